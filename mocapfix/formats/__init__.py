@@ -1,0 +1,99 @@
+"""Format registry: picks a reader by suffix and content, a writer by suffix.
+
+Each format module defines ``NAME``, ``SUFFIXES``, ``sniff(head: bytes) -> bool``,
+``read(path, **options) -> Motion`` and ``write(motion, path, **options) -> list[Path]``
+(writers use :mod:`mocapfix.fileio` so outputs appear atomically). Modules are imported
+on first use so that ``mocapfix --help`` stays fast.
+"""
+from __future__ import annotations
+
+import importlib
+from pathlib import Path
+
+from mocapfix.errors import MocapfixError, UnreadableFileError, WriteError
+from mocapfix.motion import Motion
+
+_MODULES = {
+    "c3d": "mocapfix.formats.c3d",
+    "bvh": "mocapfix.formats.bvh",
+    "asfamc": "mocapfix.formats.asfamc",
+    "kinect": "mocapfix.formats.kinect",
+}
+_SUFFIXES = {
+    ".c3d": "c3d",
+    ".bvh": "bvh",
+    ".amc": "asfamc",
+    ".asf": "asfamc",
+    ".csv": "kinect",
+    ".txt": "kinect",
+    ".tsv": "kinect",
+}
+#: suffixes of files that hold motions (``.asf`` alone is a skeleton, read as a rest pose)
+MOTION_SUFFIXES = (".c3d", ".bvh", ".amc", ".csv", ".txt", ".tsv")
+
+
+def module(name: str):
+    try:
+        return importlib.import_module(_MODULES[name])
+    except KeyError:
+        raise MocapfixError(
+            f"unknown format {name!r}; known: {', '.join(sorted(_MODULES))}") from None
+
+
+def detect(path) -> str:
+    """Format name of ``path`` from its suffix, confirmed or overridden by its content."""
+    path = Path(path)
+    by_suffix = _SUFFIXES.get(path.suffix.lower())
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(4096)
+    except OSError as exc:
+        raise UnreadableFileError(path, f"cannot open: {exc.strerror or exc}") from None
+    if not head:
+        raise UnreadableFileError(path, "file is empty")
+    if by_suffix is not None and module(by_suffix).sniff(head):
+        return by_suffix
+    for name in _MODULES:
+        if name != by_suffix and module(name).sniff(head):
+            return name
+    if by_suffix is not None:
+        return by_suffix  # let the reader explain what is wrong
+    raise UnreadableFileError(path, "unknown file format (expected .c3d, .bvh, .amc/.asf, "
+                                    "or Kinect skeleton .csv/.txt)")
+
+
+def read(path, format: str | None = None, **options) -> Motion:
+    """Read any supported file into a :class:`Motion`.
+
+    Any failure is a :class:`UnreadableFileError` naming the file and the cause.
+    """
+    path = Path(path)
+    if not path.exists():
+        raise UnreadableFileError(path, "no such file")
+    if path.is_dir():
+        raise UnreadableFileError(path, "is a directory, not a file")
+    name = format or detect(path)
+    mod = module(name)
+    try:
+        motion = mod.read(path, **options)
+    except MocapfixError:
+        raise
+    except MemoryError:
+        raise UnreadableFileError(path, "file declares more data than can be held in memory") from None
+    except (ValueError, IndexError, KeyError, TypeError, OverflowError, EOFError,
+            UnicodeDecodeError, OSError, AssertionError, ArithmeticError) as exc:
+        # a reader bug or a malformation it did not anticipate: still one clear line
+        raise UnreadableFileError(path, f"malformed {name} file ({type(exc).__name__}: {exc})") from exc
+    motion.path = str(path)
+    motion.format = name
+    return motion
+
+
+def write(motion: Motion, path, format: str | None = None, **options) -> list[Path]:
+    """Write ``motion`` to ``path`` (format from the suffix unless given). Returns the files
+    written (ASF/AMC writes the skeleton beside the motion)."""
+    path = Path(path)
+    name = format or _SUFFIXES.get(path.suffix.lower()) or motion.format
+    if name not in _MODULES:
+        raise WriteError(path, f"cannot tell the output format from suffix {path.suffix!r}")
+    return module(name).write(motion, path, **options)
