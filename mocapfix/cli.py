@@ -60,5 +60,76 @@ def info(ctx, files, as_json, fps):
         sys.exit(EXIT_USAGE)
 
 
+def _parse_reports(value: str) -> tuple[str, ...]:
+    from mocapfix.clean import REPORT_KINDS
+
+    kinds = tuple(k.strip().lower() for k in value.split(",") if k.strip())
+    bad = [k for k in kinds if k not in REPORT_KINDS and k != "none"]
+    if bad:
+        raise click.BadParameter(f"unknown report kind(s) {', '.join(bad)}; use json, md, html or none")
+    return tuple(k for k in kinds if k != "none")
+
+
+@main.command()
+@click.argument("inputs", nargs=-1, required=True, type=click.Path())
+@click.option("-o", "--output", "outdir", required=True, type=click.Path(file_okay=False),
+              help="Output folder; the input tree is mirrored inside it.")
+@click.option("-c", "--config", "config_path", type=click.Path(dir_okay=False),
+              help="Pipeline config (YAML). Default: the shipped configs/default.yaml.")
+@click.option("--report", "reports", default="json", show_default=True,
+              help="Reports to write beside each output: json, md, html (comma-separated) or none.")
+@click.option("-j", "--jobs", default=1, show_default=True, type=click.IntRange(1, 256),
+              help="Files cleaned in parallel (process pool).")
+@click.option("--json", "as_json", is_flag=True, help="Print a JSON summary on stdout.")
+@click.option("--fps", type=float, default=None, help="Frame rate for files that store none (AMC).")
+@click.option("--allow-inside-input", is_flag=True,
+              help="Allow the output folder to lie inside an input folder.")
+@click.pass_context
+def clean(ctx, inputs, outdir, config_path, reports, jobs, as_json, fps, allow_inside_input):
+    """Clean INPUT files or folders with a pipeline of cleaners.
+
+    Exit code 0 when every file was cleaned, 1 when some failed (the others are still
+    written), 2 for a usage or config error.
+    """
+    from pathlib import Path
+
+    from mocapfix.batch import discover, run_batch
+    from mocapfix.fileio import atomic_write_text
+    from mocapfix.pipeline import default_config_path, load_config
+
+    debug = ctx.obj["debug"]
+    try:
+        kinds = _parse_reports(reports)
+        pipeline = load_config(config_path or default_config_path())
+        job_list = discover(inputs, outdir, allow_inside_input)
+        if not job_list:
+            raise MocapfixError("no motion files found in " + ", ".join(inputs))
+    except click.BadParameter as exc:
+        _fail(str(exc), debug, exc)
+    except MocapfixError as exc:
+        _fail(str(exc), debug, exc)
+    Path(outdir).mkdir(parents=True, exist_ok=True)
+    atomic_write_text(Path(outdir) / "mocapfix-config.yaml",
+                      f"# effective config of this run (from {pipeline.source})\n" + pipeline.dump())
+    results = run_batch(job_list, pipeline.config(), str(pipeline.source), kinds, jobs,
+                        {"fps": fps} if fps else None)
+    failed = [r for r in results if r["status"] == "ERROR"]
+    if as_json:
+        click.echo(json.dumps({"files": results, "cleaned": len(results) - len(failed),
+                               "failed": len(failed), "config": str(pipeline.source)}, indent=1))
+    else:
+        for r in results:
+            if r["status"] == "ERROR":
+                click.echo(f"FAILED  {r['error']}", err=True)
+            else:
+                click.echo(f"{r['status']:<7} {r['input']} -> {r['output']} "
+                           f"(missing {100 * r['missing_before']:.1f} % -> {100 * r['missing_after']:.1f} %, "
+                           f"{r['seconds']:.2f} s)")
+        click.echo(f"cleaned {len(results) - len(failed)} of {len(results)} files"
+                   + (f"; {len(failed)} failed: " + ", ".join(r["input"] for r in failed) if failed else ""),
+                   err=bool(failed))
+    sys.exit(EXIT_SOME_FAILED if failed else EXIT_OK)
+
+
 if __name__ == "__main__":  # pragma: no cover
     main()

@@ -1,0 +1,166 @@
+"""The cleaner protocol: a name, parameters validated when the cleaner is built, and
+``apply(motion) -> (motion, info)`` that never mutates its input.
+
+Parameters are declared with :class:`Param`. Physical ones (``length``, ``time``,
+``frequency``) accept ``"20 mm"``, ``"0.5 s"``, ``"12 frames"``, ``"6 Hz"`` or a bare number in
+the declared default unit, and are converted to the motion's units and frame rate inside
+``apply`` via :meth:`Cleaner.frames` and :meth:`Cleaner.length`. A bad value raises
+:class:`~mocapfix.errors.ConfigError` naming the step, the parameter and the allowed range.
+
+``info`` is a JSON-serialisable dict of what the cleaner wants in the report (iterations,
+swaps found, ...). What was filled, flagged or moved is derived by the pipeline from the
+motion before and after, so cleaners need not report it.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+from mocapfix.errors import ConfigError
+from mocapfix.motion import Motion
+from mocapfix.quantity import Quantity, parse_quantity
+
+_PHYSICAL = {"length", "time", "frequency"}
+
+
+@dataclass(frozen=True)
+class Param:
+    """Declaration of one cleaner parameter.
+
+    ``kind``: "length" | "time" | "frequency" | "float" | "int" | "bool" | "choice" | "str"
+    | "list". ``unit`` is the default unit of a bare number for physical kinds.
+    ``low``/``high`` bound the value (in SI for physical kinds, frames excepted);
+    ``low_open`` makes the lower bound exclusive.
+    """
+
+    name: str
+    kind: str
+    default: Any
+    help: str = ""
+    unit: str = ""
+    low: float | None = None
+    high: float | None = None
+    low_open: bool = False
+    choices: tuple = ()
+    nullable: bool = False
+
+    def describe_range(self) -> str:
+        if self.kind == "choice":
+            return "one of " + ", ".join(map(str, self.choices))
+        lo = "" if self.low is None else (f"> {self.low:g}" if self.low_open else f">= {self.low:g}")
+        hi = "" if self.high is None else f"<= {self.high:g}"
+        rng = " and ".join(x for x in (lo, hi) if x)
+        unit = f" {self.si_unit()}" if self.kind in _PHYSICAL else ""
+        return f"{self.kind} {rng}{unit}".strip()
+
+    def si_unit(self) -> str:
+        return {"length": "m", "time": "s", "frequency": "Hz"}.get(self.kind, "")
+
+    def parse(self, value, where: str):
+        where = f"{where}: parameter '{self.name}'"
+        if value is None:
+            if self.nullable:
+                return None
+            raise ConfigError(f"{where} needs a value ({self.describe_range()})")
+        if self.kind in _PHYSICAL:
+            q = parse_quantity(value, self.kind, self.unit, where)
+            self._check_range(q.si if q.si is not None else q.frames, where, value)
+            return q
+        if self.kind == "bool":
+            if not isinstance(value, bool):
+                raise ConfigError(f"{where} must be true or false, got {value!r}")
+            return value
+        if self.kind == "int":
+            if isinstance(value, bool) or not isinstance(value, int):
+                raise ConfigError(f"{where} must be an integer ({self.describe_range()}), got {value!r}")
+            self._check_range(value, where, value)
+            return value
+        if self.kind == "float":
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+                raise ConfigError(f"{where} must be a number ({self.describe_range()}), got {value!r}")
+            self._check_range(float(value), where, value)
+            return float(value)
+        if self.kind == "choice":
+            if value not in self.choices:
+                raise ConfigError(f"{where} must be {self.describe_range()}, got {value!r}")
+            return value
+        if self.kind == "str":
+            if not isinstance(value, str):
+                raise ConfigError(f"{where} must be a string, got {value!r}")
+            return value
+        if self.kind == "list":
+            if not isinstance(value, (list, tuple)):
+                raise ConfigError(f"{where} must be a list, got {value!r}")
+            return list(value)
+        raise AssertionError(self.kind)
+
+    def _check_range(self, number: float, where: str, shown):
+        low_bad = self.low is not None and (number <= self.low if self.low_open else number < self.low)
+        high_bad = self.high is not None and number > self.high
+        if low_bad or high_bad:
+            raise ConfigError(f"{where} = {shown!r} is out of range (allowed: {self.describe_range()})")
+
+
+class Cleaner:
+    """Base class. Subclasses set ``name``, ``params``, ``summary`` and implement ``_apply``."""
+
+    name: ClassVar[str] = ""
+    summary: ClassVar[str] = ""
+    params: ClassVar[tuple[Param, ...]] = ()
+
+    def __init__(self, step: str | None = None, **values):
+        self.step = step or self.name
+        known = {p.name: p for p in self.params}
+        unknown = sorted(set(values) - set(known))
+        if unknown:
+            raise ConfigError(
+                f"{self.step}: unknown parameter(s) {', '.join(map(repr, unknown))} for cleaner "
+                f"'{self.name}' (known: {', '.join(known) or 'none'})")
+        self.values: dict[str, Any] = {}
+        for p in self.params:
+            raw = values.get(p.name, p.default)
+            self.values[p.name] = p.parse(raw, self.step)
+        self._validate()
+
+    def _validate(self) -> None:
+        """Cross-parameter checks; raise ConfigError."""
+
+    # -- parameter access ---------------------------------------------------
+    def __getitem__(self, name: str):
+        return self.values[name]
+
+    def frames(self, name: str, motion: Motion) -> float:
+        """A time parameter in frames of ``motion``."""
+        q: Quantity = self.values[name]
+        return q.in_frames(motion.fps)
+
+    def length(self, name: str, motion: Motion) -> float:
+        """A length parameter in the length unit of ``motion``."""
+        return self.values[name].in_units(motion.metres_per_unit)
+
+    def hertz(self, name: str) -> float:
+        return self.values[name].si
+
+    def config(self) -> dict:
+        """The effective parameters, as they would be written in a config."""
+        out = {}
+        for p in self.params:
+            v = self.values[p.name]
+            out[p.name] = str(v) if isinstance(v, Quantity) else v
+        return out
+
+    # -- the contract ---------------------------------------------------------
+    def apply(self, motion: Motion) -> tuple[Motion, dict]:
+        """Clean ``motion``; returns a new Motion and a JSON-able info dict."""
+        result = self._apply(motion)
+        if isinstance(result, Motion):
+            return result, {}
+        return result
+
+    def _apply(self, motion: Motion):
+        raise NotImplementedError
+
+    def __repr__(self):
+        args = ", ".join(f"{k}={v}" for k, v in self.config().items())
+        return f"{type(self).__name__}({args})"

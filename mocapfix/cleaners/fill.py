@@ -1,0 +1,65 @@
+"""Classic gap filling per channel: linear, cubic spline or PCHIP interpolation
+(ALGORITHMS.md §0). Gaps longer than ``max_gap`` are left for a stronger method, and gaps
+touching the start or end of the capture are never extrapolated; both are reported."""
+from __future__ import annotations
+
+import numpy as np
+
+from mocapfix.cleaners import register
+from mocapfix.cleaners.base import Cleaner, Param
+from mocapfix.gaps import runs
+from mocapfix.motion import Motion
+from mocapfix.solvers.segments import INTERPOLATORS, interpolate_gaps
+
+
+def gap_report(missing: np.ndarray, still_missing: np.ndarray, fps: float) -> dict:
+    """Counts of the marker gaps (runs in a (T, J) mask) that were filled, left because they
+    touch an end of the capture, or left for another reason (too long); shared by every
+    cleaner that fills."""
+    T = missing.shape[0]
+    col, start, length = runs(missing)
+    edge = (start == 0) | (start + length == T)
+    # a gap counts as filled when none of its samples is still missing
+    left = np.zeros(len(col), dtype=bool)
+    if len(col):
+        miss_cum = np.concatenate([np.zeros((1, missing.shape[1]), dtype=np.int64),
+                                   np.cumsum(still_missing, axis=0)])
+        left = (miss_cum[start + length, col] - miss_cum[start, col]) > 0
+    long_left = left & ~edge
+    return {
+        "gaps": int(len(col)),
+        "gaps_filled": int(np.sum(~left)),
+        "gaps_left_long": int(np.sum(long_left)),
+        "gaps_left_edge": int(np.sum(left & edge)),
+        "samples_filled": int(np.sum(missing & ~still_missing)),
+        "longest_left_s": round(float(length[long_left].max()) / fps, 4) if long_left.any() else 0.0,
+    }
+
+
+@register
+class Fill(Cleaner):
+    """Interpolate each coordinate of each marker across gaps of at most ``max_gap``.
+
+    ``linear``: straight line between the samples bounding the gap. ``pchip``: piecewise
+    cubic Hermite (Fritsch & Carlson 1980), smooth and never overshooting the bounding
+    samples. ``spline``: cubic spline through all observed samples (C², not-a-knot ends;
+    de Boor 1978), smoothest but can overshoot on long gaps. Leading and trailing gaps stay
+    missing (no extrapolation).
+    """
+
+    name = "fill"
+    summary = "fill short gaps by linear, cubic-spline or PCHIP interpolation"
+    params = (
+        Param("method", "choice", "pchip", "interpolant", choices=INTERPOLATORS),
+        Param("max_gap", "time", "0.5 s", "longest gap to fill; longer ones stay missing",
+              unit="s", low=0.0, nullable=True),
+    )
+
+    def _apply(self, motion: Motion):
+        pos = motion.positions
+        T, J, _ = pos.shape
+        max_gap = None if self["max_gap"] is None else self.frames("max_gap", motion)
+        filled, _ = interpolate_gaps(pos.reshape(T, 3 * J), self["method"], max_gap)
+        out = motion.replace(positions=filled.reshape(T, J, 3))
+        info = gap_report(motion.missing, out.missing, motion.fps)
+        return out, info

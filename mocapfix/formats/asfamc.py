@@ -1,0 +1,779 @@
+"""Acclaim ASF (skeleton) + AMC (motion) files, as distributed by the CMU mocap database.
+
+Reading
+    ``read("05_01.amc")`` parses the AMC and its ASF. The ASF is ``asf=`` when given,
+    else ``<stem>.asf`` or ``<prefix>.asf`` beside the AMC (prefix = the stem before the
+    first ``_``: CMU ``05_01.amc`` → ``05.asf``), else the only ``.asf`` in that folder.
+    ``read("05.asf")`` gives a one-frame rest pose (every channel 0) with a note.
+
+    Joints are ``root`` followed by one joint per bone — the bone's END point — in
+    ``:bonedata`` order, re-ordered only where needed so that parents come first.
+    ``positions`` are the forward kinematics of a :class:`~mocapfix.kinematics.Rig`
+    built as that module's docstring describes (``pre_j = C_p⁻¹ C_j``, offset
+    ``length · C_j⁻¹ · direction`` in the bone's own frame, root ``pre = C_root`` from
+    ``orientation`` in the root ``axis`` order, root translation added to ``position``),
+    in ASF length units: ``:units length 0.45`` (CMU) means one unit is 1/0.45 inch, so
+    ``units = "in/0.45"`` and ``metres_per_unit = 0.0254 / 0.45``.
+    ``channels`` (T, C) are all AMC values in file order: each frame's bone lines in the
+    order of the first frame, each line's values in its ``order``/``dof`` order.
+
+Quirks handled
+    CRLF or LF (kept on writing); ``#`` comments; ``:version``/``:name``/free-text
+    ``:documentation``; ``:root`` keys in any order; ``axis ax ay az XYZ`` and dof orders
+    are extrinsic, so they are reversed into the Rig's matrix-product order
+    (``rx ry rz`` → ``M = Rz·Ry·Rx``); ``limits`` spread over several lines with ``inf``;
+    ``angle rad`` in the ASF and ``:RADIANS`` in the AMC; bones without DOFs absent from
+    the AMC; ``tx ty tz`` DOFs on bones (translation added to the bone vector in the
+    bone's axis frame). The ``l`` (length) DOF is refused (UnsupportedFeatureError).
+    AMC files store no frame rate: 120 Hz (CMU) is assumed with a note; ``fps`` overrides.
+
+Malformed input
+    Every failure is one :class:`UnreadableFileError` naming the file, with the line
+    number where known. A truncated AMC (last frame incomplete, or a frame missing bone
+    lines) is REFUSED with an error naming the frame: a cleaned copy silently shorter
+    than its source would be worse than no copy. Every frame must hold the bone lines of
+    the first frame in the same order (true of all CMU files); a frame that differs is
+    refused with its line number.
+
+Speed
+    Frame blocks are parsed in one pass: the content lines are joined and split into
+    tokens once, reshaped to (frames, tokens per frame), the bone-name columns are checked
+    against the first frame's layout with one array comparison, and the value columns
+    are converted to float64 in one call. Only when that check fails does a line-by-line
+    walk run, to name the offending line.
+
+Writing
+    ``write(motion, "x.amc")`` writes the AMC and, beside it, the ASF under its original
+    name, byte-for-byte as read. The AMC keeps the source's header, bone lines, DOF order,
+    frame numbers, comments and line endings; every value whose channel is unchanged
+    (within 1e-10 relative) is written as its ORIGINAL token, so an unchanged motion is
+    written byte-identical. Changed values are written with ``%.6f`` with trailing zeros
+    trimmed. ``motion.channels`` is what is written (positions are derived data).
+
+Why hand-written
+    No maintained Python ASF/AMC library exists; the PyPI ones fail on CMU files (CRLF,
+    multi-line limits, bones without DOFs) and none keeps the original tokens, which
+    byte-identical round trips need.
+"""
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from mocapfix.errors import UnreadableFileError, UnsupportedFeatureError, WriteError
+from mocapfix.fileio import atomic_write_bytes
+from mocapfix.kinematics import Rig, euler_to_matrix
+from mocapfix.motion import Motion, Skeleton
+from mocapfix.units import asf_length_unit
+
+NAME = "asfamc"
+SUFFIXES = (".amc", ".asf")
+DEFAULT_FPS = 120.0
+
+_AXES = "XYZ"
+_ROOT_CHANNELS = ("TX", "TY", "TZ", "RX", "RY", "RZ")
+_BONE_DOFS = ("rx", "ry", "rz", "tx", "ty", "tz")
+_INT_RE = re.compile(r"^\d+$")
+
+
+# --------------------------------------------------------------------------- data
+@dataclass
+class AsfBone:
+    name: str
+    direction: np.ndarray
+    length: float
+    axis_angles: np.ndarray          # x, y, z angles in the ASF angle unit
+    axis_order: str                  # extrinsic order, e.g. "XYZ"
+    dofs: list[str]                  # lower case, file order: rx ry rz tx ty tz
+    limits: list[tuple[float, float]]
+    id: int | None = None
+    line: int = 0
+
+
+@dataclass
+class AsfSkeleton:
+    """Everything an ASF file declares (angles kept in the file's angle unit)."""
+
+    version: str | None = None
+    name: str | None = None
+    mass: float | None = None
+    length_scale: float = 1.0
+    length_declared: bool = False
+    angle_unit: str = "deg"
+    documentation: list[str] = field(default_factory=list)
+    root_order: list[str] = field(default_factory=list)
+    root_axis: str = "XYZ"
+    root_position: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    root_orientation: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    bones: dict[str, AsfBone] = field(default_factory=dict)
+    parent: dict[str, str] = field(default_factory=dict)
+    order: list[str] = field(default_factory=list)        # bones, parents first
+    notes: list[str] = field(default_factory=list)
+
+    def dof_count(self, name: str) -> int:
+        return len(self.root_order) if name == "root" else len(self.bones[name].dofs)
+
+
+@dataclass
+class AsfAmcSource:
+    """What the writer needs to reproduce the files."""
+
+    asf_path: str
+    asf_bytes: bytes
+    asf: AsfSkeleton
+    layout: list[tuple[str, int]]          # bone lines of one frame: (name, value count)
+    degrees: bool
+    eol: str
+    header_lines: list[str]                # raw AMC lines before the first frame ('\r' kept)
+    body_lines: list[str] | None = None    # raw AMC lines from the first frame on
+    content_index: np.ndarray | None = None  # body line of each frame/bone line (T*lpf,)
+    frame_numbers: np.ndarray | None = None
+    value_tokens: np.ndarray | None = None   # (T, C) original numeric tokens
+    values: np.ndarray | None = None         # (T, C) their float64 values
+    flags: dict = field(default_factory=dict)  # AMC header: degrees, fully_specified, unknown
+
+    @property
+    def asf_name(self) -> str:
+        return Path(self.asf_path).name
+
+
+# --------------------------------------------------------------------------- sniff
+def sniff(head: bytes) -> bool:
+    text = head.lstrip().lower()
+    if text.startswith(b"#!oml:asf") or b":fully-specified" in text:
+        return True
+    if re.search(rb"^\s*:(degrees|radians)\s*$", text, re.M) and re.search(rb"^\s*\d+\s*$", text, re.M):
+        return True
+    return b":bonedata" in text or (b":root" in text and b":units" in text)
+
+
+# --------------------------------------------------------------------------- helpers
+def _decode(path: Path, data: bytes) -> str:
+    if not data.strip():
+        raise UnreadableFileError(path, "file is empty")
+    if b"\x00" in data[:4096]:
+        raise UnreadableFileError(path, "binary data where ASF/AMC text was expected")
+    return data.decode("latin-1")    # byte-exact round trip, never fails
+
+
+def _read_bytes(path: Path) -> bytes:
+    try:
+        return path.read_bytes()
+    except FileNotFoundError:
+        raise UnreadableFileError(path, "no such file") from None
+    except IsADirectoryError:
+        raise UnreadableFileError(path, "is a directory, not a file") from None
+    except OSError as exc:
+        raise UnreadableFileError(path, f"cannot open: {exc.strerror or exc}") from None
+
+
+def _floats(path, tokens: list[str], count: int, what: str, line: int) -> np.ndarray:
+    if len(tokens) != count:
+        raise UnreadableFileError(path, f"{what} needs {count} numbers, found {len(tokens)}", line)
+    try:
+        values = np.array([float(t) for t in tokens], dtype=np.float64)
+    except ValueError:
+        raise UnreadableFileError(path, f"{what}: non-numeric value in {' '.join(tokens)!r}", line) from None
+    if not np.all(np.isfinite(values)):
+        raise UnreadableFileError(path, f"{what}: non-finite value in {' '.join(tokens)!r}", line)
+    return values
+
+
+def _axis_order(path, token: str, line: int) -> str:
+    order = token.upper()
+    if len(order) != 3 or sorted(order) != ["X", "Y", "Z"]:
+        raise UnreadableFileError(path, f"axis order {token!r} is not a permutation of XYZ", line)
+    return order
+
+
+def axis_matrix(angles_xyz: np.ndarray, order: str, degrees: bool) -> np.ndarray:
+    """Matrix of an ASF ``axis``/``orientation``: x, y, z angles applied in the extrinsic
+    ``order`` (``"XYZ"`` → ``Rz·Ry·Rx``)."""
+    angles = np.asarray(angles_xyz, dtype=np.float64)
+    if degrees:
+        angles = np.deg2rad(angles)
+    product_order = order[::-1]
+    return euler_to_matrix(product_order, np.array([angles[_AXES.index(a)] for a in product_order]))
+
+
+# --------------------------------------------------------------------------- ASF
+class _AsfParser:
+    def __init__(self, path: Path, text: str):
+        self.path = path
+        self.lines = text.split("\n")
+        self.asf = AsfSkeleton()
+        self.bone: dict | None = None
+        self.in_limits = False
+        self.seen_sections: set[str] = set()
+        self.hierarchy_lines: list[tuple[int, list[str]]] = []
+
+    def error(self, reason: str, line: int | None = None):
+        return UnreadableFileError(self.path, reason, line)
+
+    def parse(self) -> AsfSkeleton:
+        section = None
+        for number, raw in enumerate(self.lines, start=1):
+            raw = raw.rstrip("\r")
+            if section == "documentation" and not raw.lstrip().startswith(":"):
+                self.asf.documentation.append(raw)
+                continue
+            line = raw.split("#", 1)[0].strip()
+            if not line:
+                continue
+            if line.startswith(":"):
+                section = self.start_section(line, number)
+                continue
+            if section is None:
+                raise self.error(f"unexpected text before the first section: {line[:40]!r}", number)
+            getattr(self, f"in_{section}")(line.split(), number)
+        return self.finish()
+
+    def start_section(self, line: str, number: int) -> str:
+        if self.bone is not None:
+            raise self.error(f"bone block opened at line {self.bone['line']} has no 'end'", number)
+        keyword, _, rest = line.partition(" ")
+        keyword = keyword[1:].lower()
+        self.seen_sections.add(keyword)
+        if keyword in ("version", "name"):
+            setattr(self.asf, keyword, rest.strip())
+            return "ignored"
+        if keyword in ("units", "documentation", "root", "bonedata", "hierarchy"):
+            return keyword
+        self.asf.notes.append(f"ASF section ':{keyword}' ignored (line {number})")
+        return "ignored"
+
+    def in_ignored(self, tokens, number):
+        pass
+
+    def in_units(self, tokens, number):
+        key = tokens[0].lower()
+        if len(tokens) != 2:
+            raise self.error(f":units line needs 'key value', got {' '.join(tokens)!r}", number)
+        if key == "angle":
+            unit = tokens[1].lower()
+            if unit not in ("deg", "rad"):
+                raise self.error(f"angle unit must be deg or rad, got {tokens[1]!r}", number)
+            self.asf.angle_unit = unit
+        elif key in ("mass", "length"):
+            value = _floats(self.path, tokens[1:], 1, f"units {key}", number)[0]
+            if value <= 0:
+                raise self.error(f"units {key} must be positive, got {tokens[1]}", number)
+            if key == "mass":
+                self.asf.mass = value
+            else:
+                self.asf.length_scale = value
+                self.asf.length_declared = True
+        else:
+            self.asf.notes.append(f"ASF unit '{tokens[0]}' ignored (line {number})")
+
+    def in_root(self, tokens, number):
+        key, values = tokens[0].lower(), tokens[1:]
+        if key == "order":
+            order = [v.upper() for v in values]
+            bad = [v for v in order if v not in _ROOT_CHANNELS]
+            if bad or len(set(order)) != len(order):
+                raise self.error(f"root order {' '.join(values)!r}: channels must be distinct "
+                                 f"among {' '.join(_ROOT_CHANNELS)}", number)
+            self.asf.root_order = order
+        elif key == "axis":
+            if len(values) != 1:
+                raise self.error("root axis needs one order such as XYZ", number)
+            self.asf.root_axis = _axis_order(self.path, values[0], number)
+        elif key == "position":
+            self.asf.root_position = _floats(self.path, values, 3, "root position", number)
+        elif key == "orientation":
+            self.asf.root_orientation = _floats(self.path, values, 3, "root orientation", number)
+        else:
+            self.asf.notes.append(f"ASF root key '{tokens[0]}' ignored (line {number})")
+
+    def in_bonedata(self, tokens, number):
+        key = tokens[0].lower()
+        if key == "begin":
+            if self.bone is not None:
+                raise self.error("'begin' inside an open bone block", number)
+            self.bone = {"line": number, "limits": []}
+            self.in_limits = False
+            return
+        if self.bone is None:
+            raise self.error(f"bone data {' '.join(tokens)[:40]!r} outside begin/end", number)
+        if key == "end":
+            self.finish_bone(number)
+            return
+        if tokens[0].startswith("(") and self.in_limits:
+            self.add_limits(tokens, number)
+            return
+        self.in_limits = False
+        bone, values = self.bone, tokens[1:]
+        if key == "id":
+            bone["id"] = int(_floats(self.path, values, 1, "bone id", number)[0])
+        elif key == "name":
+            if len(values) != 1:
+                raise self.error("bone name must be one word", number)
+            bone["name"] = values[0]
+        elif key == "direction":
+            bone["direction"] = _floats(self.path, values, 3, "bone direction", number)
+        elif key == "length":
+            bone["length"] = _floats(self.path, values, 1, "bone length", number)[0]
+        elif key == "axis":
+            if len(values) != 4:
+                raise self.error("bone axis needs 'ax ay az ORDER'", number)
+            bone["axis_angles"] = _floats(self.path, values[:3], 3, "bone axis", number)
+            bone["axis_order"] = _axis_order(self.path, values[3], number)
+        elif key == "dof":
+            bone["dofs"] = self.parse_dofs(values, number)
+        elif key == "limits":
+            self.in_limits = True
+            self.add_limits(values, number)
+        # bodymass, cofmass and other per-bone keys do not change the kinematics
+
+    def parse_dofs(self, values, number) -> list[str]:
+        dofs = [v.lower() for v in values]
+        if "l" in dofs:
+            raise UnsupportedFeatureError(self.path, "the 'l' (bone length) DOF is not supported", number)
+        bad = [v for v in dofs if v not in _BONE_DOFS]
+        if bad or len(set(dofs)) != len(dofs):
+            raise self.error(f"dof {' '.join(values)!r}: DOFs must be distinct among "
+                             f"{' '.join(_BONE_DOFS)}", number)
+        return dofs
+
+    def add_limits(self, tokens, number):
+        text = " ".join(tokens).replace("(", " ").replace(")", " ").split()
+        if len(text) % 2:
+            raise self.error(f"limits need (min max) pairs, got {' '.join(tokens)!r}", number)
+        try:
+            values = [float(t) for t in text]
+        except ValueError:
+            raise self.error(f"non-numeric limit in {' '.join(tokens)!r}", number) from None
+        self.bone["limits"].extend(zip(values[0::2], values[1::2]))
+
+    def finish_bone(self, number):
+        bone, self.bone = self.bone, None
+        for key in ("name", "direction", "length"):
+            if key not in bone:
+                raise self.error(f"bone block opened at line {bone['line']} has no '{key}'", number)
+        name = bone["name"]
+        if name in self.asf.bones or name == "root":
+            raise self.error(f"bone {name!r} defined twice", bone["line"])
+        dofs = bone.get("dofs", [])
+        limits = bone["limits"]
+        if limits and len(limits) != len(dofs):
+            self.asf.notes.append(f"bone {name!r}: {len(limits)} limits for {len(dofs)} DOFs")
+        self.asf.bones[name] = AsfBone(
+            name=name, direction=bone["direction"], length=float(bone["length"]),
+            axis_angles=bone.get("axis_angles", np.zeros(3)),
+            axis_order=bone.get("axis_order", "XYZ"), dofs=dofs, limits=limits,
+            id=bone.get("id"), line=bone["line"])
+
+    def in_hierarchy(self, tokens, number):
+        key = tokens[0].lower()
+        if key in ("begin", "end") and len(tokens) == 1:
+            return
+        if len(tokens) < 2:
+            raise self.error(f"hierarchy line needs 'parent child ...', got {tokens[0]!r}", number)
+        self.hierarchy_lines.append((number, tokens))
+
+    def finish(self) -> AsfSkeleton:
+        asf = self.asf
+        if self.bone is not None:
+            raise self.error(f"bone block opened at line {self.bone['line']} has no 'end'")
+        for needed in ("root", "bonedata", "hierarchy"):
+            if needed not in self.seen_sections:
+                raise self.error(f"no :{needed} section (is this an ASF file?)")
+        if not asf.root_order:
+            asf.notes.append("ASF root has no 'order': the AMC root line must be empty")
+        if not asf.length_declared:
+            asf.notes.append("ASF declares no ':units length'; assumed 1.0 (inches), a guess")
+        self.link_hierarchy()
+        return asf
+
+    def link_hierarchy(self):
+        asf = self.asf
+        for number, tokens in self.hierarchy_lines:
+            parent, children = tokens[0], tokens[1:]
+            if parent != "root" and parent not in asf.bones:
+                raise self.error(f"hierarchy parent {parent!r} is not defined in :bonedata", number)
+            for child in children:
+                if child not in asf.bones:
+                    raise self.error(f"bone {child!r} in :hierarchy is not defined in :bonedata", number)
+                if child in asf.parent:
+                    raise self.error(f"bone {child!r} has two parents in :hierarchy", number)
+                asf.parent[child] = parent
+        orphans = [b for b in asf.bones if b not in asf.parent]
+        if orphans:
+            raise self.error(f"bones defined but not in :hierarchy: {', '.join(orphans[:5])}")
+        asf.order = _parents_first(asf.bones, asf.parent)
+        if len(asf.order) != len(asf.bones):
+            stuck = [b for b in asf.bones if b not in set(asf.order)]
+            raise self.error(f"bones not connected to root (cycle in :hierarchy?): {', '.join(stuck[:5])}")
+
+
+def _parents_first(bones: dict, parent: dict) -> list[str]:
+    """:bonedata order, with a bone moved after its parent only where needed."""
+    placed = {"root"}
+    order: list[str] = []
+    pending = list(bones)
+    while pending:
+        ready = [b for b in pending if parent[b] in placed]
+        if not ready:
+            break
+        first = ready[0]
+        order.append(first)
+        placed.add(first)
+        pending.remove(first)
+    return order
+
+
+def parse_asf(path, data: bytes) -> AsfSkeleton:
+    path = Path(path)
+    return _AsfParser(path, _decode(path, data)).parse()
+
+
+# --------------------------------------------------------------------------- rig
+def build_rig(asf: AsfSkeleton, layout: list[tuple[str, int]], degrees: bool) -> tuple[Rig, list[str]]:
+    """The Rig of ``asf`` whose channels are the AMC values laid out as ``layout``."""
+    names = ["root"] + asf.order
+    index = {n: i for i, n in enumerate(names)}
+    J = len(names)
+    asf_deg = asf.angle_unit == "deg"
+    axis = np.empty((J, 3, 3))
+    axis[0] = axis_matrix(asf.root_orientation, asf.root_axis, asf_deg)
+    offsets = np.zeros((J, 3))
+    offsets[0] = asf.root_position
+    parents = np.full(J, -1, dtype=np.intp)
+    for j, name in enumerate(names[1:], start=1):
+        bone = asf.bones[name]
+        axis[j] = axis_matrix(bone.axis_angles, bone.axis_order, asf_deg)
+        parents[j] = index[asf.parent[name]]
+        offsets[j] = bone.length * axis[j].T @ bone.direction
+    pre = axis.copy()
+    pre[1:] = np.swapaxes(axis[parents[1:]], -1, -2) @ axis[1:]
+
+    first_column = {}
+    column = 0
+    for name, count in layout:
+        first_column[name] = column
+        column += count
+    rot_axes, rot_columns = [], []
+    trans = np.full((J, 3), -1, dtype=np.intp)
+    notes = []
+    for j, name in enumerate(names):
+        dofs = [d.lower() for d in asf.root_order] if j == 0 else asf.bones[name].dofs
+        if dofs and name not in first_column:
+            notes.append(f"bone {name!r} has DOFs in the ASF but no line in the AMC; held at rest")
+            dofs = []
+        start = first_column.get(name, 0)
+        rotations = [(d[1].upper(), start + k) for k, d in enumerate(dofs) if d[0] == "r"]
+        for k, d in enumerate(dofs):
+            if d[0] == "t":
+                trans[j, _AXES.index(d[1].upper())] = start + k
+        rotations.reverse()          # extrinsic file order -> matrix-product order
+        rot_axes.append("".join(a for a, _ in rotations))
+        rot_columns.append([c for _, c in rotations])
+    rig = Rig(names=names, parents=parents, offsets=offsets, rot_axes=rot_axes,
+              rot_columns=rot_columns, trans_columns=trans,
+              offset_in_own_frame=np.arange(J) > 0, pre_rotation=pre,
+              trans_adds_offset=np.ones(J, dtype=bool), degrees=degrees, n_channels=column)
+    return rig, notes
+
+
+# --------------------------------------------------------------------------- AMC
+def _amc_header(path, lines: list[str]) -> tuple[int, dict]:
+    """Index of the first frame line and the header flags."""
+    flags = {"degrees": None, "fully_specified": False, "unknown": []}
+    for i, raw in enumerate(lines):
+        line = raw.strip()
+        if not line or line.startswith("#"):
+            continue
+        if line.startswith(":"):
+            key = line[1:].split()[0].upper() if len(line) > 1 else ""
+            if key == "FULLY-SPECIFIED":
+                flags["fully_specified"] = True
+            elif key in ("DEGREES", "RADIANS"):
+                flags["degrees"] = key == "DEGREES"
+            else:
+                flags["unknown"].append(line)
+            continue
+        if not _INT_RE.match(line):
+            raise UnreadableFileError(path, f"expected a frame number, found {line[:40]!r}", i + 1)
+        return i, flags
+    raise UnreadableFileError(path, "no frames (header only)")
+
+
+def _frame_layout(path, body, content, first_line: int, asf: AsfSkeleton) -> list[tuple[str, int]]:
+    """Bone lines of the first frame: [(name, value count), ...], checked against the ASF."""
+    layout = []
+    for i in content[1:]:
+        tokens = body[i].split()
+        if _INT_RE.match(tokens[0]):
+            break
+        name = tokens[0]
+        number = first_line + i + 1
+        if name != "root" and name not in asf.bones:
+            raise UnreadableFileError(path, f"bone {name!r} is not defined in the ASF", number)
+        if any(name == n for n, _ in layout):
+            raise UnreadableFileError(path, f"bone {name!r} appears twice in frame {body[content[0]].strip()}", number)
+        expected = asf.dof_count(name)
+        if len(tokens) - 1 != expected:
+            raise UnreadableFileError(
+                path, f"bone {name!r} has {len(tokens) - 1} values, the ASF declares {expected} DOFs", number)
+        layout.append((name, expected))
+    return layout
+
+
+def _locate_error(path, body, content, layout, first_line: int) -> UnreadableFileError:
+    """Walk the frame blocks line by line to name what breaks the common layout."""
+    per_frame = 1 + len(layout)
+    frame = None
+    for n, i in enumerate(content):
+        tokens = body[i].split()
+        number = first_line + i + 1
+        slot = n % per_frame
+        if slot == 0:
+            if len(tokens) != 1 or not _INT_RE.match(tokens[0]):
+                return UnreadableFileError(
+                    path, f"after frame {frame}: expected a frame number, found {body[i].strip()[:40]!r} "
+                          f"(every frame must hold the bone lines of the first frame, in the same order)",
+                    number)
+            frame = tokens[0]
+            continue
+        name, count = layout[slot - 1]
+        if _INT_RE.match(tokens[0]) and len(tokens) == 1:
+            return UnreadableFileError(
+                path, f"frame {frame} is incomplete: it lacks bone line {name!r} and {per_frame - 1 - slot} more",
+                number)
+        if tokens[0] != name:
+            return UnreadableFileError(
+                path, f"frame {frame}: expected bone line {name!r}, found {tokens[0][:40]!r} "
+                      f"(every frame must hold the bone lines of the first frame, in the same order)", number)
+        if len(tokens) - 1 != count:
+            return UnreadableFileError(
+                path, f"frame {frame}: bone {name!r} has {len(tokens) - 1} values, expected {count}", number)
+        for token in tokens[1:]:
+            try:
+                value = float(token)
+            except ValueError:
+                return UnreadableFileError(path, f"frame {frame}: {token[:40]!r} is not a number", number)
+            if not np.isfinite(value):
+                return UnreadableFileError(path, f"frame {frame}: non-finite value {token!r}", number)
+    slot = len(content) % per_frame
+    if slot:
+        missing = layout[slot - 1][0]
+        return UnreadableFileError(
+            path, f"truncated: last frame {frame} is incomplete ({slot - 1} of {per_frame - 1} bone lines, "
+                  f"missing {missing!r} onwards)", first_line + content[-1] + 1)
+    return UnreadableFileError(path, "frame blocks do not share one layout")
+
+
+def parse_amc(path, text: str, asf: AsfSkeleton) -> AsfAmcSource:
+    path = Path(path)
+    lines = text.split("\n")
+    first, flags = _amc_header(path, lines)
+    header, body = lines[:first], lines[first:]
+    content = [i for i, line in enumerate(body) if line.strip() and not line.lstrip().startswith("#")]
+    layout = _frame_layout(path, body, content, first, asf)
+    per_frame = 1 + len(layout)
+    tokens_per_frame = 1 + sum(1 + count for _, count in layout)
+    n_frames = len(content) // per_frame
+    if len(content) % per_frame:
+        raise _locate_error(path, body, content, layout, first)
+    tokens = " ".join([body[i] for i in content]).split()
+    if len(tokens) != n_frames * tokens_per_frame:
+        raise _locate_error(path, body, content, layout, first)
+    table = np.array(tokens).reshape(n_frames, tokens_per_frame)
+    name_columns, value_columns = _token_columns(layout)
+    expected_names = np.array([name for name, _ in layout])
+    if not (np.all(table[:, name_columns] == expected_names) and np.all(np.char.isdigit(table[:, 0]))):
+        raise _locate_error(path, body, content, layout, first)
+    value_tokens = table[:, value_columns]
+    try:
+        values = value_tokens.astype(np.float64)
+    except ValueError:
+        raise _locate_error(path, body, content, layout, first) from None
+    if not np.all(np.isfinite(values)):
+        raise _locate_error(path, body, content, layout, first)
+    degrees = flags["degrees"]
+    source = AsfAmcSource(
+        asf_path="", asf_bytes=b"", asf=asf, layout=layout,
+        degrees=(asf.angle_unit == "deg") if degrees is None else degrees,
+        eol="\r\n" if lines[0].endswith("\r") else "\n", header_lines=header, body_lines=body,
+        content_index=np.asarray(content, dtype=np.intp),
+        frame_numbers=table[:, 0].astype(np.int64), value_tokens=value_tokens, values=values,
+        flags=flags)
+    return source
+
+
+def _token_columns(layout) -> tuple[np.ndarray, np.ndarray]:
+    names, values = [], []
+    column = 1
+    for _, count in layout:
+        names.append(column)
+        values.extend(range(column + 1, column + 1 + count))
+        column += 1 + count
+    return np.array(names, dtype=np.intp), np.array(values, dtype=np.intp)
+
+
+# --------------------------------------------------------------------------- read
+def find_asf(amc_path: Path, asf_option=None) -> Path:
+    if asf_option is not None:
+        asf = Path(asf_option)
+        if not asf.is_file():
+            raise UnreadableFileError(amc_path, f"ASF skeleton {asf} (asf= option) not found")
+        return asf
+    folder = amc_path.parent
+    stems = [amc_path.stem, amc_path.stem.split("_", 1)[0]]
+    for stem in stems:
+        for suffix in (".asf", ".ASF", ".Asf"):
+            candidate = folder / (stem + suffix)
+            if candidate.is_file():
+                return candidate
+    in_folder = sorted(p for p in folder.iterdir() if p.suffix.lower() == ".asf" and p.is_file())
+    if len(in_folder) == 1:
+        return in_folder[0]
+    tried = " or ".join(f"{s}.asf" for s in dict.fromkeys(stems))
+    why = f"{len(in_folder)} .asf files there" if in_folder else "no .asf file there"
+    raise UnreadableFileError(
+        amc_path, f"cannot find the ASF skeleton: no {tried} in {folder} ({why}); pass asf=PATH")
+
+
+def read(path, fps: float | None = None, **options) -> Motion:
+    path = Path(path)
+    if path.suffix.lower() == ".asf":
+        return _read_rest_pose(path, fps)
+    amc_bytes = _read_bytes(path)
+    amc_text = _decode(path, amc_bytes)
+    asf_path = find_asf(path, options.get("asf"))
+    asf_bytes = _read_bytes(asf_path)
+    asf = parse_asf(asf_path, asf_bytes)
+    source = parse_amc(path, amc_text, asf)
+    source.asf_path, source.asf_bytes = str(asf_path), asf_bytes
+    notes = list(asf.notes)
+    if source.flags["degrees"] is None:
+        notes.append(f"AMC has no :DEGREES/:RADIANS line; angles read in the ASF unit ({asf.angle_unit})")
+    for line in source.flags["unknown"]:
+        notes.append(f"AMC header line {line!r} kept but not interpreted")
+    frames = source.frame_numbers
+    if len(frames) > 1 and np.any(np.diff(frames) != 1):
+        notes.append("AMC frame numbers are not consecutive; frames are taken as evenly spaced")
+    return _motion(source, source.values.copy(), fps, notes)
+
+
+def _read_rest_pose(path: Path, fps) -> Motion:
+    asf_bytes = _read_bytes(path)
+    asf = parse_asf(path, asf_bytes)
+    layout = [(name, asf.dof_count(name)) for name in ["root"] + asf.order if asf.dof_count(name)]
+    eol = "\r\n" if b"\r\n" in asf_bytes else "\n"
+    cr = eol[:-1]
+    source = AsfAmcSource(
+        asf_path=str(path), asf_bytes=asf_bytes, asf=asf, layout=layout, degrees=True, eol=eol,
+        header_lines=[":FULLY-SPECIFIED" + cr, ":DEGREES" + cr], frame_numbers=np.array([1]))
+    n_channels = sum(count for _, count in layout)
+    notes = list(asf.notes) + ["ASF skeleton read alone: one frame, rest pose (every channel 0)"]
+    return _motion(source, np.zeros((1, n_channels)), fps, notes)
+
+
+def _motion(source: AsfAmcSource, channels: np.ndarray, fps, notes: list[str]) -> Motion:
+    asf = source.asf
+    rig, rig_notes = build_rig(asf, source.layout, source.degrees)
+    positions = rig.positions(channels)
+    if fps is None:
+        fps = DEFAULT_FPS
+        if source.values is not None:
+            notes.append("AMC files store no frame rate; assumed 120 Hz (CMU default)")
+    elif fps <= 0:
+        raise UnreadableFileError(source.asf_path, f"frame rate must be positive, got {fps}")
+    scale = asf.length_scale
+    units = "in" if scale == 1.0 else f"in/{scale:g}"
+    return Motion(
+        positions=positions, names=list(rig.names), fps=float(fps), units=units,
+        metres_per_unit=asf_length_unit(scale), format=NAME,
+        skeleton=Skeleton(rig.parents.copy()), rig=rig, channels=channels,
+        source=source, notes=notes + rig_notes)
+
+
+# --------------------------------------------------------------------------- write
+def format_value(value: float) -> str:
+    """``%.6f`` without trailing zeros (``-0`` written as ``0``)."""
+    text = f"{value:.6f}".rstrip("0").rstrip(".")
+    return "0" if text in ("-0", "") else text
+
+
+def write(motion: Motion, path, **options) -> list[Path]:
+    path = Path(path)
+    source = motion.source
+    if not isinstance(source, AsfAmcSource):
+        raise WriteError(path, "ASF/AMC can only be written from a motion read from ASF/AMC "
+                               "(its skeleton and channel layout are needed)")
+    if motion.channels is None:
+        raise WriteError(path, "motion has no channels to write")
+    channels = np.asarray(motion.channels, dtype=np.float64)
+    n_channels = sum(count for _, count in source.layout)
+    if channels.ndim != 2 or channels.shape[1] != n_channels:
+        raise WriteError(path, f"channels must be (frames, {n_channels}), got {channels.shape}")
+    if not np.all(np.isfinite(channels)):
+        raise WriteError(path, "channels hold NaN or infinite values, which AMC cannot store")
+    asf_target = path.with_name(source.asf_name)
+    if path.suffix.lower() == ".asf":
+        if channels.shape[0] > 1:
+            raise WriteError(path, "an .asf file holds only the skeleton; write the motion to a .amc path")
+        return [_write_asf(path, source)]
+    if asf_target.resolve() == path.resolve():
+        raise WriteError(path, f"the AMC would overwrite its skeleton {source.asf_name}")
+    text = _amc_text(source, channels)
+    atomic_write_bytes(path, text.encode("latin-1"))
+    return [path, _write_asf(asf_target, source)]
+
+
+def _write_asf(target: Path, source: AsfAmcSource) -> Path:
+    try:
+        if target.is_file() and target.read_bytes() == source.asf_bytes:
+            return target           # already there, identical (e.g. a second trial of a subject)
+    except OSError:
+        pass
+    return atomic_write_bytes(target, source.asf_bytes)
+
+
+def _amc_text(source: AsfAmcSource, channels: np.ndarray) -> str:
+    same_shape = source.values is not None and source.values.shape == channels.shape
+    if same_shape:
+        body = _patched_body(source, channels)
+    else:
+        body = _generated_body(source, channels)
+    return "\n".join(source.header_lines + body)
+
+
+def _patched_body(source: AsfAmcSource, channels: np.ndarray) -> list[str]:
+    """The source's lines, with only the bone lines holding changed values re-written."""
+    body = list(source.body_lines)
+    old = source.values
+    changed = ~np.isclose(channels, old, rtol=1e-10, atol=1e-10)
+    if not changed.any():
+        return body
+    tokens = source.value_tokens.astype(object)
+    tokens[changed] = [format_value(v) for v in channels[changed]]
+    per_frame = 1 + len(source.layout)
+    starts = np.cumsum([0] + [count for _, count in source.layout])
+    for k, (name, count) in enumerate(source.layout):
+        frames = np.flatnonzero(changed[:, starts[k]:starts[k + 1]].any(axis=1))
+        for f in frames:
+            i = source.content_index[f * per_frame + 1 + k]
+            ending = "\r" if body[i].endswith("\r") else ""
+            body[i] = " ".join([name, *tokens[f, starts[k]:starts[k + 1]]]) + ending
+    return body
+
+
+def _generated_body(source: AsfAmcSource, channels: np.ndarray) -> list[str]:
+    """Frame blocks written from scratch (frame count differs from the source, or ASF only)."""
+    eol_cr = "\r" if source.eol == "\r\n" else ""
+    first = int(source.frame_numbers[0]) if source.frame_numbers is not None else 1
+    starts = np.cumsum([0] + [count for _, count in source.layout])
+    text = np.vectorize(format_value, otypes=[object])(channels) if channels.size else channels
+    lines = []
+    for f in range(channels.shape[0]):
+        lines.append(f"{first + f}{eol_cr}")
+        for k, (name, _) in enumerate(source.layout):
+            lines.append(" ".join([name, *text[f, starts[k]:starts[k + 1]]]) + eol_cr)
+    lines.append("")        # final line ending
+    return lines

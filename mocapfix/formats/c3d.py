@@ -1,0 +1,845 @@
+"""C3D (biomechanics / optical motion capture) reader and writer.
+
+What is handled
+---------------
+* All three processor types: Intel (little-endian IEEE), DEC (little-endian words, VAX
+  F-floats) and SGI/MIPS (big-endian IEEE); int16 (POINT:SCALE > 0) and float32
+  (POINT:SCALE < 0) storage. DEC and MIPS files are converted to Intel on read and are
+  always *written* as Intel (a note on the motion says so).
+* Missing samples: residual word < 0 (the C3D flag), NaN coordinates (kineticstoolkit)
+  and exact (0, 0, 0) (Qualisys/numediart, some Vicon/BTS exports). ``Motion.confidence``
+  is 1.0 for a valid sample and 0.0 for a missing one (residual magnitudes are vendor
+  specific and often all 0, so they are not turned into a finer confidence).
+* Labels from POINT:LABELS, LABELS2, LABELS3, ... (more than 255 markers); whitespace and
+  NULs stripped; subject-prefixed labels ("Matt:C7") are kept whole (unique across
+  subjects); empty labels become ``marker<N>``; duplicates get ``_2``, ``_3`` suffixes.
+  Every such change is listed in ``Motion.notes``.
+* POINT:UNITS as one entry or one per marker ("mm  mm  mm"); unset or unknown -> mm, noted.
+* POINT:RATE (header rate as fallback), POINT:SCALE (header scale as fallback; a
+  disagreement is noted and the parameter wins, as in the C3D manual).
+* Quirky real files: no parameter section at all (header-only PhaseSpace export: points
+  are read from the header counts, labels are placeholders); POINT:DATA_START = 0 or
+  absent (header pointer used); a parameter whose record lacks the description-length
+  byte (OptiTrack POINT:LABELS); header/parameter frame counts that disagree or exceed
+  what the file holds (PhoeniX Dance.c3d, NDI Optotrak): when the data section ends
+  exactly on a frame boundary the complete frames are read and a note says so; when it
+  ends inside a frame the file is truncated and refused (UnreadableFileError).
+
+Why hand-written instead of py-c3d (``c3d`` package)
+-----------------------------------------------------
+py-c3d 0.6 was measured against the shared files: its Reader asserts on a header scale
+that disagrees with POINT:SCALE (MACsample.c3d), crashes on OptiTrack's label record
+without description byte (mocap36.c3d), ignores POINT:LABELS2, and ``read_frames`` is a
+Python loop per frame. Its Writer re-lays out the parameter section (rewrites DATA_START,
+adds TRIAL and ANALOG parameters), re-encodes analog data through float scales, truncates
+int16 coordinates instead of rounding, writes stale coordinates for invalid points and
+refuses to copy DEC/MIPS metadata (``to_writer`` raises ValueError). The C3D layout is
+small (512-byte header, a linked list of parameter records, fixed-size frame records), so
+this module parses it directly with bounded loops and reads the data block with one
+``numpy.frombuffer`` per file. py-c3d is still used by the tests as an independent reader
+of the files written here.
+
+Writing
+-------
+When the motion still has this reader's :class:`C3DSource` and the same frames and
+markers, the output is the input file (converted to Intel if needed) with only the point
+records of changed samples re-encoded: header, every parameter byte, analog data, events
+and trailing bytes are copied. Unchanged motion from an Intel file gives a byte-identical
+file (unless ``mark_missing`` has to flag vendor-style (0,0,0)/NaN gaps, see ``write``).
+Sample rules: unchanged samples keep their record bytes (residual and camera mask);
+samples filled by a cleaner get residual 0 and camera mask 0 (c3d.org: modelled, valid);
+samples still missing get residual -1 with the source coordinates; samples a cleaner
+modified keep their residual and camera mask; samples a cleaner deleted get (0,0,0) and
+residual -1. Int16 files are rounded to the POINT:SCALE grid. Any other motion (no C3D
+source, or a different number of frames/markers) is written as a fresh float file with
+only the POINT/ANALOG/TRIAL parameters (logged).
+"""
+from __future__ import annotations
+
+import logging
+import struct
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from mocapfix.errors import UnreadableFileError, WriteError
+from mocapfix.fileio import atomic_open
+from mocapfix.motion import Motion
+from mocapfix.units import METRES_PER_UNIT, normalise_unit_name
+
+NAME = "c3d"
+SUFFIXES = (".c3d",)
+
+PROCESSOR_INTEL, PROCESSOR_DEC, PROCESSOR_MIPS = 84, 85, 86
+PROCESSOR_NAMES = {PROCESSOR_INTEL: "Intel", PROCESSOR_DEC: "DEC", PROCESSOR_MIPS: "SGI/MIPS"}
+BLOCK = 512
+MAX_EVENTS = 18
+
+log = logging.getLogger(__name__)
+
+
+# ---------------------------------------------------------------------------------------
+# number conversion between processor types (all vectorised)
+# ---------------------------------------------------------------------------------------
+def dec_to_float(raw: bytes) -> np.ndarray:
+    """VAX/DEC F-floats (as stored in C3D files) to float64, exactly.
+
+    A DEC float is two little-endian 16-bit words, the high word first; value =
+    (-1)^s * 0.1fff... * 2^(e-128); e = 0 means zero.
+    """
+    words = np.frombuffer(raw, dtype="<u4").astype(np.uint64)
+    bits = ((words & 0xFFFF) << 16) | (words >> 16)
+    sign = np.where(bits >> 31, -1.0, 1.0)
+    exponent = ((bits >> 23) & 0xFF).astype(np.int64)
+    mantissa = ((bits & 0x7FFFFF) | 0x800000).astype(np.float64)
+    value = sign * np.ldexp(mantissa, exponent - 128 - 24)
+    return np.where(exponent == 0, 0.0, value)
+
+
+def floats_to_intel(raw: bytes, processor: int) -> bytes:
+    """32-bit floats of ``processor`` re-encoded as little-endian IEEE float32."""
+    if processor == PROCESSOR_DEC:
+        return dec_to_float(raw).astype("<f4").tobytes()
+    if processor == PROCESSOR_MIPS:
+        return np.frombuffer(raw, dtype=">f4").astype("<f4").tobytes()
+    return bytes(raw)
+
+
+def words_to_intel(raw: bytes, processor: int, itemsize: int = 2) -> bytes:
+    """Integers of ``processor`` as little-endian (only MIPS needs a byte swap)."""
+    if processor == PROCESSOR_MIPS and itemsize > 1:
+        return np.frombuffer(raw, dtype=f">u{itemsize}").astype(f"<u{itemsize}").tobytes()
+    return bytes(raw)
+
+
+def header_to_intel(raw: bytes, processor: int) -> bytes:
+    """The 512-byte header of ``processor`` re-encoded for an Intel file."""
+    if processor == PROCESSOR_INTEL:
+        return bytes(raw)
+    out = bytearray(raw)
+    if processor == PROCESSOR_MIPS:
+        for start, stop in ((2, 12), (16, 20), (24, 304), (394, 396), (468, 512)):
+            out[start:stop] = words_to_intel(raw[start:stop], processor)
+    for start in (12, 20):
+        out[start:start + 4] = floats_to_intel(raw[start:start + 4], processor)
+    out[304:376] = floats_to_intel(raw[304:376], processor)  # 18 event times
+    return bytes(out)
+
+
+# ---------------------------------------------------------------------------------------
+# parameter section
+# ---------------------------------------------------------------------------------------
+@dataclass
+class C3DParam:
+    """One parameter; ``data`` is Intel-encoded (converted from DEC/MIPS on read)."""
+
+    name: str
+    group_id: int
+    bytes_per_element: int
+    dims: tuple
+    data: bytes
+    desc: str = ""
+
+    @property
+    def value(self):
+        """Decoded value: list of str (bpe -1, one per string), numpy array or scalar."""
+        bpe, dims = self.bytes_per_element, self.dims
+        if bpe == -1:
+            text = self.data.decode("latin-1")
+            if len(dims) <= 1:
+                return [text]
+            width = dims[0]
+            count = int(np.prod(dims[1:])) if width else 0
+            return [text[i * width:(i + 1) * width] for i in range(count)]
+        dtype = {1: "<i1", 2: "<i2", 4: "<f4"}.get(bpe)
+        if dtype is None or len(self.data) % abs(bpe):
+            return self.data
+        values = np.frombuffer(self.data, dtype=dtype)
+        if not dims:
+            return values[0].item() if values.size else None
+        try:
+            return values.reshape(tuple(reversed(dims)))
+        except ValueError:
+            return values
+
+    def scalar(self, kind: str = "float"):
+        """First element as float or as unsigned 16-bit int; None if empty."""
+        if self.bytes_per_element == 4 and len(self.data) >= 4:
+            number = float(np.frombuffer(self.data[:4], "<f4")[0])
+        elif self.bytes_per_element == 2 and len(self.data) >= 2:
+            number = float(np.frombuffer(self.data[:2], "<u2" if kind == "uint" else "<i2")[0])
+        elif self.bytes_per_element == 1 and len(self.data) >= 1:
+            number = float(self.data[0])
+        else:
+            return None
+        return number
+
+
+@dataclass
+class C3DGroup:
+    name: str
+    group_id: int
+    desc: str = ""
+    params: dict = field(default_factory=dict)
+
+
+@dataclass
+class ParameterSection:
+    groups: dict            # name -> C3DGroup (in file order)
+    intel_bytes: bytes      # the whole section re-encoded for Intel (same layout)
+    offset: int             # byte offset in the file
+    problems: list          # oddities noticed while parsing
+
+    def get(self, key: str):
+        group_name, _, param_name = key.upper().partition(":")
+        group = self.groups.get(group_name)
+        return None if group is None else group.params.get(param_name)
+
+
+def parse_parameters(path, data: bytes, start: int, stop: int, processor: int) -> ParameterSection:
+    """Walk the linked parameter records in ``data[start:stop]``.
+
+    Every iteration advances by at least one record header, so the loop is bounded by the
+    section size. Malformed records end the walk with a recorded problem.
+    """
+    section = bytearray(data[start:stop])
+    section[3] = PROCESSOR_INTEL
+    groups_by_id: dict = {}
+    problems: list = []
+    int16 = ">h" if processor == PROCESSOR_MIPS else "<h"
+    pos = start + 4
+    while pos + 2 <= stop:
+        name_len, group_id = struct.unpack_from("<bb", data, pos)
+        name_len = abs(name_len)
+        if name_len == 0 or group_id == 0:
+            break
+        name_end = pos + 2 + name_len
+        if name_end + 2 > stop:
+            problems.append(f"parameter record at byte {pos} runs past the section end")
+            break
+        name = data[pos + 2:name_end].decode("latin-1").strip().upper()
+        offset_pos = name_end
+        (to_next,) = struct.unpack_from(int16, data, offset_pos)
+        section[offset_pos - start:offset_pos - start + 2] = struct.pack("<h", to_next)
+        record_end = stop if to_next <= 0 else min(offset_pos + to_next, stop)
+        if to_next > 0 and offset_pos + to_next > stop:
+            problems.append(f"parameter {name!r} points past the parameter section")
+        body = offset_pos + 2
+        if group_id < 0:
+            _read_group(data, body, record_end, name, -group_id, groups_by_id)
+        else:
+            param = _read_param(data, body, record_end, name, group_id, processor, problems)
+            if param is not None:
+                lo = body + 2 + len(param.dims) - start
+                section[lo:lo + len(param.data)] = param.data
+                group = groups_by_id.setdefault(group_id, C3DGroup(f"GROUP{group_id}", group_id))
+                if name in group.params:
+                    problems.append(f"duplicate parameter {group.name}:{name} (first kept)")
+                else:
+                    group.params[name] = param
+        if to_next <= 0:
+            break
+        pos = offset_pos + to_next
+    groups = {}
+    for group in groups_by_id.values():
+        name = group.name
+        if name in groups:
+            problems.append(f"duplicate group name {name!r}: second one renamed {name}{group.group_id}")
+            name = f"{name}{group.group_id}"
+        groups[name] = group
+    return ParameterSection(groups, bytes(section), start, problems)
+
+
+def _read_group(data, body, record_end, name, group_id, groups_by_id):
+    desc = ""
+    if body < record_end:
+        desc_len = data[body]
+        desc = data[body + 1:min(body + 1 + desc_len, record_end)].decode("latin-1")
+    group = groups_by_id.setdefault(group_id, C3DGroup(name, group_id))
+    group.name, group.desc = name, desc
+
+
+def _read_param(data, body, record_end, name, group_id, processor, problems):
+    if body + 2 > record_end:
+        problems.append(f"parameter {name!r} has no type/dimension bytes")
+        return None
+    (bpe,) = struct.unpack_from("<b", data, body)
+    ndims = data[body + 1]
+    dims_end = body + 2 + ndims
+    if dims_end > record_end or bpe not in (-1, 1, 2, 4):
+        problems.append(f"parameter {name!r} has an invalid type ({bpe}) or dimensions")
+        return None
+    dims = tuple(data[body + 2:dims_end])
+    size = int(np.prod(dims, dtype=np.int64)) * abs(bpe) if dims else abs(bpe)
+    data_end = dims_end + size
+    if data_end > record_end:
+        problems.append(f"parameter {name!r} declares {size} bytes but its record holds "
+                        f"{record_end - dims_end}; value cut")
+        data_end = record_end - (record_end - dims_end) % abs(bpe)
+    raw = data[dims_end:data_end]
+    raw = floats_to_intel(raw, processor) if bpe == 4 else words_to_intel(raw, processor, abs(bpe))
+    desc = ""
+    if data_end < record_end:
+        desc_len = data[data_end]
+        desc = data[data_end + 1:min(data_end + 1 + desc_len, record_end)].decode("latin-1")
+    else:
+        problems.append(f"parameter {name!r} lacks its description-length byte")
+    return C3DParam(name, group_id, bpe, dims, bytes(raw), desc)
+
+
+# ---------------------------------------------------------------------------------------
+# the source kept on the Motion for writing back
+# ---------------------------------------------------------------------------------------
+@dataclass
+class C3DSource:
+    """Everything the writer needs; arrays are Intel-encoded and never changed by cleaners.
+
+    ``points`` (T, P, 4) float32 or int16 records as stored (x, y, z, residual word);
+    ``analog`` (T, A) raw analog words per point frame (channels interleaved per sample,
+    ``analog_per_frame`` samples); ``residual`` (T, P) in length units, -1 if flagged
+    invalid; ``camera_mask`` (T, P) uint8; ``positions``/``missing`` as read.
+    """
+
+    processor: int
+    header: bytes                 # 512 bytes, Intel-encoded
+    original_header: bytes
+    parameters: ParameterSection | None
+    data_offset: int
+    storage: str                  # "float" or "int16"
+    scale: float                  # |scale| used for int16 storage
+    points: np.ndarray
+    analog: np.ndarray
+    analog_per_frame: int
+    analog_dtype: str
+    residual: np.ndarray
+    camera_mask: np.ndarray
+    positions: np.ndarray
+    missing: np.ndarray
+    names: list
+    units: str
+    metres_per_unit: float
+    first_frame: int
+    events: list
+    prefix: bytes                 # file bytes from 512 up to data_offset, Intel-encoded
+    tail: bytes                   # bytes after the last frame read
+    conversion_note: str | None = None
+
+    @property
+    def groups(self) -> dict:
+        return {} if self.parameters is None else self.parameters.groups
+
+    def param(self, key: str):
+        return None if self.parameters is None else self.parameters.get(key)
+
+    @property
+    def analog_frames(self) -> np.ndarray:
+        """Analog data as (T, analog_per_frame, channels) float64 raw values (no scaling)."""
+        t, words = self.analog.shape
+        per = max(self.analog_per_frame, 1)
+        return self.analog.astype(np.float64).reshape(t, per, words // per if words else 0)
+
+
+# ---------------------------------------------------------------------------------------
+# reading
+# ---------------------------------------------------------------------------------------
+def sniff(head: bytes) -> bool:
+    if len(head) < 4 or head[1] != 0x50 or head[0] < 2:
+        return False
+    param_at = (head[0] - 1) * BLOCK
+    if len(head) >= param_at + 4:
+        return head[param_at + 3] in PROCESSOR_NAMES
+    return len(head) < 4096 or head[0] <= 64
+
+
+def read(path, fps: float | None = None, **options) -> Motion:
+    """Read a C3D file. ``fps`` overrides the file's rate (noted when they disagree)."""
+    path = Path(path)
+    try:
+        data = path.read_bytes()
+    except OSError as exc:
+        raise UnreadableFileError(path, f"cannot read: {exc.strerror or exc}") from None
+    try:
+        return _read_bytes(path, data, fps)
+    except UnreadableFileError:
+        raise
+    except (struct.error, ValueError, IndexError, UnicodeDecodeError, OverflowError) as exc:
+        raise UnreadableFileError(path, f"malformed C3D file ({type(exc).__name__}: {exc})") from None
+
+
+def _read_bytes(path, data: bytes, fps):
+    notes: list[str] = []
+    if len(data) == 0:
+        raise UnreadableFileError(path, "file is empty")
+    if len(data) < BLOCK:
+        raise UnreadableFileError(path, f"file is {len(data)} bytes, shorter than the 512-byte C3D header")
+    if data[1] != 0x50:
+        raise UnreadableFileError(path, "not a C3D file (byte 2 of the header is not the C3D key 0x50)")
+    param_block = data[0]
+    if param_block < 2 or (param_block - 1) * BLOCK + 4 > len(data):
+        raise UnreadableFileError(path, f"parameter section pointer (block {param_block}) lies outside "
+                                        f"the file ({len(data)} bytes): truncated or not a C3D file")
+    param_start = (param_block - 1) * BLOCK
+    n_param_blocks, processor = data[param_start + 2], data[param_start + 3]
+    if processor not in PROCESSOR_NAMES:
+        raise UnreadableFileError(path, f"unknown processor type {processor} in the parameter section "
+                                        "(expected 84 Intel, 85 DEC, 86 SGI/MIPS)")
+    header = header_to_intel(data[:BLOCK], processor)
+    h = _unpack_header(header)
+
+    parameters = None
+    if n_param_blocks == 0:
+        notes.append("file has no parameter section; points, rate and scale taken from the header, "
+                     "labels are placeholders")
+    else:
+        # the data pointer bounds the section better than its declared block count, which
+        # some writers get wrong (PhoeniX Dance.c3d declares too few blocks)
+        stop = min(param_start + n_param_blocks * BLOCK, len(data))
+        if param_start + 4 < (h["data_block"] - 1) * BLOCK <= len(data):
+            stop = (h["data_block"] - 1) * BLOCK
+        parameters = parse_parameters(path, data, param_start, stop, processor)
+        notes += [f"parameter section: {p}" for p in parameters.problems]
+    get = (lambda key: None) if parameters is None else parameters.get
+
+    n_points = _choose_count(get("POINT:USED"), h["point_count"], "POINT:USED", "points", notes)
+    if n_points == 0:
+        raise UnreadableFileError(path, "file holds no 3D points (POINT:USED and header point count are 0)")
+    scale = _choose_float(get("POINT:SCALE"), h["scale"], "POINT:SCALE", "scale", notes)
+    if scale is None or scale == 0:
+        raise UnreadableFileError(path, "no usable POINT:SCALE or header scale factor (0)")
+    storage = "float" if scale < 0 else "int16"
+    rate = _choose_float(get("POINT:RATE"), h["rate"], "POINT:RATE", "frame rate", notes)
+
+    data_offset = _data_offset(path, get("POINT:DATA_START"), h["data_block"], param_start, len(data),
+                               notes if parameters is not None else [])
+    word = 4 if storage == "float" else 2
+    analog_words = h["analog_count"]
+    analog_per_frame = h["analog_per_frame"]
+    analog_words = _check_analog_layout(get, analog_words, analog_per_frame, notes)
+    frame_bytes = (4 * n_points + analog_words) * word
+    n_frames = _frame_count(path, get, h, frame_bytes, len(data) - data_offset, notes)
+
+    analog_fmt = get("ANALOG:FORMAT")
+    unsigned = analog_fmt is not None and "UNSIGNED" in "".join(analog_fmt.value).upper()
+    points, analog = _read_data(data, data_offset, n_frames, n_points, analog_words, storage,
+                                processor, unsigned)
+    tail = data[data_offset + n_frames * frame_bytes:]
+
+    positions, missing, residual, camera_mask = _decode_points(points, storage, abs(scale), notes)
+    names = _labels(get, parameters, n_points, notes)
+    units, metres = _units(get("POINT:UNITS"), notes)
+
+    if fps is not None:
+        if rate is not None and not np.isclose(fps, rate):
+            notes.append(f"frame rate {fps:g} Hz given by the user overrides the file's {rate:g} Hz")
+        rate = float(fps)
+    if rate is None or not np.isfinite(rate) or rate <= 0:
+        raise UnreadableFileError(path, "no valid frame rate in POINT:RATE or the header; pass fps")
+
+    conversion_note = None
+    if processor != PROCESSOR_INTEL:
+        conversion_note = (f"processor {PROCESSOR_NAMES[processor]}: will be written as Intel "
+                           "(little-endian IEEE); values are converted exactly")
+        notes.append(conversion_note)
+    prefix = bytearray(data[BLOCK:data_offset])
+    if parameters is not None:
+        lo = param_start - BLOCK
+        section = parameters.intel_bytes[:max(0, min(len(parameters.intel_bytes), len(prefix) - lo))]
+        prefix[lo:lo + len(section)] = section
+    else:
+        prefix[param_start - BLOCK + 3] = PROCESSOR_INTEL
+
+    source = C3DSource(
+        processor=processor, header=header, original_header=data[:BLOCK], parameters=parameters,
+        data_offset=data_offset, storage=storage, scale=abs(scale), points=points, analog=analog,
+        analog_per_frame=analog_per_frame, analog_dtype=str(analog.dtype),
+        residual=residual, camera_mask=camera_mask, positions=positions.copy(), missing=missing,
+        names=list(names), units=units, metres_per_unit=metres, first_frame=h["first_frame"],
+        events=_events(header), prefix=bytes(prefix), tail=tail, conversion_note=conversion_note)
+    return Motion(positions=positions, names=names, fps=float(rate), units=units,
+                  metres_per_unit=metres, format=NAME, confidence=(~missing).astype(np.float64),
+                  source=source, path=str(path), notes=notes)
+
+
+def _unpack_header(header: bytes) -> dict:
+    (point_count, analog_count, first, last, max_gap) = struct.unpack_from("<5H", header, 2)
+    (scale,) = struct.unpack_from("<f", header, 12)
+    data_block, analog_per_frame = struct.unpack_from("<2H", header, 16)
+    (rate,) = struct.unpack_from("<f", header, 20)
+    return dict(point_count=point_count, analog_count=analog_count, first_frame=first,
+                last_frame=last, scale=float(scale), data_block=data_block,
+                analog_per_frame=analog_per_frame, rate=float(rate))
+
+
+def _choose_count(param, header_value, key, what, notes) -> int:
+    value = None if param is None else param.scalar("uint")
+    if value is None:
+        return int(header_value)
+    if int(value) != header_value:
+        notes.append(f"{key} = {int(value)} disagrees with the header {what} count {header_value}; "
+                     f"{key} used")
+    return int(value)
+
+
+def _choose_float(param, header_value, key, what, notes):
+    value = None if param is None else param.scalar()
+    if value is None or not np.isfinite(value):
+        if param is not None:
+            notes.append(f"{key} unreadable; header {what} {header_value:g} used")
+        return header_value if np.isfinite(header_value) else None
+    if not np.isclose(value, header_value, rtol=1e-5, atol=0):
+        notes.append(f"{key} = {value:g} disagrees with the header {what} {header_value:g}; {key} used")
+    return float(value)
+
+
+def _data_offset(path, data_start, header_block, param_start, size, notes) -> int:
+    block = header_block
+    if data_start is None:
+        notes.append("POINT:DATA_START missing; header data pointer used")
+    else:
+        value = int(data_start.scalar("uint") or 0)
+        if value == 0:
+            notes.append("POINT:DATA_START is 0; header data pointer used")
+        elif value != header_block:
+            notes.append(f"POINT:DATA_START = {value} disagrees with the header data block "
+                         f"{header_block}; header used")
+    offset = (block - 1) * BLOCK
+    if block < 2 or offset <= param_start or offset > size:
+        raise UnreadableFileError(path, f"data section pointer (block {block}) lies outside the file "
+                                        f"({size} bytes): truncated or corrupt header")
+    return offset
+
+
+def _check_analog_layout(get, analog_words, analog_per_frame, notes) -> int:
+    used = get("ANALOG:USED")
+    if used is not None:
+        expected = int(used.scalar("uint") or 0) * analog_per_frame
+        if expected != analog_words:
+            notes.append(f"ANALOG:USED x samples per frame = {expected} disagrees with the header "
+                         f"analog word count {analog_words}; header used for the data layout")
+    return analog_words
+
+
+def _frame_count(path, get, h, frame_bytes, available_bytes, notes) -> int:
+    """Frames to read: the largest declared count the file holds completely.
+
+    Declared counts come from the header (last - first + 1), POINT:FRAMES,
+    POINT:LONG_FRAMES and TRIAL:ACTUAL_START/END_FIELD. If the file holds fewer frames than
+    every declaration: complete frames followed by end-of-file are read (noted); a partial
+    frame means the file was cut, and it is refused.
+    """
+    candidates = {}
+    if h["last_frame"] >= h["first_frame"]:
+        candidates["header"] = h["last_frame"] - h["first_frame"] + 1
+    frames = get("POINT:FRAMES")
+    if frames is not None and frames.scalar("uint"):
+        candidates["POINT:FRAMES"] = int(frames.scalar("uint"))
+    long_frames = get("POINT:LONG_FRAMES")
+    if long_frames is not None and long_frames.bytes_per_element == 4:
+        value = long_frames.scalar()
+        if value and np.isfinite(value) and value > 0:
+            candidates["POINT:LONG_FRAMES"] = int(value)
+    start, end = get("TRIAL:ACTUAL_START_FIELD"), get("TRIAL:ACTUAL_END_FIELD")
+    if start is not None and end is not None and len(start.data) >= 4 and len(end.data) >= 4:
+        s = np.frombuffer(start.data[:4], "<u2").astype(np.int64)
+        e = np.frombuffer(end.data[:4], "<u2").astype(np.int64)
+        first, last = s[0] + s[1] * 65536, e[0] + e[1] * 65536
+        if last >= first > 0:
+            candidates["TRIAL:ACTUAL_END_FIELD"] = int(last - first + 1)
+    if not candidates:
+        raise UnreadableFileError(path, "no frame count in the header or parameters")
+    if frame_bytes <= 0:
+        raise UnreadableFileError(path, "frame record size is 0")
+    held = available_bytes // frame_bytes
+    if len(set(candidates.values())) > 1:
+        notes.append("frame counts disagree: " + ", ".join(f"{k} {v}" for k, v in candidates.items()))
+    fitting = [v for v in candidates.values() if v <= held]
+    if fitting:
+        return max(fitting)
+    declared = min(candidates.values())
+    if available_bytes % frame_bytes:
+        raise UnreadableFileError(
+            path, f"truncated: data section holds {available_bytes / frame_bytes:.2f} frames of "
+                  f"{frame_bytes} bytes, {declared} declared")
+    if held == 0:
+        raise UnreadableFileError(path, f"data section is empty, {declared} frames declared")
+    notes.append(f"file declares {declared} frames but holds {held} complete frames ending exactly "
+                 f"at end of file; read {held}")
+    return int(held)
+
+
+def _read_data(data, offset, n_frames, n_points, analog_words, storage, processor, unsigned):
+    """Point records (T, P, 4) and analog words (T, A), Intel-encoded, one frombuffer each."""
+    if storage == "float":
+        base = "f4"
+        order = ">" if processor == PROCESSOR_MIPS else "<"
+        analog_base = "f4"
+    else:
+        base = "i2"
+        order = ">" if processor == PROCESSOR_MIPS else "<"
+        analog_base = "u2" if unsigned else "i2"
+    if processor == PROCESSOR_DEC and storage == "float":
+        base = analog_base = "u4"
+    record = np.dtype([("p", order + base, (n_points, 4)), ("a", order + analog_base, (analog_words,))])
+    frames = np.frombuffer(data, dtype=record, count=n_frames, offset=offset)
+    points, analog = frames["p"], frames["a"]
+    if processor == PROCESSOR_DEC and storage == "float":
+        points = dec_to_float(points.tobytes()).astype("<f4").reshape(points.shape)
+        analog = dec_to_float(analog.tobytes()).astype("<f4").reshape(analog.shape)
+    points = np.ascontiguousarray(points.astype(points.dtype.newbyteorder("<")))
+    analog = np.ascontiguousarray(analog.astype(analog.dtype.newbyteorder("<")))
+    return points, analog
+
+
+def _residual_words(points: np.ndarray, storage: str) -> np.ndarray:
+    """The 4th word of each record as a signed integer (-1 when it is not finite)."""
+    fourth = points[..., 3]
+    if storage == "float":
+        finite = np.isfinite(fourth)
+        clipped = np.clip(np.where(finite, fourth, -1.0), -32768, 32767)
+        return np.trunc(clipped).astype(np.int32)
+    return fourth.astype(np.int32)
+
+
+def _decode_points(points, storage, scale, notes):
+    xyz = points[..., :3].astype(np.float64)
+    if storage == "int16":
+        xyz *= scale
+    word = _residual_words(points, storage)
+    flagged = word < 0
+    non_finite = ~np.isfinite(xyz).all(axis=2)
+    zeros = (xyz == 0).all(axis=2) & ~flagged & ~non_finite
+    missing = flagged | non_finite | zeros
+    if non_finite.any():
+        notes.append(f"{int(non_finite.sum())} samples with NaN/inf coordinates treated as missing")
+    if zeros.any():
+        notes.append(f"{int(zeros.sum())} samples at exactly (0,0,0) without the residual -1 flag "
+                     "treated as missing")
+    residual = np.where(flagged, -1.0, (word & 0xFF) * scale)
+    camera_mask = np.where(flagged, 0, (word & 0x7F00) >> 8).astype(np.uint8)
+    positions = np.where(missing[..., None], np.nan, xyz)
+    return positions, missing, residual, camera_mask
+
+
+def _labels(get, parameters, n_points, notes) -> list[str]:
+    raw: list[str] = []
+    if parameters is not None and "POINT" in parameters.groups:
+        keys = ["LABELS"] + [f"LABELS{i}" for i in range(2, 1 + len(parameters.groups["POINT"].params))]
+        for key in keys:
+            param = get(f"POINT:{key}")
+            if param is None or param.bytes_per_element != -1:
+                if key != "LABELS":
+                    break
+                continue
+            raw += param.value
+            if len(raw) >= n_points:
+                break
+    if parameters is not None and len(raw) < n_points:
+        notes.append(f"POINT:LABELS holds {len(raw)} labels for {n_points} points; placeholders added")
+    raw = [s.replace("\x00", " ").strip() for s in raw[:n_points]]
+    raw += [""] * (n_points - len(raw))
+    empty = [i for i, s in enumerate(raw) if not s]
+    taken = set(s for s in raw if s)
+    for i in empty:
+        candidate = f"marker{i + 1}"
+        while candidate in taken:
+            candidate += "_"
+        raw[i] = candidate
+        taken.add(candidate)
+    if empty and parameters is not None:
+        notes.append(f"{len(empty)} empty marker labels named marker<N>")
+    seen: dict[str, int] = {}
+    renamed = []
+    names = []
+    for label in raw:
+        if label in seen:
+            seen[label] += 1
+            new = f"{label}_{seen[label]}"
+            while new in taken:
+                seen[label] += 1
+                new = f"{label}_{seen[label]}"
+            renamed.append(f"{label}->{new}")
+            taken.add(new)
+            names.append(new)
+        else:
+            seen[label] = 1
+            names.append(label)
+    if renamed:
+        notes.append("duplicate marker labels made unique: " + ", ".join(renamed[:10])
+                     + (" ..." if len(renamed) > 10 else ""))
+    return names
+
+
+def _units(param, notes) -> tuple[str, float]:
+    if param is None or param.bytes_per_element != -1:
+        notes.append("POINT:UNITS unset; assuming mm")
+        return "mm", METRES_PER_UNIT["mm"]
+    tokens = " ".join(param.value).replace("\x00", " ").split()
+    units = {normalise_unit_name(t) for t in tokens}
+    if not tokens:
+        notes.append("POINT:UNITS empty; assuming mm")
+        return "mm", METRES_PER_UNIT["mm"]
+    if None in units:
+        notes.append(f"POINT:UNITS {tokens[0]!r} not recognised; assuming mm")
+        return "mm", METRES_PER_UNIT["mm"]
+    if len(units) > 1:
+        notes.append(f"POINT:UNITS lists several units {sorted(units)}; the first ({tokens[0]}) used")
+    unit = normalise_unit_name(tokens[0])
+    return unit, METRES_PER_UNIT[unit]
+
+
+def _events(header: bytes) -> list[dict]:
+    """Header events (up to 18): time (s from the first frame), label, displayed flag."""
+    (count,) = struct.unpack_from("<H", header, 300)
+    count = min(count, MAX_EVENTS)
+    times = np.frombuffer(header[304:376], "<f4")
+    events = []
+    for i in range(count):
+        events.append(dict(time=float(times[i]), displayed=bool(header[376 + i]),
+                           label=header[396 + 4 * i:400 + 4 * i].decode("latin-1").strip("\x00 ")))
+    return events
+
+
+# ---------------------------------------------------------------------------------------
+# writing
+# ---------------------------------------------------------------------------------------
+def write(motion: Motion, path, mark_missing: bool = True, **options) -> list[Path]:
+    """Write ``motion`` as an Intel C3D file; returns ``[path]``.
+
+    ``mark_missing`` (default True): samples missing in the source only by a vendor
+    convention ((0,0,0) or NaN with a non-negative residual) are written with residual -1,
+    so every reader sees the gap; False keeps those records byte-for-byte.
+    """
+    path = Path(path)
+    source = motion.source
+    if (isinstance(source, C3DSource) and motion.positions.shape == source.positions.shape
+            and list(motion.names) == list(source.names)):
+        payload = _splice(motion, source, path, mark_missing)
+    else:
+        if isinstance(source, C3DSource):
+            log.warning("%s: frames or markers changed since reading; writing a fresh C3D "
+                        "without the original analog data and parameters", path)
+        payload = _fresh_file(motion, path)
+    with atomic_open(path, "wb") as handle:
+        handle.write(payload)
+    return [path]
+
+
+def _positions_in_source_units(motion: Motion, source: C3DSource) -> np.ndarray:
+    positions = np.asarray(motion.positions, dtype=np.float64)
+    if motion.metres_per_unit != source.metres_per_unit:
+        positions = positions * (motion.metres_per_unit / source.metres_per_unit)
+    return positions
+
+
+def _splice(motion: Motion, source: C3DSource, path, mark_missing: bool) -> bytes:
+    new = _positions_in_source_units(motion, source)
+    old = source.positions
+    new_missing = ~np.isfinite(new).all(axis=2)
+    same = ((new == old) | (np.isnan(new) & np.isnan(old))).all(axis=2)
+    changed = ~same
+    filled = changed & ~new_missing & source.missing
+    modified = changed & ~new_missing & ~source.missing
+    deleted = new_missing & ~source.missing
+    still_missing = new_missing & source.missing
+
+    points = source.points.copy()
+    encode = filled | modified
+    if encode.any():
+        points[..., :3][encode] = _encode_xyz(new[encode], source, path)
+    words = _residual_words(source.points, source.storage)
+    points[..., 3][filled] = 0
+    if deleted.any():
+        points[..., :3][deleted] = 0
+        points[..., 3][deleted] = -1
+    if mark_missing:
+        unflagged = still_missing & (words >= 0)
+        points[..., 3][unflagged] = -1
+        if source.storage == "float":
+            nan_word = still_missing & ~np.isfinite(source.points[..., 3])
+            points[..., 3][nan_word] = -1
+
+    record = np.dtype([("p", points.dtype, points.shape[1:]), ("a", source.analog.dtype, source.analog.shape[1:])])
+    frames = np.empty(points.shape[0], dtype=record)
+    frames["p"] = points
+    frames["a"] = source.analog
+    return source.header + source.prefix + frames.tobytes() + source.tail
+
+
+def _encode_xyz(values: np.ndarray, source: C3DSource, path) -> np.ndarray:
+    if source.storage == "float":
+        return values.astype(np.float32)
+    grid = np.rint(values / source.scale)
+    if (np.abs(grid) > 32767).any():
+        raise WriteError(path, f"coordinate beyond the int16 range of this file "
+                               f"(|value| > {32767 * source.scale:g} {source.units})")
+    return grid.astype(np.int16)
+
+
+# -- fresh file (no C3D source, or frames/markers changed) -------------------------------
+def _param_record(name: str, group_id: int, bpe: int, dims, data: bytes, desc: str = "") -> bytes:
+    name_b, desc_b = name.encode("latin-1"), desc.encode("latin-1")
+    body = struct.pack("<bB", bpe, len(dims)) + bytes(dims) + data + struct.pack("<B", len(desc_b)) + desc_b
+    return struct.pack("<bb", len(name_b), group_id) + name_b + struct.pack("<h", 2 + len(body)) + body
+
+
+def _group_record(name: str, group_id: int, desc: str) -> bytes:
+    name_b, desc_b = name.encode("latin-1"), desc.encode("latin-1")
+    body = struct.pack("<B", len(desc_b)) + desc_b
+    return struct.pack("<bb", len(name_b), -group_id) + name_b + struct.pack("<h", 2 + len(body)) + body
+
+
+def _string_param(name, group_id, strings: list[str], desc="") -> bytes:
+    width = max([len(s) for s in strings] + [1])
+    data = "".join(s.ljust(width) for s in strings).encode("latin-1")
+    return _param_record(name, group_id, -1, (width, len(strings)), data, desc)
+
+
+def _fresh_file(motion: Motion, path) -> bytes:
+    positions = np.asarray(motion.positions, dtype=np.float64)
+    n_frames, n_points = positions.shape[:2]
+    if n_frames == 0 or n_points == 0:
+        raise WriteError(path, "cannot write a C3D file without frames or markers")
+    if n_points > 65535 or any(len(n.encode("latin-1", "replace")) > 255 for n in motion.names):
+        raise WriteError(path, "too many markers (> 65535) or a label longer than 255 characters")
+    unit = motion.units if motion.units in METRES_PER_UNIT else "mm"
+    if unit != motion.units:
+        positions = positions * (motion.metres_per_unit / METRES_PER_UNIT["mm"])
+    rate = float(motion.fps)
+    records = [_group_record("POINT", 1, "3-D point parameters")]
+    f32 = lambda v: struct.pack("<f", v)  # noqa: E731
+    u16 = lambda v: struct.pack("<H", v)  # noqa: E731
+    records += [
+        _param_record("USED", 1, 2, (), u16(n_points)),
+        _param_record("FRAMES", 1, 2, (), u16(min(n_frames, 65535))),
+        _param_record("DATA_START", 1, 2, (), u16(0)),  # patched below
+        _param_record("SCALE", 1, 4, (), f32(-1.0)),
+        _param_record("RATE", 1, 4, (), f32(rate)),
+        _param_record("UNITS", 1, -1, (len(unit),), unit.encode("latin-1")),
+    ]
+    if n_frames >= 65535:
+        records.append(_param_record("LONG_FRAMES", 1, 4, (), f32(float(n_frames))))
+    names = [n.encode("latin-1", "replace").decode("latin-1") for n in motion.names]
+    for chunk, start in enumerate(range(0, n_points, 255)):
+        key = "LABELS" if chunk == 0 else f"LABELS{chunk + 1}"
+        records.append(_string_param(key, 1, names[start:start + 255]))
+    records += [_group_record("ANALOG", 2, "Analog parameters"),
+                _param_record("USED", 2, 2, (), u16(0)),
+                _param_record("RATE", 2, 4, (), f32(rate))]
+    body = b"".join(records)
+    n_param_blocks = -(-(4 + len(body)) // BLOCK)
+    data_block = 2 + n_param_blocks
+    body = body.replace(_param_record("DATA_START", 1, 2, (), u16(0)),
+                        _param_record("DATA_START", 1, 2, (), u16(data_block)), 1)
+    section = (bytes([1, 0x50, n_param_blocks, PROCESSOR_INTEL]) + body).ljust(n_param_blocks * BLOCK, b"\0")
+
+    header = bytearray(BLOCK)
+    struct.pack_into("<BBHHHHHfHHf", header, 0, 2, 0x50, n_points, 0, 1, min(n_frames, 65535),
+                     0, -1.0, data_block, 0, rate)
+    missing = ~np.isfinite(positions).all(axis=2)
+    points = np.zeros((n_frames, n_points, 4), dtype="<f4")
+    points[..., :3] = np.where(missing[..., None], 0.0, positions)
+    points[..., 3] = np.where(missing, -1.0, 0.0)
+    data = points.tobytes()
+    data += b"\0" * (-len(data) % BLOCK)
+    return bytes(header) + section + data

@@ -1,0 +1,1038 @@
+"""Kinect skeleton text files: three dataset layouts and two layouts users export.
+
+Layouts (detected from content, never from the name):
+
+``kinect_v2_csv``
+    Microsoft LabanotationSuite / KinectReader CSV, no header: a timestamp in 100 ns
+    ticks, then 25 x ``X,Y,Z,TrackingState`` (metres, camera space; state 0 NotTracked,
+    1 Inferred, 2 Tracked), usually a trailing comma. Joint order = Kinect SDK 2.0
+    ``JointType``. The same layout with 20 joints (Kinect SDK 1.x order) is accepted
+    as ``kinect_v1_csv``.
+``utkinect``
+    UTKinect-Action3D ``joints_sXX_eXX.txt``: whitespace separated, a frame index then
+    20 x ``x y z`` (metres), Kinect SDK 1.x order. The indices count 30 Hz camera frames
+    but rows are irregular (mostly every 2-8 indices, some indices repeated), so
+    ``times = (index - first index) / 30`` and ``fps`` is the median row rate.
+``msr_action3d``
+    MSR Action3D ``aXX_sXX_eXX_skeleton3D.txt`` (the *real_world_coordinates* variant):
+    rows ``x y z c``, 20 rows per frame, metres. Known: 20 rows per frame, c in [0, 1],
+    nominal 15 fps (the dataset's stated rate; the file holds no timing). Assumed: the
+    joint order, taken from the bone list of the dataset's ``drawskt.m`` viewer (see
+    :mod:`mocapfix.formats.kinect_layouts`) -- the bone-length tests on the real files
+    confirm it. The other variant (screen u, v, depth) is refused. ``c`` becomes the
+    confidence directly. About a quarter of rows have ``c = 0``; on the shared files these
+    are always plausible positions of joints the tracker inferred (shoulder centre, spine,
+    hip centre, feet), never zeros, so ``c = 0`` is a low confidence, NOT missing. Only a
+    row whose x, y, z are all 0 (or not finite) is missing.
+``wide_csv``
+    A header row with ``<Joint>_X, <Joint>_Y, <Joint>_Z`` columns (also ``<Joint>.X``,
+    ``<Joint> X``, any case, optional unit tag ``(mm)``/``[mm]``), optional
+    ``<Joint>_State``/``_TrackingState`` (0/1/2) or ``_Confidence`` (0..1) columns and an
+    optional time/timestamp/frame column; separator ``,``, ``;`` or tab. Other columns are
+    kept untouched. Empty cells are missing.
+``long_csv``
+    A header ``frame, joint, x, y, z[, state]`` (``time``/``timestamp`` instead of frame,
+    ``name`` instead of joint accepted), one row per joint per frame; a joint without a
+    row in some frame is missing there.
+
+Joint sets: a headed file whose joint names all belong to a built-in set (Kinect v1/v2,
+Azure Kinect, any spelling) gets that set's topology as ``motion.skeleton``; unknown
+names give no skeleton.
+
+Tracking state -> confidence: Tracked 2 -> 1.0, Inferred 1 -> 0.5, NotTracked 0 ->
+missing (NaN) with confidence 0; the file's coordinates of NotTracked samples are kept in
+``motion.source`` so that writing back reproduces them.
+
+Missing/odd values (decisions): ``nan``/``inf`` text in a coordinate -> that sample is
+missing (noted); a non-numeric token -> one UnreadableFileError naming file and line; a
+row with the wrong number of values in the middle -> error naming the line; an incomplete
+LAST line (or incomplete last MSR frame) -> the complete part is read and a note says the
+file looks truncated (the fragment is not written back); empty file / header only -> error.
+
+Timing: timestamps (ticks, seconds, ms) or frame indices give ``motion.times`` in seconds
+from 0 and ``fps`` = 1 / median positive interval. Intervals > 1.5 x the median are
+reported as dropped-frame gaps, intervals of 0 as repeated frames, negative ones as
+backward steps -- in ``motion.notes``; rows are never inserted or removed.
+
+Units: metres (``units="m"``) for the dataset layouts. A headed CSV uses its unit tag if
+it has one, else the unit is guessed from magnitude (median bone length when the
+skeleton is known, else the body's spread around its centroid) and a note says so
+(``units=`` option overrides).
+
+Writing back (same layout as read): every line is kept as read; only samples whose
+position changed are re-formatted (at least 6 decimals, more when the original token had
+more), so an unchanged motion writes back byte-identical (trailing comma, number format,
+whitespace, line endings, BOM). A sample a cleaner FILLED (missing when read, present
+now) gets TrackingState 1 (Inferred) in the Kinect CSVs and state columns, ``c = 0.5`` in
+MSR files; a sample still missing keeps its original tokens and state; a sample a cleaner
+REMOVED (present when read, NaN now) is written as NotTracked (state 0, coordinates kept)
+where the layout has a state, as ``0 0 0 0`` in MSR files, as ``nan`` in UTKinect files,
+as empty cells in a headed CSV without state and as an absent row in the long layout.
+If the motion has no Kinect source (built in Python) or its frame count/joints differ
+from the source, a headed wide CSV is written (``time`` + ``<Joint>_X/_Y/_Z`` [+ ``_State``]).
+
+Why hand-written: these are ad-hoc research/export layouts with no library that reads
+them; the parsing is one ``split`` per line plus one vectorised numpy conversion.
+"""
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from mocapfix.errors import UnreadableFileError, UnsupportedFeatureError, WriteError
+from mocapfix.fileio import atomic_write_bytes
+from mocapfix.formats import kinect_layouts as kl
+from mocapfix.motion import Motion, Skeleton
+from mocapfix.units import METRES_PER_UNIT, normalise_unit_name
+
+NAME = "kinect"
+SUFFIXES = (".csv", ".txt", ".tsv")
+
+STATE_CONFIDENCE = {0: 0.0, 1: 0.5, 2: 1.0}
+UTKINECT_FPS = 30.0
+MSR_FPS = 15.0
+DEFAULT_FPS = 30.0
+GAP_FACTOR = 1.5
+
+_NUMBER = re.compile(r"^[+-]?(\d+\.?\d*([eE][+-]?\d+)?|\.\d+([eE][+-]?\d+)?|nan|inf|infinity)$",
+                     re.IGNORECASE)
+_AXIS_COLUMN = re.compile(
+    r"^(?P<joint>.*?\S)[\s_.:\-]+(?P<role>x|y|z|state|tracking[\s_]?state|trackingstate|"
+    r"confidence|conf)(?:\s*[\[(](?P<unit>[a-z]+)[\])])?$", re.IGNORECASE)
+_TIME_NAMES = {"time", "times", "timestamp", "timestamps", "t", "seconds", "sec", "secs",
+               "times", "timems", "timestampms", "ms", "ticks", "timeus", "timestampus",
+               "us", "relativetime", "elapsed", "elapsedtime"}
+_FRAME_NAMES = {"frame", "frames", "frameindex", "frameno", "framenumber", "framenum",
+                "frameid", "index", "idx"}
+_JOINT_NAMES = {"joint", "jointname", "name", "jointtype", "label", "bone", "marker"}
+_STATE_NAMES = {"state", "trackingstate", "tracking"}
+_CONF_NAMES = {"confidence", "conf"}
+
+
+def _norm(name: str) -> str:
+    return re.sub(r"[\s_.\-:\"']+", "", name.strip().lower())
+
+
+# ---------------------------------------------------------------------------------------
+# source kept for writing back
+# ---------------------------------------------------------------------------------------
+@dataclass
+class KinectSource:
+    """Everything the writer needs to reproduce the file (see the module docstring)."""
+
+    layout: str
+    bom: str
+    lines: list[str]             # every line of the file, without its line ending
+    endings: list[str]           # the ending of each line ("\n", "\r\n" or "" for the last)
+    sep: str | None              # field separator; None = runs of whitespace
+    names: list[str]
+    line_of: np.ndarray          # (T, J) line index of each sample; -1: no row (long layout)
+    coord_field: np.ndarray      # (T, J, 3) field index of X, Y, Z in its line
+    state_field: np.ndarray      # (T, J) field index of the state / confidence; -1: none
+    state_kind: str | None       # "tracking" (0/1/2), "confidence" (0..1) or None
+    original: np.ndarray         # (T, J, 3) coordinates as written (NotTracked kept)
+    missing: np.ndarray          # (T, J) samples the reader made missing
+    skip_lines: list[int] = field(default_factory=list)   # truncated fragments, not written
+    extra: dict = field(default_factory=dict)              # layout-specific (long layout rows)
+
+
+# ---------------------------------------------------------------------------------------
+# text helpers
+# ---------------------------------------------------------------------------------------
+def _decode(raw: bytes, path) -> tuple[str, str]:
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise UnreadableFileError(path, f"not a text file (undecodable byte at offset "
+                                        f"{exc.start})") from None
+    bom = "\ufeff" if text.startswith("\ufeff") else ""
+    return bom, text[len(bom):]
+
+
+def _split_lines(text: str) -> tuple[list[str], list[str]]:
+    pieces = text.split("\n")
+    lines, endings = [], []
+    for i, piece in enumerate(pieces):
+        last = i == len(pieces) - 1
+        if last and piece == "":
+            break
+        if piece.endswith("\r") and not last:
+            lines.append(piece[:-1])
+            endings.append("\r\n")
+        else:
+            lines.append(piece)
+            endings.append("" if last else "\n")
+    return lines, endings
+
+
+def _content_indices(lines: list[str]) -> list[int]:
+    """Indices of lines that hold data or a header (not blank, not ``#`` comments)."""
+    return [i for i, line in enumerate(lines)
+            if line.strip() and not line.lstrip().startswith("#")]
+
+
+def _split_fields(line: str, sep: str | None) -> list[str]:
+    return line.split() if sep is None else line.split(sep)
+
+
+def _is_number(token: str) -> bool:
+    return bool(_NUMBER.match(token.strip()))
+
+
+def _numbers(tokens: list[str], token_lines: np.ndarray, path, empty_is_nan=False) -> np.ndarray:
+    """One vectorised conversion; on failure, name the line of the first bad token."""
+    if empty_is_nan:
+        tokens = [t if t.strip() else "nan" for t in tokens]
+    try:
+        return np.array(tokens, dtype=np.float64)
+    except ValueError:
+        for k, token in enumerate(tokens):
+            if not _is_number(token):
+                raise UnreadableFileError(path, f"non-numeric value {token.strip()!r}",
+                                          line=int(token_lines[k]) + 1) from None
+        raise UnreadableFileError(path, "non-numeric value") from None
+
+
+def _check_counts(rows: list[list[str]], idx: list[int], expected: int, path, notes,
+                  what: str) -> tuple[list[list[str]], list[int], list[int]]:
+    """Rows must hold ``expected`` fields; a short LAST row is a truncation: dropped, noted."""
+    counts = np.fromiter(map(len, rows), dtype=np.intp, count=len(rows))
+    bad = np.nonzero(counts != expected)[0]
+    skipped: list[int] = []
+    if len(bad) and bad[0] == len(rows) - 1 and counts[-1] < expected:
+        notes.append(f"last line (line {idx[-1] + 1}) is incomplete ({counts[-1]} of "
+                     f"{expected} {what}): the file looks truncated; that line was dropped")
+        skipped = [idx[-1]]
+        rows, idx = rows[:-1], idx[:-1]
+    elif len(bad):
+        k = int(bad[0])
+        raise UnreadableFileError(path, f"{counts[k]} {what} where {expected} were expected",
+                                  line=idx[k] + 1)
+    return rows, idx, skipped
+
+
+# ---------------------------------------------------------------------------------------
+# layout detection
+# ---------------------------------------------------------------------------------------
+def _strip_trailing_empty(fields: list[str]) -> list[str]:
+    return fields[:-1] if fields and not fields[-1].strip() else fields
+
+
+def _classify(content: list[str]) -> str | None:
+    """Layout name of a file from its first content lines, or None."""
+    if not content:
+        return None
+    first = content[0]
+    if "," in first or ";" in first or "\t" in first:
+        sep = max((",", ";", "\t"), key=first.count)
+        fields = _strip_trailing_empty(first.split(sep))
+        if all(_is_number(f) for f in fields):
+            return _classify_headerless_csv(fields) if sep == "," else None
+        return _header_layout(fields)
+    tokens = first.split()
+    if not all(_is_number(t) for t in tokens):
+        return _header_layout(tokens) if len(tokens) >= 4 else None
+    if len(tokens) == 61 and float(tokens[0]).is_integer():
+        return "utkinect"
+    if len(tokens) == 4 and _looks_msr(content):
+        return "msr_action3d"
+    return None
+
+
+def _classify_headerless_csv(fields: list[str]) -> str | None:
+    n = len(fields) - 1
+    if n % 4 or n // 4 not in (20, 25):
+        return None
+    try:
+        states = {float(f) for f in fields[4::4]}
+        stamp = float(fields[0])
+    except ValueError:
+        return None
+    if not states <= {0.0, 1.0, 2.0} or not stamp.is_integer():
+        return None
+    return "kinect_v2_csv" if n // 4 == 25 else "kinect_v1_csv"
+
+
+def _looks_msr(content: list[str]) -> bool:
+    rows = [line.split() for line in content[:40]]
+    if len(rows) > 1:
+        rows = rows[:-1]  # the last line of a 4 KiB head may be cut
+    for row in rows:
+        if len(row) != 4 or not all(_is_number(t) for t in row):
+            return False
+        c = float(row[3])
+        if not 0.0 <= c <= 1.0:
+            return False
+    return True
+
+
+def _header_layout(fields: list[str]) -> str | None:
+    columns = [_clean_header(f) for f in fields]
+    if _long_columns(columns) is not None:
+        return "long_csv"
+    joints, _, _ = _wide_columns(columns)
+    if any({"x", "y", "z"} <= set(roles) for roles in joints.values()):
+        return "wide_csv"
+    return None
+
+
+def sniff(head: bytes) -> bool:
+    """True when ``head`` (first bytes of a file) looks like one of the layouts."""
+    text = head.decode("utf-8", errors="replace").lstrip("\ufeff")
+    lines = text.split("\n")
+    if len(head) >= 4096 and len(lines) > 1:
+        lines = lines[:-1]  # cut mid-line
+    content = [ln.rstrip("\r") for ln in lines
+               if ln.strip() and not ln.lstrip().startswith("#")]
+    try:
+        return _classify(content[:40]) is not None
+    except (ValueError, IndexError):
+        return False
+
+
+# ---------------------------------------------------------------------------------------
+# reading
+# ---------------------------------------------------------------------------------------
+def read(path, fps: float | None = None, units: str | None = None, **options) -> Motion:
+    """Read any of the layouts (see the module docstring) into a :class:`Motion`."""
+    path = Path(path)
+    try:
+        raw = path.read_bytes()
+    except OSError as exc:
+        raise UnreadableFileError(path, f"cannot open: {exc.strerror or exc}") from None
+    if not raw.strip():
+        raise UnreadableFileError(path, "file is empty")
+    bom, text = _decode(raw, path)
+    lines, endings = _split_lines(text)
+    idx = _content_indices(lines)
+    if not idx:
+        raise UnreadableFileError(path, "file holds no data lines")
+    layout = options.get("layout") or _classify([lines[i] for i in idx[:40]])
+    if layout is None:
+        raise UnreadableFileError(path, _why_unknown(lines[idx[0]]), line=idx[0] + 1)
+    reader = {
+        "kinect_v2_csv": _read_kinect_csv, "kinect_v1_csv": _read_kinect_csv,
+        "utkinect": _read_utkinect, "msr_action3d": _read_msr,
+        "wide_csv": _read_wide, "long_csv": _read_long,
+    }[layout]
+    if fps is not None and not (np.isfinite(float(fps)) and float(fps) > 0):
+        raise UnreadableFileError(path, f"fps must be a positive number, got {fps}")
+    notes: list[str] = []
+    parts = reader(path, lines, idx, notes, layout=layout, fps=fps, units=units)
+    motion = _assemble(parts, layout, bom, lines, endings, notes, fps)
+    motion.path = str(path)
+    return motion
+
+
+def _why_unknown(first: str) -> str:
+    n_comma = len(_strip_trailing_empty(first.split(",")))
+    n_space = len(first.split())
+    return ("not a Kinect skeleton layout: first line has "
+            f"{n_comma if ',' in first else n_space} values (expected 1 + 25 x 4 for a "
+            "Kinect v2 CSV, 61 for UTKinect, 4 for MSR Action3D, or a header with "
+            "<Joint>_X/_Y/_Z or frame,joint,x,y,z columns)")
+
+
+@dataclass
+class _Parsed:
+    """What a layout reader hands to :func:`_assemble`."""
+
+    names: list[str]
+    coords: np.ndarray            # (T, J, 3) as written
+    missing: np.ndarray           # (T, J)
+    confidence: np.ndarray | None
+    line_of: np.ndarray
+    coord_field: np.ndarray
+    state_field: np.ndarray
+    state_kind: str | None
+    sep: str | None
+    times: np.ndarray | None      # seconds from the first row, or None (uniform)
+    file_fps: float
+    units: str = "m"
+    skeleton: Skeleton | None = None
+    skip_lines: list[int] = field(default_factory=list)
+    extra: dict = field(default_factory=dict)
+
+
+def _assemble(p: _Parsed, layout, bom, lines, endings, notes, fps) -> Motion:
+    positions = p.coords.copy()
+    positions[p.missing] = np.nan
+    motion_fps = p.file_fps
+    if fps is not None:
+        fps = float(fps)
+        if abs(fps - p.file_fps) > 0.01 * p.file_fps:
+            notes.append(f"fps {fps:g} given by the user overrides the file's {p.file_fps:.4g} fps")
+        motion_fps = fps
+    source = KinectSource(
+        layout=layout, bom=bom, lines=lines, endings=endings, sep=p.sep, names=list(p.names),
+        line_of=p.line_of, coord_field=p.coord_field, state_field=p.state_field,
+        state_kind=p.state_kind, original=p.coords, missing=p.missing,
+        skip_lines=p.skip_lines, extra=p.extra)
+    return Motion(positions=positions, names=list(p.names), fps=motion_fps, units=p.units,
+                  metres_per_unit=METRES_PER_UNIT[p.units], format=NAME,
+                  confidence=p.confidence, skeleton=p.skeleton, times=p.times,
+                  source=source, notes=notes)
+
+
+def _nonfinite_missing(coords: np.ndarray, notes: list[str]) -> np.ndarray:
+    bad = ~np.isfinite(coords).all(axis=2)
+    if bad.any():
+        notes.append(f"{int(bad.sum())} samples with nan/inf coordinates read as missing")
+    return bad
+
+
+def _timing(times: np.ndarray, notes: list[str], unit_label="frame") -> float:
+    """fps from the median positive interval; dropped/repeated/backward frames noted."""
+    if len(times) < 2:
+        return float("nan")
+    dt = np.diff(times)
+    positive = dt[dt > 0]
+    if not len(positive):
+        notes.append("all rows have the same time stamp; rate unknown")
+        return float("nan")
+    median = float(np.median(positive))
+    gaps = dt > GAP_FACTOR * median
+    if gaps.any():
+        notes.append(f"{int(gaps.sum())} dropped-frame gaps, longest {1000 * dt.max():.0f} ms "
+                     f"(interval > {GAP_FACTOR}x the median {1000 * median:.1f} ms)")
+    repeated = int(np.sum(dt == 0))
+    if repeated:
+        notes.append(f"{repeated} repeated frames (same {unit_label} as the row before)")
+    backward = int(np.sum(dt < 0))
+    if backward:
+        notes.append(f"{backward} backward time steps (rows out of time order)")
+    return 1.0 / median
+
+
+def _state_confidence(states: np.ndarray, missing: np.ndarray) -> np.ndarray:
+    confidence = np.select([states == 2, states == 1], [1.0, 0.5], 0.0)
+    confidence[missing] = 0.0
+    return confidence
+
+
+# -- headerless Kinect v2 / v1 CSV --------------------------------------------------------
+def _read_kinect_csv(path, lines, idx, notes, layout, fps, units) -> _Parsed:
+    names = kl.KINECT_V2 if layout == "kinect_v2_csv" else kl.KINECT_V1
+    n = len(names)
+    rows = [_strip_trailing_empty(lines[i].split(",")) for i in idx]
+    rows, idx, skipped = _check_counts(rows, idx, 1 + 4 * n, path, notes, "values")
+    if not rows:
+        raise UnreadableFileError(path, "no complete data line")
+    token_lines = np.repeat(np.asarray(idx), 1 + 4 * n)
+    values = _numbers([t for row in rows for t in row], token_lines, path)
+    values = values.reshape(len(rows), 1 + 4 * n)
+    ticks, block = values[:, 0], values[:, 1:].reshape(len(rows), n, 4)
+    states = block[..., 3]
+    bad_state = ~np.isin(states, (0.0, 1.0, 2.0))
+    if bad_state.any():
+        t, j = np.argwhere(bad_state)[0]
+        raise UnreadableFileError(path, f"tracking state {states[t, j]:g} of {names[j]} is not "
+                                        f"0, 1 or 2", line=idx[t] + 1)
+    if not np.isfinite(ticks).all():
+        t = int(np.nonzero(~np.isfinite(ticks))[0][0])
+        raise UnreadableFileError(path, "timestamp is not a number", line=idx[t] + 1)
+    coords = block[..., :3]
+    missing = (states == 0) | _nonfinite_missing(coords, notes)
+    times = (ticks - ticks[0]) * 1e-7
+    file_fps = _timing(times, notes)
+    T = len(rows)
+    j = np.arange(n)
+    return _Parsed(
+        names=list(names), coords=coords, missing=missing,
+        confidence=_state_confidence(states.astype(int), missing),
+        line_of=np.repeat(np.asarray(idx)[:, None], n, axis=1),
+        coord_field=np.broadcast_to(1 + 4 * j[:, None] + np.arange(3), (T, n, 3)).copy(),
+        state_field=np.broadcast_to(4 + 4 * j, (T, n)).copy(), state_kind="tracking",
+        sep=",", times=times, file_fps=_or_default(file_fps, DEFAULT_FPS, notes),
+        skeleton=kl.skeleton_for("kinect_v2" if n == 25 else "kinect_v1"), skip_lines=skipped,
+        extra={"ticks0": float(ticks[0])})
+
+
+def _or_default(value: float, default: float, notes: list[str]) -> float:
+    if np.isfinite(value) and value > 0:
+        return float(value)
+    notes.append(f"frame rate unknown; assumed {default:g} fps")
+    return default
+
+
+# -- UTKinect -------------------------------------------------------------------------------
+def _read_utkinect(path, lines, idx, notes, layout, fps, units) -> _Parsed:
+    names = kl.KINECT_V1
+    n = len(names)
+    rows = [lines[i].split() for i in idx]
+    rows, idx, skipped = _check_counts(rows, idx, 1 + 3 * n, path, notes, "values")
+    if not rows:
+        raise UnreadableFileError(path, "no complete data line")
+    values = _numbers([t for row in rows for t in row],
+                      np.repeat(np.asarray(idx), 1 + 3 * n), path).reshape(len(rows), 1 + 3 * n)
+    index = values[:, 0]
+    bad = ~(np.isfinite(index) & (index == np.round(index)))
+    if bad.any():
+        k = int(np.nonzero(bad)[0][0])
+        raise UnreadableFileError(path, "frame index is not an integer", line=idx[k] + 1)
+    coords = values[:, 1:].reshape(len(rows), n, 3)
+    missing = _nonfinite_missing(coords, notes)
+    jumps = np.diff(index)
+    if len(jumps):
+        notes.append(f"frame index (30 Hz camera frames) runs {index[0]:.0f}-{index[-1]:.0f}: "
+                     f"{int(np.sum(jumps > 1))} jumps > 1 (largest {jumps.max():.0f}), "
+                     f"{int(np.sum(jumps == 0))} repeated indices")
+    times = (index - index[0]) / UTKINECT_FPS
+    file_fps = _timing(times, notes, unit_label="frame index")
+    T = len(rows)
+    j = np.arange(n)
+    return _Parsed(
+        names=list(names), coords=coords, missing=missing, confidence=None,
+        line_of=np.repeat(np.asarray(idx)[:, None], n, axis=1),
+        coord_field=np.broadcast_to(1 + 3 * j[:, None] + np.arange(3), (T, n, 3)).copy(),
+        state_field=np.full((T, n), -1), state_kind=None, sep=None, times=times,
+        file_fps=_or_default(file_fps, UTKINECT_FPS, notes),
+        skeleton=kl.skeleton_for("kinect_v1"), skip_lines=skipped,
+        extra={"index0": float(index[0])})
+
+
+# -- MSR Action3D -----------------------------------------------------------------------
+def _read_msr(path, lines, idx, notes, layout, fps, units) -> _Parsed:
+    names = kl.MSR_ACTION3D
+    n = len(names)
+    rows = [lines[i].split() for i in idx]
+    rows, idx, skipped = _check_counts(rows, idx, 4, path, notes, "values")
+    partial = len(rows) % n
+    if partial:
+        notes.append(f"last frame is incomplete ({partial} of {n} rows): the file looks "
+                     "truncated; that frame was dropped")
+        skipped += idx[len(idx) - partial:]
+        rows, idx = rows[:len(rows) - partial], idx[:len(idx) - partial]
+    if not rows:
+        raise UnreadableFileError(path, f"no complete frame of {n} rows")
+    values = _numbers([t for row in rows for t in row], np.repeat(np.asarray(idx), 4), path)
+    block = values.reshape(-1, n, 4)
+    coords, conf = block[..., :3], block[..., 3]
+    finite = np.isfinite(coords).all(axis=2)
+    if finite.any() and np.median(np.abs(coords[finite][:, :2])) > 20:
+        raise UnsupportedFeatureError(path, "MSR Action3D screen-coordinates variant (u, v, "
+                                            "depth): only the real-world (metres) files are read")
+    bad_conf = ~((conf >= 0) & (conf <= 1))
+    if bad_conf.any():
+        k = int(np.argwhere(bad_conf)[0][0] * n + np.argwhere(bad_conf)[0][1])
+        raise UnreadableFileError(path, "confidence (4th value) is not in [0, 1]", line=idx[k] + 1)
+    zero = finite & (coords == 0).all(axis=2)
+    missing = ~finite | zero
+    if (~finite).any():
+        notes.append(f"{int((~finite).sum())} samples with nan/inf coordinates read as missing")
+    if zero.any():
+        notes.append(f"{int(zero.sum())} samples at (0, 0, 0) read as missing")
+    low = int(np.sum((conf == 0) & ~missing))
+    if low:
+        notes.append(f"{low} samples with confidence 0 kept as low-confidence (not missing)")
+    notes.append(f"MSR Action3D files hold no timing; nominal {MSR_FPS:g} fps assumed")
+    confidence = conf.copy()
+    confidence[missing] = 0.0
+    T = block.shape[0]
+    line_of = np.asarray(idx).reshape(T, n)
+    return _Parsed(
+        names=list(names), coords=coords, missing=missing, confidence=confidence,
+        line_of=line_of, coord_field=np.broadcast_to(np.arange(3), (T, n, 3)).copy(),
+        state_field=np.full((T, n), 3), state_kind="confidence", sep=None, times=None,
+        file_fps=MSR_FPS, skeleton=kl.skeleton_for("msr_action3d"), skip_lines=skipped)
+
+
+# -- headed layouts: shared helpers ---------------------------------------------------------
+def _clean_header(name: str) -> str:
+    return name.strip().strip('"').strip("'").strip()
+
+
+def _header_sep(line: str) -> str:
+    return max((",", ";", "\t"), key=line.count) if any(c in line for c in ",;\t") else " "
+
+
+def _wide_columns(columns: list[str]):
+    """joint -> {role: column}, the time/frame column (index, kind), unit tags seen."""
+    joints: dict[str, dict[str, int]] = {}
+    unit_tags = set()
+    time_col = None
+    for c, name in enumerate(columns):
+        key = _norm(re.sub(r"[\[(][a-z]+[\])]\s*$", "", name, flags=re.I))
+        if time_col is None and (key in _TIME_NAMES or key in _FRAME_NAMES
+                                 or key.startswith("time")):
+            time_col = (c, _time_kind(name))
+            continue
+        m = _AXIS_COLUMN.match(name)
+        if not m:
+            continue
+        role = _norm(m.group("role"))
+        role = {"trackingstate": "state", "conf": "confidence"}.get(role, role)
+        joints.setdefault(m.group("joint").strip(), {})[role] = c
+        if m.group("unit") and role in "xyz":
+            unit_tags.add(m.group("unit").lower())
+    return joints, time_col, unit_tags
+
+
+def _time_kind(name: str) -> str:
+    """'frame', 's', 'ms', 'us', 'ticks' or 'auto' (decide by magnitude)."""
+    key = _norm(name)
+    if key in _FRAME_NAMES:
+        return "frame"
+    if "tick" in key:
+        return "ticks"
+    if key.endswith("ms") or "(ms)" in name.lower() or "[ms]" in name.lower():
+        return "ms"
+    if key.endswith("us"):
+        return "us"
+    if key in ("seconds", "sec", "secs") or key.endswith("(s)") or "[s]" in name.lower() \
+            or key in ("times", "ts"):
+        return "s"
+    return "auto"
+
+
+def _times_from_column(values: np.ndarray, kind: str, fps: float | None, notes) -> np.ndarray:
+    rel = values - values[0]
+    if kind == "frame":
+        rate = fps or DEFAULT_FPS
+        if fps is None:
+            notes.append(f"frame numbers but no time column: {DEFAULT_FPS:g} fps assumed")
+        return rel / rate
+    scale = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ticks": 1e-7}.get(kind)
+    if scale is None:
+        dt = np.diff(values)
+        dt = dt[dt > 0]
+        median = float(np.median(dt)) if len(dt) else 1.0
+        if median < 1.0:
+            scale, label = 1.0, "seconds"
+        elif median < 1e3:
+            scale, label = 1e-3, "milliseconds"
+        elif median < 1e5:
+            scale, label = 1e-6, "microseconds"
+        else:
+            scale, label = 1e-7, "100 ns ticks (Kinect)"
+        notes.append(f"time column unit not stated; read as {label} from its median step "
+                     f"{median:g}")
+    return rel * scale
+
+
+def _guess_units(coords, missing, skeleton, tags, units, notes, path) -> tuple[str, np.ndarray]:
+    """(unit name, coords unchanged). Explicit option > header tag > magnitude guess."""
+    if units:
+        unit = normalise_unit_name(units)
+        if unit is None:
+            raise UnreadableFileError(path, f"unknown length unit {units!r}")
+        return unit, coords
+    if tags:
+        unit = normalise_unit_name(sorted(tags)[0])
+        if unit is None or len(tags) > 1:
+            raise UnreadableFileError(path, f"unknown or mixed unit tags in header: {sorted(tags)}")
+        return unit, coords
+    pts = np.where(missing[..., None], np.nan, coords)
+    if skeleton is not None and len(skeleton.bones):
+        bones = skeleton.bone_array
+        lengths = np.linalg.norm(pts[:, bones[:, 0]] - pts[:, bones[:, 1]], axis=2)
+        scale, what, limits = np.nanmedian(lengths), "median bone length", (2.0, 100.0)
+    else:
+        centre = np.nanmean(pts, axis=1, keepdims=True) if pts.shape[1] > 2 else 0.0
+        scale = np.nanmedian(np.linalg.norm(pts - centre, axis=2))
+        what, limits = "median spread of the joints", (3.0, 150.0)
+    if not np.isfinite(scale):
+        return "m", coords
+    unit = "m" if scale < limits[0] else ("cm" if scale < limits[1] else "mm")
+    notes.append(f"units not stated; {unit} guessed from the {what} ({scale:.3g}); "
+                 "pass units= to override")
+    return unit, coords
+
+
+def _data_rows(path, lines, idx, sep, n_columns, notes):
+    rows = [lines[i].split(sep) if sep != " " else lines[i].split() for i in idx]
+    rows = [r[:-1] if len(r) == n_columns + 1 and not r[-1].strip() else r for r in rows]
+    return _check_counts(rows, idx, n_columns, path, notes, "columns")
+
+
+# -- headed wide CSV ------------------------------------------------------------------------
+def _read_wide(path, lines, idx, notes, layout, fps, units) -> _Parsed:
+    header_i, data_idx = idx[0], idx[1:]
+    sep = _header_sep(lines[header_i])
+    columns = [_clean_header(c) for c in (lines[header_i].split(sep) if sep != " "
+                                          else lines[header_i].split())]
+    joints, time_col, tags = _wide_columns(columns)
+    for joint, roles in joints.items():
+        lacking = {"x", "y", "z"} - set(roles)
+        if lacking and lacking != {"x", "y", "z"}:
+            raise UnreadableFileError(path, f"joint {joint!r} lacks column(s) "
+                                            f"{', '.join(sorted(lacking)).upper()}",
+                                      line=header_i + 1)
+    names = [j for j, r in joints.items() if "x" in r]
+    if not data_idx:
+        raise UnreadableFileError(path, "header but no data rows")
+    rows, data_idx, skipped = _data_rows(path, lines, data_idx, sep, len(columns), notes)
+    if not rows:
+        raise UnreadableFileError(path, "no complete data row")
+    T, J = len(rows), len(names)
+    coord_cols = np.array([[joints[n][a] for a in "xyz"] for n in names])
+    coords = _column_values(rows, data_idx, coord_cols.ravel(), path).reshape(T, J, 3)
+    missing = ~np.isfinite(coords).all(axis=2)
+    empty_or_nan = int(missing.sum())
+    state_kind, state_field, confidence = _wide_states(rows, data_idx, joints, names, path,
+                                                        missing)
+    if state_kind == "tracking":
+        states = _column_values(rows, data_idx, state_field[0], path)
+        missing |= states.reshape(T, J) == 0
+    if empty_or_nan:
+        notes.append(f"{empty_or_nan} samples with empty/nan/inf cells read as missing")
+    match = kl.match_joint_set(names)
+    skeleton = match[1] if match else None
+    if match:
+        notes.append(f"joint names match the {match[0]} set: its bone topology is used")
+    unit, coords = _guess_units(coords, missing, skeleton, tags, units, notes, path)
+    times, file_fps = _wide_times(rows, data_idx, time_col, fps, path, notes)
+    extra_cols = len(columns) - 3 * J - (time_col is not None) - int(state_kind is not None) * J
+    if extra_cols > 0:
+        notes.append(f"{extra_cols} other columns kept as they are")
+    return _Parsed(
+        names=names, coords=coords, missing=missing, confidence=confidence,
+        line_of=np.repeat(np.asarray(data_idx)[:, None], J, axis=1),
+        coord_field=np.broadcast_to(coord_cols, (T, J, 3)).copy(), state_field=state_field,
+        state_kind=state_kind, sep=None if sep == " " else sep, times=times, file_fps=file_fps,
+        units=unit, skeleton=skeleton, skip_lines=skipped)
+
+
+def _column_values(rows, idx, cols, path) -> np.ndarray:
+    cols = np.asarray(cols, dtype=np.intp)
+    tokens = [row[c] for row in rows for c in cols]
+    return _numbers(tokens, np.repeat(np.asarray(idx), len(cols)), path, empty_is_nan=True)
+
+
+def _wide_states(rows, idx, joints, names, path, missing):
+    T, J = missing.shape
+    for kind, role in (("tracking", "state"), ("confidence", "confidence")):
+        have = [role in joints[n] for n in names]
+        if not any(have):
+            continue
+        if not all(have):
+            lacking = [n for n, h in zip(names, have) if not h]
+            raise UnreadableFileError(path, f"{role} column missing for {', '.join(lacking[:5])}")
+        cols = np.array([joints[n][role] for n in names])
+        values = _column_values(rows, idx, cols, path).reshape(T, J)
+        if kind == "tracking":
+            bad = ~np.isin(values, (0.0, 1.0, 2.0)) & ~missing
+            if bad.any():
+                t, j = np.argwhere(bad)[0]
+                raise UnreadableFileError(path, f"tracking state {values[t, j]:g} is not 0, 1 or 2",
+                                          line=idx[t] + 1)
+            states = np.nan_to_num(values, nan=0.0).astype(int)
+            confidence = _state_confidence(states, missing | (states == 0))
+        else:
+            confidence = np.clip(np.nan_to_num(values, nan=0.0), 0.0, 1.0)
+            confidence[missing] = 0.0
+        return kind, np.broadcast_to(cols, (T, J)).copy(), confidence
+    return None, np.full((T, J), -1), None
+
+
+def _wide_times(rows, idx, time_col, fps, path, notes):
+    if time_col is None:
+        rate = fps or DEFAULT_FPS
+        if fps is None:
+            notes.append(f"no time column: {DEFAULT_FPS:g} fps assumed")
+        return None, rate
+    col, kind = time_col
+    values = _column_values(rows, idx, [col], path)
+    if not np.isfinite(values).all():
+        k = int(np.nonzero(~np.isfinite(values))[0][0])
+        raise UnreadableFileError(path, "empty or non-numeric time/frame value", line=idx[k] + 1)
+    times = _times_from_column(values, kind, fps, notes)
+    file_fps = _timing(times, notes)
+    return times, _or_default(file_fps, fps or DEFAULT_FPS, notes)
+
+
+# -- long layout (one row per joint per frame) --------------------------------------------
+def _long_columns(columns: list[str]) -> dict | None:
+    keys = [_norm(re.sub(r"[\[(][a-z]+[\])]\s*$", "", c, flags=re.I)) for c in columns]
+    roles: dict[str, int] = {}
+    for c, key in enumerate(keys):
+        if key in ("x", "y", "z", "posx", "posy", "posz", "positionx", "positiony", "positionz"):
+            roles.setdefault(key[-1], c)
+        elif key in _JOINT_NAMES:
+            roles.setdefault("joint", c)
+        elif key in _FRAME_NAMES:
+            roles.setdefault("frame", c)
+        elif key in _TIME_NAMES or key.startswith("time"):
+            roles.setdefault("time", c)
+        elif key in _STATE_NAMES:
+            roles.setdefault("state", c)
+        elif key in _CONF_NAMES:
+            roles.setdefault("confidence", c)
+    if not {"x", "y", "z", "joint"} <= set(roles) or not ({"frame", "time"} & set(roles)):
+        return None
+    return roles
+
+
+def _read_long(path, lines, idx, notes, layout, fps, units) -> _Parsed:
+    header_i, data_idx = idx[0], idx[1:]
+    sep = _header_sep(lines[header_i])
+    columns = [_clean_header(c) for c in (lines[header_i].split(sep) if sep != " "
+                                          else lines[header_i].split())]
+    roles = _long_columns(columns)
+    if not data_idx:
+        raise UnreadableFileError(path, "header but no data rows")
+    rows, data_idx, skipped = _data_rows(path, lines, data_idx, sep, len(columns), notes)
+    if not rows:
+        raise UnreadableFileError(path, "no complete data row")
+    key_col = roles.get("frame", roles.get("time"))
+    keys = _column_values(rows, data_idx, [key_col], path)
+    if not np.isfinite(keys).all():
+        k = int(np.nonzero(~np.isfinite(keys))[0][0])
+        raise UnreadableFileError(path, "empty or non-numeric frame value", line=data_idx[k] + 1)
+    frame_keys, frame_of_row = np.unique(keys, return_inverse=True)
+    joint_tokens = [row[roles["joint"]].strip().strip('"') for row in rows]
+    names = list(dict.fromkeys(joint_tokens))
+    joint_number = {n: i for i, n in enumerate(names)}
+    joint_of_row = np.array([joint_number[n] for n in joint_tokens], dtype=np.intp)
+    T, J = len(frame_keys), len(names)
+    line_of = np.full((T, J), -1, dtype=np.intp)
+    flat = frame_of_row * J + joint_of_row
+    dup = np.nonzero(np.bincount(flat, minlength=T * J) > 1)[0]
+    if len(dup):
+        row = int(np.nonzero(flat == dup[0])[0][1])
+        raise UnreadableFileError(path, f"second row for joint {joint_tokens[row]!r} in the "
+                                        "same frame", line=data_idx[row] + 1)
+    line_of.ravel()[flat] = np.asarray(data_idx)
+    values = _column_values(rows, data_idx, [roles["x"], roles["y"], roles["z"]], path)
+    coords = np.full((T, J, 3), np.nan)
+    coords.reshape(T * J, 3)[flat] = values.reshape(-1, 3)
+    absent = line_of < 0
+    missing = ~np.isfinite(coords).all(axis=2)
+    if absent.any():
+        notes.append(f"{int(absent.sum())} joint samples have no row (missing)")
+    state_kind, confidence, state_col = None, None, -1
+    if "state" in roles or "confidence" in roles:
+        state_kind = "tracking" if "state" in roles else "confidence"
+        state_col = roles["state" if state_kind == "tracking" else "confidence"]
+        raw = np.full(T * J, np.nan)
+        raw[flat] = _column_values(rows, data_idx, [state_col], path)
+        raw = raw.reshape(T, J)
+        if state_kind == "tracking":
+            bad = ~np.isin(raw, (0.0, 1.0, 2.0)) & ~absent & ~np.isnan(raw)
+            if bad.any():
+                t, j = np.argwhere(bad)[0]
+                raise UnreadableFileError(path, f"tracking state {raw[t, j]:g} is not 0, 1 or 2",
+                                          line=int(line_of[t, j]) + 1)
+            states = np.nan_to_num(raw, nan=0.0).astype(int)
+            missing |= states == 0
+            confidence = _state_confidence(states, missing)
+        else:
+            confidence = np.clip(np.nan_to_num(raw, nan=0.0), 0.0, 1.0)
+            confidence[missing] = 0.0
+    match = kl.match_joint_set(names)
+    skeleton = match[1] if match else None
+    if match:
+        notes.append(f"joint names match the {match[0]} set: its bone topology is used")
+    unit, coords = _guess_units(coords, missing, skeleton, _long_unit_tags(columns, roles),
+                                units, notes, path)
+    kind = "frame" if "frame" in roles else _time_kind(columns[key_col])
+    times = _times_from_column(frame_keys, kind, fps, notes)
+    file_fps = _or_default(_timing(times, notes), fps or DEFAULT_FPS, notes)
+    last_line = np.full(T, -1, dtype=np.intp)
+    np.maximum.at(last_line, frame_of_row, np.asarray(data_idx))
+    _, first_row = np.unique(keys, return_index=True)
+    frame_tokens = [rows[int(r)][key_col].strip() for r in first_row]
+    return _Parsed(
+        names=names, coords=coords,
+        missing=missing, confidence=confidence, line_of=line_of,
+        coord_field=np.broadcast_to(np.array([roles["x"], roles["y"], roles["z"]]),
+                                    (T, J, 3)).copy(),
+        state_field=np.full((T, J), state_col), state_kind=state_kind,
+        sep=None if sep == " " else sep, times=times, file_fps=file_fps, units=unit,
+        skeleton=skeleton, skip_lines=skipped,
+        extra={"frame_last_line": last_line, "frame_tokens": frame_tokens,
+               "n_columns": len(columns), "key_col": key_col, "joint_col": roles["joint"]})
+
+
+def _long_unit_tags(columns, roles) -> set:
+    tags = set()
+    for axis in "xyz":
+        m = re.search(r"[\[(]([a-z]+)[\])]\s*$", columns[roles[axis]], flags=re.I)
+        if m:
+            tags.add(m.group(1).lower())
+    return tags
+
+
+# ---------------------------------------------------------------------------------------
+# writing
+# ---------------------------------------------------------------------------------------
+def write(motion: Motion, path, **options) -> list[Path]:
+    """Write ``motion`` in the layout it was read from (see the module docstring)."""
+    path = Path(path)
+    source = motion.source
+    if isinstance(source, KinectSource) and _fits(source, motion):
+        text = _patched_text(source, motion)
+    else:
+        text = _wide_csv_text(motion)
+    try:
+        atomic_write_bytes(path, text.encode("utf-8"))
+    except OSError as exc:
+        raise WriteError(path, f"cannot write: {exc.strerror or exc}") from None
+    return [path]
+
+
+def _fits(source: KinectSource, motion: Motion) -> bool:
+    return source.original.shape == motion.positions.shape and source.names == list(motion.names)
+
+
+def _format_like(value: float, token: str) -> str:
+    """``value`` with at least 6 decimals, and at least as many as ``token`` had."""
+    token = token.strip()
+    decimals = len(token.split(".", 1)[1]) if "." in token and "e" not in token.lower() else 0
+    if "e" in token.lower():
+        return f"{value:.9g}"
+    return f"{value:.{max(6, decimals)}f}"
+
+
+def _sample_edits(source: KinectSource, motion: Motion):
+    """(t, j, action) for every sample whose stored tokens must change."""
+    new = motion.positions
+    new_missing = np.isnan(new).any(axis=2)
+    same = np.all(new == source.original, axis=2)
+    unchanged = np.where(source.missing, new_missing, same & ~new_missing)
+    for t, j in np.argwhere(~unchanged):
+        if new_missing[t, j]:
+            yield int(t), int(j), "remove"
+        else:
+            yield int(t), int(j), "fill" if source.missing[t, j] else "move"
+
+
+def _patched_text(source: KinectSource, motion: Motion) -> str:
+    lines = list(source.lines)
+    split_cache: dict[int, list[str]] = {}
+    deleted: set[int] = set(source.skip_lines)
+    inserted: dict[int, list[str]] = {}
+    for t, j, action in _sample_edits(source, motion):
+        line = int(source.line_of[t, j])
+        if line < 0:  # long layout, no row for this sample in the file
+            if action == "fill":
+                inserted.setdefault(int(source.extra["frame_last_line"][t]), []).append(
+                    _new_long_row(source, motion, t, j))
+            continue
+        fields = split_cache.get(line)
+        if fields is None:
+            fields = split_cache[line] = _fields_with_separators(lines[line], source.sep)
+        if not _edit_sample(source, fields, t, j, action, motion.positions[t, j]):
+            deleted.add(line)
+    for line, fields in split_cache.items():
+        lines[line] = _join_fields(fields, source.sep)
+    out = [source.bom]
+    for i, line in enumerate(lines):
+        if i not in deleted:
+            out.append(line + source.endings[i])
+        for extra in inserted.get(i, []):
+            if not out[-1].endswith(("\n", "\r")):
+                out.append(_eol(source))
+            out.append(extra + _eol(source))
+    return "".join(out)
+
+
+def _eol(source: KinectSource) -> str:
+    return next((e for e in source.endings if e), "\n")
+
+
+def _fields_with_separators(line: str, sep: str | None) -> list[str]:
+    """Fields and separators alternately, so that joining gives the line back exactly."""
+    if sep is None:
+        return re.split(r"(\s+)", line)
+    out = []
+    for k, part in enumerate(line.split(sep)):
+        if k:
+            out.append(sep)
+        out.append(part)
+    return out
+
+
+def _join_fields(parts: list[str], sep: str | None) -> str:
+    return "".join(parts)
+
+
+def _field_slot(parts: list[str], sep: str | None, field_index: int) -> int:
+    """Position in ``parts`` of field number ``field_index``."""
+    if sep is None:
+        tokens = [k for k in range(0, len(parts), 2) if parts[k] != ""]
+        return tokens[field_index]
+    return 2 * field_index
+
+
+def _edit_sample(source, parts, t, j, action, value) -> bool:
+    """Rewrite the tokens of one sample in ``parts``. False: delete the whole line."""
+    slots = [_field_slot(parts, source.sep, int(f)) for f in source.coord_field[t, j]]
+    state_slot = (_field_slot(parts, source.sep, int(source.state_field[t, j]))
+                  if source.state_field[t, j] >= 0 else None)
+    if action == "remove":
+        return _remove_sample(source, parts, slots, state_slot)
+    for slot, v in zip(slots, value):
+        parts[slot] = _pad(parts[slot], _format_like(float(v), parts[slot]))
+    if action == "fill" and state_slot is not None:
+        parts[state_slot] = _pad(parts[state_slot], "1" if source.state_kind == "tracking"
+                                 else _format_like(0.5, parts[state_slot]))
+    return True
+
+
+def _pad(old: str, new: str) -> str:
+    """Keep the leading/trailing blanks a CSV cell had around its number."""
+    stripped = old.strip()
+    if not stripped:
+        return new
+    start = old.index(stripped)
+    return old[:start] + new + old[start + len(stripped):]
+
+
+def _remove_sample(source, parts, slots, state_slot) -> bool:
+    if source.state_kind == "tracking" and state_slot is not None:
+        parts[state_slot] = _pad(parts[state_slot], "0")
+        return True
+    if source.layout == "msr_action3d":
+        for slot in slots + [state_slot]:
+            parts[slot] = _format_like(0.0, parts[slot])
+        return True
+    if source.layout == "long_csv":
+        return False
+    blank = "nan" if source.sep is None else ""
+    for slot in slots:
+        parts[slot] = _pad(parts[slot], blank) if blank else ""
+    if state_slot is not None:  # confidence column
+        parts[state_slot] = _pad(parts[state_slot], _format_like(0.0, parts[state_slot]))
+    return True
+
+
+def _new_long_row(source: KinectSource, motion: Motion, t: int, j: int) -> str:
+    fields = [""] * source.extra["n_columns"]
+    fields[source.extra["key_col"]] = source.extra["frame_tokens"][t]
+    fields[source.extra["joint_col"]] = source.names[j]
+    for f, v in zip(source.coord_field[t, j], motion.positions[t, j]):
+        fields[int(f)] = f"{v:.6f}"
+    if source.state_field[t, j] >= 0:
+        fields[int(source.state_field[t, j])] = "1" if source.state_kind == "tracking" else "0.5"
+    return (source.sep or " ").join(fields)
+
+
+def _wide_csv_text(motion: Motion) -> str:
+    """Headed wide CSV: time, <Joint>_X, _Y, _Z [, _State] per joint."""
+    T, J = motion.n_frames, motion.n_joints
+    tag = "" if motion.units == "m" else f" ({motion.units})"
+    with_state = motion.confidence is not None
+    header = ["time"]
+    for name in motion.names:
+        header += [f"{name}_X{tag}", f"{name}_Y{tag}", f"{name}_Z{tag}"]
+        if with_state:
+            header.append(f"{name}_State")
+    times = motion.times if motion.times is not None else np.arange(T) / motion.fps
+    missing = motion.missing
+    cells = np.char.mod("%.6f", motion.positions)
+    cells[missing] = ""
+    blocks = [cells]
+    if with_state:
+        conf = motion.confidence
+        state = np.select([conf >= 0.75, conf > 0], ["2", "1"], "0")
+        state = np.where(missing, "0", state)
+        blocks.append(state[..., None])
+    body = np.concatenate(blocks, axis=2).reshape(T, -1)
+    time_cells = np.char.mod("%.6f", np.asarray(times, dtype=np.float64))
+    lines = [",".join(header)]
+    lines += [",".join([time_cells[t], *body[t]]) for t in range(T)]
+    return "\n".join(lines) + "\n"

@@ -1,0 +1,64 @@
+"""Error metrics against ground truth and quality metrics without it (ALGORITHMS.md,
+"Metrics"). All take (T, J, 3) arrays in the same unit and ignore samples where the truth
+is missing."""
+from __future__ import annotations
+
+import numpy as np
+
+
+def joint_errors(estimate: np.ndarray, truth: np.ndarray) -> np.ndarray:
+    """Euclidean error per sample, (T, J); NaN where either is missing."""
+    return np.linalg.norm(np.asarray(estimate) - np.asarray(truth), axis=-1)
+
+
+def rmse(estimate, truth, mask=None) -> float:
+    """sqrt(mean ||P − P̃||²) over samples (Feng 2015 eq. 19 when over all samples;
+    Feng 2014 eq. 27 when ``mask`` selects the corrupted ones). Missing estimates are
+    excluded — see :func:`unfilled_fraction`."""
+    err = joint_errors(estimate, truth)
+    sel = np.isfinite(err) if mask is None else (np.isfinite(err) & mask)
+    return float(np.sqrt(np.mean(err[sel] ** 2))) if sel.any() else float("nan")
+
+
+def max_error(estimate, truth, mask=None) -> float:
+    err = joint_errors(estimate, truth)
+    sel = np.isfinite(err) if mask is None else (np.isfinite(err) & mask)
+    return float(err[sel].max()) if sel.any() else float("nan")
+
+
+def mean_joint_error(estimate, truth) -> float:
+    """AJE (Yang 2019): mean Euclidean joint error."""
+    err = joint_errors(estimate, truth)
+    return float(np.nanmean(err))
+
+
+def bone_lengths(positions: np.ndarray, bones: np.ndarray) -> np.ndarray:
+    """(T, B) lengths of the bones (pairs of joint indices)."""
+    bones = np.asarray(bones, dtype=np.intp).reshape(-1, 2)
+    return np.linalg.norm(positions[:, bones[:, 0]] - positions[:, bones[:, 1]], axis=-1)
+
+
+def mean_bone_error(estimate, truth, bones) -> float:
+    """ABE (Yang 2019): mean |bone length − true bone length|."""
+    return float(np.nanmean(np.abs(bone_lengths(estimate, bones) - bone_lengths(truth, bones))))
+
+
+def bone_length_variation(positions, bones) -> np.ndarray:
+    """std/mean of each bone's length over time (B,), ignoring missing frames."""
+    lengths = bone_lengths(positions, bones)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.nanstd(lengths, axis=0) / np.nanmean(lengths, axis=0)
+
+
+def rms_acceleration(positions: np.ndarray, fps: float) -> np.ndarray:
+    """RMS of the second difference per joint (J,), in units/s² — a jitter measure."""
+    acc = np.diff(positions, n=2, axis=0) * fps * fps
+    with np.errstate(invalid="ignore"):
+        return np.sqrt(np.nanmean(np.sum(acc ** 2, axis=-1), axis=0))
+
+
+def unfilled_fraction(estimate, truth) -> float:
+    """Fraction of samples with a truth but no estimate."""
+    est_missing = np.isnan(np.asarray(estimate)).any(axis=-1)
+    truth_ok = ~np.isnan(np.asarray(truth)).any(axis=-1)
+    return float(np.mean(est_missing[truth_ok])) if truth_ok.any() else 0.0

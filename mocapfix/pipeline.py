@@ -1,0 +1,208 @@
+"""YAML config → validated list of cleaner steps, and running them on a Motion.
+
+Config shape (safe-loaded)::
+
+    version: 1
+    pipeline:
+      - cleaner: spikes
+      - cleaner: fill_pca
+        max_gap: 1.0 s
+      - cleaner: butterworth
+        cutoff: 6 Hz
+        formats: [c3d, kinect]      # optional: run this step only on these formats
+    report:                          # optional thresholds of the quality report
+      warn_missing: 0.0
+      ...
+
+Errors name the file, the line and the key. Running records, per step, which samples it
+filled, which it flagged (made missing) and how far it moved the rest: the provenance the
+quality report is built from.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from mocapfix.cleaners import build
+from mocapfix.cleaners.base import Cleaner
+from mocapfix.errors import ConfigError
+from mocapfix.motion import Motion
+
+CONFIG_VERSION = 1
+_STEP_KEYS = {"cleaner", "formats", "name"}
+_TOP_KEYS = {"version", "pipeline", "report"}
+_FORMATS = {"c3d", "bvh", "asfamc", "kinect"}
+
+
+class _LineLoader(yaml.SafeLoader):
+    """Safe loader that remembers the line of every mapping (as key ``__line__``)."""
+
+
+def _construct_mapping(loader, node):
+    mapping = loader.construct_mapping(node, deep=True)
+    mapping["__line__"] = node.start_mark.line + 1
+    return mapping
+
+
+_LineLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _construct_mapping)
+
+
+@dataclass
+class Step:
+    cleaner: Cleaner
+    formats: tuple[str, ...] | None = None
+    line: int | None = None
+
+    @property
+    def label(self) -> str:
+        return self.cleaner.step
+
+    def applies(self, motion: Motion) -> bool:
+        return self.formats is None or motion.format in self.formats
+
+    def config(self) -> dict:
+        out = {"cleaner": self.cleaner.name}
+        out.update(self.cleaner.config())
+        if self.formats:
+            out["formats"] = list(self.formats)
+        return out
+
+
+@dataclass
+class Pipeline:
+    steps: list[Step]
+    report: dict = field(default_factory=dict)
+    source: str | None = None
+
+    def config(self) -> dict:
+        """The effective config (every parameter, defaults included) as a plain dict."""
+        out = {"version": CONFIG_VERSION, "pipeline": [s.config() for s in self.steps]}
+        if self.report:
+            out["report"] = dict(self.report)
+        return out
+
+    def dump(self) -> str:
+        return yaml.safe_dump(self.config(), sort_keys=False)
+
+    def run(self, motion: Motion) -> tuple[Motion, list["StepRecord"]]:
+        records = []
+        for step in self.steps:
+            if not step.applies(motion):
+                records.append(StepRecord.skipped(step, motion, "not for this format"))
+                continue
+            started = time.perf_counter()
+            out, info = step.cleaner.apply(motion)
+            records.append(StepRecord.compare(step, motion, out, info, time.perf_counter() - started))
+            motion = out
+        return motion, records
+
+
+@dataclass
+class StepRecord:
+    """What one step did, per sample: filled (missing → present), flagged (present →
+    missing) and the displacement of samples present before and after."""
+
+    step: str
+    cleaner: str
+    seconds: float
+    filled: np.ndarray
+    flagged: np.ndarray
+    moved: np.ndarray
+    info: dict
+    skipped: str | None = None
+
+    @classmethod
+    def compare(cls, step: Step, before: Motion, after: Motion, info: dict, seconds: float):
+        if after.positions.shape != before.positions.shape:
+            raise ConfigError(f"{step.label}: cleaner changed the shape of the motion")
+        miss_before, miss_after = before.missing, after.missing
+        moved = np.linalg.norm(after.positions - before.positions, axis=-1)
+        moved[miss_before | miss_after] = 0.0
+        return cls(step.label, step.cleaner.name, seconds, miss_before & ~miss_after,
+                   ~miss_before & miss_after, moved, info or {})
+
+    @classmethod
+    def skipped(cls, step: Step, motion: Motion, why: str):
+        shape = motion.positions.shape[:2]
+        return cls(step.label, step.cleaner.name, 0.0, np.zeros(shape, bool),
+                   np.zeros(shape, bool), np.zeros(shape), {}, skipped=why)
+
+
+def _line_of(obj) -> str:
+    return f" (line {obj['__line__']})" if isinstance(obj, dict) and "__line__" in obj else ""
+
+
+def _strip_lines(obj):
+    if isinstance(obj, dict):
+        return {k: _strip_lines(v) for k, v in obj.items() if k != "__line__"}
+    if isinstance(obj, list):
+        return [_strip_lines(v) for v in obj]
+    return obj
+
+
+def parse_config(data, source: str = "<config>") -> Pipeline:
+    """Validate a loaded config (dict, possibly carrying ``__line__`` marks)."""
+    if not isinstance(data, dict):
+        raise ConfigError(f"{source}: a config is a mapping with 'version' and 'pipeline'")
+    unknown = sorted(set(data) - _TOP_KEYS - {"__line__"})
+    if unknown:
+        raise ConfigError(f"{source}: unknown top-level key(s) {', '.join(map(repr, unknown))} "
+                          f"(known: {', '.join(sorted(_TOP_KEYS))})")
+    version = data.get("version", CONFIG_VERSION)
+    if version != CONFIG_VERSION:
+        raise ConfigError(f"{source}: unsupported config version {version!r} (this mocapfix reads {CONFIG_VERSION})")
+    steps_data = data.get("pipeline")
+    if not isinstance(steps_data, list) or not steps_data:
+        raise ConfigError(f"{source}: 'pipeline' must be a non-empty list of steps")
+    steps = []
+    for n, raw in enumerate(steps_data, start=1):
+        where = f"{source}: step {n}{_line_of(raw)}"
+        if not isinstance(raw, dict) or "cleaner" not in raw:
+            raise ConfigError(f"{where}: each step is a mapping with a 'cleaner' key")
+        params = {k: _strip_lines(v) for k, v in raw.items() if k not in _STEP_KEYS and k != "__line__"}
+        name = raw["cleaner"]
+        if not isinstance(name, str):
+            raise ConfigError(f"{where}: 'cleaner' must be a name, got {name!r}")
+        formats = raw.get("formats")
+        if formats is not None:
+            if isinstance(formats, str):
+                formats = [formats]
+            bad = [f for f in formats if f not in _FORMATS]
+            if bad or not isinstance(formats, list):
+                raise ConfigError(f"{where}: 'formats' must list some of {', '.join(sorted(_FORMATS))}, got {formats!r}")
+            formats = tuple(formats)
+        label = f"step {n} ({raw.get('name') or name}){_line_of(raw)}"
+        cleaner = build(name, step=f"{source}: {label}", **params)
+        cleaner.step = label.split(" (line")[0]
+        steps.append(Step(cleaner, formats, raw.get("__line__")))
+    report = _strip_lines(data.get("report") or {})
+    if not isinstance(report, dict):
+        raise ConfigError(f"{source}: 'report' must be a mapping of thresholds")
+    return Pipeline(steps, report, source)
+
+
+def load_config(path) -> Pipeline:
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise ConfigError(f"{path}: cannot read config: {exc.strerror or exc}") from None
+    return loads_config(text, str(path))
+
+
+def loads_config(text: str, source: str = "<config>") -> Pipeline:
+    try:
+        data = yaml.load(text, Loader=_LineLoader)  # noqa: S506 — SafeLoader subclass
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f" (line {mark.line + 1})" if mark is not None else ""
+        raise ConfigError(f"{source}{where}: not valid YAML: {getattr(exc, 'problem', exc)}") from None
+    return parse_config(data, source)
+
+
+def default_config_path() -> Path:
+    return Path(__file__).resolve().parent / "configs" / "default.yaml"

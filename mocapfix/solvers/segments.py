@@ -1,0 +1,332 @@
+"""Per-segment kernels for channels with missing samples.
+
+Layout: ``x`` is a (T, C) float array, time along axis 0, one column per channel
+(a coordinate of a marker), NaN where a sample is missing. A *segment* is a maximal run of
+observed samples in one column. Filters that cannot see NaN (IIR filters, wavelets,
+medians) are applied to each segment separately, so that a gap neither spreads NaN nor
+pulls values across it. Segments that start and end on the same frames in several columns
+(the three coordinates of a marker, or every column of a gap-free capture) are processed
+together in one vectorised call: the Python loop is over distinct segments, never over
+frames.
+
+Two ways to treat the ends of a segment are offered:
+
+* ``"segments"``: the segment is extended beyond its ends (``extend``: point/odd
+  reflection, or a robust straight line) and filtered on its own — what
+  :func:`scipy.signal.filtfilt` does at the ends of a signal (Gustafsson 1996; the
+  ``padtype='odd'`` of SciPy);
+* ``"bridge"``: interior gaps are first bridged with a smooth interpolant
+  (:func:`interpolate_gaps`), the bridged channel is filtered, and the gaps are restored to
+  NaN. Information flows across the gap, which for a low-pass filter with a long impulse
+  response usually gives smaller edge errors than padding (measured in
+  ``tests/test_classic_cleaners.py``).
+"""
+from __future__ import annotations
+
+import math
+from typing import Callable
+
+import numpy as np
+from scipy import interpolate, ndimage, signal
+
+from mocapfix.gaps import runs
+
+EDGE_MODES = ("odd", "linear")
+GAP_MODES = ("segments", "bridge")
+INTERPOLATORS = ("linear", "pchip", "spline")
+
+
+# -- segments -----------------------------------------------------------------------------
+
+def segment_groups(observed: np.ndarray) -> list[tuple[int, int, np.ndarray]]:
+    """Observed runs of a (T, C) mask grouped by identical (start, length).
+
+    Returns a list of ``(start, length, columns)``; ``columns`` is an integer array of the
+    columns that hold a run of True from ``start`` to ``start + length``.
+    """
+    observed = np.asarray(observed, dtype=bool)
+    col, start, length = runs(observed)
+    if col.size == 0:
+        return []
+    key = start.astype(np.int64) * (observed.shape[0] + 1) + length
+    order = np.lexsort((col, key))
+    cuts = np.flatnonzero(np.diff(key[order])) + 1
+    return [(int(start[idx[0]]), int(length[idx[0]]), col[idx]) for idx in np.split(order, cuts)]
+
+
+def apply_segments(x: np.ndarray, func: Callable[[np.ndarray], np.ndarray],
+                   min_length: int = 1, observed: np.ndarray | None = None) -> np.ndarray:
+    """Apply ``func`` to every observed segment of every column of ``x`` (T, C).
+
+    ``func`` receives an (n, k) array (one segment of n samples, shared by k columns) and
+    returns an array of the same shape. Segments shorter than ``min_length`` are copied
+    unchanged; missing samples stay NaN. Returns a new array.
+    """
+    x = np.asarray(x, dtype=np.float64)
+    if observed is None:
+        observed = ~np.isnan(x)
+    out = x.copy()
+    for s, n, cols in segment_groups(observed):
+        if n < min_length:
+            continue
+        out[s:s + n, cols] = func(x[s:s + n][:, cols])
+    return out
+
+
+def extend(seg: np.ndarray, n_pad: int, mode: str = "odd", fit: int | None = None) -> tuple[np.ndarray, int]:
+    """Extend an (n, k) segment by up to ``n_pad`` samples at both ends along axis 0.
+
+    ``mode="odd"``: point reflection about the end sample, ``2 x[0] − x[i]`` (keeps value
+    and slope continuous; SciPy's ``padtype='odd'``); at most ``n − 1`` samples.
+    ``mode="linear"``: a robust straight line through the first/last ``fit`` samples
+    (slope = median of first differences, level = median of the detrended samples, as in
+    the Theil–Sen/repeated-median estimators), so that one wild end sample does not
+    decide the extension; always ``n_pad`` samples.
+
+    Returns ``(padded, p)`` with ``p`` samples added at each end.
+    """
+    n = seg.shape[0]
+    if mode == "odd":
+        p = max(0, min(int(n_pad), n - 1))
+        if p == 0:
+            return seg.copy(), 0
+        left = 2.0 * seg[0] - seg[p:0:-1]
+        right = 2.0 * seg[-1] - seg[-2:-p - 2:-1]
+        return np.concatenate([left, seg, right], axis=0), p
+    if mode == "linear":
+        p = max(0, int(n_pad))
+        if p == 0:
+            return seg.copy(), 0
+        m = min(n, fit if fit is not None else max(p, 3))
+        idx = np.arange(m, dtype=np.float64).reshape((m,) + (1,) * (seg.ndim - 1))
+        head, tail = seg[:m], seg[n - m:]
+        if m >= 2:
+            slope_h = np.median(np.diff(head, axis=0), axis=0)
+            slope_t = np.median(np.diff(tail, axis=0), axis=0)
+        else:
+            slope_h = slope_t = np.zeros(seg.shape[1:])
+        level_h = np.median(head - slope_h * idx, axis=0)
+        level_t = np.median(tail - slope_t * idx, axis=0) + slope_t * (m - 1)
+        steps = np.arange(1, p + 1, dtype=np.float64).reshape((p,) + (1,) * (seg.ndim - 1))
+        left = (level_h - slope_h * steps)[::-1]
+        right = level_t + slope_t * steps
+        return np.concatenate([left, seg, right], axis=0), p
+    raise ValueError(f"unknown edge mode {mode!r} (known: {', '.join(EDGE_MODES)})")
+
+
+# -- interpolation across gaps --------------------------------------------------------------
+
+def run_rows(start: np.ndarray, length: np.ndarray) -> np.ndarray:
+    """Frame indices covered by runs, concatenated (vectorised ``arange`` per run)."""
+    total = int(length.sum())
+    offsets = np.repeat(np.cumsum(length) - length, length)
+    return np.repeat(start, length) + (np.arange(total) - offsets)
+
+
+def interpolate_gaps(x: np.ndarray, method: str = "pchip", max_gap: float | None = None,
+                     times: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Fill interior gaps of each column of ``x`` (T, C) by interpolation.
+
+    Parameters
+    ----------
+    x : (T, C) array, NaN = missing.
+    method : "linear" (piecewise linear), "pchip" (shape-preserving piecewise cubic
+        Hermite, Fritsch & Carlson 1980; never overshoots the neighbouring samples) or
+        "spline" (C² cubic spline through all observed samples, not-a-knot ends;
+        de Boor 1978).
+    max_gap : gaps of more than ``max_gap`` samples are left NaN (None: no limit).
+    times : (T,) sample times; default ``arange(T)``.
+
+    Returns
+    -------
+    filled : (T, C) copy of ``x`` with the fillable gaps filled. Leading and trailing gaps
+        are never filled (no extrapolation).
+    target : (T, C) boolean mask of the samples that were filled.
+
+    Columns with identical missing patterns are interpolated together; the loop is over
+    distinct patterns (at most the number of columns), never over frames.
+    """
+    if method not in INTERPOLATORS:
+        raise ValueError(f"unknown interpolation {method!r} (known: {', '.join(INTERPOLATORS)})")
+    x = np.asarray(x, dtype=np.float64)
+    T = x.shape[0]
+    out = x.copy()
+    target = np.zeros(x.shape, dtype=bool)
+    missing = np.isnan(x)
+    col, start, length = runs(missing)
+    ok = (start > 0) & (start + length < T)
+    if max_gap is not None:
+        ok &= length <= max_gap
+    if not ok.any():
+        return out, target
+    target[run_rows(start[ok], length[ok]), np.repeat(col[ok], length[ok])] = True
+    t = np.arange(T, dtype=np.float64) if times is None else np.asarray(times, dtype=np.float64)
+    columns = np.unique(col[ok])
+    groups: dict[bytes, list[int]] = {}
+    for c in columns:
+        key = np.packbits(missing[:, c]).tobytes() + np.packbits(target[:, c]).tobytes()
+        groups.setdefault(key, []).append(int(c))
+    for cols in groups.values():
+        cols = np.asarray(cols)
+        obs = ~missing[:, cols[0]]
+        rows = target[:, cols[0]]
+        tt, yy = t[obs], x[obs][:, cols]
+        if method == "linear":
+            f = interpolate.make_interp_spline(tt, yy, k=1, axis=0)
+        elif method == "pchip":
+            f = interpolate.PchipInterpolator(tt, yy, axis=0, extrapolate=False)
+        else:
+            f = interpolate.CubicSpline(tt, yy, axis=0, bc_type="not-a-knot", extrapolate=False)
+        out[np.ix_(rows, cols)] = f(t[rows])
+    return out, target
+
+
+def apply_bridged(x: np.ndarray, func: Callable[[np.ndarray], np.ndarray], bridge: str = "pchip",
+                  min_length: int = 1) -> np.ndarray:
+    """Bridge every interior gap with ``interpolate_gaps(method=bridge)``, apply ``func`` to
+    each channel's span from its first to its last observed sample (see
+    :func:`apply_segments`), and restore NaN where ``x`` was missing."""
+    filled, _ = interpolate_gaps(x, bridge)
+    out = apply_segments(filled, func, min_length=min_length)
+    out[np.isnan(x)] = np.nan
+    return out
+
+
+def _by_gaps(x, func, gaps: str, min_length: int = 1):
+    if gaps == "segments":
+        return apply_segments(x, func, min_length=min_length)
+    if gaps == "bridge":
+        return apply_bridged(x, func, min_length=min_length)
+    raise ValueError(f"unknown gap mode {gaps!r} (known: {', '.join(GAP_MODES)})")
+
+
+# -- filters ------------------------------------------------------------------------------
+
+def default_padlen(sos: np.ndarray) -> int:
+    """SciPy's default pad length of :func:`scipy.signal.sosfiltfilt`."""
+    sos = np.atleast_2d(sos)
+    return 3 * (2 * len(sos) + 1 - min(int((sos[:, 2] == 0).sum()), int((sos[:, 5] == 0).sum())))
+
+
+def filtfilt(x: np.ndarray, sos: np.ndarray, gaps: str = "bridge", edge: str = "odd",
+             padlen: int | None = None) -> np.ndarray:
+    """Zero-phase IIR filtering (forward–backward, :func:`scipy.signal.sosfiltfilt`;
+    Gustafsson 1996 initial conditions) of every column of ``x`` (T, C), NaN-safe.
+
+    Parameters
+    ----------
+    sos : second-order sections of the filter (``scipy.signal.butter(..., output='sos')``).
+    gaps : "segments" (filter each observed segment alone) or "bridge" (bridge gaps with
+        PCHIP, filter, restore NaN) — see the module docstring.
+    edge : how a segment is extended beyond its ends before filtering ("odd" or "linear",
+        see :func:`extend`).
+    padlen : samples of extension; default SciPy's ``3 (2 n_sections + 1)``, at most
+        ``n − 1`` for odd extension of a short segment.
+
+    Returns
+    -------
+    (T, C) filtered array, NaN where ``x`` is NaN.
+    """
+    sos = np.atleast_2d(np.asarray(sos, dtype=np.float64))
+    pad = default_padlen(sos) if padlen is None else int(padlen)
+
+    def func(seg):
+        padded, p = extend(seg, pad, edge)
+        y = signal.sosfiltfilt(sos, padded, axis=0, padtype=None)
+        return y[p:p + seg.shape[0]]
+
+    return _by_gaps(x, func, gaps, min_length=2)
+
+
+def gaussian(x: np.ndarray, sigma: float, gaps: str = "segments", edge: str = "odd",
+             truncate: float = 4.0) -> np.ndarray:
+    """Gaussian low-pass (sigma in samples) of every column of ``x`` (T, C), NaN-safe.
+
+    Each segment is extended (``edge``, :func:`extend`) by up to ``truncate·sigma`` samples
+    and smoothed by normalised convolution (Knutsson & Westin 1993):
+    ``g * (x w) / g * w`` with ``w`` = 1 on the (extended) segment and 0 beyond, so a short
+    segment is averaged over the samples it has and no value is pulled across a gap.
+    Odd extension keeps straight-line motion unbiased at the segment ends.
+    """
+    if sigma <= 0:
+        return np.asarray(x, dtype=np.float64).copy()
+    radius = int(math.ceil(truncate * sigma))
+
+    def func(seg):
+        padded, p = extend(seg, radius, edge)
+        num = ndimage.gaussian_filter1d(padded, sigma, axis=0, mode="constant", cval=0.0,
+                                        truncate=truncate)
+        den = ndimage.gaussian_filter1d(np.ones(padded.shape[0]), sigma, mode="constant",
+                                        cval=0.0, truncate=truncate)
+        return (num / den[:, None])[p:p + seg.shape[0]]
+
+    return _by_gaps(x, func, gaps)
+
+
+def bayes_shrink(coeffs: list[np.ndarray], sigma: np.ndarray) -> list[np.ndarray]:
+    """Soft-threshold every detail band with the BayesShrink threshold
+    ``σ² / σ_x``, ``σ_x = sqrt(max(mean(d²) − σ², 0))`` (Chang, Yu & Vetterli 2000;
+    as in ``skimage.restoration.denoise_wavelet``); a band with ``σ_x = 0`` is zeroed.
+    ``coeffs`` is a ``pywt.wavedec`` list along axis 0, ``sigma`` the noise std per column.
+    """
+    out = [coeffs[0]]
+    var = np.asarray(sigma, dtype=np.float64) ** 2
+    for d in coeffs[1:]:
+        sig_x = np.sqrt(np.maximum(np.mean(d * d, axis=0) - var, 0.0))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            thr = np.where(sig_x > 0, var / np.where(sig_x > 0, sig_x, 1.0), np.abs(d).max(axis=0))
+        out.append(np.sign(d) * np.maximum(np.abs(d) - thr, 0.0))
+    return out
+
+
+def wavelet_denoise(x: np.ndarray, wavelet: str = "sym8", level: int | None = None,
+                    gaps: str = "bridge", mode: str = "antireflect") -> np.ndarray:
+    """Wavelet shrinkage denoising of every column of ``x`` (T, C), NaN-safe.
+
+    Discrete wavelet transform (``pywt.wavedec``, boundary ``mode``), robust noise estimate
+    ``σ = median(|d_1|) / 0.6745`` from the finest detail band (Donoho & Johnstone 1994),
+    BayesShrink soft thresholds per band (:func:`bayes_shrink`), inverse transform.
+    ``level`` None: ``max(dwt_max_level − 3, 1)`` like scikit-image.
+
+    Returns the denoised (T, C) array, NaN where ``x`` is NaN.
+    """
+    import pywt
+
+    w = pywt.Wavelet(wavelet)
+
+    def func(seg):
+        n = seg.shape[0]
+        maxlev = pywt.dwt_max_level(n, w.dec_len)
+        if maxlev < 1:
+            return seg
+        lev = max(maxlev - 3, 1) if level is None else min(level, maxlev)
+        coeffs = pywt.wavedec(seg, w, mode=mode, level=lev, axis=0)
+        sigma = np.median(np.abs(coeffs[-1]), axis=0) / 0.6745
+        rec = pywt.waverec(bayes_shrink(coeffs, sigma), w, mode=mode, axis=0)
+        return rec[:n]
+
+    return _by_gaps(x, func, gaps, min_length=2)
+
+
+# -- robust running statistics ---------------------------------------------------------------
+
+def running_median(x: np.ndarray, half: int, edge: str = "linear") -> np.ndarray:
+    """Running median over ``2 half + 1`` samples of each observed segment of ``x`` (T, C).
+
+    Segment ends are extended with a robust straight line (``edge="linear"``,
+    :func:`extend`), so that the median of a moving marker does not lag at a gap or at the
+    ends of the capture (a one-sided window of a ramp is off by half its width times the
+    velocity). Memory: one (n, k, 2 half + 1) strided view per segment group.
+    """
+    from numpy.lib.stride_tricks import sliding_window_view
+
+    half = int(half)
+    if half < 1:
+        return np.asarray(x, dtype=np.float64).copy()
+
+    def func(seg):
+        padded, p = extend(seg, half, edge, fit=2 * half + 1)
+        view = sliding_window_view(padded, 2 * half + 1, axis=0)
+        return np.median(view, axis=-1)[p - half:p - half + seg.shape[0]]
+
+    return apply_segments(x, func)

@@ -1,0 +1,198 @@
+"""Rotation write-back: turn cleaned joint positions of a BVH or ASF/AMC motion back into
+the channel values its file stores (ALGORITHMS.md, "Rotations").
+
+Bone offsets stay fixed. Walking the hierarchy from the root, each joint's frame is
+rotated by the smallest world rotation that maps the bone vectors it carries onto the
+cleaned ones: one bone → the minimal swing (the twist about the bone is the input's);
+several bones → orthogonal Procrustes (Kabsch, weighted by bone length). The joint's
+local rotation then follows from its parent's new frame, and is decomposed into the
+joint's own Euler axes (restricted to its degrees of freedom where it has fewer than
+three). The root translation comes from the cleaned root position. Forward kinematics of
+the new channels gives the written positions; their distance to the cleaned positions is
+the write-back residual. Channel values that move by less than ``keep_tol`` are kept
+bit-identical, so untouched frames write back unchanged.
+
+Everything is vectorised over frames; the loop is over joints.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from mocapfix.kinematics import Rig, euler_to_matrix, matrix_to_euler
+
+_AXES = "XYZ"
+
+
+def _minimal_rotation(u: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """Smallest rotation taking direction u to direction w, (T, 3, 3) (Rodrigues)."""
+    u = u / np.maximum(np.linalg.norm(u, axis=-1, keepdims=True), 1e-300)
+    w = w / np.maximum(np.linalg.norm(w, axis=-1, keepdims=True), 1e-300)
+    v = np.cross(u, w)
+    c = np.einsum("ti,ti->t", u, w)
+    K = np.zeros(u.shape[:-1] + (3, 3))
+    K[..., 0, 1], K[..., 0, 2], K[..., 1, 2] = -v[..., 2], v[..., 1], -v[..., 0]
+    K[..., 1, 0], K[..., 2, 0], K[..., 2, 1] = v[..., 2], -v[..., 1], v[..., 0]
+    # R = I + K + K²/(1+c); opposite vectors (c ≈ -1) are rotated by π about any normal
+    denom = np.where(c > -1 + 1e-12, 1.0 + c, np.inf)
+    R = np.eye(3) + K + (K @ K) / denom[..., None, None]
+    flip = c <= -1 + 1e-12
+    if flip.any():
+        axis = np.cross(u[flip], np.eye(3)[np.argmin(np.abs(u[flip]), axis=-1)])
+        axis /= np.linalg.norm(axis, axis=-1, keepdims=True)
+        R[flip] = 2 * axis[:, :, None] * axis[:, None, :] - np.eye(3)
+    return R
+
+
+def _kabsch(u: np.ndarray, w: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    """Rotation R minimising Σ_k weight_k ||R u_k − w_k||² for stacks (T, K, 3)."""
+    H = np.einsum("k,tki,tkj->tij", weights, w, u)
+    U, _, Vt = np.linalg.svd(H)
+    d = np.sign(np.linalg.det(U @ Vt))
+    D = np.ones(U.shape[:-1])
+    D[..., -1] = d
+    return (U * D[..., None, :]) @ Vt
+
+
+def decompose(axes: str, M: np.ndarray) -> np.ndarray:
+    """Angles (radians) for the joint's axes (matrix-product order) best representing M.
+
+    Three distinct axes: exact Tait–Bryan decomposition. Two: the missing axis is placed
+    in the middle of a three-axis decomposition and dropped (exact whenever M is
+    representable). One: the least-squares angle about that axis.
+    """
+    if len(axes) == 3:
+        return matrix_to_euler(axes, M)
+    if len(axes) == 2:
+        missing = next(a for a in _AXES if a not in axes)
+        full = matrix_to_euler(axes[0] + missing + axes[1], M)
+        return full[..., [0, 2]]
+    i = _AXES.index(axes)
+    j, k = (i + 1) % 3, (i + 2) % 3
+    return np.arctan2(M[..., k, j] - M[..., j, k], M[..., j, j] + M[..., k, k])[..., None]
+
+
+def _refine_restricted(axes, ang, base, rest, w, weights, iterations: int = 8):
+    """Gauss–Newton on the joint's own angles (fewer than three DOFs) so that its bones
+    point as close as possible to the cleaned directions — a swing outside the joint's
+    DOFs cannot be dropped afterwards without losing accuracy. Finite-difference
+    Jacobian; all frames at once."""
+    wts = np.sqrt(weights / max(weights.sum(), 1e-300))[None, :, None]
+    w_unit = w / np.maximum(np.linalg.norm(w, axis=-1, keepdims=True), 1e-300)
+    rest_unit = rest / np.maximum(np.linalg.norm(rest, axis=-1, keepdims=True), 1e-300)
+    ok = np.isfinite(w_unit).all(axis=(1, 2))
+
+    def residual(a):
+        u = np.einsum("tab,kb->tka", base @ euler_to_matrix(axes, a), rest_unit)
+        return ((u - w_unit) * wts).reshape(len(a), -1)
+
+    a = np.where(ok[:, None], ang, 0.0)
+    w_unit = np.where(ok[:, None, None], w_unit, 0.0)
+    h = 1e-6
+    for _ in range(iterations):
+        r = residual(a)
+        Jac = np.stack([(residual(a + h * np.eye(len(axes))[n]) - r) / h
+                        for n in range(len(axes))], axis=-1)
+        JtJ = np.swapaxes(Jac, 1, 2) @ Jac + 1e-9 * np.eye(len(axes))
+        step = np.linalg.solve(JtJ, np.einsum("tri,tr->ti", Jac, r)[..., None])[..., 0]
+        a = a - step
+    return np.where(ok[:, None], a, ang)
+
+
+def _unwrap_to(new_deg: np.ndarray, old_deg: np.ndarray) -> np.ndarray:
+    """Shift each angle by a multiple of 360° to lie nearest the original value."""
+    return new_deg - 360.0 * np.round((new_deg - old_deg) / 360.0)
+
+
+def _carried_bones(rig: Rig):
+    """For each joint with rotation DOFs, the bones whose direction its rotation sets and
+    their rest vectors in its frame. A bone carried by a joint without DOFs (ASF hip
+    joints, BVH ``CHANNELS 0``) is rigidly attached to the nearest ancestor that has them."""
+    J = rig.n_joints
+    carriers = [[] for _ in range(J)]
+    rest = [[] for _ in range(J)]
+    for k in range(J):
+        if rig.parents[k] < 0:
+            continue
+        c = k if rig.offset_in_own_frame[k] else rig.parents[k]
+        vec = rig.offsets[k].copy()
+        while not rig.rot_axes[c] and rig.parents[c] >= 0:
+            vec = rig.pre_rotation[c] @ vec
+            c = rig.parents[c]
+        if rig.rot_axes[c]:
+            carriers[c].append(k)
+            rest[c].append(vec)
+    return carriers, [np.array(r).reshape(-1, 3) for r in rest]
+
+
+def solve_channels(rig: Rig, channels: np.ndarray, target: np.ndarray,
+                   keep_tol: float = 1e-6) -> np.ndarray:
+    """New channel values whose FK best matches ``target`` positions (T, J, 3).
+
+    ``channels`` are the original values (twist and untouched DOFs come from them).
+    Frames/joints whose target is NaN keep their original rotation.
+    """
+    channels = np.asarray(channels, dtype=np.float64)
+    out = channels.copy()
+    T, J = channels.shape[0], rig.n_joints
+    target = np.asarray(target, dtype=np.float64)
+    new_frames = np.empty((T, J, 3, 3))
+    carriers, rest_vectors = _carried_bones(rig)
+    for j in range(J):
+        p = rig.parents[j]
+        # root translation from the cleaned root position
+        tcols = rig.trans_columns[j]
+        if p < 0 and (tcols >= 0).any():
+            ok = np.isfinite(target[:, j]).all(axis=1)
+            base = rig.offsets[j] if rig.trans_adds_offset[j] else np.zeros(3)
+            for axis in range(3):
+                if tcols[axis] >= 0:
+                    col = tcols[axis]
+                    out[ok, col] = target[ok, j, axis] - base[axis]
+        parent_frame = new_frames[:, p] if p >= 0 else np.broadcast_to(np.eye(3), (T, 3, 3))
+        axes, cols = rig.rot_axes[j], rig.rot_columns[j]
+        ang_old = channels[:, cols]
+        ang_old_rad = np.deg2rad(ang_old) if rig.degrees else ang_old
+        M_old = euler_to_matrix(axes, ang_old_rad) if axes else np.broadcast_to(np.eye(3), (T, 3, 3))
+        current = parent_frame @ rig.pre_rotation[j] @ M_old
+        kids = carriers[j]
+        if not axes or not kids:
+            new_frames[:, j] = current
+            continue
+        rest = rest_vectors[j]                                     # (K, 3) in j's frame
+        origin_idx = [rig.parents[k] for k in kids]
+        w = target[:, kids] - target[:, origin_idx]                # (T, K, 3) cleaned bone vectors
+        u = np.einsum("tab,kb->tka", current, rest)               # bone vectors before correction
+        valid = np.isfinite(w).all(axis=(1, 2)) & (np.linalg.norm(rest, axis=1) > 0).any()
+        lengths = np.linalg.norm(rest, axis=1)
+        R = np.broadcast_to(np.eye(3), (T, 3, 3)).copy()
+        if valid.any():
+            if np.count_nonzero(lengths > 0) == 1:
+                k = int(np.argmax(lengths))
+                R[valid] = _minimal_rotation(u[valid, k], w[valid, k])
+            else:
+                R[valid] = _kabsch(u[valid], w[valid], lengths)
+        frame = R @ current
+        new_frames[:, j] = frame
+        M_new = np.swapaxes(parent_frame @ rig.pre_rotation[j], -1, -2) @ frame
+        ang = decompose(axes, M_new)
+        if len(axes) < 3:
+            base = parent_frame @ rig.pre_rotation[j]
+            ang = _refine_restricted(axes, ang, base, rest, w, lengths)
+        if rig.degrees:
+            ang = np.rad2deg(ang)
+            ang = _unwrap_to(ang, ang_old)
+        else:
+            ang = ang - 2 * np.pi * np.round((ang - ang_old) / (2 * np.pi))
+        ang = np.where(np.abs(ang - ang_old) < keep_tol, ang_old, ang)
+        out[:, cols] = np.where(valid[:, None], ang, ang_old)
+    return out
+
+
+def write_back(motion, keep_tol: float = 1e-6):
+    """Channels, FK positions and per-joint residual (T, J) for a motion whose positions
+    were cleaned while ``motion.channels`` still hold the values read from the file."""
+    rig = motion.rig
+    channels = solve_channels(rig, motion.channels, motion.positions, keep_tol)
+    positions = rig.positions(channels)
+    residual = np.linalg.norm(positions - motion.positions, axis=-1)
+    return channels, positions, residual
