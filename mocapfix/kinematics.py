@@ -48,12 +48,20 @@ def axis_rotation(axis: str, angles: np.ndarray) -> np.ndarray:
 def euler_to_matrix(axes: str, angles: np.ndarray) -> np.ndarray:
     """Product ``R_axes[0](angles[...,0]) · R_axes[1](...) · ...`` (radians).
 
-    ``angles`` has shape (..., len(axes)). Returns (..., 3, 3).
+    ``angles`` has shape (..., len(axes)). Returns (..., 3, 3). Right-multiplying by an
+    elementary rotation about axis i only mixes columns j and k, so each factor costs two
+    column updates instead of a batched 3×3 product.
     """
     angles = np.asarray(angles, dtype=np.float64)
-    out = np.broadcast_to(np.eye(3), angles.shape[:-1] + (3, 3)).copy()
+    out = np.zeros(angles.shape[:-1] + (3, 3))
+    out[..., 0, 0] = out[..., 1, 1] = out[..., 2, 2] = 1.0
     for n, axis in enumerate(axes):
-        out = out @ axis_rotation(axis, angles[..., n])
+        i = _AXIS_INDEX[axis.upper()]
+        j, k = (i + 1) % 3, (i + 2) % 3
+        c, s = np.cos(angles[..., n])[..., None], np.sin(angles[..., n])[..., None]
+        col_j, col_k = out[..., :, j].copy(), out[..., :, k]
+        out[..., :, j] = col_j * c + col_k * s
+        out[..., :, k] = col_k * c - col_j * s
     return out
 
 
@@ -136,36 +144,56 @@ class Rig:
                 out[:, j] = self.pre_rotation[j]
         return out
 
-    def forward(self, channels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """World positions (T, J, 3) and frame orientations F (T, J, 3, 3)."""
+    def local_offsets(self, channels: np.ndarray) -> np.ndarray:
+        """The vector from each joint's parent to the joint in its carrier frame, per
+        frame: the rest offset with translation channels added or substituted. (T, J, 3)."""
+        channels = np.asarray(channels, dtype=np.float64)
+        vec = np.broadcast_to(self.offsets, (channels.shape[0],) + self.offsets.shape).copy()
+        for j in np.flatnonzero((self.trans_columns >= 0).any(axis=1)):
+            tcols = self.trans_columns[j]
+            has = tcols >= 0
+            if self.trans_adds_offset[j]:
+                vec[:, j, has] += channels[:, tcols[has]]
+            else:
+                vec[:, j, has] = channels[:, tcols[has]]
+        return vec
+
+    def forward(self, channels: np.ndarray, with_frames: bool = True):
+        """World positions (T, J, 3) and frame orientations F (T, J, 3, 3) (None when
+        ``with_frames`` is False)."""
         channels = np.asarray(channels, dtype=np.float64)
         if channels.ndim != 2 or channels.shape[1] < self.n_channels:
             raise ValueError(
                 f"channels must be (T, >= {self.n_channels}), got {channels.shape}")
-        T = channels.shape[0]
-        local = self.local_rotations(channels)
-        frames = np.empty_like(local)
-        pos = np.empty((T, self.n_joints, 3))
+        vec = self.local_offsets(channels)
+        # per-joint contiguous arrays: batched products on strided slices are several times slower
+        frames: list[np.ndarray] = []
+        pos: list[np.ndarray] = []
         for j in range(self.n_joints):
             p = self.parents[j]
-            vec = np.broadcast_to(self.offsets[j], (T, 3)).copy()
-            tcols = self.trans_columns[j]
-            has_t = tcols >= 0
-            if has_t.any():
-                t = np.zeros((T, 3))
-                t[:, has_t] = channels[:, tcols[has_t]]
-                if self.trans_adds_offset[j]:
-                    vec += t
-                else:
-                    vec[:, has_t] = t[:, has_t]
+            axes = self.rot_axes[j]
+            if axes:
+                ang = channels[:, self.rot_columns[j]]
+                local = self.pre_rotation[j] @ euler_to_matrix(axes, np.deg2rad(ang) if self.degrees else ang)
+            else:
+                local = self.pre_rotation[j]
             if p < 0:
-                frames[:, j] = local[:, j]
-                pos[:, j] = vec
+                frames.append(np.broadcast_to(local, (channels.shape[0], 3, 3)).copy())
+                pos.append(np.ascontiguousarray(vec[:, j]))
                 continue
-            frames[:, j] = frames[:, p] @ local[:, j]
-            carrier = frames[:, j] if self.offset_in_own_frame[j] else frames[:, p]
-            pos[:, j] = pos[:, p] + np.einsum("tab,tb->ta", carrier, vec)
-        return pos, frames
+            # joints without DOFs and an identity pre-rotation (End Sites) share the parent frame
+            frames.append(frames[p] if (not axes and self._identity_pre[j]) else frames[p] @ local)
+            carrier = frames[j] if self.offset_in_own_frame[j] else frames[p]
+            pos.append(pos[p] + (carrier @ vec[:, j, :, None])[..., 0])
+        return np.stack(pos, axis=1), (np.stack(frames, axis=1) if with_frames else None)
+
+    @property
+    def _identity_pre(self) -> np.ndarray:
+        cached = getattr(self, "_identity_pre_cache", None)
+        if cached is None or len(cached) != self.n_joints:
+            cached = np.all(np.abs(self.pre_rotation - np.eye(3)) < 1e-15, axis=(1, 2))
+            self._identity_pre_cache = cached
+        return cached
 
     def positions(self, channels: np.ndarray) -> np.ndarray:
-        return self.forward(channels)[0]
+        return self.forward(channels, with_frames=False)[0]

@@ -92,7 +92,7 @@ class Pipeline:
         records = []
         for step in self.steps:
             if not step.applies(motion):
-                records.append(StepRecord.skipped(step, motion, "not for this format"))
+                records.append(StepRecord.not_run(step, motion, "not for this format"))
                 continue
             started = time.perf_counter()
             out, info = step.cleaner.apply(motion)
@@ -126,7 +126,7 @@ class StepRecord:
                    ~miss_before & miss_after, moved, info or {})
 
     @classmethod
-    def skipped(cls, step: Step, motion: Motion, why: str):
+    def not_run(cls, step: Step, motion: Motion, why: str):
         shape = motion.positions.shape[:2]
         return cls(step.label, step.cleaner.name, 0.0, np.zeros(shape, bool),
                    np.zeros(shape, bool), np.zeros(shape), {}, skipped=why)

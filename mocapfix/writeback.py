@@ -43,6 +43,22 @@ def _minimal_rotation(u: np.ndarray, w: np.ndarray) -> np.ndarray:
     return R
 
 
+def _fit_rotation(u: np.ndarray, w: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    """World rotation taking the bones ``u`` (T, K, 3) onto ``w``: Kabsch when the bones
+    span a plane, else the minimal swing of the longest bone (collinear or single bones
+    leave the twist undetermined, so the input's is kept)."""
+    longest = int(np.argmax(weights))
+    swing = _minimal_rotation(u[:, longest], w[:, longest])
+    if np.count_nonzero(weights > 0) < 2:
+        return swing
+    R = _kabsch(u, w, weights)
+    # planar test on the rest bones: the second singular value of the weighted bone set
+    sv = np.linalg.svd(u * weights[None, :, None], compute_uv=False)
+    degenerate = sv[:, 1] < 1e-6 * np.maximum(sv[:, 0], 1e-300)
+    R[degenerate] = swing[degenerate]
+    return R
+
+
 def _kabsch(u: np.ndarray, w: np.ndarray, weights: np.ndarray) -> np.ndarray:
     """Rotation R minimising Σ_k weight_k ||R u_k − w_k||² for stacks (T, K, 3)."""
     H = np.einsum("k,tki,tkj->tij", weights, w, u)
@@ -82,7 +98,7 @@ def _refine_restricted(axes, ang, base, rest, w, weights, iterations: int = 8):
     ok = np.isfinite(w_unit).all(axis=(1, 2))
 
     def residual(a):
-        u = np.einsum("tab,kb->tka", base @ euler_to_matrix(axes, a), rest_unit)
+        u = np.einsum("tab,tkb->tka", base @ euler_to_matrix(axes, a), rest_unit)
         return ((u - w_unit) * wts).reshape(len(a), -1)
 
     a = np.where(ok[:, None], ang, 0.0)
@@ -104,24 +120,23 @@ def _unwrap_to(new_deg: np.ndarray, old_deg: np.ndarray) -> np.ndarray:
 
 
 def _carried_bones(rig: Rig):
-    """For each joint with rotation DOFs, the bones whose direction its rotation sets and
-    their rest vectors in its frame. A bone carried by a joint without DOFs (ASF hip
-    joints, BVH ``CHANNELS 0``) is rigidly attached to the nearest ancestor that has them."""
-    J = rig.n_joints
-    carriers = [[] for _ in range(J)]
-    rest = [[] for _ in range(J)]
-    for k in range(J):
+    """For each joint with rotation DOFs, the bones whose direction its rotation sets, as
+    (bone joint k, P) with P the constant rotation taking k's local vector into the
+    carrying joint's frame. A bone carried by a joint without DOFs (ASF hip joints, BVH
+    ``CHANNELS 0``, End Sites' parents' children) is rigidly attached to the nearest
+    ancestor that has them."""
+    carriers = [[] for _ in range(rig.n_joints)]
+    for k in range(rig.n_joints):
         if rig.parents[k] < 0:
             continue
         c = k if rig.offset_in_own_frame[k] else rig.parents[k]
-        vec = rig.offsets[k].copy()
+        P = np.eye(3)
         while not rig.rot_axes[c] and rig.parents[c] >= 0:
-            vec = rig.pre_rotation[c] @ vec
+            P = rig.pre_rotation[c] @ P
             c = rig.parents[c]
         if rig.rot_axes[c]:
-            carriers[c].append(k)
-            rest[c].append(vec)
-    return carriers, [np.array(r).reshape(-1, 3) for r in rest]
+            carriers[c].append((k, P))
+    return carriers
 
 
 def solve_channels(rig: Rig, channels: np.ndarray, target: np.ndarray,
@@ -135,56 +150,66 @@ def solve_channels(rig: Rig, channels: np.ndarray, target: np.ndarray,
     out = channels.copy()
     T, J = channels.shape[0], rig.n_joints
     target = np.asarray(target, dtype=np.float64)
-    new_frames = np.empty((T, J, 3, 3))
-    carriers, rest_vectors = _carried_bones(rig)
+    frames: list[np.ndarray | None] = [None] * J
+    placed = np.zeros((T, J, 3))             # positions of the new solution, joint by joint
+    is_placed = np.zeros(J, dtype=bool)
+    carriers = _carried_bones(rig)
+    identity = np.broadcast_to(np.eye(3), (T, 3, 3))
+
+    def place(k):
+        if rig.parents[k] < 0:
+            placed[:, k] = rig.local_offsets(out)[:, k]
+        else:
+            carrier = frames[k] if rig.offset_in_own_frame[k] else frames[rig.parents[k]]
+            placed[:, k] = placed[:, rig.parents[k]] + (carrier @ local_vectors[:, k, :, None])[..., 0]
+        is_placed[k] = True
+
+    local_vectors = rig.local_offsets(channels)                    # (T, J, 3)
     for j in range(J):
         p = rig.parents[j]
-        # root translation from the cleaned root position
         tcols = rig.trans_columns[j]
-        if p < 0 and (tcols >= 0).any():
+        if p < 0 and (tcols >= 0).any():       # root translation from the cleaned root position
             ok = np.isfinite(target[:, j]).all(axis=1)
             base = rig.offsets[j] if rig.trans_adds_offset[j] else np.zeros(3)
-            for axis in range(3):
-                if tcols[axis] >= 0:
-                    col = tcols[axis]
-                    out[ok, col] = target[ok, j, axis] - base[axis]
-        parent_frame = new_frames[:, p] if p >= 0 else np.broadcast_to(np.eye(3), (T, 3, 3))
+            for axis in np.flatnonzero(tcols >= 0):
+                out[ok, tcols[axis]] = target[ok, j, axis] - base[axis]
+        parent_frame = frames[p] if p >= 0 else identity
+        if p >= 0 and not rig.offset_in_own_frame[j]:
+            place(j)
         axes, cols = rig.rot_axes[j], rig.rot_columns[j]
         ang_old = channels[:, cols]
-        ang_old_rad = np.deg2rad(ang_old) if rig.degrees else ang_old
-        M_old = euler_to_matrix(axes, ang_old_rad) if axes else np.broadcast_to(np.eye(3), (T, 3, 3))
-        current = parent_frame @ rig.pre_rotation[j] @ M_old
-        kids = carriers[j]
-        if not axes or not kids:
-            new_frames[:, j] = current
-            continue
-        rest = rest_vectors[j]                                     # (K, 3) in j's frame
-        origin_idx = [rig.parents[k] for k in kids]
-        w = target[:, kids] - target[:, origin_idx]                # (T, K, 3) cleaned bone vectors
-        u = np.einsum("tab,kb->tka", current, rest)               # bone vectors before correction
-        valid = np.isfinite(w).all(axis=(1, 2)) & (np.linalg.norm(rest, axis=1) > 0).any()
-        lengths = np.linalg.norm(rest, axis=1)
-        R = np.broadcast_to(np.eye(3), (T, 3, 3)).copy()
-        if valid.any():
-            if np.count_nonzero(lengths > 0) == 1:
-                k = int(np.argmax(lengths))
-                R[valid] = _minimal_rotation(u[valid, k], w[valid, k])
-            else:
-                R[valid] = _kabsch(u[valid], w[valid], lengths)
-        frame = R @ current
-        new_frames[:, j] = frame
-        M_new = np.swapaxes(parent_frame @ rig.pre_rotation[j], -1, -2) @ frame
-        ang = decompose(axes, M_new)
-        if len(axes) < 3:
-            base = parent_frame @ rig.pre_rotation[j]
-            ang = _refine_restricted(axes, ang, base, rest, w, lengths)
-        if rig.degrees:
-            ang = np.rad2deg(ang)
-            ang = _unwrap_to(ang, ang_old)
-        else:
-            ang = ang - 2 * np.pi * np.round((ang - ang_old) / (2 * np.pi))
-        ang = np.where(np.abs(ang - ang_old) < keep_tol, ang_old, ang)
-        out[:, cols] = np.where(valid[:, None], ang, ang_old)
+        to_rad = np.deg2rad if rig.degrees else np.asarray
+        base = parent_frame @ rig.pre_rotation[j]
+        current = base @ euler_to_matrix(axes, to_rad(ang_old)) if axes else base
+        carried = carriers[j]
+        if axes and carried:
+            kids = [k for k, _ in carried]
+            rest = np.stack([local_vectors[:, k] @ P.T for k, P in carried], axis=1)   # (T, K, 3)
+            # aim each bone from where the new solution put its start (so errors do not add
+            # up along the chain), or from the cleaned start when that is not placed yet
+            origins = np.stack([placed[:, rig.parents[k]] if is_placed[rig.parents[k]]
+                                else target[:, rig.parents[k]] for k in kids], axis=1)
+            w = target[:, kids] - origins
+            u = np.einsum("tab,tkb->tka", current, rest)
+            lengths = np.linalg.norm(rest, axis=-1).mean(axis=0)
+            valid = np.isfinite(w).all(axis=(1, 2)) & (lengths.max() > 0)
+            if valid.any():
+                R = _fit_rotation(u[valid], w[valid], lengths)
+                M_new = np.swapaxes(base[valid] if base.ndim == 3 else base, -1, -2) @ (R @ current[valid])
+                ang = decompose(axes, M_new)
+                if len(axes) < 3:
+                    ang = _refine_restricted(axes, ang, base[valid], rest[valid], w[valid], lengths)
+                old = ang_old[valid]
+                if rig.degrees:
+                    ang = _unwrap_to(np.rad2deg(ang), old)
+                else:
+                    ang = ang - 2 * np.pi * np.round((ang - old) / (2 * np.pi))
+                ang = np.where(np.abs(ang - old) < keep_tol, old, ang)
+                out[np.flatnonzero(valid)[:, None], cols] = ang
+            current = base @ euler_to_matrix(axes, to_rad(out[:, cols]))
+        frames[j] = np.ascontiguousarray(np.broadcast_to(current, (T, 3, 3)))
+        if p < 0 or rig.offset_in_own_frame[j]:
+            place(j)
     return out
 
 

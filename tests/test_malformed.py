@@ -1,0 +1,117 @@
+"""Malformed input, for every format: truncated at random byte offsets, garbage bytes,
+empty files, NaN text, wrong column counts. Each read either returns a Motion (when the
+format's users expect partial files to load, with a note) or raises one
+UnreadableFileError naming the file — quickly, never a hang, never another exception."""
+from __future__ import annotations
+
+import signal
+from contextlib import contextmanager
+
+import numpy as np
+import pytest
+
+from mocapfix.errors import UnreadableFileError
+from mocapfix.formats import read
+from mocapfix.motion import Motion
+from tests.conftest import SAMPLE_DATA
+
+SAMPLES = ["walk.bvh", "walker_01.amc", "walk_markers.c3d", "walk_kinect_v2.csv"]
+
+
+@contextmanager
+def hang_guard(seconds: int = 20):
+    def boom(*_):
+        raise TimeoutError(f"read did not return within {seconds} s")
+
+    old = signal.signal(signal.SIGALRM, boom)
+    signal.alarm(seconds)
+    try:
+        yield
+    finally:
+        signal.alarm(0)
+        signal.signal(signal.SIGALRM, old)
+
+
+def _check(path):
+    with hang_guard():
+        try:
+            motion = read(path)
+        except UnreadableFileError as exc:
+            assert str(path) in str(exc), f"message does not name the file: {exc}"
+            assert len(str(exc).splitlines()) == 1
+            return None
+    assert isinstance(motion, Motion)
+    assert motion.positions.ndim == 3
+    return motion
+
+
+@pytest.mark.parametrize("name", SAMPLES)
+def test_truncated_at_random_offsets(name, tmp_path):
+    data = (SAMPLE_DATA / name).read_bytes()
+    rng = np.random.default_rng(7)
+    offsets = sorted(set(rng.integers(1, len(data) - 1, 25).tolist()) | {1, 10, len(data) // 2})
+    if name.endswith(".amc"):
+        (tmp_path / "walker.asf").write_bytes((SAMPLE_DATA / "walker.asf").read_bytes())
+    for cut in offsets:
+        path = tmp_path / name
+        path.write_bytes(data[:cut])
+        motion = _check(path)
+        if motion is not None:
+            assert motion.n_frames <= len(data)  # read something sane
+            assert any("trunc" in n.lower() or "incomplete" in n.lower() for n in motion.notes) \
+                or motion.n_frames > 0
+
+
+@pytest.mark.parametrize("name", SAMPLES)
+def test_garbage_and_empty(name, tmp_path):
+    rng = np.random.default_rng(8)
+    if name.endswith(".amc"):
+        (tmp_path / "walker.asf").write_bytes((SAMPLE_DATA / "walker.asf").read_bytes())
+    path = tmp_path / name
+    path.write_bytes(b"")
+    with pytest.raises(UnreadableFileError, match="empty"):
+        read(path)
+    for _ in range(10):
+        path.write_bytes(rng.integers(0, 256, int(rng.integers(1, 5000)), dtype=np.uint8).tobytes())
+        _check(path)
+    # garbage in the middle of a valid file
+    data = bytearray((SAMPLE_DATA / name).read_bytes())
+    for _ in range(10):
+        at = int(rng.integers(0, len(data) - 64))
+        corrupt = bytearray(data)
+        corrupt[at:at + 64] = rng.integers(0, 256, 64, dtype=np.uint8).tobytes()
+        path.write_bytes(bytes(corrupt))
+        _check(path)
+
+
+@pytest.mark.parametrize("name", ["walk.bvh", "walker_01.amc", "walk_kinect_v2.csv"])
+def test_nan_text_and_wrong_columns(name, tmp_path):
+    if name.endswith(".amc"):
+        (tmp_path / "walker.asf").write_bytes((SAMPLE_DATA / "walker.asf").read_bytes())
+    text = (SAMPLE_DATA / name).read_text()
+    lines = text.splitlines(keepends=True)
+    last = len(lines) - 3
+    # a value replaced by NaN text
+    bad = list(lines)
+    tokens = bad[last].replace(",", " , ").split()
+    bad[last] = bad[last].replace(tokens[1].strip(","), "nan", 1)
+    (tmp_path / name).write_text("".join(bad))
+    _check(tmp_path / name)
+    # a line with one value missing
+    bad = list(lines)
+    sep = "," if name.endswith(".csv") else " "
+    parts = bad[last].rstrip("\r\n").split(sep)
+    bad[last] = sep.join(parts[:-2] + parts[-1:]) + "\n"
+    (tmp_path / name).write_text("".join(bad))
+    _check(tmp_path / name)
+
+
+def test_unknown_and_missing_files(tmp_path):
+    with pytest.raises(UnreadableFileError, match="no such file"):
+        read(tmp_path / "nope.c3d")
+    odd = tmp_path / "notes.xyz"
+    odd.write_text("hello\n")
+    with pytest.raises(UnreadableFileError, match="unknown file format"):
+        read(odd)
+    with pytest.raises(UnreadableFileError, match="directory"):
+        read(tmp_path)

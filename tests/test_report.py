@@ -1,0 +1,52 @@
+"""The quality report on cases whose answers are known by construction."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+
+from mocapfix.clean import clean_motion
+from mocapfix.motion import Motion, Skeleton
+from mocapfix.pipeline import loads_config
+from mocapfix.report import build_report, to_html, to_json, to_markdown
+
+
+def _motion():
+    T = 200
+    t = np.arange(T) / 100.0
+    a = np.stack([1000 * t, np.zeros(T), np.full(T, 900.0)], axis=1)
+    b = a + np.array([0.0, 0.0, -400.0])
+    pos = np.stack([a, b], axis=1)
+    pos[50:60, 1] = np.nan                     # one 10-frame gap on marker B
+    return Motion(pos, ["A", "B"], 100.0, units="mm", metres_per_unit=0.001, format="c3d",
+                  skeleton=Skeleton(np.array([-1, 0])))
+
+
+def test_report_names_the_filler_and_counts():
+    motion = _motion()
+    pipe = loads_config("pipeline:\n  - cleaner: fill\n    method: linear\n")
+    result = clean_motion(motion, pipe)
+    report = build_report(result)
+    json.loads(to_json(report))  # valid JSON, no NaN
+    a, b = report["joints"]
+    assert b["missing_before"] == 0.05 and b["missing_after"] == 0.0
+    assert b["gaps"]["count"] == 1 and b["gaps"]["longest_frames"] == 10
+    assert b["gaps"]["filled"] == [{"start": 50, "length": 10, "filled_by": "step 1 (fill)"}]
+    assert a["status"] == "OK" and b["status"] == "OK"
+    # the straight line is filled exactly, so the bone keeps its length
+    assert b["bone_variation_after"] < 1e-12
+    assert report["file"]["samples_filled"] == 10 and report["file"]["status"] == "OK"
+    md = to_markdown(report)
+    assert "| B | OK |" in md and "step 1 (fill)" in md
+    assert to_html(report, result).count("<svg") == 2
+
+
+def test_unfilled_gap_warns_and_fails_over_threshold():
+    motion = _motion()
+    pipe = loads_config("pipeline:\n  - cleaner: fill\n    max_gap: 5 frames\n")
+    report = build_report(clean_motion(motion, pipe))
+    b = report["joints"][1]
+    assert b["gaps"]["unfilled"] == [{"start": 50, "length": 10, "filled_frames": 0}]
+    assert b["status"] == "WARN" and "still missing" in b["reasons"][0]
+    strict = build_report(clean_motion(motion, pipe), {"fail_missing_after": 0.01})
+    assert strict["joints"][1]["status"] == "FAIL" and strict["file"]["status"] == "FAIL"
