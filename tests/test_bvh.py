@@ -223,6 +223,15 @@ def test_tabs_whitespace_and_mixed_line_endings(tmp_path):
     assert motion.names == ["Hips", "Chest", "Chest_End"]
 
 
+def test_old_mac_cr_line_endings(tmp_path):
+    path = _write(tmp_path, TINY.replace("\n", "\r"))
+    motion = bvh.read(path)
+    np.testing.assert_allclose(motion.positions, TINY_POSITIONS, atol=1e-12)
+    out = tmp_path / "out.bvh"
+    bvh.write(motion, out)
+    assert out.read_bytes() == path.read_bytes()
+
+
 def test_real_crlf_lf_mix_and_byte_order_mark(tmp_path):
     path = shared("bvh/cmu_cgspeed_131_01.bvh")
     data = path.read_bytes()

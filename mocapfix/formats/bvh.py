@@ -47,7 +47,10 @@ for byte, the ``Frames:`` and ``Frame Time:`` lines keep their spelling (the num
 only when the frame count or rate changed), and every frame line keeps its whitespace and
 line ending. A value equal to the one read is written as its ORIGINAL token, so an
 unchanged motion round-trips byte-identical; a changed value is written with ``%.6f``
-(trailing zeros trimmed), i.e. within 5e-7 of the float64 value.
+(trailing zeros trimmed), i.e. within 5e-7 of the float64 value. When ``motion.fps`` is no
+longer 1 / Frame Time (a user override at read, a resampling cleaner) the Frame Time number
+is rewritten. Only channels are written: rig or offset changes are not (the hierarchy text
+is the source's).
 
 Why hand-written instead of bvhio
 ---------------------------------
@@ -77,7 +80,7 @@ SUFFIXES = (".bvh",)
 
 _BOM = b"\xef\xbb\xbf"
 _TOKEN = re.compile(rb"\S+")
-_MOTION_LINE = re.compile(rb"(?mi)^[ \t]*MOTION[ \t]*\r?$")
+_MOTION_LINE = re.compile(rb"(?i)(?:(?<=[\r\n])|\A)[ \t]*MOTION[ \t]*(?=[\r\n]|\Z)")
 _FRAMES_LINE = re.compile(rb"(?i)^(\s*Frames\s*:\s*)(\S+)(\s*)$")
 _FRAME_TIME_LINE = re.compile(rb"(?i)^(\s*Frame\s+Time\s*:\s*)(\S+)(\s*)$")
 _WHITESPACE_SPLIT = re.compile(rb"(\s+)")
@@ -148,9 +151,9 @@ class _Tokens:
         self.words: list[bytes] = []
         self.lines: list[int] = []
         self.line_ends: list[bool] = []  # True when the token is the last on its line
-        line, last = 1 + data.count(b"\n", 0, start), start
+        line, last = 1 + _count_lines(data, 0, start), start
         for match in _TOKEN.finditer(data, start):
-            line += data.count(b"\n", last, match.start())
+            line += _count_lines(data, last, match.start())
             last = match.start()
             if self.lines and self.lines[-1] != line:
                 self.line_ends[-1] = True
@@ -159,7 +162,7 @@ class _Tokens:
             self.line_ends.append(False)
         if self.line_ends:
             self.line_ends[-1] = True
-        self.end_line = 1 + data.count(b"\n")
+        self.end_line = 1 + _count_lines(data, 0, len(data))
         self.pos = 0
 
     def at_end(self) -> bool:
@@ -204,6 +207,12 @@ class _Tokens:
         if not math.isfinite(value):
             self.fail(f"{what}: {_text(word)!r} is not a finite number", line)
         return value
+
+
+def _count_lines(data: bytes, start: int, end: int) -> int:
+    """Line breaks in ``data[start:end]``: LF, CRLF and a lone CR each count once."""
+    return (data.count(b"\n", start, end) + data.count(b"\r", start, end)
+            - data.count(b"\r\n", start, end))
 
 
 def _text(word: bytes) -> str:
@@ -278,6 +287,8 @@ def _parse_joint_body(tokens: _Tokens, joint: _Joint) -> None:
             has_channels = True
         else:
             break
+    if joint.offset is None and tokens.at_end():
+        tokens.fail(f"hierarchy ends early (file truncated?): joint {joint.name!r} has no OFFSET")
     if joint.offset is None:
         tokens.fail(f"joint {joint.name!r} has no OFFSET")
 
@@ -378,7 +389,7 @@ def _header_line(path, lines: list[bytes], index: int, pattern, what: str, first
 def _parse_motion(path, data: bytes, motion_start: int, n_channels: int,
                   allow_truncated: bool, notes: list[str]):
     """Parse ``MOTION`` .. end of file. Returns (values (T, C), frame_time, source parts)."""
-    first_line = 1 + data.count(b"\n", 0, motion_start)
+    first_line = 1 + _count_lines(data, 0, motion_start)
     lines = _split_lines(data, motion_start)  # lines[0] is the MOTION line
     frames_match, index = _header_line(path, lines, 1, _FRAMES_LINE, "'Frames: N'", first_line)
     frames_at = index - 1
@@ -391,22 +402,22 @@ def _parse_motion(path, data: bytes, motion_start: int, n_channels: int,
     # group each non-blank line with the blank lines before it; the loop is over lines present
     frame_lines: list[bytes] = []
     frame_line_numbers: list[int] = []
-    pending = b""
+    pending: list[bytes] = []  # blank lines waiting for the next frame line
     extra = 0
     tail_start = len(lines)
     for k in range(index, len(lines)):
         raw = lines[k]
         if not raw.strip():
-            pending += raw
+            pending.append(raw)
             continue
         if len(frame_lines) == declared:
             extra = sum(1 for rest in lines[k:] if rest.strip())
             tail_start = k
             break
-        frame_lines.append(pending + raw)
+        frame_lines.append(b"".join(pending) + raw if pending else raw)
         frame_line_numbers.append(first_line + k)
-        pending = b""
-    tail = pending if extra == 0 else b""
+        pending = []
+    tail = b"".join(pending) if extra == 0 else b""
     if extra:
         notes.append(f"{extra} line(s) after the {declared} declared frames (from line "
                      f"{first_line + tail_start}) were ignored and will not be written back")

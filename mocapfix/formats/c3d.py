@@ -29,11 +29,16 @@ Why hand-written instead of py-c3d (``c3d`` package)
 -----------------------------------------------------
 py-c3d 0.6 was measured against the shared files: its Reader asserts on a header scale
 that disagrees with POINT:SCALE (MACsample.c3d), crashes on OptiTrack's label record
-without description byte (mocap36.c3d), ignores POINT:LABELS2, and ``read_frames`` is a
-Python loop per frame. Its Writer re-lays out the parameter section (rewrites DATA_START,
-adds TRIAL and ANALOG parameters), re-encodes analog data through float scales, truncates
-int16 coordinates instead of rounding, writes stale coordinates for invalid points and
-refuses to copy DEC/MIPS metadata (``to_writer`` raises ValueError). The C3D layout is
+without description byte (mocap36.c3d), fails in ``read_frames`` on a scalar ANALOG:SCALE
+(kineticstoolkit racing file: "SCALE: cannot get value as float32 array"; POINT:SCALE
+itself is a normal float there), reads only POINT:LABELS (the LABELS2 patch,
+EmbodiedCognition/py-c3d PR #47, was closed unmerged), and ``read_frames`` is a Python
+loop per frame (it does stop at end of file, so it cannot hang). Its Writer re-lays out
+the parameter section (rewrites DATA_START, adds TRIAL and ANALOG parameters), re-encodes
+analog data through float scales, truncates int16 coordinates instead of rounding,
+writes stale coordinates for invalid points and refuses to copy DEC/MIPS metadata
+(``to_writer`` raises ValueError); ``to_writer('copy_metadata')`` + ``add_frames`` on
+pc_real.c3d gives a 5 KiB larger, not byte-identical file. The C3D layout is
 small (512-byte header, a linked list of parameter records, fixed-size frame records), so
 this module parses it directly with bounded loops and reads the data block with one
 ``numpy.frombuffer`` per file. py-c3d is still used by the tests as an independent reader
@@ -50,7 +55,8 @@ Sample rules: unchanged samples keep their record bytes (residual and camera mas
 samples filled by a cleaner get residual 0 and camera mask 0 (c3d.org: modelled, valid);
 samples still missing get residual -1 with the source coordinates; samples a cleaner
 modified keep their residual and camera mask; samples a cleaner deleted get (0,0,0) and
-residual -1. Int16 files are rounded to the POINT:SCALE grid. Any other motion (no C3D
+residual -1. Int16 files are rounded to the POINT:SCALE grid. The file's POINT:RATE is
+kept even when the user overrode the rate on reading (the data were not resampled). Any other motion (no C3D
 source, or a different number of frames/markers) is written as a fresh float file with
 only the POINT/ANALOG/TRIAL parameters (logged).
 """
@@ -320,7 +326,7 @@ class C3DSource:
     units: str
     metres_per_unit: float
     first_frame: int
-    events: list
+    events: list                  # header events (time s, label, displayed)
     prefix: bytes                 # file bytes from 512 up to data_offset, Intel-encoded
     tail: bytes                   # bytes after the last frame read
     conversion_note: str | None = None
@@ -331,6 +337,11 @@ class C3DSource:
 
     def param(self, key: str):
         return None if self.parameters is None else self.parameters.get(key)
+
+    @property
+    def parameter_events(self) -> list[dict]:
+        """EVENT group events (``events`` holds the header's)."""
+        return parameter_events(self.parameters)
 
     @property
     def analog_frames(self) -> np.ndarray:
@@ -349,7 +360,7 @@ def sniff(head: bytes) -> bool:
     param_at = (head[0] - 1) * BLOCK
     if len(head) >= param_at + 4:
         return head[param_at + 3] in PROCESSOR_NAMES
-    return len(head) < 4096 or head[0] <= 64
+    return True  # parameter section beyond the 4 KiB head: the reader will check it
 
 
 def read(path, fps: float | None = None, **options) -> Motion:
@@ -421,11 +432,12 @@ def _read_bytes(path, data: bytes, fps):
 
     analog_fmt = get("ANALOG:FORMAT")
     unsigned = analog_fmt is not None and "UNSIGNED" in "".join(analog_fmt.value).upper()
-    points, analog = _read_data(data, data_offset, n_frames, n_points, analog_words, storage,
-                                processor, unsigned)
+    with np.errstate(invalid="ignore", over="ignore"):  # garbage may hold signalling NaNs
+        points, analog = _read_data(data, data_offset, n_frames, n_points, analog_words, storage,
+                                    processor, unsigned)
+        positions, missing, residual, camera_mask = _decode_points(points, storage, abs(scale), notes)
     tail = data[data_offset + n_frames * frame_bytes:]
 
-    positions, missing, residual, camera_mask = _decode_points(points, storage, abs(scale), notes)
     names = _labels(get, parameters, n_points, notes)
     units, metres = _units(get("POINT:UNITS"), notes)
 
@@ -439,7 +451,7 @@ def _read_bytes(path, data: bytes, fps):
     conversion_note = None
     if processor != PROCESSOR_INTEL:
         conversion_note = (f"processor {PROCESSOR_NAMES[processor]}: will be written as Intel "
-                           "(little-endian IEEE); values are converted exactly")
+                           "(little-endian IEEE floats and integers)")
         notes.append(conversion_note)
     prefix = bytearray(data[BLOCK:data_offset])
     if parameters is not None:
@@ -482,10 +494,11 @@ def _choose_count(param, header_value, key, what, notes) -> int:
 
 
 def _choose_float(param, header_value, key, what, notes):
+    """The parameter's value unless it is unreadable, non-finite or 0 (then the header's)."""
     value = None if param is None else param.scalar()
-    if value is None or not np.isfinite(value):
+    if value is None or not np.isfinite(value) or value == 0:
         if param is not None:
-            notes.append(f"{key} unreadable; header {what} {header_value:g} used")
+            notes.append(f"{key} unusable ({value}); header {what} {header_value:g} used")
         return header_value if np.isfinite(header_value) else None
     if not np.isclose(value, header_value, rtol=1e-5, atol=0):
         notes.append(f"{key} = {value:g} disagrees with the header {what} {header_value:g}; {key} used")
@@ -688,6 +701,27 @@ def _units(param, notes) -> tuple[str, float]:
     return unit, METRES_PER_UNIT[unit]
 
 
+def parameter_events(parameters: ParameterSection | None) -> list[dict]:
+    """Events of the EVENT group (Vicon style): context, label, time in seconds."""
+    if parameters is None or parameters.get("EVENT:TIMES") is None:
+        return []
+    times = parameters.get("EVENT:TIMES").value
+    if not isinstance(times, np.ndarray) or times.ndim != 2 or times.shape[1] != 2:
+        return []
+    used = parameters.get("EVENT:USED")
+    declared = None if used is None else used.scalar("uint")
+    count = len(times) if declared is None else min(int(declared), len(times))
+
+    def strings(key):
+        param = parameters.get(key)
+        values = param.value if param is not None and param.bytes_per_element == -1 else []
+        return [v.strip("\x00 ") for v in values] + [""] * max(0, count - len(values))
+
+    labels, contexts = strings("EVENT:LABELS"), strings("EVENT:CONTEXTS")
+    return [dict(context=contexts[i], label=labels[i], time=float(times[i, 0]) * 60 + float(times[i, 1]))
+            for i in range(count)]
+
+
 def _events(header: bytes) -> list[dict]:
     """Header events (up to 18): time (s from the first frame), label, displayed flag."""
     (count,) = struct.unpack_from("<H", header, 300)
@@ -759,7 +793,8 @@ def _splice(motion: Motion, source: C3DSource, path, mark_missing: bool) -> byte
             nan_word = still_missing & ~np.isfinite(source.points[..., 3])
             points[..., 3][nan_word] = -1
 
-    record = np.dtype([("p", points.dtype, points.shape[1:]), ("a", source.analog.dtype, source.analog.shape[1:])])
+    record = np.dtype([("p", points.dtype, points.shape[1:]),
+                       ("a", source.analog.dtype, source.analog.shape[1:])])
     frames = np.empty(points.shape[0], dtype=record)
     frames["p"] = points
     frames["a"] = source.analog
@@ -834,8 +869,9 @@ def _fresh_file(motion: Motion, path) -> bytes:
     section = (bytes([1, 0x50, n_param_blocks, PROCESSOR_INTEL]) + body).ljust(n_param_blocks * BLOCK, b"\0")
 
     header = bytearray(BLOCK)
+    # one analog sample per frame with zero channels keeps ANALOG:RATE / POINT:RATE = 1
     struct.pack_into("<BBHHHHHfHHf", header, 0, 2, 0x50, n_points, 0, 1, min(n_frames, 65535),
-                     0, -1.0, data_block, 0, rate)
+                     0, -1.0, data_block, 1, rate)
     missing = ~np.isfinite(positions).all(axis=2)
     points = np.zeros((n_frames, n_points, 4), dtype="<f4")
     points[..., :3] = np.where(missing[..., None], 0.0, positions)
