@@ -68,6 +68,7 @@ MSR files; a sample still missing keeps its original tokens and state; a sample 
 REMOVED (present when read, NaN now) is written as NotTracked (state 0, coordinates kept)
 where the layout has a state, as ``0 0 0 0`` in MSR files, as ``nan`` in UTKinect files,
 as empty cells in a headed CSV without state and as an absent row in the long layout.
+Confidence changes alone are not written (the state follows the position rules above).
 If the motion has no Kinect source (built in Python) or its frame count/joints differ
 from the source, a headed wide CSV is written (``time`` + ``<Joint>_X/_Y/_Z`` [+ ``_State``]).
 
@@ -103,7 +104,7 @@ _AXIS_COLUMN = re.compile(
     r"^(?P<joint>.*?\S)[\s_.:\-]+(?P<role>x|y|z|state|tracking[\s_]?state|trackingstate|"
     r"confidence|conf)(?:\s*[\[(](?P<unit>[a-z]+)[\])])?$", re.IGNORECASE)
 _TIME_NAMES = {"time", "times", "timestamp", "timestamps", "t", "seconds", "sec", "secs",
-               "times", "timems", "timestampms", "ms", "ticks", "timeus", "timestampus",
+               "timems", "timestampms", "ms", "ticks", "timeus", "timestampus",
                "us", "relativetime", "elapsed", "elapsedtime"}
 _FRAME_NAMES = {"frame", "frames", "frameindex", "frameno", "framenumber", "framenum",
                 "frameid", "index", "idx"}
@@ -174,10 +175,6 @@ def _content_indices(lines: list[str]) -> list[int]:
             if line.strip() and not line.lstrip().startswith("#")]
 
 
-def _split_fields(line: str, sep: str | None) -> list[str]:
-    return line.split() if sep is None else line.split(sep)
-
-
 def _is_number(token: str) -> bool:
     return bool(_NUMBER.match(token.strip()))
 
@@ -226,20 +223,19 @@ def _classify(content: list[str]) -> str | None:
     if not content:
         return None
     first = content[0]
-    if "," in first or ";" in first or "\t" in first:
-        sep = max((",", ";", "\t"), key=first.count)
-        fields = _strip_trailing_empty(first.split(sep))
+    if "," in first:
+        fields = _strip_trailing_empty(first.split(","))
         if all(_is_number(f) for f in fields):
-            return _classify_headerless_csv(fields) if sep == "," else None
-        return _header_layout(fields)
+            return _classify_headerless_csv(fields)
     tokens = first.split()
-    if not all(_is_number(t) for t in tokens):
-        return _header_layout(tokens) if len(tokens) >= 4 else None
-    if len(tokens) == 61 and float(tokens[0]).is_integer():
-        return "utkinect"
-    if len(tokens) == 4 and _looks_msr(content):
-        return "msr_action3d"
-    return None
+    if tokens and all(_is_number(t) for t in tokens):
+        if len(tokens) == 61 and float(tokens[0]).is_integer():
+            return "utkinect"
+        if len(tokens) == 4 and _looks_msr(content):
+            return "msr_action3d"
+        return None
+    sep = _header_sep(first)
+    return _header_layout(first.split(sep) if sep != " " else tokens)
 
 
 def _classify_headerless_csv(fields: list[str]) -> str | None:
@@ -311,13 +307,12 @@ def read(path, fps: float | None = None, units: str | None = None, **options) ->
     if not idx:
         raise UnreadableFileError(path, "file holds no data lines")
     layout = options.get("layout") or _classify([lines[i] for i in idx[:40]])
+    if layout not in _READERS and layout is not None:
+        raise UnreadableFileError(path, f"unknown Kinect layout {layout!r}; known: "
+                                        f"{', '.join(sorted(_READERS))}")
     if layout is None:
         raise UnreadableFileError(path, _why_unknown(lines[idx[0]]), line=idx[0] + 1)
-    reader = {
-        "kinect_v2_csv": _read_kinect_csv, "kinect_v1_csv": _read_kinect_csv,
-        "utkinect": _read_utkinect, "msr_action3d": _read_msr,
-        "wide_csv": _read_wide, "long_csv": _read_long,
-    }[layout]
+    reader = _READERS[layout]
     if fps is not None and not (np.isfinite(float(fps)) and float(fps) > 0):
         raise UnreadableFileError(path, f"fps must be a positive number, got {fps}")
     notes: list[str] = []
@@ -553,12 +548,11 @@ def _wide_columns(columns: list[str]):
     """joint -> {role: column}, the time/frame column (index, kind), unit tags seen."""
     joints: dict[str, dict[str, int]] = {}
     unit_tags = set()
-    time_col = None
+    clocks = []
     for c, name in enumerate(columns):
         key = _norm(re.sub(r"[\[(][a-z]+[\])]\s*$", "", name, flags=re.I))
-        if time_col is None and (key in _TIME_NAMES or key in _FRAME_NAMES
-                                 or key.startswith("time")):
-            time_col = (c, _time_kind(name))
+        if key in _TIME_NAMES or key in _FRAME_NAMES or key.startswith("time"):
+            clocks.append((c, _time_kind(name)))
             continue
         m = _AXIS_COLUMN.match(name)
         if not m:
@@ -568,6 +562,8 @@ def _wide_columns(columns: list[str]):
         joints.setdefault(m.group("joint").strip(), {})[role] = c
         if m.group("unit") and role in "xyz":
             unit_tags.add(m.group("unit").lower())
+    timed = [clock for clock in clocks if clock[1] != "frame"]
+    time_col = (timed or clocks or [None])[0]
     return joints, time_col, unit_tags
 
 
@@ -613,18 +609,18 @@ def _times_from_column(values: np.ndarray, kind: str, fps: float | None, notes) 
     return rel * scale
 
 
-def _guess_units(coords, missing, skeleton, tags, units, notes, path) -> tuple[str, np.ndarray]:
-    """(unit name, coords unchanged). Explicit option > header tag > magnitude guess."""
+def _guess_units(coords, missing, skeleton, tags, units, notes, path) -> str:
+    """Length unit of a headed file: ``units=`` option > header tag > magnitude guess."""
     if units:
         unit = normalise_unit_name(units)
         if unit is None:
             raise UnreadableFileError(path, f"unknown length unit {units!r}")
-        return unit, coords
+        return unit
     if tags:
         unit = normalise_unit_name(sorted(tags)[0])
         if unit is None or len(tags) > 1:
             raise UnreadableFileError(path, f"unknown or mixed unit tags in header: {sorted(tags)}")
-        return unit, coords
+        return unit
     pts = np.where(missing[..., None], np.nan, coords)
     if skeleton is not None and len(skeleton.bones):
         bones = skeleton.bone_array
@@ -635,11 +631,11 @@ def _guess_units(coords, missing, skeleton, tags, units, notes, path) -> tuple[s
         scale = np.nanmedian(np.linalg.norm(pts - centre, axis=2))
         what, limits = "median spread of the joints", (3.0, 150.0)
     if not np.isfinite(scale):
-        return "m", coords
+        return "m"
     unit = "m" if scale < limits[0] else ("cm" if scale < limits[1] else "mm")
     notes.append(f"units not stated; {unit} guessed from the {what} ({scale:.3g}); "
                  "pass units= to override")
-    return unit, coords
+    return unit
 
 
 def _data_rows(path, lines, idx, sep, n_columns, notes):
@@ -673,19 +669,16 @@ def _read_wide(path, lines, idx, notes, layout, fps, units) -> _Parsed:
     missing = ~np.isfinite(coords).all(axis=2)
     empty_or_nan = int(missing.sum())
     state_kind, state_field, confidence = _wide_states(rows, data_idx, joints, names, path,
-                                                        missing)
-    if state_kind == "tracking":
-        states = _column_values(rows, data_idx, state_field[0], path)
-        missing |= states.reshape(T, J) == 0
+                                                        missing)  # NotTracked -> missing
     if empty_or_nan:
         notes.append(f"{empty_or_nan} samples with empty/nan/inf cells read as missing")
     match = kl.match_joint_set(names)
     skeleton = match[1] if match else None
     if match:
         notes.append(f"joint names match the {match[0]} set: its bone topology is used")
-    unit, coords = _guess_units(coords, missing, skeleton, tags, units, notes, path)
+    unit = _guess_units(coords, missing, skeleton, tags, units, notes, path)
     times, file_fps = _wide_times(rows, data_idx, time_col, fps, path, notes)
-    extra_cols = len(columns) - 3 * J - (time_col is not None) - int(state_kind is not None) * J
+    extra_cols = len(columns) - 3 * J - (time_col is not None) - int(np.sum(state_field[0] >= 0))
     if extra_cols > 0:
         notes.append(f"{extra_cols} other columns kept as they are")
     return _Parsed(
@@ -698,33 +691,36 @@ def _read_wide(path, lines, idx, notes, layout, fps, units) -> _Parsed:
 
 def _column_values(rows, idx, cols, path) -> np.ndarray:
     cols = np.asarray(cols, dtype=np.intp)
-    tokens = [row[c] for row in rows for c in cols]
+    tokens = [row[c].strip().strip('"') for row in rows for c in cols]
     return _numbers(tokens, np.repeat(np.asarray(idx), len(cols)), path, empty_is_nan=True)
 
 
 def _wide_states(rows, idx, joints, names, path, missing):
+    """Per-joint state (0/1/2) or confidence columns; joints without one count as tracked."""
     T, J = missing.shape
     for kind, role in (("tracking", "state"), ("confidence", "confidence")):
-        have = [role in joints[n] for n in names]
-        if not any(have):
+        have = [j for j, n in enumerate(names) if role in joints[n]]
+        if not have:
             continue
-        if not all(have):
-            lacking = [n for n, h in zip(names, have) if not h]
-            raise UnreadableFileError(path, f"{role} column missing for {', '.join(lacking[:5])}")
-        cols = np.array([joints[n][role] for n in names])
-        values = _column_values(rows, idx, cols, path).reshape(T, J)
+        cols = np.array([joints[names[j]][role] for j in have])
+        values = _column_values(rows, idx, cols, path).reshape(T, len(have))
+        field_index = np.full((T, J), -1, dtype=np.intp)
+        field_index[:, have] = cols
+        confidence = np.ones((T, J))
         if kind == "tracking":
-            bad = ~np.isin(values, (0.0, 1.0, 2.0)) & ~missing
+            bad = ~np.isin(values, (0.0, 1.0, 2.0)) & ~missing[:, have]
             if bad.any():
-                t, j = np.argwhere(bad)[0]
-                raise UnreadableFileError(path, f"tracking state {values[t, j]:g} is not 0, 1 or 2",
+                t, k = np.argwhere(bad)[0]
+                raise UnreadableFileError(path, f"tracking state {values[t, k]:g} of "
+                                                f"{names[have[k]]} is not 0, 1 or 2",
                                           line=idx[t] + 1)
             states = np.nan_to_num(values, nan=0.0).astype(int)
-            confidence = _state_confidence(states, missing | (states == 0))
+            missing[:, have] |= states == 0
+            confidence[:, have] = _state_confidence(states, missing[:, have])
         else:
-            confidence = np.clip(np.nan_to_num(values, nan=0.0), 0.0, 1.0)
-            confidence[missing] = 0.0
-        return kind, np.broadcast_to(cols, (T, J)).copy(), confidence
+            confidence[:, have] = np.clip(np.nan_to_num(values, nan=0.0), 0.0, 1.0)
+        confidence[missing] = 0.0
+        return kind, field_index, confidence
     return None, np.full((T, J), -1), None
 
 
@@ -826,8 +822,8 @@ def _read_long(path, lines, idx, notes, layout, fps, units) -> _Parsed:
     skeleton = match[1] if match else None
     if match:
         notes.append(f"joint names match the {match[0]} set: its bone topology is used")
-    unit, coords = _guess_units(coords, missing, skeleton, _long_unit_tags(columns, roles),
-                                units, notes, path)
+    unit = _guess_units(coords, missing, skeleton, _long_unit_tags(columns, roles), units,
+                        notes, path)
     kind = "frame" if "frame" in roles else _time_kind(columns[key_col])
     times = _times_from_column(frame_keys, kind, fps, notes)
     file_fps = _or_default(_timing(times, notes), fps or DEFAULT_FPS, notes)
@@ -854,6 +850,14 @@ def _long_unit_tags(columns, roles) -> set:
         if m:
             tags.add(m.group(1).lower())
     return tags
+
+
+#: layout name -> reader (used by :func:`read`)
+_READERS = {
+    "kinect_v2_csv": _read_kinect_csv, "kinect_v1_csv": _read_kinect_csv,
+    "utkinect": _read_utkinect, "msr_action3d": _read_msr,
+    "wide_csv": _read_wide, "long_csv": _read_long,
+}
 
 
 # ---------------------------------------------------------------------------------------
@@ -902,7 +906,7 @@ def _sample_edits(source: KinectSource, motion: Motion):
 
 def _patched_text(source: KinectSource, motion: Motion) -> str:
     lines = list(source.lines)
-    split_cache: dict[int, list[str]] = {}
+    edited: dict[int, _Line] = {}
     deleted: set[int] = set(source.skip_lines)
     inserted: dict[int, list[str]] = {}
     for t, j, action in _sample_edits(source, motion):
@@ -912,13 +916,12 @@ def _patched_text(source: KinectSource, motion: Motion) -> str:
                 inserted.setdefault(int(source.extra["frame_last_line"][t]), []).append(
                     _new_long_row(source, motion, t, j))
             continue
-        fields = split_cache.get(line)
-        if fields is None:
-            fields = split_cache[line] = _fields_with_separators(lines[line], source.sep)
-        if not _edit_sample(source, fields, t, j, action, motion.positions[t, j]):
+        if line not in edited:
+            edited[line] = _Line(lines[line], source.sep)
+        if not _edit_sample(source, edited[line], t, j, action, motion.positions[t, j]):
             deleted.add(line)
-    for line, fields in split_cache.items():
-        lines[line] = _join_fields(fields, source.sep)
+    for line, fields in edited.items():
+        lines[line] = fields.text()
     out = [source.bom]
     for i, line in enumerate(lines):
         if i not in deleted:
@@ -934,42 +937,42 @@ def _eol(source: KinectSource) -> str:
     return next((e for e in source.endings if e), "\n")
 
 
-def _fields_with_separators(line: str, sep: str | None) -> list[str]:
-    """Fields and separators alternately, so that joining gives the line back exactly."""
-    if sep is None:
-        return re.split(r"(\s+)", line)
-    out = []
-    for k, part in enumerate(line.split(sep)):
-        if k:
-            out.append(sep)
-        out.append(part)
-    return out
+class _Line:
+    """A line cut into fields and separators, so that joining gives it back exactly."""
+
+    def __init__(self, line: str, sep: str | None):
+        if sep is None:
+            self.parts = re.split(r"(\s+)", line)
+            self.slots = [k for k in range(0, len(self.parts), 2) if self.parts[k] != ""]
+        else:
+            self.parts = []
+            for k, part in enumerate(line.split(sep)):
+                if k:
+                    self.parts.append(sep)
+                self.parts.append(part)
+            self.slots = list(range(0, len(self.parts), 2))
+
+    def __getitem__(self, field_index: int) -> str:
+        return self.parts[self.slots[field_index]]
+
+    def __setitem__(self, field_index: int, value: str) -> None:
+        self.parts[self.slots[field_index]] = value
+
+    def text(self) -> str:
+        return "".join(self.parts)
 
 
-def _join_fields(parts: list[str], sep: str | None) -> str:
-    return "".join(parts)
-
-
-def _field_slot(parts: list[str], sep: str | None, field_index: int) -> int:
-    """Position in ``parts`` of field number ``field_index``."""
-    if sep is None:
-        tokens = [k for k in range(0, len(parts), 2) if parts[k] != ""]
-        return tokens[field_index]
-    return 2 * field_index
-
-
-def _edit_sample(source, parts, t, j, action, value) -> bool:
-    """Rewrite the tokens of one sample in ``parts``. False: delete the whole line."""
-    slots = [_field_slot(parts, source.sep, int(f)) for f in source.coord_field[t, j]]
-    state_slot = (_field_slot(parts, source.sep, int(source.state_field[t, j]))
-                  if source.state_field[t, j] >= 0 else None)
+def _edit_sample(source, line: _Line, t, j, action, value) -> bool:
+    """Rewrite the tokens of one sample in ``line``. False: delete the whole line."""
+    fields = [int(f) for f in source.coord_field[t, j]]
+    state = int(source.state_field[t, j]) if source.state_field[t, j] >= 0 else None
     if action == "remove":
-        return _remove_sample(source, parts, slots, state_slot)
-    for slot, v in zip(slots, value):
-        parts[slot] = _pad(parts[slot], _format_like(float(v), parts[slot]))
-    if action == "fill" and state_slot is not None:
-        parts[state_slot] = _pad(parts[state_slot], "1" if source.state_kind == "tracking"
-                                 else _format_like(0.5, parts[state_slot]))
+        return _remove_sample(source, line, fields, state)
+    for f, v in zip(fields, value):
+        line[f] = _pad(line[f], _format_like(float(v), line[f]))
+    if action == "fill" and state is not None:
+        line[state] = _pad(line[state], "1" if source.state_kind == "tracking"
+                           else _format_like(0.5, line[state]))
     return True
 
 
@@ -982,21 +985,20 @@ def _pad(old: str, new: str) -> str:
     return old[:start] + new + old[start + len(stripped):]
 
 
-def _remove_sample(source, parts, slots, state_slot) -> bool:
-    if source.state_kind == "tracking" and state_slot is not None:
-        parts[state_slot] = _pad(parts[state_slot], "0")
+def _remove_sample(source, line: _Line, fields, state) -> bool:
+    if source.state_kind == "tracking" and state is not None:
+        line[state] = _pad(line[state], "0")
         return True
     if source.layout == "msr_action3d":
-        for slot in slots + [state_slot]:
-            parts[slot] = _format_like(0.0, parts[slot])
+        for f in fields + [state]:
+            line[f] = _format_like(0.0, line[f])
         return True
     if source.layout == "long_csv":
         return False
-    blank = "nan" if source.sep is None else ""
-    for slot in slots:
-        parts[slot] = _pad(parts[slot], blank) if blank else ""
-    if state_slot is not None:  # confidence column
-        parts[state_slot] = _pad(parts[state_slot], _format_like(0.0, parts[state_slot]))
+    for f in fields:
+        line[f] = "nan" if source.sep is None else ""
+    if state is not None:  # confidence column
+        line[state] = _pad(line[state], _format_like(0.0, line[state]))
     return True
 
 
@@ -1032,7 +1034,7 @@ def _wide_csv_text(motion: Motion) -> str:
         state = np.where(missing, "0", state)
         blocks.append(state[..., None])
     body = np.concatenate(blocks, axis=2).reshape(T, -1)
-    time_cells = np.char.mod("%.6f", np.asarray(times, dtype=np.float64))
+    time_cells = np.char.mod("%.9f", np.asarray(times, dtype=np.float64))
     lines = [",".join(header)]
     lines += [",".join([time_cells[t], *body[t]]) for t in range(T)]
     return "\n".join(lines) + "\n"
