@@ -17,6 +17,7 @@ _MODULES = (
     "mocapfix.cleaners.spikes",
     "mocapfix.cleaners.pca_fill",
     "mocapfix.cleaners.swaps",
+    "mocapfix.cleaners.rotations",
 )
 _loaded = False
 
