@@ -245,7 +245,7 @@ TINY_ASF = """# tiny skeleton: a bone up from the root, a bone sideways from its
   Free text: two bones.
   # not a comment inside documentation
 :root
-   orientation 0 0 0
+   orientation 0 0 {thirty}
    position 1 0 0
    axis XYZ
    order TX TY TZ RX RY RZ
@@ -255,7 +255,7 @@ TINY_ASF = """# tiny skeleton: a bone up from the root, a bone sideways from its
     name up
     direction 0 1 0
     length 2
-    axis 0 0 0 XYZ
+    axis 0 0 {fortyfive} XYZ
     dof rz
     limits (-inf inf)
   end
@@ -291,6 +291,10 @@ side {q} 0
 root 0 0 0 0 0 {q}
 up 0
 side 0 0
+4
+root 0 0 0 0 0 0
+up 0
+side {q} {q}
 """
 
 # Worked on paper. Frame 1 (rest): root at position (1,0,0); up end = root + 2*(0,1,0);
@@ -299,18 +303,31 @@ side 0 0
 # rx 90 about local x = world y, so L = Ry(90); G = Rz(90) Ry(90); Ry(90)(1,0,0) = (0,0,-1),
 # Rz(90)(0,0,-1) = (0,0,-1) -> (9,20,29).
 # Frame 3: root RZ 90 turns the chain: up end = (1,0,0) + (-2,0,0); side end = + (0,1,0).
+# Frame 4: side rx 90 then ry 90 (extrinsic, M = Ry Rx); L (1,0,0) = C M C^-1 (1,0,0):
+# C^-1 -> (0,-1,0), Rx(90) -> (0,0,-1), Ry(90) -> (-1,0,0), C -> (0,-1,0): side end (1,1,0).
+# (The other product order, Rx Ry, would give (0,0,-1).)
+# The root orientation (about z) and the axis of "up" (about z) commute with every rotation
+# they meet here, so they must not move any end point: C M C^-1 cancels them.
 TINY_EXPECTED = np.array([
     [[1, 0, 0], [1, 2, 0], [2, 2, 0]],
     [[11, 20, 30], [9, 20, 30], [9, 20, 29]],
     [[1, 0, 0], [-1, 0, 0], [-1, 1, 0]],
+    [[1, 0, 0], [1, 2, 0], [1, 1, 0]],
 ], dtype=float)
+
+
+def tiny_asf_text() -> str:
+    return TINY_ASF.format(length="1", angle="deg", ninety="90", thirty="0", fortyfive="0")
 
 
 def write_tiny(folder: Path, *, length="1.0", angle="deg", unit="DEGREES", eol="\n",
                asf_name="tiny.asf", amc_name="tiny_01.amc") -> Path:
-    ninety = "90" if angle == "deg" else repr(np.pi / 2)
-    q = "90" if unit == "DEGREES" else repr(np.pi / 2)
-    asf = TINY_ASF.format(length=length, angle=angle, ninety=ninety)
+    def angle_text(degrees, as_degrees):
+        return f"{degrees}" if as_degrees else repr(float(np.deg2rad(degrees)))
+    asf = TINY_ASF.format(length=length, angle=angle, ninety=angle_text(90, angle == "deg"),
+                          thirty=angle_text(30, angle == "deg"),
+                          fortyfive=angle_text(45, angle == "deg"))
+    q = angle_text(90, unit == "DEGREES")
     amc = TINY_AMC.format(unit=unit, q=q)
     (folder / asf_name).write_bytes(asf.replace("\n", eol).encode())
     (folder / amc_name).write_bytes(amc.replace("\n", eol).encode())
@@ -325,7 +342,7 @@ def test_hand_checked_two_bone_skeleton(tmp_path):
     assert motion.units == "in" and motion.metres_per_unit == pytest.approx(0.0254)
     assert motion.source.asf.documentation[0].strip() == "Free text: two bones."
     assert motion.source.asf.bones["side"].limits == [(-180.0, 180.0), (-np.inf, np.inf)]
-    assert motion.channels.shape == (3, 9)
+    assert motion.channels.shape == (4, 9)
 
 
 @pytest.mark.parametrize("angle, unit", [("rad", "DEGREES"), ("deg", "RADIANS"), ("rad", "RADIANS")])
@@ -346,8 +363,42 @@ def test_cmu_length_unit_and_crlf_hand_case(tmp_path):
     assert written[1] == out / "tiny.asf"
 
 
+def test_comments_and_blank_lines_between_frames_are_kept(tmp_path):
+    amc = write_tiny(tmp_path)
+    text = amc.read_text().replace("\n2\n", "\n\n# a comment between frames\n2\n")
+    amc.write_text(text)
+    motion = asfamc.read(amc)
+    np.testing.assert_allclose(motion.positions, TINY_EXPECTED, atol=1e-12)
+    out = tmp_path / "out"
+    out.mkdir()
+    assert asfamc.write(motion, out / "a.amc")[0].read_text() == text
+    changed = motion.copy()
+    changed.channels[2, 5] = -45.0                  # frame 3, root RZ
+    written = asfamc.write(changed, out / "b.amc")[0].read_text()
+    assert written == text.replace("root 0 0 0 0 0 90", "root 0 0 0 0 0 -45")
+
+
+def test_trailing_blank_lines_are_kept(tmp_path):
+    amc = write_tiny(tmp_path, eol="\r\n")
+    data = amc.read_bytes() + b"\r\n  \r\n"
+    amc.write_bytes(data)
+    motion = asfamc.read(amc)
+    np.testing.assert_allclose(motion.positions, TINY_EXPECTED, atol=1e-12)
+    out = tmp_path / "out"
+    out.mkdir()
+    assert asfamc.write(motion, out / "a.amc")[0].read_bytes() == data
+
+
+def test_amc_without_angle_line_uses_the_asf_angle_unit(tmp_path):
+    amc = write_tiny(tmp_path, angle="rad", unit="RADIANS")
+    amc.write_text(amc.read_text().replace(":RADIANS\n", ""))
+    motion = asfamc.read(amc)
+    np.testing.assert_allclose(motion.positions, TINY_EXPECTED, atol=1e-12)
+    assert any("no :DEGREES/:RADIANS" in note for note in motion.notes)
+
+
 def test_bone_translation_dofs_add_along_the_bone_axes(tmp_path):
-    asf = TINY_ASF.format(length="1", angle="deg", ninety="90").replace("dof rx ry", "dof tx ty")
+    asf = tiny_asf_text().replace("dof rx ry", "dof tx ty")
     (tmp_path / "t.asf").write_text(asf)
     # side has axis Rz(90): local x = world y, local y = world -x
     (tmp_path / "t.amc").write_text(":DEGREES\n1\nroot 0 0 0 0 0 0\nup 0\nside 0.5 0.25\n")
@@ -356,7 +407,7 @@ def test_bone_translation_dofs_add_along_the_bone_axes(tmp_path):
 
 
 def test_length_dof_is_refused_clearly(tmp_path):
-    asf = TINY_ASF.format(length="1", angle="deg", ninety="90").replace("dof rx ry", "dof rx l")
+    asf = tiny_asf_text().replace("dof rx ry", "dof rx l")
     (tmp_path / "t.asf").write_text(asf)
     (tmp_path / "t.amc").write_text(":DEGREES\n1\nroot 0 0 0 0 0 0\nup 0\nside 0 1\n")
     with pytest.raises(UnsupportedFeatureError, match=r"t\.asf:\d+: the 'l'"):
@@ -433,9 +484,19 @@ def test_truncated_amc_is_refused_naming_the_frame(tmp_path):
 def test_truncated_amc_in_the_middle_of_a_number_is_refused(tmp_path):
     amc, _ = cmu_copy(tmp_path)
     data = amc.read_bytes()
-    amc.write_bytes(data[: len(data) // 2])
-    with pytest.raises(UnreadableFileError, match=r"05_01\.amc"):
+    cut = data.index(b"lhumerus", len(data) // 2) + 12     # inside the first number
+    amc.write_bytes(data[:cut])
+    with pytest.raises(UnreadableFileError, match=r"05_01\.amc:\d+: truncated: the file ends mid-line"):
         asfamc.read(amc)
+
+
+def test_file_cut_inside_its_last_number_reads_with_a_note(tmp_path):
+    """The one truncation that cannot be told from a short number: say so."""
+    amc, _ = cmu_copy(tmp_path)
+    amc.write_bytes(amc.read_bytes()[:-4])                 # "ltoes 4.52449\r\n" -> "ltoes 4.524"
+    motion = asfamc.read(amc)
+    assert motion.channels[-1, -1] == 4.524
+    assert any("does not end with a line break" in note for note in motion.notes)
 
 
 def test_frame_missing_a_bone_line_is_refused_with_its_line(tmp_path):
@@ -485,17 +546,25 @@ def test_empty_files_are_refused(tmp_path, which):
 def test_garbage_is_refused_with_a_line_number(tmp_path):
     path = tmp_path / "junk.amc"
     path.write_bytes(b":DEGREES\nhello world\n")
-    (tmp_path / "junk.asf").write_text(TINY_ASF.format(length="1", angle="deg", ninety="90"))
+    (tmp_path / "junk.asf").write_text(tiny_asf_text())
     with pytest.raises(UnreadableFileError, match=r"junk\.amc:2: expected a frame number"):
         asfamc.read(path)
     (tmp_path / "junk.asf").write_text(":bonedata\n  begin\n    name a\n  end\n:hierarchy\n")
-    with pytest.raises(UnreadableFileError, match=r"junk\.asf:4: bone block opened at line 2 has no 'direction'"):
+    with pytest.raises(UnreadableFileError, match=r"junk\.asf:4: bone block opened at line 2 "
+                                                  r"has no 'direction'"):
         asfamc.read(path)
     (tmp_path / "junk.asf").write_text(":bonedata\n begin\n name a\n direction 0 1 0\n length 1\n end\n")
     with pytest.raises(UnreadableFileError, match=r"junk\.asf: no :root section"):
         asfamc.read(path)
     (tmp_path / "junk.asf").write_text("just some\ntext\n")
     with pytest.raises(UnreadableFileError, match=r"junk\.asf:1: unexpected text"):
+        asfamc.read(path)
+
+
+def test_absurd_frame_number_is_refused(tmp_path):
+    path = write_tiny(tmp_path)
+    path.write_text(path.read_text().replace("\n3\n", "\n" + "9" * 30 + "\n"))
+    with pytest.raises(UnreadableFileError, match=r"tiny_01\.amc:\d+: "):
         asfamc.read(path)
 
 

@@ -46,8 +46,8 @@ Writing
     ``write(motion, "x.amc")`` writes the AMC and, beside it, the ASF under its original
     name, byte-for-byte as read. The AMC keeps the source's header, bone lines, DOF order,
     frame numbers, comments and line endings; every value whose channel is unchanged
-    (within 1e-10 relative) is written as its ORIGINAL token, so an unchanged motion is
-    written byte-identical. Changed values are written with ``%.6f`` with trailing zeros
+    (within 1e-10, absolute and relative) is written as its ORIGINAL token, so an
+    unchanged motion is written byte-identical. Changed values are written with ``%.6f`` with trailing zeros
     trimmed. ``motion.channels`` is what is written (positions are derived data).
 
 Why hand-written
@@ -57,6 +57,7 @@ Why hand-written
 """
 from __future__ import annotations
 
+import heapq
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -76,7 +77,7 @@ DEFAULT_FPS = 120.0
 _AXES = "XYZ"
 _ROOT_CHANNELS = ("TX", "TY", "TZ", "RX", "RY", "RZ")
 _BONE_DOFS = ("rx", "ry", "rz", "tx", "ty", "tz")
-_INT_RE = re.compile(r"^\d+$")
+_INT_RE = re.compile(r"^\d{1,18}$")
 
 
 # --------------------------------------------------------------------------- data
@@ -131,9 +132,9 @@ class AsfAmcSource:
     body_lines: list[str] | None = None    # raw AMC lines from the first frame on
     content_index: np.ndarray | None = None  # body line of each frame/bone line (T*lpf,)
     frame_numbers: np.ndarray | None = None
-    value_tokens: np.ndarray | None = None   # (T, C) original numeric tokens
-    values: np.ndarray | None = None         # (T, C) their float64 values
+    values: np.ndarray | None = None         # (T, C) the values as read
     flags: dict = field(default_factory=dict)  # AMC header: degrees, fully_specified, unknown
+    notes: list[str] = field(default_factory=list)  # what the AMC parser noticed
 
     @property
     def asf_name(self) -> str:
@@ -411,18 +412,22 @@ class _AsfParser:
 
 
 def _parents_first(bones: dict, parent: dict) -> list[str]:
-    """:bonedata order, with a bone moved after its parent only where needed."""
-    placed = {"root"}
+    """:bonedata order, with a bone moved after its parent only where needed.
+
+    Kahn's algorithm with a heap keyed on the :bonedata position: O(n log n). Bones on a
+    cycle never become ready and are left out (the caller reports them)."""
+    position = {name: k for k, name in enumerate(bones)}
+    children: dict[str, list[str]] = {}
+    for child, par in parent.items():
+        children.setdefault(par, []).append(child)
+    ready = [(position[c], c) for c in children.get("root", [])]
+    heapq.heapify(ready)
     order: list[str] = []
-    pending = list(bones)
-    while pending:
-        ready = [b for b in pending if parent[b] in placed]
-        if not ready:
-            break
-        first = ready[0]
-        order.append(first)
-        placed.add(first)
-        pending.remove(first)
+    while ready:
+        _, name = heapq.heappop(ready)
+        order.append(name)
+        for child in children.get(name, []):
+            heapq.heappush(ready, (position[child], child))
     return order
 
 
@@ -504,7 +509,7 @@ def _amc_header(path, lines: list[str]) -> tuple[int, dict]:
 
 def _frame_layout(path, body, content, first_line: int, asf: AsfSkeleton) -> list[tuple[str, int]]:
     """Bone lines of the first frame: [(name, value count), ...], checked against the ASF."""
-    layout = []
+    layout, seen = [], set()
     for i in content[1:]:
         tokens = body[i].split()
         if _INT_RE.match(tokens[0]):
@@ -513,8 +518,10 @@ def _frame_layout(path, body, content, first_line: int, asf: AsfSkeleton) -> lis
         number = first_line + i + 1
         if name != "root" and name not in asf.bones:
             raise UnreadableFileError(path, f"bone {name!r} is not defined in the ASF", number)
-        if any(name == n for n, _ in layout):
-            raise UnreadableFileError(path, f"bone {name!r} appears twice in frame {body[content[0]].strip()}", number)
+        if name in seen:
+            raise UnreadableFileError(
+                path, f"bone {name!r} appears twice in frame {body[content[0]].strip()}", number)
+        seen.add(name)
         expected = asf.dof_count(name)
         if len(tokens) - 1 != expected:
             raise UnreadableFileError(
@@ -525,6 +532,19 @@ def _frame_layout(path, body, content, first_line: int, asf: AsfSkeleton) -> lis
 
 def _locate_error(path, body, content, layout, first_line: int) -> UnreadableFileError:
     """Walk the frame blocks line by line to name what breaks the common layout."""
+    return _as_truncation(_first_layout_break(path, body, content, layout, first_line),
+                          path, body, content, first_line)
+
+
+def _as_truncation(error: UnreadableFileError, path, body, content, first_line: int) -> UnreadableFileError:
+    """Say "truncated" when the broken line is the last one and the file ends inside it."""
+    ends_mid_line = body[-1].strip() != ""
+    if ends_mid_line and error.line == first_line + content[-1] + 1 and "truncated" not in error.reason:
+        return UnreadableFileError(path, f"truncated: the file ends mid-line ({error.reason})", error.line)
+    return error
+
+
+def _first_layout_break(path, body, content, layout, first_line: int) -> UnreadableFileError:
     per_frame = 1 + len(layout)
     frame = None
     for n, i in enumerate(content):
@@ -542,8 +562,8 @@ def _locate_error(path, body, content, layout, first_line: int) -> UnreadableFil
         name, count = layout[slot - 1]
         if _INT_RE.match(tokens[0]) and len(tokens) == 1:
             return UnreadableFileError(
-                path, f"frame {frame} is incomplete: it lacks bone line {name!r} and {per_frame - 1 - slot} more",
-                number)
+                path, f"frame {frame} is incomplete: it lacks bone line {name!r} "
+                      f"and {per_frame - 1 - slot} more", number)
         if tokens[0] != name:
             return UnreadableFileError(
                 path, f"frame {frame}: expected bone line {name!r}, found {tokens[0][:40]!r} "
@@ -572,24 +592,31 @@ def parse_amc(path, text: str, asf: AsfSkeleton) -> AsfAmcSource:
     lines = text.split("\n")
     first, flags = _amc_header(path, lines)
     header, body = lines[:first], lines[first:]
-    content = [i for i, line in enumerate(body) if line.strip() and not line.lstrip().startswith("#")]
-    layout = _frame_layout(path, body, content, first, asf)
+    content, contiguous = _content_lines(text[sum(len(line) + 1 for line in header):], body)
+    try:
+        layout = _frame_layout(path, body, content, first, asf)
+    except UnreadableFileError as error:
+        raise _as_truncation(error, path, body, content, first) from None
     per_frame = 1 + len(layout)
     tokens_per_frame = 1 + sum(1 + count for _, count in layout)
     n_frames = len(content) // per_frame
     if len(content) % per_frame:
         raise _locate_error(path, body, content, layout, first)
-    tokens = " ".join([body[i] for i in content]).split()
+    if contiguous:
+        tokens = "\n".join(body).split()         # no blank or comment lines in between
+    else:
+        tokens = " ".join([body[i] for i in content]).split()
     if len(tokens) != n_frames * tokens_per_frame:
         raise _locate_error(path, body, content, layout, first)
     table = np.array(tokens).reshape(n_frames, tokens_per_frame)
     name_columns, value_columns = _token_columns(layout)
     expected_names = np.array([name for name, _ in layout])
-    if not (np.all(table[:, name_columns] == expected_names) and np.all(np.char.isdigit(table[:, 0]))):
+    frame_tokens = table[:, 0]
+    if not (np.all(table[:, name_columns] == expected_names) and np.all(np.char.isdigit(frame_tokens))
+            and np.all(np.char.str_len(frame_tokens) < 19)):
         raise _locate_error(path, body, content, layout, first)
-    value_tokens = table[:, value_columns]
     try:
-        values = value_tokens.astype(np.float64)
+        values = table[:, value_columns].astype(np.float64)
     except ValueError:
         raise _locate_error(path, body, content, layout, first) from None
     if not np.all(np.isfinite(values)):
@@ -600,9 +627,23 @@ def parse_amc(path, text: str, asf: AsfSkeleton) -> AsfAmcSource:
         degrees=(asf.angle_unit == "deg") if degrees is None else degrees,
         eol="\r\n" if lines[0].endswith("\r") else "\n", header_lines=header, body_lines=body,
         content_index=np.asarray(content, dtype=np.intp),
-        frame_numbers=table[:, 0].astype(np.int64), value_tokens=value_tokens, values=values,
+        frame_numbers=frame_tokens.astype(np.int64), values=values,
         flags=flags)
+    if body[-1].strip():
+        source.notes.append("AMC does not end with a line break: if the file was cut, the last "
+                            f"value ({body[-1].split()[-1]!r}) may be incomplete")
     return source
+
+
+def _content_lines(body_text: str, body: list[str]) -> tuple[list[int], bool]:
+    """Indices of the body lines that are neither blank nor comments, and whether they are
+    simply all lines up to trailing blank ones (the usual case, checked with one regex)."""
+    if not re.search(r"(^|\n)[ \t\r]*(#|\n)", body_text.rstrip()):
+        last = len(body)
+        while last and not body[last - 1].strip():
+            last -= 1
+        return list(range(last)), True
+    return [i for i, line in enumerate(body) if line.strip() and not line.lstrip().startswith("#")], False
 
 
 def _token_columns(layout) -> tuple[np.ndarray, np.ndarray]:
@@ -649,7 +690,7 @@ def read(path, fps: float | None = None, **options) -> Motion:
     asf = parse_asf(asf_path, asf_bytes)
     source = parse_amc(path, amc_text, asf)
     source.asf_path, source.asf_bytes = str(asf_path), asf_bytes
-    notes = list(asf.notes)
+    notes = list(asf.notes) + source.notes
     if source.flags["degrees"] is None:
         notes.append(f"AMC has no :DEGREES/:RADIANS line; angles read in the ASF unit ({asf.angle_unit})")
     for line in source.flags["unknown"]:
@@ -751,16 +792,21 @@ def _patched_body(source: AsfAmcSource, channels: np.ndarray) -> list[str]:
     changed = ~np.isclose(channels, old, rtol=1e-10, atol=1e-10)
     if not changed.any():
         return body
-    tokens = source.value_tokens.astype(object)
-    tokens[changed] = [format_value(v) for v in channels[changed]]
+    text = np.empty(channels.shape, dtype=object)
+    text[changed] = [format_value(v) for v in channels[changed].tolist()]
     per_frame = 1 + len(source.layout)
     starts = np.cumsum([0] + [count for _, count in source.layout])
-    for k, (name, count) in enumerate(source.layout):
-        frames = np.flatnonzero(changed[:, starts[k]:starts[k + 1]].any(axis=1))
-        for f in frames:
-            i = source.content_index[f * per_frame + 1 + k]
+    for k, (name, _) in enumerate(source.layout):
+        line_changed = changed[:, starts[k]:starts[k + 1]]
+        frames = np.flatnonzero(line_changed.any(axis=1))
+        rows = line_changed[frames].tolist()
+        new_text = text[frames, starts[k]:starts[k + 1]].tolist()
+        lines = source.content_index[frames * per_frame + 1 + k].tolist()
+        for i, row, new in zip(lines, rows, new_text):
+            old_tokens = body[i].split()[1:]
+            tokens = [n if c else o for o, n, c in zip(old_tokens, new, row)]
             ending = "\r" if body[i].endswith("\r") else ""
-            body[i] = " ".join([name, *tokens[f, starts[k]:starts[k + 1]]]) + ending
+            body[i] = " ".join([name, *tokens]) + ending
     return body
 
 
