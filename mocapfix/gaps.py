@@ -12,7 +12,7 @@ def runs(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """
     mask = np.asarray(mask, dtype=bool)
     T = mask.shape[0]
-    flat = mask.reshape(T, -1)
+    flat = mask.reshape(T, int(np.prod(mask.shape[1:], dtype=np.int64)))
     padded = np.zeros((T + 2, flat.shape[1]), dtype=np.int8)
     padded[1:-1] = flat
     d = np.diff(padded, axis=0)

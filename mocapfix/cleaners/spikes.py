@@ -1,23 +1,35 @@
 """Spike (outlier) detection: marks implausible samples missing so a gap filler takes over
 (ALGORITHMS.md §0).
 
-Hampel identifier (Hampel 1974; Pearson et al. 2016, "Generalized Hampel filters") applied
-per marker to the 3-D residual to a robust running median:
+A Hampel identifier (Hampel 1974; Pearson et al. 2016, "Generalized Hampel filters") per
+marker on the 3-D residual to a robust local fit. The robust smooth is a leave-one-out
+local quadratic (robust LOESS, Cleveland 1979; :func:`mocapfix.solvers.localfit.local_polyfit`)
+rather than a running median: a median over 0.1 s lags by up to 60 mm at the turning
+points of fast movements (CMU 85_02, accelerations up to 270 m/s²), a local quadratic
+by < 1 mm, so clean data is not flagged.
 
-1. ``b`` = running median of each coordinate over ``window``, computed per observed
-   segment with robust straight-line extension at segment ends
-   (:func:`mocapfix.solvers.segments.running_median`), so a moving marker does not look
-   like an outlier next to a gap or at the ends of the capture;
-2. ``r_t = ||x_t − b_t||`` (3-D residual norm);
-3. noise scale per marker ``s = 1.4826 · median |x − b|`` over its samples and coordinates
-   (MAD about the running median);
-4. a sample is a spike when ``r_t > max(k s, min_jump)``: the physical floor keeps clean
-   data with a tiny MAD from being flagged;
-5. shoulders of wide spikes (2–5 frames, ramping in and out): neighbours of a flagged
-   sample whose residual exceeds half the threshold are flagged too (hysteresis, grown up
-   to half a window);
-6. a second pass recomputes the running median with the flagged samples replaced by the
-   first baseline, which sharpens the baseline next to clustered spikes.
+1. fit every sample from its neighbours within ``window`` (itself left out), weighted;
+2. ``r_t = ||x_t − fit_t||`` (3-D residual norm);
+3. global noise scale per marker ``s = 1.4826 · median |x − fit|`` over samples and
+   coordinates;
+4. ``passes`` rounds of iterative reweighting (Tukey biweight of ``r / 2·threshold``,
+   threshold ``max(k s √(1 + leverage_t), min_jump)``) so that a spike loses its say in
+   its neighbours' fits; the leverage term accounts for one-sided fits next to gaps and
+   at the ends;
+5. decision: ``r_t > max(k σ_t √(1 + leverage_t), min_jump)`` with
+   ``σ_t = max(s, local scale)``, the local scale being the median residual norm over
+   ``±window`` / 1.5382 (Hampel's local MAD for a 3-D residual): a stretch the local
+   model cannot follow (very fast or jerky movement, dropped frames) has large residuals
+   all along and is not a spike, while one spike barely moves the median. The physical
+   floor ``min_jump`` keeps clean data with a tiny MAD from being flagged;
+6. shoulders of wide spikes (2–5 frames, ramping in and out): the fit is redone without
+   the flagged samples and their neighbours are flagged too when their residual exceeds
+   ``max(k σ √(1 + leverage), min_jump / 2)`` (hysteresis, grown up to half a window).
+
+Measured with ``corrupt.occlusion(..., "noise")`` (2 % spikes of 20–100 mm on 2 mm
+jitter, seeds 0–2): recall 0.999 on CMU 85_02 and HDM05, false positives ≤ 0.0001 of the
+clean samples; on the uncorrupted captures 0.00003 (CMU) and 0 (HDM05) of the samples, and
+≤ 0.6 % on each of the 25 shared C3D files (median 0.07 %).
 """
 from __future__ import annotations
 
@@ -26,71 +38,88 @@ import numpy as np
 from mocapfix.cleaners import register
 from mocapfix.cleaners.base import Cleaner, Param
 from mocapfix.motion import Motion
-from mocapfix.solvers.segments import running_median
+from mocapfix.solvers.localfit import local_polyfit, moving_median
+
+
+def _residuals(pos, w, half, observed):
+    fit, lev, support = local_polyfit(pos, w, half, degree=2, leave_out=True)
+    usable = observed & (support > 0)
+    with np.errstate(invalid="ignore"):
+        res = pos - fit
+        r = np.where(usable, np.linalg.norm(res, axis=2), 0.0)
+    return res, r, np.maximum(lev, 0.0), usable
+
+
+def _local_scale(r, usable, half):
+    """Hampel's local scale: the median residual norm over ``±2 half`` samples / 1.5382
+    (the median of the norm of a 3-D standard normal)."""
+    return np.nan_to_num(moving_median(np.where(usable, r, np.nan), 2 * half) / 1.5382)
 
 
 def hampel_flags(pos: np.ndarray, half: int, k: float, floor: float,
-                 passes: int = 2) -> tuple[np.ndarray, np.ndarray]:
-    """Spike mask (T, J) of marker positions ``pos`` (T, J, 3) and the threshold per marker
-    (J,), in the units of ``pos``. See the module docstring for the method."""
+                 passes: int = 3) -> tuple[np.ndarray, np.ndarray]:
+    """Spike mask (T, J) of marker positions ``pos`` (T, J, 3) and the median threshold
+    per marker (J,), in the units of ``pos``. See the module docstring for the method."""
     T, J, _ = pos.shape
-    x = pos.reshape(T, 3 * J)
-    work = x
-    flags = np.zeros((T, J), dtype=bool)
-    thr = np.full(J, float(floor))
-    for _ in range(max(1, passes)):
-        base = running_median(work, half)
-        res = (x - base).reshape(T, J, 3)
-        with np.errstate(invalid="ignore"):
-            r = np.linalg.norm(res, axis=2)
-        absres = np.abs(res).reshape(T, 3 * J).reshape(T, J, 3)
-        valid = ~np.isnan(absres).all(axis=(0, 2))
-        scale = np.zeros(J)
-        if valid.any():
-            scale[valid] = 1.4826 * np.nanmedian(absres[:, valid].transpose(1, 0, 2).reshape(int(valid.sum()), -1), axis=1)
-        thr = np.maximum(k * scale, floor)
-        with np.errstate(invalid="ignore"):
-            core = r > thr
-            weak = r > 0.5 * thr
-        flags = core
-        for _ in range(half):
-            grown = flags.copy()
-            grown[1:] |= flags[:-1]
-            grown[:-1] |= flags[1:]
-            grown &= weak
-            if np.array_equal(grown, flags):
-                break
-            flags = grown
+    observed = ~np.isnan(pos).any(axis=2)
+    w = observed.astype(np.float64)
+    for it in range(max(1, passes)):
+        res, r, lev, usable = _residuals(pos, w, half, observed)
+        if it == 0:
+            absres = np.where(usable[..., None], np.abs(res), np.nan)
+            has = usable.any(axis=0)
+            scale = np.zeros(J)
+            if has.any():
+                scale[has] = 1.4826 * np.nanmedian(absres[:, has], axis=(0, 2))
+        thr = np.maximum(k * scale[None, :] * np.sqrt(1.0 + lev), floor)
+        if it < passes - 1:
+            # Tukey biweight of the residual: spikes lose their say in the neighbours' fits
+            w = observed * np.clip(1.0 - (r / (2.0 * thr)) ** 2, 0.0, None) ** 2
+    # final decision with the local scale of the cleaned fit's residuals: a stretch the
+    # local model cannot follow (very fast or jerky movement, dropped frames) has large
+    # residuals all along and is not a spike; an isolated spike barely moves the median
+    sigma = np.maximum(scale[None, :], _local_scale(r, usable, half))
+    thr = np.maximum(k * sigma * np.sqrt(1.0 + lev), floor)
+    flags = r > thr
+    for _ in range(half):
         if not flags.any():
             break
-        # next pass: flagged samples replaced by this pass's baseline (no new segments)
-        rep = np.repeat(flags, 3, axis=1)
-        work = np.where(rep, base, x)
-    return flags, thr
+        # refit without the flagged samples; grow into neighbours that are still off
+        _, r, lev, usable = _residuals(pos, w * ~flags, half, observed)
+        sigma = np.maximum(scale[None, :], _local_scale(r, usable, half))
+        weak = np.maximum(k * sigma * np.sqrt(1.0 + lev), 0.5 * floor)
+        near = np.zeros_like(flags)
+        near[1:] |= flags[:-1]
+        near[:-1] |= flags[1:]
+        grow = near & ~flags & (r > weak)
+        if not grow.any():
+            break
+        flags = flags | grow
+    return flags, np.median(thr, axis=0)
 
 
 @register
 class Spikes(Cleaner):
-    """Flag spikes (Hampel identifier on the residual to a robust running median, per
+    """Flag spikes (Hampel identifier on the residual to a robust local quadratic fit, per
     marker on the 3-D residual norm) and mark them missing. See the module docstring."""
 
     name = "spikes"
-    summary = "mark spikes/outliers missing (Hampel on the residual to a running median)"
+    flags_samples = True
+    summary = "mark spikes/outliers missing (Hampel on the residual to a robust local fit)"
     params = (
-        Param("window", "time", "0.1 s", "length of the running-median window", unit="s",
+        Param("window", "time", "0.08 s", "length of the local-fit window", unit="s",
               low=0.0, low_open=True),
-        Param("k", "float", 6.0, "threshold in robust standard deviations (MAD × 1.4826)",
+        Param("k", "float", 5.0, "threshold in robust standard deviations (MAD × 1.4826)",
               low=1.0, high=100.0),
         Param("min_jump", "length", "10 mm", "smallest residual ever flagged", unit="mm",
               low=0.0, low_open=True),
-        Param("passes", "int", 2, "detection passes (each re-estimates the baseline "
-              "without the flagged samples)", low=1, high=5),
+        Param("passes", "int", 3, "reweighting passes of the robust fit", low=1, high=5),
     )
 
     def _apply(self, motion: Motion):
         pos = motion.positions
         T, J, _ = pos.shape
-        if T == 0 or J == 0:
+        if pos.size == 0:
             return motion.copy(), {"flagged": 0, "flagged_per_marker": {}}
         half = max(1, int(round(self.frames("window", motion) / 2.0)))
         flags, thr = hampel_flags(pos, half, self["k"], self.length("min_jump", motion),
