@@ -60,6 +60,25 @@ def info(ctx, files, as_json, fps):
         sys.exit(EXIT_USAGE)
 
 
+@main.command("cleaners")
+@click.option("--markdown", is_flag=True, help="Print a Markdown table (as in the README).")
+def list_cleaners(markdown):
+    """List the cleaners a config can name, with their parameters and defaults."""
+    from mocapfix.cleaners import registry
+
+    rows = []
+    for name, cls in registry().items():
+        params = ", ".join(f"{p.name}={p.default}" for p in cls.params) or "–"
+        rows.append((name, cls.summary, params))
+    if markdown:
+        click.echo("| cleaner | what it does | parameters (defaults) |\n|---|---|---|")
+        for name, summary, params in rows:
+            click.echo(f"| `{name}` | {summary} | {params} |")
+        return
+    for name, summary, params in rows:
+        click.echo(f"{name:<18} {summary}\n{'':<18} {params}")
+
+
 def _parse_reports(value: str) -> tuple[str, ...]:
     from mocapfix.clean import REPORT_KINDS
 

@@ -36,3 +36,22 @@ def atomic_write_bytes(path, data: bytes) -> Path:
 
 def atomic_write_text(path, text: str) -> Path:
     return atomic_write_bytes(path, text.encode("utf-8"))
+
+
+def read_input_bytes(path) -> bytes:
+    """The bytes of an input file; any OS failure or an empty (or whitespace-only) file is
+    an :class:`~mocapfix.errors.UnreadableFileError` naming the file."""
+    from mocapfix.errors import UnreadableFileError
+
+    path = Path(path)
+    try:
+        data = path.read_bytes()
+    except FileNotFoundError:
+        raise UnreadableFileError(path, "no such file") from None
+    except IsADirectoryError:
+        raise UnreadableFileError(path, "is a directory, not a file") from None
+    except OSError as exc:
+        raise UnreadableFileError(path, f"cannot open: {exc.strerror or exc}") from None
+    if not data.strip():
+        raise UnreadableFileError(path, "file is empty")
+    return data

@@ -6,7 +6,9 @@ Tests that use the real captures in ``../shared/data`` get their paths from
 """
 from __future__ import annotations
 
+import contextlib
 import os
+import signal
 from pathlib import Path
 
 import pytest
@@ -47,3 +49,22 @@ def need(path) -> Path:
 def shared(relpath: str) -> Path:
     """One named file of the shared data, with the skip/fail rule applied."""
     return need(DATA / relpath)
+
+
+@contextlib.contextmanager
+def hang_guard(seconds: int = 10):
+    """Fail instead of hanging forever (a generous guard, not a timing assertion)."""
+    if not hasattr(signal, "SIGALRM"):
+        yield
+        return
+
+    def _timeout(signum, frame):
+        raise TimeoutError(f"reader did not return within {seconds} s")
+
+    previous = signal.signal(signal.SIGALRM, _timeout)
+    signal.alarm(seconds)
+    try:
+        yield
+    finally:
+        signal.alarm(0)
+        signal.signal(signal.SIGALRM, previous)

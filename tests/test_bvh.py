@@ -4,13 +4,11 @@ Independent reference for forward kinematics: bvhio (float32, its own Euler code
 """
 from __future__ import annotations
 
-import contextlib
-import signal
 
 import numpy as np
 import pytest
 
-from conftest import need, shared, shared_files
+from conftest import hang_guard, need, shared, shared_files
 from mocapfix.errors import UnreadableFileError, WriteError
 from mocapfix.formats import bvh
 
@@ -25,25 +23,6 @@ EXPECTED = {
     "bandai_dataset-2_run_normal_001.bvh": (22, 5, 132, 68, 30, {"ZXY"}),
 }
 BVH_FILES = shared_files("bvh", "*.bvh")
-
-
-@contextlib.contextmanager
-def hang_guard(seconds: int = 10):
-    """Fail instead of hanging forever (a generous guard, not a timing assertion)."""
-    if not hasattr(signal, "SIGALRM"):
-        yield
-        return
-
-    def _timeout(signum, frame):
-        raise TimeoutError(f"reader did not return within {seconds} s")
-
-    previous = signal.signal(signal.SIGALRM, _timeout)
-    signal.alarm(seconds)
-    try:
-        yield
-    finally:
-        signal.alarm(0)
-        signal.signal(signal.SIGALRM, previous)
 
 
 def _read_refused(path, **options) -> UnreadableFileError:

@@ -15,7 +15,7 @@ import pytest
 from mocapfix.errors import UnreadableFileError
 from mocapfix.formats import c3d as C
 from mocapfix.motion import Motion
-from tests.conftest import need, shared, shared_files
+from conftest import need, shared, shared_files
 
 c3d_lib = pytest.importorskip("c3d")
 

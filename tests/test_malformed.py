@@ -4,32 +4,15 @@ format's users expect partial files to load, with a note) or raises one
 UnreadableFileError naming the file — quickly, never a hang, never another exception."""
 from __future__ import annotations
 
-import signal
-from contextlib import contextmanager
-
 import numpy as np
 import pytest
 
 from mocapfix.errors import UnreadableFileError
 from mocapfix.formats import read
 from mocapfix.motion import Motion
-from tests.conftest import SAMPLE_DATA
+from conftest import SAMPLE_DATA, hang_guard
 
 SAMPLES = ["walk.bvh", "walker_01.amc", "walk_markers.c3d", "walk_kinect_v2.csv"]
-
-
-@contextmanager
-def hang_guard(seconds: int = 20):
-    def boom(*_):
-        raise TimeoutError(f"read did not return within {seconds} s")
-
-    old = signal.signal(signal.SIGALRM, boom)
-    signal.alarm(seconds)
-    try:
-        yield
-    finally:
-        signal.alarm(0)
-        signal.signal(signal.SIGALRM, old)
 
 
 def _check(path):

@@ -9,7 +9,7 @@ from mocapfix.cleaners import build
 from mocapfix.cleaners.rotations import continuous_quaternions
 from mocapfix.kinematics import Rig
 from mocapfix.motion import Motion
-from tests.conftest import shared
+from conftest import shared
 
 
 def test_quaternion_signs_made_continuous():

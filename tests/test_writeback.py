@@ -7,7 +7,7 @@ import pytest
 
 from mocapfix.kinematics import Rig, euler_to_matrix
 from mocapfix.writeback import decompose, solve_channels
-from tests.conftest import shared, shared_files, need
+from conftest import shared, shared_files, need
 
 
 def _branching_rig():

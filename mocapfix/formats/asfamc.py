@@ -65,7 +65,7 @@ from pathlib import Path
 import numpy as np
 
 from mocapfix.errors import UnreadableFileError, UnsupportedFeatureError, WriteError
-from mocapfix.fileio import atomic_write_bytes
+from mocapfix.fileio import atomic_write_bytes, read_input_bytes
 from mocapfix.kinematics import Rig, euler_to_matrix
 from mocapfix.motion import Motion, Skeleton
 from mocapfix.units import asf_length_unit
@@ -158,17 +158,6 @@ def _decode(path: Path, data: bytes) -> str:
     if b"\x00" in data[:4096]:
         raise UnreadableFileError(path, "binary data where ASF/AMC text was expected")
     return data.decode("latin-1")    # byte-exact round trip, never fails
-
-
-def _read_bytes(path: Path) -> bytes:
-    try:
-        return path.read_bytes()
-    except FileNotFoundError:
-        raise UnreadableFileError(path, "no such file") from None
-    except IsADirectoryError:
-        raise UnreadableFileError(path, "is a directory, not a file") from None
-    except OSError as exc:
-        raise UnreadableFileError(path, f"cannot open: {exc.strerror or exc}") from None
 
 
 def _floats(path, tokens: list[str], count: int, what: str, line: int) -> np.ndarray:
@@ -683,10 +672,10 @@ def read(path, fps: float | None = None, **options) -> Motion:
     path = Path(path)
     if path.suffix.lower() == ".asf":
         return _read_rest_pose(path, fps)
-    amc_bytes = _read_bytes(path)
+    amc_bytes = read_input_bytes(path)
     amc_text = _decode(path, amc_bytes)
     asf_path = find_asf(path, options.get("asf"))
-    asf_bytes = _read_bytes(asf_path)
+    asf_bytes = read_input_bytes(asf_path)
     asf = parse_asf(asf_path, asf_bytes)
     source = parse_amc(path, amc_text, asf)
     source.asf_path, source.asf_bytes = str(asf_path), asf_bytes
@@ -702,7 +691,7 @@ def read(path, fps: float | None = None, **options) -> Motion:
 
 
 def _read_rest_pose(path: Path, fps) -> Motion:
-    asf_bytes = _read_bytes(path)
+    asf_bytes = read_input_bytes(path)
     asf = parse_asf(path, asf_bytes)
     layout = [(name, asf.dof_count(name)) for name in ["root"] + asf.order if asf.dof_count(name)]
     eol = "\r\n" if b"\r\n" in asf_bytes else "\n"

@@ -71,7 +71,7 @@ from pathlib import Path
 import numpy as np
 
 from mocapfix.errors import UnreadableFileError, WriteError
-from mocapfix.fileio import atomic_write_bytes
+from mocapfix.fileio import atomic_write_bytes, read_input_bytes
 from mocapfix.kinematics import Rig
 from mocapfix.motion import Motion, Skeleton
 
@@ -549,12 +549,7 @@ def read(path, fps: float | None = None, allow_truncated: bool = False, **option
     """Read a BVH file; see the module docstring. ``allow_truncated`` reads the complete
     frames of a truncated file (with a note) instead of refusing it."""
     path = Path(path)
-    try:
-        data = path.read_bytes()
-    except OSError as exc:
-        raise UnreadableFileError(path, f"cannot open: {exc.strerror or exc}") from None
-    if not data.strip():
-        raise UnreadableFileError(path, "file is empty")
+    data = read_input_bytes(path)
     notes: list[str] = []
     start = len(_BOM) if data.startswith(_BOM) else 0
     motion_match = _MOTION_LINE.search(data, start)

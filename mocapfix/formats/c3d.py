@@ -70,7 +70,7 @@ from pathlib import Path
 import numpy as np
 
 from mocapfix.errors import UnreadableFileError, WriteError
-from mocapfix.fileio import atomic_open
+from mocapfix.fileio import atomic_open, read_input_bytes
 from mocapfix.motion import Motion
 from mocapfix.units import METRES_PER_UNIT, normalise_unit_name
 
@@ -366,10 +366,7 @@ def sniff(head: bytes) -> bool:
 def read(path, fps: float | None = None, **options) -> Motion:
     """Read a C3D file. ``fps`` overrides the file's rate (noted when they disagree)."""
     path = Path(path)
-    try:
-        data = path.read_bytes()
-    except OSError as exc:
-        raise UnreadableFileError(path, f"cannot read: {exc.strerror or exc}") from None
+    data = read_input_bytes(path)
     try:
         return _read_bytes(path, data, fps)
     except UnreadableFileError:

@@ -84,7 +84,7 @@ from pathlib import Path
 import numpy as np
 
 from mocapfix.errors import UnreadableFileError, UnsupportedFeatureError, WriteError
-from mocapfix.fileio import atomic_write_bytes
+from mocapfix.fileio import atomic_write_bytes, read_input_bytes
 from mocapfix.formats import kinect_layouts as kl
 from mocapfix.motion import Motion, Skeleton
 from mocapfix.units import METRES_PER_UNIT, normalise_unit_name
@@ -295,12 +295,7 @@ def sniff(head: bytes) -> bool:
 def read(path, fps: float | None = None, units: str | None = None, **options) -> Motion:
     """Read any of the layouts (see the module docstring) into a :class:`Motion`."""
     path = Path(path)
-    try:
-        raw = path.read_bytes()
-    except OSError as exc:
-        raise UnreadableFileError(path, f"cannot open: {exc.strerror or exc}") from None
-    if not raw.strip():
-        raise UnreadableFileError(path, "file is empty")
+    raw = read_input_bytes(path)
     bom, text = _decode(raw, path)
     lines, endings = _split_lines(text)
     idx = _content_indices(lines)
