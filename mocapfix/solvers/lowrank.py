@@ -1,0 +1,255 @@
+"""Low-rank kernels shared by the matrix-based cleaners.
+
+Plain functions on arrays in the (T, C) layout (rows = frames, columns = channels), with
+T >> C in motion capture, so every decomposition is of a C x C matrix or a thin SVD --
+never a T x T matrix.
+
+- :func:`shrink` -- entrywise soft threshold, the proximal operator of ``tau * ||X||_1``.
+- :func:`svt` -- singular value thresholding, the proximal operator of ``tau * ||X||_*``
+  (Cai, Candes & Shen 2010, "A singular value thresholding algorithm for matrix
+  completion", eq. 2.2). Used by TSMC (Feng et al. 2014, Alg. 2) and Yang et al. 2019.
+- :func:`rank_for_variance` / :func:`lowrank_approx` -- truncated SVD (Eckart-Young).
+- :func:`ppca_fit` / :func:`conditional_mean` -- the maximum-likelihood probabilistic PCA
+  of Tipping & Bishop (1999, "Probabilistic principal component analysis", eq. 7-8) and
+  the Gaussian conditional mean of missing columns given the observed ones.
+- :func:`impute_lowrank` -- iterative low-rank imputation ("SVDimpute", Troyanskaya et al.
+  2001; the iterative PCA gap filling of Gloersen & Federolf 2016): fill, fit, re-predict
+  the missing entries from the observed ones, repeat until the fill stops moving.
+"""
+from __future__ import annotations
+
+import contextlib
+
+import numpy as np
+
+
+def blas_single_thread():
+    """Context manager holding BLAS/LAPACK to one thread (via ``threadpoolctl`` when it is
+    installed; otherwise a no-op). The matrices of these kernels are small (C x C with C =
+    3 x markers), where threads only add overhead -- on a loaded machine, 10-20x."""
+    try:
+        from threadpoolctl import threadpool_limits
+    except ImportError:  # pragma: no cover - optional dependency
+        return contextlib.nullcontext()
+    return threadpool_limits(1)
+
+
+def shrink(X, tau):
+    """Soft threshold ``sign(X) * max(|X| - tau, 0)``, entrywise.
+
+    Parameters
+    ----------
+    X : array_like
+        Any shape.
+    tau : float or array_like
+        Threshold (>= 0), broadcast against ``X``.
+
+    Returns
+    -------
+    ndarray of the shape of ``X`` (float64).
+    """
+    X = np.asarray(X, dtype=np.float64)
+    return np.sign(X) * np.maximum(np.abs(X) - tau, 0.0)
+
+
+def svt(X, tau, return_rank: bool = False):
+    """Singular value thresholding ``U diag(max(s - tau, 0)) V^T``.
+
+    The minimiser of ``tau ||Y||_* + 1/2 ||Y - X||_F^2`` (Cai, Candes & Shen 2010).
+    Uses the thin SVD, so a (d, n) matrix costs O(d n min(d, n)).
+
+    Parameters
+    ----------
+    X : array_like, shape (m, n)
+    tau : float
+        Threshold on the singular values (>= 0).
+    return_rank : bool
+        Also return the number of singular values left above zero.
+
+    Returns
+    -------
+    Y : ndarray, shape (m, n)
+    rank : int, only when ``return_rank``.
+    """
+    X = np.asarray(X, dtype=np.float64)
+    if tau < 0:
+        raise ValueError("svt: tau must be >= 0")
+    U, s, Vt = np.linalg.svd(X, full_matrices=False)
+    s = np.maximum(s - tau, 0.0)
+    rank = int(np.count_nonzero(s))
+    Y = (U[:, :rank] * s[:rank]) @ Vt[:rank]
+    return (Y, rank) if return_rank else Y
+
+
+def rank_for_variance(eigenvalues, variance: float) -> int:
+    """Smallest k whose k leading eigenvalues (variances, decreasing) hold ``variance``
+    (a fraction in (0, 1]) of the total; at least 1."""
+    ev = np.clip(np.asarray(eigenvalues, dtype=np.float64), 0.0, None)
+    total = ev.sum()
+    if total <= 0:
+        return 1
+    k = int(np.searchsorted(np.cumsum(ev) / total, variance * (1 - 1e-12)) + 1)
+    return min(max(k, 1), len(ev))
+
+
+def lowrank_approx(X, rank: int | None = None, variance: float | None = None):
+    """Best rank-k approximation of ``X`` in the Frobenius norm (truncated SVD).
+
+    Give ``rank``, or ``variance`` (fraction of the squared singular values to keep).
+    Returns ``(approximation, k)``.
+    """
+    X = np.asarray(X, dtype=np.float64)
+    U, s, Vt = np.linalg.svd(X, full_matrices=False)
+    if rank is None:
+        rank = rank_for_variance(s ** 2, 1.0 if variance is None else variance)
+    rank = int(min(max(rank, 0), len(s)))
+    return (U[:, :rank] * s[:rank]) @ Vt[:rank], rank
+
+
+def ppca_fit(X, variance: float = 0.99, rank: int | None = None):
+    """Maximum-likelihood probabilistic PCA of the rows of ``X`` (T, C).
+
+    Tipping & Bishop (1999), eq. 7-8: ``W = V_k (L_k - sigma2 I)^{1/2}``, with
+    ``sigma2`` the mean of the discarded eigenvalues of the sample covariance. The
+    covariance is C x C (eigen-decomposition, never T x T).
+
+    Parameters
+    ----------
+    X : ndarray (T, C), no NaN.
+    variance : float
+        Keep the fewest components holding this fraction of the variance...
+    rank : int, optional
+        ...unless a fixed number of components is given.
+
+    Returns
+    -------
+    mean (C,), W (C, k), sigma2 (float), k (int)
+    """
+    X = np.asarray(X, dtype=np.float64)
+    mean = X.mean(axis=0)
+    Z = X - mean
+    ev, V = np.linalg.eigh(Z.T @ Z / max(len(X), 1))
+    ev, V = np.clip(ev[::-1], 0.0, None), V[:, ::-1]
+    k = rank_for_variance(ev, variance) if rank is None else int(min(max(rank, 1), len(ev)))
+    sigma2 = float(ev[k:].mean()) if k < len(ev) else 0.0
+    W = V[:, :k] * np.sqrt(np.clip(ev[:k] - sigma2, 0.0, None))
+    return mean, W, sigma2, k
+
+
+def conditional_mean(rows, missing, mean, W, sigma2):
+    """Predict the ``missing`` columns of ``rows`` from their other columns under the PPCA
+    model ``x ~ N(mean, W W^T + sigma2 I)``.
+
+    ``z = (W_o^T W_o + sigma2 I)^{-1} W_o^T (x_o - mean_o)`` (posterior mean of the
+    latent, Tipping & Bishop eq. 34 restricted to the observed columns), ``x_m = mean_m +
+    W_m z``. With ``sigma2 = 0`` this is the least-squares fit of the observed columns,
+    i.e. the fixed point of EM imputation with a rank-k basis.
+
+    Parameters
+    ----------
+    rows : ndarray (n, C); values in ``missing`` columns are ignored.
+    missing : bool ndarray (C,), the same for every row.
+    mean, W, sigma2 : from :func:`ppca_fit`.
+
+    Returns
+    -------
+    ndarray (n, missing.sum()).
+    """
+    missing = np.asarray(missing, dtype=bool)
+    observed = ~missing
+    Wo = W[observed]
+    gram = Wo.T @ Wo
+    ridge = sigma2 if sigma2 > 0 else 1e-10 * (np.trace(gram) / max(len(gram), 1) + 1e-300)
+    gram[np.diag_indices_from(gram)] += ridge
+    z = np.linalg.solve(gram, Wo.T @ (rows[:, observed] - mean[observed]).T)
+    return (W[missing] @ z).T + mean[missing]
+
+
+def missing_patterns(missing):
+    """Group the rows of a (T, C) boolean mask by their pattern.
+
+    Returns ``(rows, patterns, inverse)``: the indices of the rows with something missing,
+    the distinct patterns (P, C) among them, and the pattern index of each such row."""
+    missing = np.asarray(missing, dtype=bool)
+    rows = np.flatnonzero(missing.any(axis=1))
+    if not len(rows):
+        return rows, np.zeros((0, missing.shape[1]), bool), np.zeros(0, np.intp)
+    patterns, inverse = np.unique(missing[rows], axis=0, return_inverse=True)
+    return rows, patterns, inverse.ravel()
+
+
+def conditional_mean_rows(X, grouping, mean, W, sigma2, chunk: int = 4096):
+    """:func:`conditional_mean` for rows with different missing patterns at once.
+
+    ``grouping`` is :func:`missing_patterns` of the missing mask. One k x k system per
+    distinct pattern (``W_o^T W_o = W^T W - W_m^T W_m``, inverted as a batch), then one
+    product for all rows -- a handful of array operations however many patterns there are.
+
+    Returns the predictions (len(rows), C) of every column of those rows (callers keep the
+    missing ones).
+    """
+    rows, patterns, inverse = grouping
+    k = W.shape[1]
+    if not len(rows):
+        return np.zeros((0, W.shape[0]))
+    gram = W.T @ W
+    grams = gram[None] - np.einsum("pc,ci,cj->pij", patterns.astype(np.float64), W, W)
+    scale = np.trace(gram) / max(k, 1)
+    ridge = sigma2 if sigma2 > 0 else 1e-10 * scale + 1e-300
+    grams[:, np.arange(k), np.arange(k)] += ridge
+    inverses = np.linalg.inv(grams)
+    out = np.empty((len(rows), W.shape[0]))
+    for lo in range(0, len(rows), chunk):
+        r, pat = rows[lo:lo + chunk], inverse[lo:lo + chunk]
+        centred = np.where(patterns[pat], 0.0, X[r] - mean)
+        z = np.einsum("nij,nj->ni", inverses[pat], centred @ W)
+        out[lo:lo + chunk] = z @ W.T + mean
+    return out
+
+
+def impute_lowrank(X, missing, variance: float = 0.99, rank: int | None = None,
+                   max_iter: int = 100, tol: float = 0.0):
+    """Iterative low-rank imputation of the ``missing`` entries of ``X`` (T, C).
+
+    Loop: fit :func:`ppca_fit` on the current completed matrix; replace every missing
+    entry by its conditional mean given the observed entries of its row
+    (:func:`conditional_mean_rows`); stop when the largest change of a missing entry is
+    <= ``tol`` or after ``max_iter`` fits. Observed entries never change. Each iteration
+    costs one C x C eigen-decomposition, one k x k inverse per missing pattern and a few
+    (T, C) x (C, k) products.
+
+    Parameters
+    ----------
+    X : ndarray (T, C); missing entries hold an initial guess (e.g. interpolation).
+    missing : bool ndarray (T, C).
+    variance, rank : see :func:`ppca_fit`.
+    max_iter : int >= 1.
+    tol : float, in the unit of ``X``.
+
+    Returns
+    -------
+    completed (T, C), info dict (iterations, rank, last_change, converged, model=(mean,
+    W, sigma2) of the last fit).
+    """
+    X = np.array(X, dtype=np.float64)
+    missing = np.asarray(missing, dtype=bool)
+    grouping = missing_patterns(missing)
+    rows = grouping[0]
+    hole = missing[rows]
+    change = 0.0
+    model = ppca_fit(X, variance, rank)
+    iterations = 0
+    for iterations in range(1, max_iter + 1):
+        if not len(rows):
+            break
+        predicted = conditional_mean_rows(X, grouping, *model[:3])
+        block = X[rows]
+        change = float(np.max(np.abs(predicted[hole] - block[hole])))
+        block[hole] = predicted[hole]
+        X[rows] = block
+        model = ppca_fit(X, variance, rank)
+        if change <= tol:
+            break
+    info = dict(iterations=iterations, rank=int(model[3]), last_change=change,
+                converged=bool(change <= tol), model=model[:3])
+    return X, info
