@@ -48,15 +48,16 @@ def kabsch(source, target, weights):
     frame. Returns R (T, 3, 3), cs (T, 3), ct (T, 3). Batched 3x3 SVDs, no frame loop.
     """
     wsum = weights.sum(axis=1, keepdims=True)
-    cs = np.einsum("tj,tjk->tk", weights, source) / wsum
-    ct = np.einsum("tj,tjk->tk", weights, target) / wsum
-    H = np.einsum("tj,tja,tjb->tab", weights, source - cs[:, None], target - ct[:, None])
+    cs = (weights[:, None, :] @ source)[:, 0] / wsum
+    ct = (weights[:, None, :] @ target)[:, 0] / wsum
+    # batched products (matmul) rather than multi-operand einsum: several times faster
+    H = np.swapaxes((source - cs[:, None]) * weights[..., None], 1, 2) @ (target - ct[:, None])
     U, _, Vt = np.linalg.svd(H)
-    d = np.sign(np.linalg.det(np.einsum("tab,tbc->tac", U, Vt)))
+    d = np.sign(np.linalg.det(U @ Vt))
     d[d == 0] = 1.0
     Vt = Vt.copy()
     Vt[:, 2] *= d[:, None]
-    R = np.einsum("tba,tcb->tac", Vt, U)          # V diag(1, 1, d) U^T
+    R = np.swapaxes(U @ Vt, 1, 2)                 # V diag(1, 1, d) U^T
     return R, cs, ct
 
 
@@ -75,7 +76,7 @@ def body_frame(positions, observed, rounds: int = 50, rtol: float = 1e-10):
     size = max(float(np.sqrt(np.mean(ref ** 2))), 1e-300)
     for _ in range(rounds):
         R, cs, ct = kabsch(src, np.broadcast_to(ref, src.shape), w)
-        local = np.einsum("tab,tjb->tja", R, src - cs[:, None]) + ct[:, None]
+        local = (src - cs[:, None]) @ np.swapaxes(R, 1, 2) + ct[:, None]
         local[~observed] = np.nan
         new = np.nan_to_num(np.nanmean(local, axis=0))
         moved = float(np.max(np.abs(new - ref)))
@@ -87,7 +88,7 @@ def body_frame(positions, observed, rounds: int = 50, rtol: float = 1e-10):
 
 def to_global(local, transform):
     R, cs, ct = transform
-    return np.einsum("tba,tjb->tja", R, local - ct[:, None]) + cs[:, None]
+    return (local - ct[:, None]) @ R + cs[:, None]
 
 
 def hold_interp(x):

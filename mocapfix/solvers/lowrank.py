@@ -193,7 +193,8 @@ def conditional_mean_rows(X, grouping, mean, W, sigma2, chunk: int = 4096):
     if not len(rows):
         return np.zeros((0, W.shape[0]))
     gram = W.T @ W
-    grams = gram[None] - np.einsum("pc,ci,cj->pij", patterns.astype(np.float64), W, W)
+    missing_W = patterns[:, :, None] * W[None]                      # (P, C, k)
+    grams = gram[None] - np.swapaxes(missing_W, 1, 2) @ W
     scale = np.trace(gram) / max(k, 1)
     ridge = sigma2 if sigma2 > 0 else 1e-10 * scale + 1e-300
     grams[:, np.arange(k), np.arange(k)] += ridge
@@ -202,7 +203,7 @@ def conditional_mean_rows(X, grouping, mean, W, sigma2, chunk: int = 4096):
     for lo in range(0, len(rows), chunk):
         r, pat = rows[lo:lo + chunk], inverse[lo:lo + chunk]
         centred = np.where(patterns[pat], 0.0, X[r] - mean)
-        z = np.einsum("nij,nj->ni", inverses[pat], centred @ W)
+        z = (inverses[pat] @ (centred @ W)[..., None])[..., 0]
         out[lo:lo + chunk] = z @ W.T + mean
     return out
 
