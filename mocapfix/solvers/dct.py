@@ -1,0 +1,226 @@
+"""DCT-diagonalised smoothness operators for the TSMC family (Feng et al. 2014; Garcia 2010).
+
+Layout: ``x`` is (T, C) — time along axis 0, one column per channel — unless an ``axis``
+argument says otherwise. Nothing here builds a T×T matrix.
+
+The operator ``O`` of Feng et al. 2014, eq. (6), is the second difference with repeated
+borders (rows ``[-1 1 0 …]``, ``[1 -2 1 …]``, …, ``[… 1 -1]``). It is symmetric and is
+diagonalised by the orthonormal DCT-II (Strang 1999, "The discrete cosine transform";
+Garcia 2010, "Robust smoothing of gridded data in one and higher dimensions with missing
+values", CSDA 54:1167): ``O = Cᵀ diag(λ) C`` with
+
+    λ_k = −2 + 2 cos(π k / n),   k = 0 … n−1,
+
+so ``OᵀO = OOᵀ = Cᵀ diag(λ²) C`` and
+
+    (I + μ OᵀO)⁻¹ y   = idct( dct(y) / (1 + μ λ²) )          (Feng 2014 eq. 14)
+    z (β OOᵀ + λ2 I)⁻¹ = idct( dct(z) / (β λ² + λ2) )          (Feng 2014 Alg. 2 step 7)
+
+— one DCT, a division and one inverse DCT, O(n log n) per channel, all channels at once.
+
+The repeated-border condition makes the smoother's solution flat at the ends (zero first
+difference in the last row of ``O``). :func:`pad` therefore extends each channel before a
+DCT step — by point reflection of a complete channel (value and slope continuous), or with
+samples marked missing for the weighted solvers — and :func:`unpad` removes it.
+"""
+from __future__ import annotations
+
+import numpy as np
+from scipy import fft
+
+from mocapfix.solvers.segments import extend, interpolate_gaps
+
+WORKERS = 1  # scipy.fft threads (2 was slower with other work on a 2-core machine)
+
+
+def eigenvalues(n: int) -> np.ndarray:
+    """Eigenvalues ``λ_k = −2 + 2 cos(π k / n)`` of the n×n repeated-border second-difference
+    matrix ``O`` (Feng 2014 eq. 6), in DCT-II order (k = 0 … n−1)."""
+    return -2.0 + 2.0 * np.cos(np.pi * np.arange(n) / n)
+
+
+def _shape(lam: np.ndarray, ndim: int, axis: int) -> np.ndarray:
+    shape = [1] * ndim
+    shape[axis] = lam.size
+    return lam.reshape(shape)
+
+
+def dct(x: np.ndarray, axis: int = 0) -> np.ndarray:
+    """Orthonormal DCT-II along ``axis``."""
+    return fft.dct(x, type=2, norm="ortho", axis=axis, workers=WORKERS)
+
+
+def idct(x: np.ndarray, axis: int = 0) -> np.ndarray:
+    """Inverse of :func:`dct`."""
+    return fft.idct(x, type=2, norm="ortho", axis=axis, workers=WORKERS)
+
+
+def smoother(y: np.ndarray, mu, axis: int = 0) -> np.ndarray:
+    """``(I + μ OᵀO)⁻¹ y`` along ``axis`` (Feng 2014 eq. 14; Garcia 2010 eq. 7).
+
+    Parameters
+    ----------
+    y : array, any shape; the operator acts along ``axis``.
+    mu : scalar, or an array broadcastable against ``y`` with ``axis`` removed (one μ per
+        channel), μ ≥ 0.
+
+    Returns
+    -------
+    Array of ``y``'s shape.
+    """
+    y = np.asarray(y, dtype=np.float64)
+    axis = axis % y.ndim
+    lam2 = _shape(eigenvalues(y.shape[axis]) ** 2, y.ndim, axis)
+    mu = np.expand_dims(np.asarray(mu, dtype=np.float64), axis) if np.ndim(mu) else mu
+    return idct(dct(y, axis) / (1.0 + mu * lam2), axis)
+
+
+def penalty_solve(z: np.ndarray, beta: float, lam: float, axis: int = 0) -> np.ndarray:
+    """``(β OOᵀ + λ I)⁻¹`` applied along ``axis`` of ``z`` (Feng 2014 eq. A.13: with the
+    channels as rows, ``M = Z (β OOᵀ + λ I)⁻¹`` is this operator on every row, O being
+    symmetric). Parameters: β ≥ 0, λ > 0."""
+    z = np.asarray(z, dtype=np.float64)
+    axis = axis % z.ndim
+    lam2 = _shape(eigenvalues(z.shape[axis]) ** 2, z.ndim, axis)
+    return idct(dct(z, axis) / (beta * lam2 + lam), axis)
+
+
+# -- generalised cross-validation ------------------------------------------------------
+
+LOG_MU_GRID = np.arange(-3.0, 10.01, 0.25)
+
+
+def gcv_mu(y: np.ndarray, n_eff: np.ndarray | None = None,
+           log_mu: np.ndarray = LOG_MU_GRID) -> tuple[np.ndarray, np.ndarray]:
+    """Per-channel smoothing parameter by generalised cross-validation (Craven & Wahba
+    1979; Feng 2014 eqs. 16–18; Garcia 2010 eq. 9) for the smoother :func:`smoother` on the
+    complete (T, C) data ``y``.
+
+    With ``Γ_k(μ) = 1 / (1 + μ λ_k²)`` and ``ŷ = dct(y)``, the residual sum of squares is
+    ``Σ_k (1 − Γ_k)² ŷ_k²`` and ``tr H = Σ_k Γ_k``, so
+
+        GCV(μ) = RSS / n_eff  /  (1 − tr H / n)²
+
+    is evaluated on a grid of log10 μ for all channels with one matrix product, then
+    refined per channel by a parabola through the best grid point and its neighbours.
+    ``n_eff`` (C,) is the number of observed samples (eq. 17's n − n_s; default n) — it
+    scales GCV per channel and does not move its minimum, kept for the reported score.
+
+    Returns ``(mu, score)``, both (C,).
+    """
+    y = np.asarray(y, dtype=np.float64)
+    n = y.shape[0]
+    lam2 = eigenvalues(n) ** 2
+    mu = 10.0 ** np.asarray(log_mu)
+    gamma = 1.0 / (1.0 + lam2[:, None] * mu[None, :])            # (n, m)
+    power = dct(y) ** 2                                         # (n, C)
+    rss = power.T @ (1.0 - gamma) ** 2                           # (C, m)
+    denom = (1.0 - gamma.sum(axis=0) / n) ** 2                   # (m,)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        score = rss / np.where(denom > 0, denom, np.nan)[None, :]
+    score = np.where(np.isfinite(score), score, np.inf)
+    best = np.argmin(score, axis=1)
+    # parabolic refinement in log μ (grid is uniform)
+    i = np.clip(best, 1, len(mu) - 2)
+    s0, s1, s2 = (score[np.arange(len(i)), i + d] for d in (-1, 0, 1))
+    step = log_mu[1] - log_mu[0]
+    curv = s0 - 2 * s1 + s2
+    with np.errstate(divide="ignore", invalid="ignore"):
+        offset = np.where((curv > 0) & np.isfinite(curv), 0.5 * (s0 - s2) / curv, 0.0)
+    offset = np.clip(offset, -1.0, 1.0)
+    refined = np.where((best == i), log_mu[i] + offset * step, log_mu[best])
+    n_eff = np.full(y.shape[1], n) if n_eff is None else np.asarray(n_eff)
+    return 10.0 ** refined, score[np.arange(len(best)), best] / np.maximum(n_eff, 1)
+
+
+def gcv_smooth(y: np.ndarray, n_pad: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """Smooth every complete column of ``y`` (T, C) by :func:`smoother` with its own
+    GCV-chosen μ, after point-reflection padding of ``n_pad`` samples at each end (so the
+    repeated-border condition does not flatten the ends). Returns ``(smoothed, mu)``."""
+    yp, p = pad_reflect(y, n_pad)
+    mu, _ = gcv_mu(yp)
+    return unpad(smoother(yp, mu), p), mu
+
+
+# -- weighted robust smoothing (Algorithm 1 of Feng 2014) --------------------------------
+
+def robust_smooth(x: np.ndarray, weights: np.ndarray, scale: np.ndarray,
+                  iterations: int = 8, mu: np.ndarray | None = None,
+                  init: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Robust penalised least squares per channel (Feng 2014 Algorithm 1, eqs. 12–18;
+    Garcia 2010 §3–4):
+
+        x̂ ← (I + μ OᵀO)⁻¹ ( G (x − x̂) + x̂ ),   G = w · exp(−r² / p²)
+
+    Parameters
+    ----------
+    x : (n, C) data; NaN = missing (weight 0).
+    weights : (n, C) prior weights in [0, 1] (0 = missing / not to be used; the reader's
+        confidence goes here).
+    scale : (C,) Welsch scale ``p`` per channel (Feng uses 5 cm).
+    iterations : robust re-weighting steps; μ is re-chosen by GCV at each step on the
+        pseudo-data ``G (x − x̂) + x̂`` (Garcia's device: with the weights folded into the
+        pseudo-data the complete-data GCV of :func:`gcv_mu` applies).
+    mu : fixed (C,) μ instead of GCV.
+    init : (n, C) complete initial guess (default: linear interpolation, ends held).
+
+    Returns
+    -------
+    (x̂, mu, G): the smooth (n, C), the last μ per channel and the last weights.
+    """
+    x = np.asarray(x, dtype=np.float64)
+    w = np.where(np.isnan(x), 0.0, np.asarray(weights, dtype=np.float64))
+    x0 = np.where(w > 0, x, 0.0)
+    xhat = prefill(np.where(w > 0, x, np.nan)) if init is None else np.array(init, dtype=np.float64)
+    n_obs = (w > 0).sum(axis=0)
+    p2 = np.maximum(np.asarray(scale, dtype=np.float64), 1e-300) ** 2
+    fixed = mu is not None
+    g = w.copy()
+    for _ in range(max(1, iterations)):
+        r = x0 - xhat
+        g = w * np.exp(-(r * r) / p2)
+        pseudo = g * r + xhat
+        if not fixed:
+            mu, _ = gcv_mu(pseudo, n_obs)
+        xhat = smoother(pseudo, mu)
+    return xhat, np.asarray(mu, dtype=np.float64) * np.ones(x.shape[1]), g
+
+
+# -- padding and initial fills -------------------------------------------------------------
+
+def prefill(x: np.ndarray) -> np.ndarray:
+    """Complete copy of ``x`` (T, C): interior gaps by linear interpolation, leading and
+    trailing gaps hold the nearest observed value; all-missing columns become 0."""
+    filled, _ = interpolate_gaps(np.asarray(x, dtype=np.float64), "linear")
+    T = filled.shape[0]
+    ok = ~np.isnan(filled)
+    idx = np.where(ok, np.arange(T)[:, None], 0)
+    np.maximum.accumulate(idx, axis=0, out=idx)
+    fwd = np.take_along_axis(filled, idx, axis=0)               # forward fill (trailing)
+    idx_b = np.where(ok, np.arange(T)[:, None], T - 1)
+    idx_b = np.minimum.accumulate(idx_b[::-1], axis=0)[::-1]
+    bwd = np.take_along_axis(filled, idx_b, axis=0)              # backward fill (leading)
+    out = np.where(ok, filled, np.where(np.isnan(fwd), bwd, fwd))
+    return np.nan_to_num(out, nan=0.0)
+
+
+def pad_reflect(x: np.ndarray, n_pad: int) -> tuple[np.ndarray, int]:
+    """Point-reflect a complete (T, C) array by up to ``n_pad`` samples at each end
+    (``2 x[0] − x[i]``: value and slope continuous; :func:`segments.extend`)."""
+    if n_pad <= 0 or x.shape[0] < 2:
+        return np.asarray(x, dtype=np.float64), 0
+    return extend(np.asarray(x, dtype=np.float64), n_pad)
+
+
+def pad_missing(x: np.ndarray, n_pad: int) -> tuple[np.ndarray, int]:
+    """Add ``n_pad`` missing (NaN) samples at each end of (T, C) ``x``: for the weighted
+    solvers, which then extrapolate by their own model instead of a flat border."""
+    if n_pad <= 0:
+        return np.asarray(x, dtype=np.float64), 0
+    nan = np.full((n_pad,) + x.shape[1:], np.nan)
+    return np.concatenate([nan, x, nan], axis=0), n_pad
+
+
+def unpad(x: np.ndarray, p: int) -> np.ndarray:
+    """Remove ``p`` samples added at each end by :func:`pad_reflect` / :func:`pad_missing`."""
+    return x[p:x.shape[0] - p] if p else x

@@ -1,0 +1,256 @@
+"""trust + tsmc (Feng et al. 2014) and the DCT operators of mocapfix.solvers.dct."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from mocapfix.cleaners import build
+from mocapfix.cleaners.tsmc import _svt_tall, bridge_residual, tsmc_solve
+from mocapfix.motion import Motion
+from mocapfix.solvers import dct
+from mocapfix.solvers.lowrank import svt
+
+from conftest import shared
+
+
+def _dense_O(n: int) -> np.ndarray:
+    """Feng 2014 eq. (6): second difference with repeated borders (test only)."""
+    O = np.zeros((n, n))
+    for i in range(1, n - 1):
+        O[i, i - 1:i + 2] = [1.0, -2.0, 1.0]
+    O[0, :2] = [-1.0, 1.0]
+    O[-1, -2:] = [1.0, -1.0]
+    return O
+
+
+# -- DCT operators == dense formulas -------------------------------------------------------
+
+@pytest.mark.parametrize("n", [2, 3, 8, 33])
+def test_dct_operators_equal_dense_formulas(n):
+    rng = np.random.default_rng(n)
+    O = _dense_O(n)
+    assert np.allclose(np.sort(np.linalg.eigvalsh(O)), np.sort(dct.eigenvalues(n)), atol=1e-12)
+    y = rng.normal(size=(n, 4))
+    mu = np.array([0.0, 0.3, 10.0, 1e4])
+    dense = np.stack([np.linalg.solve(np.eye(n) + m * O.T @ O, y[:, c])
+                      for c, m in enumerate(mu)], axis=1)
+    assert np.max(np.abs(dct.smoother(y, mu) - dense)) < 1e-10
+    assert np.max(np.abs(dct.smoother(y, 7.0) - np.linalg.solve(np.eye(n) + 7.0 * O.T @ O, y))) < 1e-10
+    # rows = channels (the paper's layout): M = Z (beta O O^T + lam I)^-1
+    Z = rng.normal(size=(5, n))
+    dense_m = Z @ np.linalg.inv(3.0 * O @ O.T + 0.7 * np.eye(n))
+    assert np.max(np.abs(dct.penalty_solve(Z, 3.0, 0.7, axis=1) - dense_m)) < 1e-10
+    assert np.max(np.abs(dct.penalty_solve(Z.T, 3.0, 0.7, axis=0) - dense_m.T)) < 1e-10
+
+
+def test_gcv_trace_and_choice():
+    """GCV picks a μ that removes most of white noise from a smooth signal, and its
+    closed-form RSS equals the dense smoother's."""
+    rng = np.random.default_rng(0)
+    t = np.arange(400) / 100.0
+    clean = np.stack([np.sin(2 * np.pi * 0.7 * t), np.cos(2 * np.pi * 1.1 * t) * 2], axis=1)
+    y = clean + rng.normal(0, 0.05, clean.shape)
+    mu, _ = dct.gcv_mu(y)
+    err = np.sqrt(np.mean((dct.smoother(y, mu) - clean) ** 2))
+    assert err < 0.4 * 0.05, err
+    # the score is minimal at the chosen mu (compare with x10 and /10 via dense formula)
+    n = 60
+    O = _dense_O(n)
+    ys = y[:n, :1]
+
+    def gcv_dense(m):
+        H = np.linalg.inv(np.eye(n) + m * O.T @ O)
+        r = H @ ys - ys
+        return float((r ** 2).sum() / n / (1 - np.trace(H) / n) ** 2)
+
+    m, s = dct.gcv_mu(ys)
+    assert s[0] == pytest.approx(gcv_dense(m[0]), rel=0.05)
+    assert gcv_dense(m[0]) <= min(gcv_dense(m[0] * 10), gcv_dense(m[0] / 10))
+
+
+def test_robust_smooth_ignores_spike_and_bridges_gap():
+    """Padded with missing samples (as ``trust`` does), the robust smooth of a sine with a
+    5-unit spike and a 40-sample gap stays on the sine (measured: 0.004 at the samples,
+    0.014 in the gap, 0.0004 at the ends)."""
+    t = np.arange(300) / 100.0
+    clean = np.sin(2 * np.pi * 0.5 * t)[:, None]
+    x = clean.copy()
+    x[100] += 5.0                       # outlier
+    x[180:220] = np.nan                 # gap
+    xp, p = dct.pad_missing(x, 50)
+    init, _ = dct.pad_reflect(dct.prefill(x), 50)
+    xhat, mu, g = dct.robust_smooth(xp, np.ones_like(xp), np.array([0.1]), iterations=8, init=init)
+    assert g[p + 100, 0] < 1e-6         # the spike lost its weight
+    err = np.abs(dct.unpad(xhat, p) - clean)[:, 0]
+    observed = ~np.isnan(x[:, 0])
+    assert err[observed].max() < 0.02 and err[~observed].max() < 0.05
+    assert err[:5].max() < 0.005 and err[-5:].max() < 0.005
+
+
+def test_svt_tall_matches_shared_kernel():
+    rng = np.random.default_rng(2)
+    Z = rng.normal(size=(900, 4)) @ rng.normal(size=(4, 30)) * 10 + rng.normal(size=(900, 30)) * 0.01
+    for tau in (0.0, 0.05, 3.0, 1e6):
+        assert np.max(np.abs(_svt_tall(Z, tau) - svt(Z, tau))) < 1e-7
+
+
+def test_bridge_residual_is_linear_for_short_gaps_and_fades():
+    d = np.full((11, 1), np.nan)
+    d[0], d[10] = 1.0, 3.0
+    out = bridge_residual(d, np.inf)
+    assert np.allclose(out[1:10, 0], np.linspace(1, 3, 11)[1:10])
+    assert out[0, 0] == 0.0 and out[10, 0] == 0.0
+    faded = bridge_residual(d, 1.0)
+    assert faded[5, 0] == pytest.approx(2.0 * np.exp(-5.0))
+
+
+# -- Algorithm 2 on synthetic low-rank smooth motion -----------------------------------------
+
+def test_tsmc_recovers_low_rank_smooth_matrix():
+    """Rank-3 smooth channels, 12 gaps of 20–70 frames and 2 % sparse errors of 5–20 units
+    on the observed entries (Ω = all observed: the errors must go to E). Measured: missing
+    entries RMSE 0.004–0.1 (signal RMS ≈ 10) for β ∈ {1, 10}, γ ∈ {1.1, 1.5}."""
+    rng = np.random.default_rng(1)
+    T, C = 600, 30
+    t = np.arange(T) / 60.0
+    basis = np.stack([np.sin(2 * np.pi * 0.5 * t), np.cos(2 * np.pi * 0.8 * t + 0.3),
+                      np.sin(2 * np.pi * 1.3 * t + 1.0)], axis=1)
+    truth = basis @ rng.normal(0, 10, (3, C))
+    omega = np.ones((T, C), bool)
+    for c in rng.choice(C, 12, replace=False):
+        s = rng.integers(10, T - 80)
+        omega[s:s + rng.integers(20, 70), c] = False
+    err = (rng.random((T, C)) < 0.02) & omega
+    x = truth.copy()
+    x[err] += rng.choice([-1, 1], err.sum()) * rng.uniform(5, 20, err.sum())
+    for gamma in (1.1, 1.5):
+        Y, E, info = tsmc_solve(x, omega, alpha=1.0, beta=3.0, gamma=gamma, tol=1e-6, max_iter=500)
+        assert info["converged"]
+        e = Y - truth
+        assert np.sqrt(np.mean(e[~omega] ** 2)) < 0.3
+        assert np.sqrt(np.mean(e[err] ** 2)) < 0.3       # sparse errors removed
+        assert np.sqrt(np.mean(e ** 2)) < 0.1
+
+
+def _cv_markers(T=240, J=6, fps=100.0) -> Motion:
+    """Rigid-ish markers moving at constant velocity plus a slow sway: low rank, smooth."""
+    t = np.arange(T)[:, None] / fps
+    offsets = np.arange(J)[None, :] * 50.0
+    x = 300.0 * t + offsets + 20.0 * np.sin(2 * np.pi * 0.5 * t)
+    y = 100.0 + 0.0 * t + offsets * 0.5 + 10.0 * np.cos(2 * np.pi * 0.5 * t)
+    z = 900.0 + 5.0 * np.sin(2 * np.pi * 0.3 * t) + offsets * 0.2
+    pos = np.stack([x, y, z], axis=2)
+    return Motion(pos, [f"M{j}" for j in range(J)], fps, format="c3d")
+
+
+def test_trust_flags_the_spike_only():
+    m = _cv_markers()
+    pos = m.positions.copy()
+    pos[120, 2] += np.array([30.0, -20.0, 10.0])       # a 38 mm spike
+    out, info = build("trust").apply(m.replace(positions=pos))
+    flagged = np.isnan(out.positions).any(axis=2)
+    assert flagged[120, 2] and flagged.sum() == 1
+    assert info["untrusted"] == 1 and info["untrusted_per_joint"] == {"M2": 1}
+
+
+def test_trust_uses_reader_confidence():
+    m = _cv_markers()
+    conf = np.ones(m.positions.shape[:2])
+    conf[50:55, 1] = 0.0
+    out, info = build("trust").apply(m.replace(confidence=conf))
+    flagged = np.isnan(out.positions).any(axis=2)
+    assert flagged[50:55, 1].all() and flagged.sum() == 5
+    assert info["untrusted_low_confidence"] == 5
+    # tsmc re-estimates low-confidence samples too (moved back onto the motion)
+    pos = m.positions.copy()
+    pos[50:55, 1] += 80.0
+    out, info = build("tsmc").apply(m.replace(positions=pos, confidence=conf))
+    assert np.max(np.abs(out.positions[50:55, 1] - m.positions[50:55, 1])) < 2.0
+    assert info["untrusted"] == 5
+
+
+def test_tsmc_fills_gaps_and_the_end_without_flattening():
+    m = _cv_markers()
+    pos = m.positions.copy()
+    pos[60:140, 0] = np.nan           # 0.8 s interior gap
+    pos[-40:, 3] = np.nan             # trailing gap: must follow the motion, not stop
+    out, info = build("tsmc").apply(m.replace(positions=pos))
+    err = np.linalg.norm(out.positions - m.positions, axis=2)
+    assert np.isfinite(out.positions).all()
+    assert err[60:140, 0].max() < 5.0, err[60:140, 0].max()
+    assert err[-40:, 3].max() < 10.0, err[-40:, 3].max()   # 120 mm travelled meanwhile
+    observed = ~np.isnan(pos).any(axis=2)
+    assert np.array_equal(out.positions[observed], pos[observed])   # clean data kept
+    assert info["iterations"] >= 1 and "residual" in info
+
+
+def test_units_do_not_matter():
+    m = _cv_markers()
+    pos = m.positions.copy()
+    pos[60:100, 0] = np.nan
+    pos[30, 4] += 40.0
+    mm = m.replace(positions=pos)
+    metres = m.replace(positions=pos / 1000.0, units="m", metres_per_unit=1.0)
+    a, _ = build("tsmc").apply(build("trust").apply(mm)[0])
+    b, _ = build("tsmc").apply(build("trust").apply(metres)[0])
+    assert np.allclose(a.positions, b.positions * 1000.0, atol=1e-6)
+
+
+# -- real captures against the classical pipelines -------------------------------------------
+
+CLASSICAL = {
+    "pchip": [("fill", {"method": "pchip", "max_gap": None})],
+    "spikes+pchip+bw12": [("spikes", {}), ("fill", {"method": "pchip", "max_gap": None}),
+                          ("butterworth", {"cutoff": "12 Hz"})],
+    "spikes+pchip+bw6": [("spikes", {}), ("fill", {"method": "pchip", "max_gap": None}),
+                         ("butterworth", {"cutoff": "6 Hz"})],
+}
+WITH_PCA = [("spikes", {}), ("fill_pca", {}), ("fill", {"method": "pchip", "max_gap": None}),
+            ("butterworth", {"cutoff": "12 Hz"})]
+
+# rmse(trust+tsmc) / rmse(best of CLASSICAL) and / rmse(WITH_PCA), seed 0 (85_02 full,
+# HDM05 frames 0–1500). Measured (issue 6 report):     vs interpolation   vs PCA pipeline
+#   85_02  gaps 36.9 mm                                  0.33               1.69
+#   85_02  noise 1.59 mm                                 0.97               0.94
+#   85_02  mixed 23.2 mm                                 0.32               1.81
+#   HDM05  gaps 6.37 mm                                  0.19               3.64
+#   HDM05  noise 1.27 mm                                 0.87               0.86
+#   HDM05  mixed 3.33 mm                                 0.15               1.35
+# trust+tsmc beats every interpolation pipeline, and the PCA pipeline only on noise: the
+# bounds below (measurement + margin) pin that down, including the loss to fill_pca.
+BOUNDS = {
+    ("cmu_85_02.c3d", "gaps"): (0.45, 2.0), ("cmu_85_02.c3d", "noise"): (1.0, 1.0),
+    ("cmu_85_02.c3d", "mixed"): (0.45, 2.2),
+    ("hdm05_HDM_mm_01-02_03_120.c3d", "gaps"): (0.3, 4.5),
+    ("hdm05_HDM_mm_01-02_03_120.c3d", "noise"): (0.95, 0.95),
+    ("hdm05_HDM_mm_01-02_03_120.c3d", "mixed"): (0.25, 1.7),
+}
+
+
+def _run(steps, motion):
+    for name, params in steps:
+        motion, _ = build(name, **params).apply(motion)
+    return motion
+
+
+@pytest.mark.parametrize("scenario", ["gaps", "noise", "mixed"])
+@pytest.mark.parametrize("capture", ["cmu_85_02.c3d", "hdm05_HDM_mm_01-02_03_120.c3d"])
+def test_against_classical_on_occlusion(capture, scenario):
+    import mocapfix
+    from mocapfix.corrupt import occlusion
+    from mocapfix.metrics import rmse
+
+    truth = mocapfix.read(shared(f"c3d/{capture}"))
+    if truth.n_frames > 1500:
+        truth = truth.replace(positions=truth.positions[:1500], confidence=None)
+    bad, _ = occlusion(truth, scenario, seed=0)
+    ours = _run([("trust", {}), ("tsmc", {})], bad)
+    assert not np.isnan(ours.positions).any()
+    mine = rmse(ours.positions, truth.positions)
+    best = min(rmse(_run(steps, bad).positions, truth.positions) for steps in CLASSICAL.values())
+    pca = rmse(_run(WITH_PCA, bad).positions, truth.positions)
+    print(f"{capture} {scenario}: trust+tsmc {mine:.3f} best interpolation {best:.3f} "
+          f"({mine / best:.2f}) pca {pca:.3f} ({mine / pca:.2f})")
+    lim_best, lim_pca = BOUNDS[(capture, scenario)]
+    assert mine < lim_best * best, (mine, best)
+    assert mine < lim_pca * pca, (mine, pca)
