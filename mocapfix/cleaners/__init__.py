@@ -18,6 +18,8 @@ _MODULES = (
     "mocapfix.cleaners.pca_fill",
     "mocapfix.cleaners.swaps",
     "mocapfix.cleaners.rotations",
+    "mocapfix.cleaners.lowrank_isometry",
+    "mocapfix.cleaners.tsmc",
 )
 _loaded = False
 
