@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from mocapfix.cleaners import build
-from mocapfix.cleaners.tsmc import _svt_tall, bridge_residual, tsmc_solve
+from mocapfix.cleaners.tsmc import bridge_residual, tsmc_solve
 from mocapfix.motion import Motion
 from mocapfix.solvers import dct
 from mocapfix.solvers.lowrank import svt
@@ -87,11 +87,16 @@ def test_robust_smooth_ignores_spike_and_bridges_gap():
     assert err[:5].max() < 0.005 and err[-5:].max() < 0.005
 
 
-def test_svt_tall_matches_shared_kernel():
+def test_svt_gram_path_matches_thin_svd_on_tall_and_wide_matrices():
+    """The shared svt takes the Gram-matrix path for motion-shaped matrices; it must equal
+    thresholding the singular values of a thin SVD."""
     rng = np.random.default_rng(2)
     Z = rng.normal(size=(900, 4)) @ rng.normal(size=(4, 30)) * 10 + rng.normal(size=(900, 30)) * 0.01
+    U, s, Vt = np.linalg.svd(Z, full_matrices=False)
     for tau in (0.0, 0.05, 3.0, 1e6):
-        assert np.max(np.abs(_svt_tall(Z, tau) - svt(Z, tau))) < 1e-7
+        reference = (U * np.maximum(s - tau, 0.0)) @ Vt
+        assert np.max(np.abs(svt(Z, tau) - reference)) < 1e-7
+        assert np.max(np.abs(svt(Z.T, tau) - reference.T)) < 1e-7
 
 
 def test_bridge_residual_is_linear_for_short_gaps_and_fades():

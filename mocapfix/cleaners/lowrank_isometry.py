@@ -45,7 +45,6 @@ Action3D clips); ``gamma: 1000`` with the settings above lowers it on all twelve
 """
 from __future__ import annotations
 
-import contextlib
 import math
 
 import numpy as np
@@ -56,6 +55,7 @@ from mocapfix.errors import ConfigError
 from mocapfix.motion import Motion
 from mocapfix.solvers import wavelet_ops
 from mocapfix.solvers.isometry import IsometrySystem, energy
+from mocapfix.solvers.lowrank import blas_single_thread, shrink, svt
 
 
 # --------------------------------------------------------------------------------------
@@ -126,17 +126,6 @@ def rig_lengths(motion: Motion, bones: np.ndarray) -> np.ndarray:
 # --------------------------------------------------------------------------------------
 # Algorithm 1
 # --------------------------------------------------------------------------------------
-def _one_blas_thread():
-    """Limit BLAS/LAPACK to one thread while the solver runs, when ``threadpoolctl`` is
-    installed. The matrices are small (3T × S SVDs, 3 × 3 blocks): a multithreaded BLAS
-    gains nothing and, on a busy machine, measured 4–30× slower (benchmarks/yang_speed.py)."""
-    try:
-        from threadpoolctl import threadpool_limits
-    except ImportError:                                   # optional: run as configured
-        return contextlib.nullcontext()
-    return threadpool_limits(1)
-
-
 def recover(X: np.ndarray, bones: np.ndarray, lengths: np.ndarray, lam: float | None = None,
             gamma: float = 100.0, mu: float = 0.01, rho: float = 0.5, eta: float = 1.3,
             wavelet: str = "db10", level: int = 2, max_iter: int = 100, tol: float = 1e-4,
@@ -169,17 +158,13 @@ def recover(X: np.ndarray, bones: np.ndarray, lengths: np.ndarray, lam: float | 
     E : (T, S, 3) sparse error on the observed samples (NaN where unobserved).
     info : iterations, final residual, isometry energy before/after (on N⁰ and A).
     """
-    with _one_blas_thread():
+    with blas_single_thread():
         return _recover(X, bones, lengths, lam, gamma, mu, rho, eta, wavelet, level, max_iter,
                         tol, init, approx_penalty, margin)
 
 
 def _recover(X, bones, lengths, lam, gamma, mu, rho, eta, wavelet, level, max_iter, tol, init,
              approx_penalty, margin):
-    # imported here so that the cleaner registry loads even while the shared kernel is
-    # being written
-    from mocapfix.solvers.lowrank import shrink, svt
-
     X = np.asarray(X, dtype=np.float64)
     T, S, _ = X.shape
     lam = 1.0 / math.sqrt(T) if lam is None else float(lam)
