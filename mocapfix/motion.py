@@ -112,6 +112,14 @@ class Motion:
             out.notes = list(self.notes)
         return out
 
+    def slice_frames(self, start: int | None = None, stop: int | None = None) -> "Motion":
+        """Frames ``start:stop`` as a new Motion (for tests and benchmarks). The writer's
+        ``source`` describes the whole file, so the slice has none."""
+        span = slice(start, stop)
+        pick = (lambda a: None if a is None else a[span].copy())
+        return self.replace(positions=self.positions[span].copy(), confidence=pick(self.confidence),
+                            channels=pick(self.channels), times=pick(self.times), source=None)
+
     def copy(self) -> "Motion":
         return self.replace()
 

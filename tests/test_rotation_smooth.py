@@ -56,3 +56,15 @@ def test_noisy_rotation_channels_are_denoised(rel):
     # 2° of white noise at 120 Hz is mostly above 6 Hz: the error must drop several-fold
     assert after < 0.4 * before, (before, after)
     assert np.array_equal(noisy.channels, _noisy_copy(clean, 2.0, 1).channels)  # input untouched
+
+
+def test_follows_position_cleaning_of_an_earlier_step():
+    """A position fix made before rotation_smooth must survive it (the channels are
+    updated from the positions first)."""
+    motion = __import__("mocapfix").read(shared("bvh/cmu_cgspeed_131_03.bvh"))
+    target = motion.positions.copy()
+    target[:, 0] += np.array([5.0, 0.0, 0.0])           # an earlier step moved the root
+    moved = motion.replace(positions=target)
+    out, _ = build("rotation_smooth", cutoff="20 Hz").apply(moved)
+    shift = out.positions[:, 0] - motion.positions[:, 0]
+    np.testing.assert_allclose(np.median(shift, axis=0), [5.0, 0.0, 0.0], atol=0.05)

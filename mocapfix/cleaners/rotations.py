@@ -12,7 +12,9 @@ Joints with one or two DOFs are unwrapped and filtered as angles; translation ch
 are filtered as they are. The filters are the shared NaN-safe kernels of
 :mod:`mocapfix.solvers.segments`.
 
-Marker data (no rotation channels) passes through unchanged.
+Marker data (no rotation channels) passes through unchanged. When an earlier step of the
+pipeline changed the positions, they are first written back into the channels, so the
+two kinds of cleaning compose.
 """
 from __future__ import annotations
 
@@ -25,6 +27,7 @@ from mocapfix.cleaners.base import Cleaner, Param
 from mocapfix.errors import ConfigError
 from mocapfix.motion import Motion
 from mocapfix.solvers import segments
+from mocapfix.writeback import solve_channels
 
 
 def continuous_quaternions(q: np.ndarray) -> np.ndarray:
@@ -70,6 +73,9 @@ class RotationSmooth(Cleaner):
         if rig is None or motion.channels is None or motion.n_frames < 3:
             return motion.copy(), {"skipped": "no rotation channels"}
         ch = motion.channels.copy()
+        if not np.allclose(rig.positions(ch), motion.positions, rtol=0, atol=1e-9, equal_nan=False):
+            # an earlier step cleaned positions: take them into the channels first
+            ch = solve_channels(rig, ch, motion.positions)
         full = [j for j in range(rig.n_joints) if len(rig.rot_axes[j]) == 3]
         partial = [c for j in range(rig.n_joints) if 0 < len(rig.rot_axes[j]) < 3
                    for c in rig.rot_columns[j]]
