@@ -53,8 +53,11 @@ def bone_length_variation(positions, bones) -> np.ndarray:
 def rms_acceleration(positions: np.ndarray, fps: float) -> np.ndarray:
     """RMS of the second difference per joint (J,), in units/s² — a jitter measure."""
     acc = np.diff(positions, n=2, axis=0) * fps * fps
-    with np.errstate(invalid="ignore"):
-        return np.sqrt(np.nanmean(np.sum(acc ** 2, axis=-1), axis=0))
+    power = np.sum(acc ** 2, axis=-1)
+    counted = np.isfinite(power).sum(axis=0)
+    total = np.nansum(power, axis=0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.sqrt(np.where(counted > 0, total / np.maximum(counted, 1), np.nan))
 
 
 def unfilled_fraction(estimate, truth) -> float:

@@ -125,8 +125,9 @@ def build_report(result: CleanResult, thresholds: dict | None = None) -> dict:
         }
         if len(bones):
             mine = bones[:, 1] == j
-            if mine.any():
+            if mine.any() and np.isfinite(var_b[mine]).any():
                 entry["bone_variation_before"] = _f(np.nanmax(var_b[mine]))
+            if mine.any() and np.isfinite(var_a[mine]).any():
                 entry["bone_variation_after"] = _f(np.nanmax(var_a[mine]))
         if result.writeback_residual is not None:
             res = result.writeback_residual[:, j] * mm

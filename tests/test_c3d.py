@@ -488,3 +488,18 @@ def test_read_does_not_modify_or_hang_on_huge_declared_counts(tmp_path):
     path.write_bytes(bytes(data))
     _assert_refused(path)
     assert path.read_bytes() == bytes(data)  # input untouched
+
+
+def test_valid_point_at_the_origin_is_not_written_as_a_gap(tmp_path):
+    """In an int16 file a filled point within half a scale step of (0, 0, 0) would be
+    stored as the vendor gap marker (0, 0, 0); the writer keeps it valid instead."""
+    motion = C.read(shared("c3d/c3dorg_s01_Eb015pi.c3d"))
+    gap = np.argwhere(motion.missing)[0]
+    pos = motion.positions.copy()
+    pos[gap[0], gap[1]] = [0.01, -0.02, 0.0]
+    out = tmp_path / "origin.c3d"
+    C.write(motion.replace(positions=pos), out)
+    back = C.read(out)
+    assert not back.missing[gap[0], gap[1]]
+    scale = abs(motion.source.scale)
+    np.testing.assert_allclose(back.positions[gap[0], gap[1]], [0.0, -scale, 0.0], atol=1e-6)

@@ -284,3 +284,18 @@ def test_swaps_real_recall_and_error(rel):
                      and abs(s["end"] - frames[-1] - 1) <= 1 for s in info["swaps"])
         assert rmse(out.positions, clean.positions) <= before / 10
     assert tried >= 5 and found / tried >= 0.8
+
+
+def test_fill_pca_rejects_fills_outside_the_capture_volume():
+    """c3d.org sample04 holds several subjects whose markers do not move as one body: PCA
+    predictions for some gaps land metres outside the lab. Those runs must be left missing
+    (and counted), never written."""
+    from mocapfix import read
+
+    motion = read(shared("c3d/c3dorg_s04_sub_labels.c3d"))
+    out, info = build("fill_pca", fill_ends=True).apply(motion)
+    observed = motion.positions[~motion.missing]
+    lo, hi = observed.min(axis=0), observed.max(axis=0)
+    filled = out.positions[motion.missing & ~out.missing]
+    assert info["filled"] > 0 and info["rejected_samples"] > 0
+    assert ((filled >= lo - 0.1 * (hi - lo)) & (filled <= hi + 0.1 * (hi - lo))).all()

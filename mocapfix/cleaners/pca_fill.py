@@ -144,6 +144,25 @@ def _refine_marker(X, missing3, observed_local, j, model, write):
         X[s:e][keep, 3 * j:3 * j + 3] = value[keep]
 
 
+def implausible_runs(filled, write, observed_points, margin: float = 0.1) -> np.ndarray:
+    """(T, J) mask of filled gap runs to reject: runs with a sample outside the capture
+    volume (the bounding box of every observed sample, grown by ``margin`` of its size on
+    each side). A PCA fill fails this way when the markers do not move as one body (two
+    subjects in one file, a marker seen too briefly to be learned): such a gap is better
+    left missing and reported than filled metres away."""
+    lo, hi = observed_points.min(axis=0), observed_points.max(axis=0)
+    pad = margin * (hi - lo)
+    outside = write & ((filled < lo - pad) | (filled > hi + pad)).any(axis=-1)
+    rejected = np.zeros_like(write)
+    if not outside.any():
+        return rejected
+    col, start, length = runs(write)
+    for c, s, n in zip(col, start, length):
+        if outside[s:s + n, c].any():
+            rejected[s:s + n, c] = True
+    return rejected
+
+
 @register
 class PCAFill(Cleaner):
     name = "fill_pca"
@@ -206,12 +225,14 @@ class PCAFill(Cleaner):
         self._refine(X, missing3, L, write, scale)
         filled_global = self._from_local(X.reshape(Tk, Jk, 3), transform)
 
+        rejected = implausible_runs(filled_global, write, sub[obs])
+        write &= ~rejected
         out = pos.copy()
         block = out[np.ix_(rows, cols)]
         block[write] = filled_global[write]
         out[np.ix_(rows, cols)] = block
         info.update(filled=int(write.sum()), iterations=it["iterations"], rank=it["rank"],
-                    converged=it["converged"])
+                    converged=it["converged"], rejected_samples=int(rejected.sum()))
         return motion.replace(positions=out), info
 
     # -- steps -------------------------------------------------------------------------

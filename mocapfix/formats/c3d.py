@@ -805,6 +805,17 @@ def _encode_xyz(values: np.ndarray, source: C3DSource, path) -> np.ndarray:
     if (np.abs(grid) > 32767).any():
         raise WriteError(path, f"coordinate beyond the int16 range of this file "
                                f"(|value| > {32767 * source.scale:g} {source.units})")
+    # A valid point within half a grid step of the origin would be stored as (0, 0, 0),
+    # which readers (ours included) take for a vendor-style gap: move it one step along
+    # its largest coordinate instead (an error of at most one scale step).
+    at_origin = ~grid.any(axis=-1)
+    if at_origin.any():
+        v = values[at_origin]
+        axis = np.argmax(np.abs(v), axis=-1)
+        step = np.where(v[np.arange(len(v)), axis] < 0, -1.0, 1.0)
+        g = grid[at_origin]
+        g[np.arange(len(v)), axis] = step
+        grid[at_origin] = g
     return grid.astype(np.int16)
 
 
