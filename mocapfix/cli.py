@@ -150,5 +150,13 @@ def clean(ctx, inputs, outdir, config_path, reports, jobs, as_json, fps, allow_i
     sys.exit(EXIT_SOME_FAILED if failed else EXIT_OK)
 
 
+def _register_bench():
+    from mocapfix.bench_cli import bench
+
+    main.add_command(bench)
+
+
+_register_bench()
+
 if __name__ == "__main__":  # pragma: no cover
     main()

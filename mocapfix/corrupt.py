@@ -95,3 +95,207 @@ def occlusion(motion: Motion, scenario: str, seed: int = 0):
     if scenario == "swap":
         return marker_swap(motion, rng)
     raise ValueError(f"unknown occlusion scenario {scenario!r} (known: {', '.join(OCCLUSION_SCENARIOS)})")
+
+
+# ---------------------------------------------------------------------------------------
+# The research papers' protocols (ALGORITHMS.md, "Corruption protocols"), used by
+# ``mocapfix bench``. Every detail a paper leaves open is fixed here and named in the
+# docstring that uses it; the README's bench section repeats the list.
+#
+# Common choices:
+# * Corruption acts on *samples* (one joint or marker at one frame, all three coordinates),
+#   never on a single coordinate: a missing sample is NaN in x, y and z (the way every
+#   reader reports a missing marker), and a noisy sample gets independent noise on x, y, z.
+# * Fractions are exact: ``round(fraction × n)`` samples are drawn without replacement from
+#   the n samples present in the clean motion (samples already missing are never counted
+#   or touched).
+# * Sizes given by the papers in cm or in ASF length units are converted to the motion's
+#   length unit with ``motion.metres_per_unit``.
+# * The same ``seed`` gives the same corruption; every function takes a
+#   ``numpy.random.Generator`` and returns (corrupted motion, touched (T, J) mask).
+
+#: the CMU/Acclaim ASF length unit (``:units length 0.45``): 1/0.45 inch in metres.
+ASF_UNIT_M = 0.0254 / 0.45
+
+
+def _cm(motion: Motion, value_cm: float) -> float:
+    return value_cm * 1e-2 / motion.metres_per_unit
+
+
+def _pick_samples(rng: np.random.Generator, eligible: np.ndarray, fraction: float) -> np.ndarray:
+    """A (T, J) mask of exactly ``round(fraction × eligible.sum())`` eligible samples."""
+    if not 0.0 <= fraction <= 1.0:
+        raise ValueError(f"fraction must be in [0, 1], got {fraction}")
+    flat = np.flatnonzero(eligible.ravel())
+    count = int(round(fraction * len(flat)))
+    mask = np.zeros(eligible.size, dtype=bool)
+    mask[rng.choice(flat, size=count, replace=False)] = True
+    return mask.reshape(eligible.shape)
+
+
+def signal_power(positions: np.ndarray) -> float:
+    """Mean power of the centred signal: the mean over all present entries of
+    (x − channel mean)², each channel (one coordinate of one joint) centred on its own
+    temporal mean. This is the signal power behind :func:`gaussian_snr`; centring makes
+    the SNR independent of where the capture volume's origin is."""
+    centred = positions - np.nanmean(positions, axis=0, keepdims=True)
+    return float(np.nanmean(centred ** 2))
+
+
+def gaussian_snr(motion: Motion, rng: np.random.Generator, snr_db: float):
+    """Feng et al. 2015 §V-A "Gaussian noise with SNR ∈ {30 … 5} dB".
+
+    Unspecified in the paper, chosen here: one noise level for the whole motion,
+    i.i.d. N(0, σ²) on every coordinate of every present sample, with
+    σ² = P / 10^(SNR/10) and P = :func:`signal_power` (the centred signal; a raw,
+    uncentred power would make the noise depend on the room's origin). The mask is every
+    present sample."""
+    pos = motion.positions.copy()
+    present = ~np.isnan(pos).any(axis=2)
+    sigma = np.sqrt(signal_power(pos) / 10.0 ** (snr_db / 10.0))
+    pos += rng.normal(0.0, sigma, size=pos.shape)
+    return motion.replace(positions=pos), present
+
+
+def uniform_outliers(motion: Motion, rng: np.random.Generator, fraction: float,
+                     half_width_cm: float = 25.0):
+    """Yang et al. 2019 §IV-A: "random noise is added to a fraction of entities …
+    uniformly distributed in the range of [−25 25] cm in each spatial dimension".
+
+    Chosen here: the fraction counts joint samples ("polluted joints"), each polluted
+    sample gets independent U(−25, 25) cm on x, y and z. Also used for the outliers of
+    Feng et al. 2015 (their outlier size is unspecified; see :data:`PROTOCOLS`)."""
+    pos = motion.positions.copy()
+    mask = _pick_samples(rng, ~np.isnan(pos).any(axis=2), fraction)
+    h = _cm(motion, half_width_cm)
+    pos[mask] += rng.uniform(-h, h, size=(int(mask.sum()), 3))
+    return motion.replace(positions=pos), mask
+
+
+def gaussian_on_fraction(motion: Motion, rng: np.random.Generator, fraction: float,
+                         sigma_asf_units: float = 2.0, eligible: np.ndarray | None = None):
+    """Feng et al. 2014 §4 "randomly added gaussian noise (σ = 2) on 30 % data", σ in
+    ASF length units (they multiply by 5.6444 to get cm): N(0, σ²) on x, y, z of exactly
+    ``round(fraction × n)`` present samples (or of the ``eligible`` ones)."""
+    pos = motion.positions.copy()
+    present = ~np.isnan(pos).any(axis=2)
+    mask = _pick_samples(rng, present if eligible is None else (present & eligible), fraction)
+    sigma = sigma_asf_units * ASF_UNIT_M / motion.metres_per_unit
+    pos[mask] += rng.normal(0.0, sigma, size=(int(mask.sum()), 3))
+    return motion.replace(positions=pos), mask
+
+
+def random_missing(motion: Motion, rng: np.random.Generator, fraction: float):
+    """Feng et al. 2014 "randomly removed 40 % data": exactly ``round(fraction × n)``
+    present samples, drawn uniformly, become NaN (whole samples, see above)."""
+    pos = motion.positions.copy()
+    mask = _pick_samples(rng, ~np.isnan(pos).any(axis=2), fraction)
+    pos[mask] = np.nan
+    return motion.replace(positions=pos), mask
+
+
+def regular_gaps(motion: Motion, rng: np.random.Generator, fraction: float = 0.30,
+                 markers: int = 10, frames: int = 60):
+    """Feng et al. 2014 "regularly removed about 30 % data wherein the number of selected
+    missing markers is fixed to 10 for each incomplete frame and each selected marker
+    misses 60 frames".
+
+    Chosen here: the timeline is cut into consecutive windows of ``frames`` frames from
+    frame 0 (the last one may be shorter); windows are taken in a random order until the
+    missing count is closest to ``fraction × T × J``; in each chosen window ``markers``
+    distinct markers, drawn at random among those not missing in the window just before,
+    are missing for the whole window. So every incomplete frame misses exactly ``markers``
+    markers, every gap is ``frames`` long (the last window may be shorter: the paper also
+    tests gaps at the end of the capture) when J >= 2 × ``markers``, and the fraction is
+    capped at ``markers / J`` (24 % on a 41-marker set). Samples already missing in the
+    clean motion stay missing but are not counted as corrupted."""
+    pos = motion.positions.copy()
+    T, J, _ = pos.shape
+    if markers > J:
+        raise ValueError(f"regular gaps need at least {markers} markers, the motion has {J}")
+    starts = np.arange(0, T, frames)
+    lengths = np.minimum(starts + frames, T) - starts
+    order = rng.permutation(len(starts))
+    cum = np.cumsum(lengths[order]) * markers
+    n_windows = int(np.argmin(np.abs(cum - fraction * T * J))) + 1
+    mask = np.zeros((T, J), dtype=bool)
+    previous, prev_w = np.zeros(J, dtype=bool), -2
+    for w in np.sort(order[:n_windows]):
+        # a marker missing in the window just before is not drawn again, so that every
+        # gap is one window long (possible when J >= 2 × markers; else gaps may merge)
+        pool = np.flatnonzero(~previous) if w == prev_w + 1 else np.arange(J)
+        if len(pool) < markers:
+            pool = np.arange(J)
+        chosen = rng.choice(pool, size=markers, replace=False)
+        mask[starts[w]:starts[w] + lengths[w], chosen] = True
+        previous = np.zeros(J, dtype=bool)
+        previous[chosen] = True
+        prev_w = w
+    mask &= ~np.isnan(pos).any(axis=2)
+    pos[mask] = np.nan
+    return motion.replace(positions=pos), mask
+
+
+def _feng2015(motion, rng, snr_db=None, outliers=None):
+    touched = np.zeros(motion.positions.shape[:2], dtype=bool)
+    if snr_db is not None:
+        motion, m = gaussian_snr(motion, rng, snr_db)
+        touched |= m
+    if outliers is not None:
+        motion, m = uniform_outliers(motion, rng, outliers)
+        touched |= m
+    return motion, touched
+
+
+def _feng2014(motion, rng, kind):
+    if kind == "random-missing":
+        return random_missing(motion, rng, 0.40)
+    if kind == "regular-gaps":
+        return regular_gaps(motion, rng, 0.30, 10, 60)
+    if kind == "noise":
+        return gaussian_on_fraction(motion, rng, 0.30, 2.0)
+    if kind == "mixed":
+        gapped, m1 = random_missing(motion, rng, 0.30)
+        noisy, m2 = gaussian_on_fraction(gapped, rng, 0.30, 2.0)
+        return noisy, m1 | m2
+    raise ValueError(kind)
+
+
+#: protocol → {setting name: keyword arguments of the protocol's corruption}.
+PROTOCOLS: dict[str, dict[str, dict]] = {
+    # Feng et al. 2015, §V-A and Tables I–III: SNR noise, outliers (size unspecified in
+    # the paper; chosen: U(−25, 25) cm per coordinate as in Yang 2019), and mixed =
+    # SNR noise on every sample, then outliers on top of it.
+    "feng2015": {
+        **{f"snr{s}": {"snr_db": s} for s in (30, 25, 20, 15, 10, 5)},
+        **{f"out{p}": {"outliers": p / 100} for p in (5, 10, 15, 20, 25, 30)},
+        **{f"snr{s}+out{p}": {"snr_db": s, "outliers": p / 100}
+           for s, p in ((20, 10), (20, 20), (10, 10), (10, 20))},
+    },
+    # Yang et al. 2019, §IV-A and Table II: 5/10/15/20/80 % samples, U(−25, 25) cm.
+    "yang2019": {f"{p}%": {"fraction": p / 100} for p in (5, 10, 15, 20, 80)},
+    # Feng et al. 2014, §4 (results only as bar charts, Figs. 6–9).
+    "feng2014": {k: {"kind": k} for k in ("random-missing", "regular-gaps", "noise", "mixed")},
+    # Realistic optical occlusions (this module's ``occlusion``).
+    "occlusion": {s: {"scenario": s} for s in OCCLUSION_SCENARIOS},
+}
+
+
+def apply_protocol(motion: Motion, protocol: str, setting: str, seed: int = 0):
+    """Corrupt ``motion`` with one setting of one protocol; returns (motion, mask).
+
+    ``seed`` alone fixes the corruption (``numpy.random.default_rng(seed)``)."""
+    if protocol not in PROTOCOLS:
+        raise ValueError(f"unknown protocol {protocol!r} (known: {', '.join(PROTOCOLS)})")
+    settings = PROTOCOLS[protocol]
+    if setting not in settings:
+        raise ValueError(f"unknown {protocol} setting {setting!r} (known: {', '.join(settings)})")
+    kw = settings[setting]
+    if protocol == "occlusion":
+        return occlusion(motion, kw["scenario"], seed)
+    rng = np.random.default_rng(seed)
+    if protocol == "feng2015":
+        return _feng2015(motion, rng, **kw)
+    if protocol == "yang2019":
+        return uniform_outliers(motion, rng, kw["fraction"], 25.0)
+    return _feng2014(motion, rng, kw["kind"])

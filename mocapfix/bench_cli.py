@@ -1,0 +1,76 @@
+"""The ``mocapfix bench`` command (registered by :mod:`mocapfix.cli` with
+``main.add_command(bench)``). Thin: parses options and calls :func:`mocapfix.bench.run`."""
+from __future__ import annotations
+
+import sys
+
+import click
+
+from mocapfix.errors import MocapfixError
+
+EXIT_USAGE = 2
+
+
+def _split(value: str | None) -> list[str] | None:
+    if value is None:
+        return None
+    items = [v.strip() for v in value.split(",") if v.strip()]
+    if not items:
+        raise click.BadParameter("give at least one name")
+    return items
+
+
+def _debug(ctx) -> bool:
+    root = ctx.find_root()
+    return bool(isinstance(root.obj, dict) and root.obj.get("debug"))
+
+
+@click.command("bench")
+@click.argument("clean_files", nargs=-1, required=True, type=click.Path(dir_okay=False))
+@click.option("--protocol", required=True,
+              type=click.Choice(["feng2015", "yang2019", "feng2014", "occlusion"]),
+              help="Corruption protocol (see the README, 'Benchmarks').")
+@click.option("--methods", default=None,
+              help="Comma-separated registered cleaners and/or baselines (none, "
+                   "linear+gaussian, pca+butterworth). Default: every registered cleaner, "
+                   "unless --configs is given. Baselines are always included.")
+@click.option("--configs", default=None,
+              help="Comma-separated YAML pipeline configs, each benchmarked as one method.")
+@click.option("--seeds", default=3, show_default=True, type=click.IntRange(1, 1000),
+              help="Number of seeds (0 … N−1); the same corruption is used for every method.")
+@click.option("--settings", default=None,
+              help="Comma-separated subset of the protocol's settings (default: all).")
+@click.option("--json", "json_out", type=click.Path(dir_okay=False), default=None,
+              help="Write every run and the summary as JSON.")
+@click.option("--markdown", "md_out", type=click.Path(dir_okay=False), default=None,
+              help="Write the Markdown tables to this file.")
+@click.option("--per-file", is_flag=True, help="Also tabulate each file separately.")
+@click.option("--quiet", "-q", is_flag=True, help="Do not print the tables or progress.")
+@click.pass_context
+def bench(ctx, clean_files, protocol, methods, configs, seeds, settings, json_out, md_out,
+          per_file, quiet):
+    """Corrupt each CLEAN_FILE with a seeded PROTOCOL, clean it with each method and
+    print error tables against the clean data (mean ± std over seeds, seconds per file)."""
+    from mocapfix import bench as bench_lib
+    from mocapfix.fileio import atomic_write_text
+
+    try:
+        method_list, notes = bench_lib.resolve_methods(_split(methods), _split(configs))
+        progress = None if quiet else (lambda msg: click.echo(f"bench: {msg}", err=True))
+        for n in notes:
+            if not quiet:
+                click.echo(f"bench: note: {n}", err=True)
+        result = bench_lib.run(list(clean_files), protocol, method_list, seeds=seeds,
+                               settings=_split(settings), notes=notes, progress=progress)
+        markdown = result.to_markdown(per_file=per_file)
+        if json_out:
+            atomic_write_text(json_out, result.to_json(per_file=per_file) + "\n")
+        if md_out:
+            atomic_write_text(md_out, markdown)
+    except MocapfixError as exc:
+        if _debug(ctx):
+            raise
+        click.echo(f"mocapfix: error: {exc}", err=True)
+        sys.exit(EXIT_USAGE)
+    if not quiet:
+        click.echo(markdown)
