@@ -197,6 +197,7 @@ def _recover(X, bones, lengths, lam, gamma, mu, rho, eta, wavelet, level, max_it
     Z2 = np.zeros_like(D)
     Z3 = np.zeros_like(D)
     r1 = r2 = r3 = float(rho)
+    rho_max = 1e8 * float(rho)
     WA = W(A)
     iso_before = energy(N, bones, lengths) if use_iso else 0.0
     it, res = 0, float("inf")
@@ -238,7 +239,10 @@ def _recover(X, bones, lengths, lam, gamma, mu, rho, eta, wavelet, level, max_it
         Z1 += r1 * R1
         Z2 += r2 * R2
         Z3 += r3 * R3
-        r1, r2, r3 = eta * r1, eta * r2, eta * r3
+        # penalties grow geometrically (Algorithm 1) but are capped, as in inexact-ALM
+        # practice (Lin, Chen & Ma 2010): past ~1e8·ρ0 the 3×3 Gauss–Newton systems
+        # overflow (ρ³ terms) while nothing is gained in accuracy
+        r1, r2, r3 = (min(eta * r, rho_max) for r in (r1, r2, r3))
         res = max(np.linalg.norm(R1), np.linalg.norm(R2), np.linalg.norm(R3)) / scale
         if res < tol:
             break
