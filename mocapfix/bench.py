@@ -58,7 +58,8 @@ from mocapfix.pipeline import Pipeline, load_config, parse_config
 BASELINES: dict[str, dict | None] = {
     "none": None,
     "linear+gaussian": {"version": 1, "pipeline": [
-        {"cleaner": "fill", "method": "linear"}, {"cleaner": "gaussian"}]},
+        # every interior gap filled, as the everyday baseline does (no max_gap)
+        {"cleaner": "fill", "method": "linear", "max_gap": None}, {"cleaner": "gaussian"}]},
     "pca+butterworth": {"version": 1, "pipeline": [
         {"cleaner": "fill_pca"}, {"cleaner": "butterworth", "cutoff": "6 Hz"}]},
 }

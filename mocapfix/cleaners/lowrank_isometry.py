@@ -204,7 +204,12 @@ def _recover(X, bones, lengths, lam, gamma, mu, rho, eta, wavelet, level, max_it
     for it in range(1, max_iter + 1):
         # line 4–5: Gauss–Newton step for N (per-frame systems, batched)
         if use_iso:
-            N += system.step(N, A, Z2, lengths, gamma, r2)
+            with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+                delta = system.step(N, A, Z2, lengths, gamma, r2)
+            # a frame whose Gauss–Newton system degenerated (overflow under extreme
+            # noise) is not moved by this step rather than poisoned with inf/NaN
+            delta[~np.isfinite(delta)] = 0.0
+            N += delta
         else:
             N = A - Z2 / r2
         # line 6: wavelet coefficients
