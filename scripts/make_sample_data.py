@@ -248,7 +248,7 @@ KINECT_V2_FROM = [  # Kinect v2 joint order → generator joint (Kinect's left i
     "Hips", "Spine", "Neck", "Head", "LeftShoulder", "LeftElbow", "LeftWrist", "LeftHandEnd",
     "RightShoulder", "RightElbow", "RightWrist", "RightHandEnd", "LeftHip", "LeftKnee",
     "LeftAnkle", "LeftToe", "RightHip", "RightKnee", "RightAnkle", "RightToe", "Chest",
-    "LeftHandEnd", "LeftWrist", "RightHandEnd", "RightWrist",
+    "LeftHandEnd", "LeftWrist", "RightHandEnd", "RightWrist",   # tips/thumbs: placed below
 ]
 
 
@@ -260,6 +260,11 @@ def write_kinect(path: Path, rng) -> None:
     ch[:, 3:6] += np.array([0.0, 0.0, 180.0])                   # facing the camera
     pos = build_rig().positions(ch) / 100.0                     # metres
     xyz = np.stack([pos[:, NAMES.index(n)] for n in KINECT_V2_FROM], axis=1)
+    # hand tips beyond the hands, thumbs beside them (the walker has no fingers)
+    for hand, wrist, tip, thumb, side in ((7, 6, 21, 22, 1.0), (11, 10, 23, 24, -1.0)):
+        along = xyz[:, hand] - xyz[:, wrist]
+        xyz[:, tip] = xyz[:, hand] + 0.8 * along
+        xyz[:, thumb] = xyz[:, wrist] + 0.5 * along + np.array([0.03 * side, 0.0, 0.02])
     xyz = xyz + np.array([0.05, -0.95, 2.6])
     xyz += rng.normal(0, 0.006, xyz.shape)                      # depth-sensor jitter
     state = np.full((T, 25), 2)
