@@ -65,6 +65,13 @@ def euler_to_matrix(axes: str, angles: np.ndarray) -> np.ndarray:
     return out
 
 
+def nearest_branch(angles: np.ndarray, reference: np.ndarray, degrees: bool = True) -> np.ndarray:
+    """Shift each angle by whole turns to lie nearest ``reference`` (same shape), so that a
+    re-decomposed rotation keeps the file's Euler branch and never jumps by 360°."""
+    turn = 360.0 if degrees else 2.0 * np.pi
+    return angles - turn * np.round((angles - reference) / turn)
+
+
 def matrix_to_euler(axes: str, matrices: np.ndarray) -> np.ndarray:
     """Inverse of :func:`euler_to_matrix` for three distinct axes (Tait–Bryan).
 

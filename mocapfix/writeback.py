@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from mocapfix.kinematics import Rig, euler_to_matrix, matrix_to_euler
+from mocapfix.kinematics import Rig, euler_to_matrix, matrix_to_euler, nearest_branch
 
 _AXES = "XYZ"
 
@@ -114,11 +114,6 @@ def _refine_restricted(axes, ang, base, rest, w, weights, iterations: int = 8):
     return np.where(ok[:, None], a, ang)
 
 
-def _unwrap_to(new_deg: np.ndarray, old_deg: np.ndarray) -> np.ndarray:
-    """Shift each angle by a multiple of 360° to lie nearest the original value."""
-    return new_deg - 360.0 * np.round((new_deg - old_deg) / 360.0)
-
-
 def _carried_bones(rig: Rig):
     """For each joint with rotation DOFs, the bones whose direction its rotation sets, as
     (bone joint k, P) with P the constant rotation taking k's local vector into the
@@ -200,10 +195,7 @@ def solve_channels(rig: Rig, channels: np.ndarray, target: np.ndarray,
                 if len(axes) < 3:
                     ang = _refine_restricted(axes, ang, base[valid], rest[valid], w[valid], lengths)
                 old = ang_old[valid]
-                if rig.degrees:
-                    ang = _unwrap_to(np.rad2deg(ang), old)
-                else:
-                    ang = ang - 2 * np.pi * np.round((ang - old) / (2 * np.pi))
+                ang = nearest_branch(np.rad2deg(ang) if rig.degrees else ang, old, rig.degrees)
                 ang = np.where(np.abs(ang - old) < keep_tol, old, ang)
                 out[np.flatnonzero(valid)[:, None], cols] = ang
             current = base @ euler_to_matrix(axes, to_rad(out[:, cols]))

@@ -76,7 +76,7 @@ def body_frame(positions, observed, rounds: int = 50, rtol: float = 1e-10):
     size = max(float(np.sqrt(np.mean(ref ** 2))), 1e-300)
     for _ in range(rounds):
         R, cs, ct = kabsch(src, np.broadcast_to(ref, src.shape), w)
-        local = (src - cs[:, None]) @ np.swapaxes(R, 1, 2) + ct[:, None]
+        local = to_local(src, (R, cs, ct))
         local[~observed] = np.nan
         new = np.nan_to_num(np.nanmean(local, axis=0))
         moved = float(np.max(np.abs(new - ref)))
@@ -84,6 +84,12 @@ def body_frame(positions, observed, rounds: int = 50, rtol: float = 1e-10):
         if moved <= rtol * size:
             break
     return local, (R, cs, ct)
+
+
+def to_local(positions, transform):
+    """Global (T, J, 3) positions into the body frame of :func:`body_frame`."""
+    R, cs, ct = transform
+    return (positions - cs[:, None]) @ np.swapaxes(R, 1, 2) + ct[:, None]
 
 
 def to_global(local, transform):

@@ -25,6 +25,7 @@ from scipy.spatial.transform import Rotation
 from mocapfix.cleaners import register
 from mocapfix.cleaners.base import Cleaner, Param
 from mocapfix.errors import ConfigError
+from mocapfix.kinematics import nearest_branch
 from mocapfix.motion import Motion
 from mocapfix.solvers import segments
 from mocapfix.writeback import solve_channels
@@ -36,11 +37,6 @@ def continuous_quaternions(q: np.ndarray) -> np.ndarray:
     dots = np.einsum("ti,ti->t", q[1:], q[:-1])
     flips = np.concatenate([[1.0], np.cumprod(np.where(dots < 0, -1.0, 1.0))])
     return q * flips[:, None]
-
-
-def nearest_branch(angles_deg: np.ndarray, reference_deg: np.ndarray) -> np.ndarray:
-    """Shift angles by multiples of 360° to lie nearest the reference."""
-    return angles_deg - 360.0 * np.round((angles_deg - reference_deg) / 360.0)
 
 
 @register
@@ -92,11 +88,11 @@ class RotationSmooth(Cleaner):
                 q = q / np.linalg.norm(q, axis=1, keepdims=True)
                 cols = rig.rot_columns[j]
                 ang = Rotation.from_quat(q).as_euler(rig.rot_axes[j].upper(), degrees=rig.degrees)
-                ch[:, cols] = ang - unit * np.round((ang - ch[:, cols]) / unit)
+                ch[:, cols] = nearest_branch(ang, ch[:, cols], rig.degrees)
         if partial:
             unwrapped = np.unwrap(ch[:, partial], period=unit, axis=0)
             smooth = self._filter(unwrapped, motion)
-            ch[:, partial] = smooth - unit * np.round((smooth - ch[:, partial]) / unit)
+            ch[:, partial] = nearest_branch(smooth, ch[:, partial], rig.degrees)
         trans = rig.trans_columns[rig.trans_columns >= 0]
         if self["translations"] and trans.size:
             ch[:, trans] = self._filter(ch[:, trans], motion)

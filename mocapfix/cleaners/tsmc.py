@@ -47,7 +47,7 @@ import numpy as np
 from mocapfix.cleaners import register
 from mocapfix.cleaners.base import Cleaner, Param
 from mocapfix.motion import Motion
-from mocapfix.cleaners.pca_fill import body_frame, to_global
+from mocapfix.cleaners.pca_fill import body_frame, to_global, to_local
 from mocapfix.solvers import dct
 from mocapfix.solvers.lowrank import shrink, svt
 from mocapfix.solvers.segments import interpolate_gaps
@@ -259,9 +259,7 @@ def moving_reference(pos: np.ndarray, observed: np.ndarray, hold: float = 0.0):
     if (use.sum(axis=1) < 3).any():
         return pos, None
     _, transform = body_frame(bridged, use)
-    R, cs, ct = transform
-    src = np.where(observed[..., None], pos, 0.0)
-    local = np.einsum("tab,tjb->tja", R, src - cs[:, None]) + ct[:, None]
+    local = to_local(np.where(observed[..., None], pos, 0.0), transform)
     local[~observed] = np.nan
     return local, (lambda loc: to_global(loc, transform))
 
