@@ -180,6 +180,31 @@ class IsometrySystem:
             rhs -= Z
         return self.solve(g, rhs, gamma, rho)
 
+    def limit_step(self, N: np.ndarray, delta: np.ndarray, lengths) -> tuple[np.ndarray, int]:
+        """``delta`` (S, 3, T) scaled down, frame by frame, so that no bone vector
+        ``d = n_i − n_j`` changes by more than ``||d|| + l``; returns (step, frames scaled).
+
+        Every solution of a bone's constraint ``||d|| = l`` lies within ``||d|| + l`` of
+        the current ``d``, so a step that moves ``d`` farther overshoots all of them. The
+        Gauss–Newton step of :meth:`step` does exactly that when a bone is compressed
+        below a third of its length: linearising ``||d||² − l²`` at a short ``d`` gives a
+        step of about ``(l² − ||d||²) / (2 ||d||)`` along ``d``, unbounded as ``||d|| → 0``
+        (the bone's direction is then undefined), and the only damping is ρ — steps of
+        metres for bones of centimetres under heavy noise, which the ALM then amplifies.
+        The frame's whole step is scaled (its direction kept), as a damped Gauss–Newton
+        step; frames where the bound holds are returned unchanged."""
+        d = bone_vectors(N, self.bones)
+        dd = bone_vectors(delta, self.bones)
+        bound = np.sqrt(np.einsum("bxt,bxt->bt", d, d)) + np.sqrt(_lengths2(lengths))
+        move = np.sqrt(np.einsum("bxt,bxt->bt", dd, dd))
+        over = move > bound
+        if not over.any():
+            return delta, 0
+        ratio = np.ones_like(move)
+        ratio[over] = bound[over] / move[over]
+        alpha = ratio.min(axis=0)                                        # (T,)
+        return delta * alpha, int(np.count_nonzero(alpha < 1.0))
+
     # -- dense (Woodbury) -----------------------------------------------------------------
     def _solve_dense(self, g, rhs, gamma, rho):
         B = len(self.bones)
