@@ -64,6 +64,24 @@ BASELINES: dict[str, dict | None] = {
         {"cleaner": "fill_pca"}, {"cleaner": "butterworth", "cutoff": "6 Hz"}]},
 }
 
+#: further named pipelines, run when asked for with ``--methods`` (issue 6's comparison:
+#: interpolation, PCA fill, plain low-rank completion, TSMC as in the paper and as shipped).
+NAMED: dict[str, dict] = {
+    "linear": {"version": 1, "pipeline": [
+        {"cleaner": "fill", "method": "linear", "max_gap": None}]},
+    "spline": {"version": 1, "pipeline": [
+        {"cleaner": "fill", "method": "spline", "max_gap": None}]},
+    # nuclear-norm completion of the centred channels alone: no smoothness term, no sparse
+    # errors to speak of, no prior, no bridging, global frame (the paper's SVT baseline),
+    # solved to a tight tolerance (a baseline gets its best shot)
+    "svt": {"version": 1, "pipeline": [
+        {"cleaner": "tsmc", "prior": "none", "beta": 0.0, "alpha": 1e6, "frame": "global",
+         "bridge": None, "observed": "keep", "tol": 1e-5, "max_iter": 2000}]},
+    "trust+tsmc(paper)": {"version": 1, "pipeline": [
+        {"cleaner": "trust"}, {"cleaner": "tsmc", "prior": "none"}]},
+    "trust+tsmc": {"version": 1, "pipeline": [{"cleaner": "trust"}, {"cleaner": "tsmc"}]},
+}
+
 #: per protocol: (metric key, header, decimals); the first one is the headline metric.
 METRICS: dict[str, list[tuple[str, str, int]]] = {
     "feng2015": [("rmse_cm", "RMSE cm", 2)],
@@ -145,9 +163,13 @@ def resolve_methods(names=None, configs=None) -> tuple[list[Method], list[str]]:
     for name in names or []:
         if name in BASELINES:
             continue
+        if name in NAMED:
+            methods.append(Method(name, "baseline", parse_config(NAMED[name], f"method {name}")))
+            continue
         if name not in reg:
             raise ConfigError(f"unknown method {name!r}: not a registered cleaner "
-                              f"({', '.join(reg)}) nor a baseline ({', '.join(BASELINES)})")
+                              f"({', '.join(reg)}), a baseline ({', '.join(BASELINES)}) nor a "
+                              f"named pipeline ({', '.join(NAMED)})")
         methods.append(Method(name, "cleaner", parse_config(
             {"version": 1, "pipeline": [{"cleaner": name}]}, f"method {name}")))
     for path in configs or []:

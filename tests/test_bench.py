@@ -222,8 +222,35 @@ def test_resolve_methods_baselines_and_unknown():
     names = [m.name for m in methods]
     assert names[:2] == ["none", "linear+gaussian"] and "gaussian" in names
     assert ("pca+butterworth" in names) or any("pca+butterworth" in n for n in notes)
-    with pytest.raises(ConfigError):
+    with pytest.raises(ConfigError, match="named pipeline"):
         bench.resolve_methods(["no_such_cleaner"])
+
+
+def test_named_svt_baseline_is_plain_low_rank_completion():
+    """``svt`` (the TSMC paper's comparison) is matrix completion: on an exactly rank-2,
+    temporally rough motion with 20 % of the samples missing at random it recovers them
+    (interpolation cannot), and leaves the observed samples as they are."""
+    from mocapfix.motion import Motion
+
+    methods, _ = bench.resolve_methods(["svt", "trust+tsmc", "linear", "spline"])
+    named = {m.name: m for m in methods}
+    assert {"svt", "trust+tsmc", "linear", "spline"} <= set(named)
+    rng = np.random.default_rng(0)
+    pos = (rng.normal(size=(400, 2)) @ rng.normal(0, 100, (2, 60))).reshape(400, 20, 3) + 500.0
+    truth = Motion(pos, [f"M{j}" for j in range(20)], 100.0, format="c3d")
+    holed = pos.copy()
+    holed[rng.random((400, 20)) < 0.2] = np.nan
+    gap = np.isnan(holed).any(axis=2)
+    out, _ = named["svt"].run(truth.replace(positions=holed))
+    lin, _ = named["linear"].run(truth.replace(positions=holed))
+    assert np.array_equal(out.positions[~gap], pos[~gap])
+    filled = gap & ~np.isnan(out.positions).any(axis=2)
+    assert filled.sum() > 0.99 * gap.sum()      # frames with < half the markers are left
+    err = np.linalg.norm(out.positions - pos, axis=2)[filled]
+    lin_err = np.linalg.norm(lin.positions - pos, axis=2)[filled]
+    # measured: svt RMSE 0.03 mm (max 0.5), linear 227 mm on this ±880 mm motion
+    assert np.sqrt(np.mean(err ** 2)) < 0.1 and err.max() < 2.0
+    assert np.sqrt(np.mean(err ** 2)) < 0.01 * np.sqrt(np.nanmean(lin_err ** 2))
 
 
 # -- CLI ---------------------------------------------------------------------------------

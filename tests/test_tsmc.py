@@ -174,12 +174,13 @@ def test_trust_uses_reader_confidence():
     assert info["untrusted"] == 5
 
 
-def test_tsmc_fills_gaps_and_the_end_without_flattening():
+@pytest.mark.parametrize("prior", ["pca", "none"])
+def test_tsmc_fills_gaps_and_the_end_without_flattening(prior):
     m = _cv_markers()
     pos = m.positions.copy()
     pos[60:140, 0] = np.nan           # 0.8 s interior gap
     pos[-40:, 3] = np.nan             # trailing gap: must follow the motion, not stop
-    out, info = build("tsmc").apply(m.replace(positions=pos))
+    out, info = build("tsmc", prior=prior).apply(m.replace(positions=pos))
     err = np.linalg.norm(out.positions - m.positions, axis=2)
     assert np.isfinite(out.positions).all()
     assert err[60:140, 0].max() < 5.0, err[60:140, 0].max()
@@ -214,21 +215,30 @@ WITH_PCA = [("spikes", {}), ("fill_pca", {}), ("fill", {"method": "pchip", "max_
             ("butterworth", {"cutoff": "12 Hz"})]
 
 # rmse(trust+tsmc) / rmse(best of CLASSICAL) and / rmse(WITH_PCA), seed 0 (85_02 full,
-# HDM05 frames 0–1500). Measured (issue 6 report):     vs interpolation   vs PCA pipeline
-#   85_02  gaps 36.9 mm                                  0.33               1.69
-#   85_02  noise 1.59 mm                                 0.97               0.94
-#   85_02  mixed 23.2 mm                                 0.32               1.81
-#   HDM05  gaps 6.37 mm                                  0.19               3.64
-#   HDM05  noise 1.27 mm                                 0.87               0.86
-#   HDM05  mixed 3.33 mm                                 0.15               1.35
-# trust+tsmc beats every interpolation pipeline, and the PCA pipeline only on noise: the
-# bounds below (measurement + margin) pin that down, including the loss to fill_pca.
+# HDM05 frames 0–1500), shipped defaults (prior: pca). Measured (issue 6 report):
+#                                                      vs interpolation   vs PCA pipeline
+#   85_02  gaps 21.28 mm                                 0.19               0.98
+#   85_02  noise 1.594 mm                                0.97               0.94
+#   85_02  mixed 12.48 mm                                0.17               0.96
+#   85_02  swap 0.000 mm (swaps first in both)           tie (both 0)       0.00
+#   HDM05  gaps 1.270 mm                                 0.04               0.73
+#   HDM05  noise 1.270 mm                                0.88               0.86
+#   HDM05  mixed 1.804 mm                                0.08               0.73
+#   HDM05  swap 0.000 mm (swaps first in both)           tie (both 0)       0.00
+# Seeds 1 and 2 (not in the test): 85_02 gaps 0.94 / 0.98, mixed 1.00 / 0.98 against the
+# PCA pipeline, HDM05 0.72–0.90. With the paper's model alone (prior: none) the ratios to
+# the PCA pipeline were 1.7–3.6 on gaps and mixed. A marker swap is not an outlier to a
+# smoother or a low-rank model: neither pipeline repairs one by itself (trust+tsmc 1.01 /
+# 1.09 of the classical error), so both get the ``swaps`` cleaner first in that scenario;
+# the repaired capture is then exact, and keeping trusted samples untouched ties with the
+# PCHIP-only pipeline (nothing to fill) and beats the ones that smooth.
 BOUNDS = {
-    ("cmu_85_02.c3d", "gaps"): (0.45, 2.0), ("cmu_85_02.c3d", "noise"): (1.0, 1.0),
-    ("cmu_85_02.c3d", "mixed"): (0.45, 2.2),
-    ("hdm05_HDM_mm_01-02_03_120.c3d", "gaps"): (0.3, 4.5),
+    ("cmu_85_02.c3d", "gaps"): (0.3, 1.0), ("cmu_85_02.c3d", "noise"): (1.0, 1.0),
+    ("cmu_85_02.c3d", "mixed"): (0.3, 1.0), ("cmu_85_02.c3d", "swap"): (1.0, 0.5),
+    ("hdm05_HDM_mm_01-02_03_120.c3d", "gaps"): (0.1, 0.85),
     ("hdm05_HDM_mm_01-02_03_120.c3d", "noise"): (0.95, 0.95),
-    ("hdm05_HDM_mm_01-02_03_120.c3d", "mixed"): (0.25, 1.7),
+    ("hdm05_HDM_mm_01-02_03_120.c3d", "mixed"): (0.15, 0.85),
+    ("hdm05_HDM_mm_01-02_03_120.c3d", "swap"): (1.0, 0.5),
 }
 
 
@@ -238,7 +248,7 @@ def _run(steps, motion):
     return motion
 
 
-@pytest.mark.parametrize("scenario", ["gaps", "noise", "mixed"])
+@pytest.mark.parametrize("scenario", ["gaps", "noise", "mixed", "swap"])
 @pytest.mark.parametrize("capture", ["cmu_85_02.c3d", "hdm05_HDM_mm_01-02_03_120.c3d"])
 def test_against_classical_on_occlusion(capture, scenario):
     import mocapfix
@@ -249,13 +259,80 @@ def test_against_classical_on_occlusion(capture, scenario):
     if truth.n_frames > 1500:
         truth = truth.replace(positions=truth.positions[:1500], confidence=None)
     bad, _ = occlusion(truth, scenario, seed=0)
-    ours = _run([("trust", {}), ("tsmc", {})], bad)
+    first = [("swaps", {})] if scenario == "swap" else []
+    ours = _run(first + [("trust", {}), ("tsmc", {})], bad)
     assert not np.isnan(ours.positions).any()
     mine = rmse(ours.positions, truth.positions)
-    best = min(rmse(_run(steps, bad).positions, truth.positions) for steps in CLASSICAL.values())
-    pca = rmse(_run(WITH_PCA, bad).positions, truth.positions)
+    best = min(rmse(_run(first + steps, bad).positions, truth.positions)
+               for steps in CLASSICAL.values())
+    pca = rmse(_run(first + WITH_PCA, bad).positions, truth.positions)
     print(f"{capture} {scenario}: trust+tsmc {mine:.3f} best interpolation {best:.3f} "
-          f"({mine / best:.2f}) pca {pca:.3f} ({mine / pca:.2f})")
+          f"pca {pca:.3f}")
     lim_best, lim_pca = BOUNDS[(capture, scenario)]
-    assert mine < lim_best * best, (mine, best)
+    tie = 1e-9 * truth.metres_per_unit ** -1          # a nanometre: both exact
+    assert mine < lim_best * best or (mine <= tie and best <= tie), (mine, best)
     assert mine < lim_pca * pca, (mine, pca)
+
+
+def test_leave_one_marker_out_residual_is_the_conditional_mean():
+    """The precision-matrix identity x_b − E[x_b | rest] = Λ_bb⁻¹ (Λ(x − μ))_b against the
+    direct Gaussian conditional mean (PPCA posterior) for every marker."""
+    from mocapfix.solvers.lowrank import conditional_mean, leave_block_out_residual, ppca_fit
+
+    rng = np.random.default_rng(3)
+    X = rng.normal(size=(80, 4)) @ rng.normal(size=(4, 15)) + 0.05 * rng.normal(size=(80, 15))
+    mean, W, sigma2, k = ppca_fit(X, 0.95)
+    assert 0 < k < 15 and sigma2 > 0
+    R = leave_block_out_residual(X, mean, W, sigma2)
+    for b in range(5):
+        missing = np.zeros(15, bool)
+        missing[3 * b:3 * b + 3] = True
+        direct = conditional_mean(X, missing, mean, W, sigma2)
+        assert np.max(np.abs((X - R)[:, missing] - direct)) < 1e-10
+
+
+def test_clean_channels_with_long_gaps_keep_their_samples():
+    """Observed samples of a clean capture stay bit-identical even when the fill of a long
+    gap is poor: the noise decision looks at the measured samples (bridged linearly), not
+    at the model's fill (it once smoothed such channels, moving samples by 30 mm)."""
+    rng = np.random.default_rng(0)
+    t = np.arange(400) / 100.0
+    basis = np.stack([np.sin(2.1 * t), np.cos(0.7 * t)], axis=1)
+    pos = (basis @ rng.normal(0, 100, (2, 30))).reshape(400, 10, 3) + 500.0
+    holed = pos.copy()
+    for j, start in ((1, 50), (4, 150), (7, 260)):
+        holed[start:start + 120, j] = np.nan
+    m = Motion(holed, [f"M{j}" for j in range(10)], 100.0, format="c3d")
+    flagged, tinfo = build("trust").apply(m)
+    out, info = build("tsmc").apply(flagged)
+    observed = ~np.isnan(holed).any(axis=2)
+    assert tinfo["untrusted"] == 0
+    assert np.array_equal(out.positions[observed], pos[observed])
+    assert info["smoothed_channels"] == 0 and not np.isnan(out.positions).any()
+
+
+def test_prefill_and_fast_padding_known_answers():
+    x = np.array([[np.nan, 1.0, np.nan],
+                  [2.0, np.nan, np.nan],
+                  [np.nan, np.nan, np.nan],
+                  [8.0, 4.0, np.nan],
+                  [np.nan, np.nan, np.nan]])
+    expected = np.array([[2.0, 1.0, 0.0],      # leading gap held, empty column 0
+                         [2.0, 2.0, 0.0],
+                         [5.0, 3.0, 0.0],      # interior gaps linear
+                         [8.0, 4.0, 0.0],
+                         [8.0, 4.0, 0.0]])     # trailing gap held
+    assert np.array_equal(dct.prefill(x), expected)
+    for n, pad in ((4500, 60), (4600, 0), (241, 50), (7, 3)):
+        p = dct.fast_pad(n, pad)
+        m = n + 2 * p
+        for f in (2, 3, 5):
+            while m % f == 0:
+                m //= f
+        assert p >= pad and m == 1
+        for q in range(pad, p):                  # the smallest such padding
+            r = n + 2 * q
+            for f in (2, 3, 5):
+                while r % f == 0:
+                    r //= f
+            assert r != 1

@@ -28,7 +28,7 @@ from __future__ import annotations
 import numpy as np
 from scipy import fft
 
-from mocapfix.solvers.segments import extend, interpolate_gaps
+from mocapfix.solvers.segments import extend
 
 WORKERS = 1  # scipy.fft threads (2 was slower with other work on a 2-core machine)
 
@@ -90,8 +90,9 @@ def penalty_solve(z: np.ndarray, beta: float, lam: float, axis: int = 0) -> np.n
 LOG_MU_GRID = np.arange(-3.0, 10.01, 0.25)
 
 
-def gcv_mu(y: np.ndarray, n_eff: np.ndarray | None = None,
-           log_mu: np.ndarray = LOG_MU_GRID) -> tuple[np.ndarray, np.ndarray]:
+def gcv_mu(y: np.ndarray | None, n_eff: np.ndarray | None = None,
+           log_mu: np.ndarray = LOG_MU_GRID,
+           spectrum: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Per-channel smoothing parameter by generalised cross-validation (Craven & Wahba
     1979; Feng 2014 eqs. 16–18; Garcia 2010 eq. 9) for the smoother :func:`smoother` on the
     complete (T, C) data ``y``.
@@ -106,14 +107,17 @@ def gcv_mu(y: np.ndarray, n_eff: np.ndarray | None = None,
     ``n_eff`` (C,) is the number of observed samples (eq. 17's n − n_s; default n) — it
     scales GCV per channel and does not move its minimum, kept for the reported score.
 
+    ``spectrum`` = ``dct(y)`` when the caller has it already (``y`` may then be None).
+
     Returns ``(mu, score)``, both (C,).
     """
-    y = np.asarray(y, dtype=np.float64)
-    n = y.shape[0]
+    if spectrum is None:
+        spectrum = dct(np.asarray(y, dtype=np.float64))
+    n = spectrum.shape[0]
     lam2 = eigenvalues(n) ** 2
     mu = 10.0 ** np.asarray(log_mu)
     gamma = 1.0 / (1.0 + lam2[:, None] * mu[None, :])            # (n, m)
-    power = dct(y) ** 2                                         # (n, C)
+    power = spectrum ** 2                                       # (n, C)
     rss = power.T @ (1.0 - gamma) ** 2                           # (C, m)
     denom = (1.0 - gamma.sum(axis=0) / n) ** 2                   # (m,)
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -129,7 +133,7 @@ def gcv_mu(y: np.ndarray, n_eff: np.ndarray | None = None,
         offset = np.where((curv > 0) & np.isfinite(curv), 0.5 * (s0 - s2) / curv, 0.0)
     offset = np.clip(offset, -1.0, 1.0)
     refined = np.where((best == i), log_mu[i] + offset * step, log_mu[best])
-    n_eff = np.full(y.shape[1], n) if n_eff is None else np.asarray(n_eff)
+    n_eff = np.full(spectrum.shape[1], n) if n_eff is None else np.asarray(n_eff)
     return 10.0 ** refined, score[np.arange(len(best)), best] / np.maximum(n_eff, 1)
 
 
@@ -176,32 +180,49 @@ def robust_smooth(x: np.ndarray, weights: np.ndarray, scale: np.ndarray,
     p2 = np.maximum(np.asarray(scale, dtype=np.float64), 1e-300) ** 2
     fixed = mu is not None
     g = w.copy()
+    lam2 = eigenvalues(x.shape[0])[:, None] ** 2
     for _ in range(max(1, iterations)):
         r = x0 - xhat
         g = w * np.exp(-(r * r) / p2)
         pseudo = g * r + xhat
+        spectrum = dct(pseudo)              # shared by GCV and the smoother
         if not fixed:
-            mu, _ = gcv_mu(pseudo, n_obs)
-        xhat = smoother(pseudo, mu)
+            mu, _ = gcv_mu(None, n_obs, spectrum=spectrum)
+        xhat = idct(spectrum / (1.0 + np.asarray(mu) * lam2))
     return xhat, np.asarray(mu, dtype=np.float64) * np.ones(x.shape[1]), g
 
 
 # -- padding and initial fills -------------------------------------------------------------
 
+def neighbours(missing: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """For a (T, C) mask: the index of the last non-missing sample at or before each
+    sample (−1 if none) and of the next one at or after it (T if none), per column."""
+    T = missing.shape[0]
+    t = np.arange(T)[:, None]
+    prev = np.where(missing, -1, t)
+    np.maximum.accumulate(prev, axis=0, out=prev)
+    nxt = np.where(missing, T, t)[::-1]
+    nxt = np.minimum.accumulate(nxt, axis=0)[::-1]
+    return prev, nxt
+
+
 def prefill(x: np.ndarray) -> np.ndarray:
     """Complete copy of ``x`` (T, C): interior gaps by linear interpolation, leading and
-    trailing gaps hold the nearest observed value; all-missing columns become 0."""
-    filled, _ = interpolate_gaps(np.asarray(x, dtype=np.float64), "linear")
-    T = filled.shape[0]
-    ok = ~np.isnan(filled)
-    idx = np.where(ok, np.arange(T)[:, None], 0)
-    np.maximum.accumulate(idx, axis=0, out=idx)
-    fwd = np.take_along_axis(filled, idx, axis=0)               # forward fill (trailing)
-    idx_b = np.where(ok, np.arange(T)[:, None], T - 1)
-    idx_b = np.minimum.accumulate(idx_b[::-1], axis=0)[::-1]
-    bwd = np.take_along_axis(filled, idx_b, axis=0)              # backward fill (leading)
-    out = np.where(ok, filled, np.where(np.isnan(fwd), bwd, fwd))
-    return np.nan_to_num(out, nan=0.0)
+    trailing gaps hold the nearest observed value; all-missing columns become 0.
+    Vectorised over every column (no per-gap loop)."""
+    x = np.asarray(x, dtype=np.float64)
+    missing = np.isnan(x)
+    if not missing.any():
+        return x.copy()
+    T = x.shape[0]
+    prev, nxt = neighbours(missing)
+    before = np.take_along_axis(x, np.maximum(prev, 0), axis=0)
+    after = np.take_along_axis(x, np.minimum(nxt, T - 1), axis=0)
+    span = np.maximum(nxt - prev, 1)
+    frac = (np.arange(T)[:, None] - prev) / span
+    inside = (prev >= 0) & (nxt < T)
+    out = np.where(inside, before + frac * (after - before), np.where(prev >= 0, before, after))
+    return np.nan_to_num(np.where(missing, out, x), nan=0.0)
 
 
 def pad_reflect(x: np.ndarray, n_pad: int) -> tuple[np.ndarray, int]:
@@ -210,6 +231,22 @@ def pad_reflect(x: np.ndarray, n_pad: int) -> tuple[np.ndarray, int]:
     if n_pad <= 0 or x.shape[0] < 2:
         return np.asarray(x, dtype=np.float64), 0
     return extend(np.asarray(x, dtype=np.float64), n_pad)
+
+
+def fast_pad(n: int, n_pad: int, search: int | None = None) -> int:
+    """The smallest padding ``p >= n_pad`` (at most ``n_pad + search``, default
+    max(64, n/20): at most ~10 % more samples) for which the padded length ``n + 2p`` has
+    no prime factor above 5, where the DCT is fastest (4,600 → 4,608 frames: 2.9 → 2.2 ms
+    for 123 channels); ``n_pad`` itself when none is in reach."""
+    search = max(64, n // 20) if search is None else search
+    for p in range(n_pad, n_pad + search + 1):
+        m = n + 2 * p
+        for f in (2, 3, 5):
+            while m % f == 0:
+                m //= f
+        if m == 1:
+            return p
+    return n_pad
 
 
 def pad_missing(x: np.ndarray, n_pad: int) -> tuple[np.ndarray, int]:
