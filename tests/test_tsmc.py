@@ -225,8 +225,8 @@ WITH_PCA = [("spikes", {}), ("fill_pca", {}), ("fill", {"method": "pchip", "max_
 #   HDM05  noise 1.270 mm                                0.88               0.86
 #   HDM05  mixed 1.804 mm                                0.08               0.73
 #   HDM05  swap 0.000 mm (swaps first in both)           tie (both 0)       0.00
-# Seeds 1 and 2 (not in the test): 85_02 gaps 0.94 / 0.98, mixed 1.00 / 0.98 against the
-# PCA pipeline, HDM05 0.72–0.90. With the paper's model alone (prior: none) the ratios to
+# Seed 2 (not in the test): 85_02 gaps 0.97, mixed 0.995 against the PCA pipeline, HDM05
+# 0.77 / 0.87 — on the breakdance trust+tsmc is level with PCA fill, not clearly better. With the paper's model alone (prior: none) the ratios to
 # the PCA pipeline were 1.7–3.6 on gaps and mixed. A marker swap is not an outlier to a
 # smoother or a low-rank model: neither pipeline repairs one by itself (trust+tsmc 1.01 /
 # 1.09 of the classical error), so both get the ``swaps`` cleaner first in that scenario;
