@@ -108,6 +108,10 @@ class Cleaner:
     name: ClassVar[str] = ""
     summary: ClassVar[str] = ""
     params: ClassVar[tuple[Param, ...]] = ()
+    #: run ``_apply`` with BLAS/LAPACK held to one thread
+    #: (:func:`mocapfix.solvers.lowrank.blas_single_thread`): for cleaners whose kernels
+    #: are many small matrix products, where threads only add overhead
+    single_thread_blas: ClassVar[bool] = False
 
     def __init__(self, step: str | None = None, **values):
         self.step = step or self.name
@@ -153,7 +157,13 @@ class Cleaner:
     # -- the contract ---------------------------------------------------------
     def apply(self, motion: Motion) -> tuple[Motion, dict]:
         """Clean ``motion``; returns a new Motion and a JSON-able info dict."""
-        result = self._apply(motion)
+        if self.single_thread_blas:
+            from mocapfix.solvers.lowrank import blas_single_thread
+
+            with blas_single_thread():
+                result = self._apply(motion)
+        else:
+            result = self._apply(motion)
         if isinstance(result, Motion):
             return result, {}
         return result

@@ -34,8 +34,8 @@ import numpy as np
 from mocapfix.cleaners import register
 from mocapfix.cleaners.base import Cleaner, Param
 from mocapfix.gaps import runs
-from mocapfix.solvers.lowrank import (blas_single_thread, conditional_mean_rows, impute_lowrank,
-                                      missing_patterns, ppca_from_moments)
+from mocapfix.solvers.lowrank import (conditional_mean_rows, impute_lowrank, missing_patterns,
+                                      ppca_from_moments)
 from mocapfix.solvers.segments import fillable
 
 
@@ -175,6 +175,7 @@ def implausible_runs(filled, write, observed_points, margin: float = 0.1) -> np.
 @register
 class PCAFill(Cleaner):
     name = "fill_pca"
+    single_thread_blas = True
     summary = ("fill gaps from the other markers by iterative PCA in a body frame "
                "(Gloersen & Federolf 2016)")
     params = (
@@ -199,10 +200,6 @@ class PCAFill(Cleaner):
     )
 
     def _apply(self, motion):
-        with blas_single_thread():
-            return self._run(motion)
-
-    def _run(self, motion):
         pos = motion.positions
         T, J, _ = pos.shape
         observed = ~np.isnan(pos).any(axis=2)

@@ -35,7 +35,6 @@ import numpy as np
 
 from mocapfix.cleaners import register
 from mocapfix.cleaners.base import Cleaner, Param
-from mocapfix.solvers.lowrank import blas_single_thread
 
 _CHUNK_ENTRIES = 400_000   # frames x pairs handled at once in the all-pairs scan
 
@@ -125,6 +124,7 @@ def template_cost(X, partners_pos, template):
 @register
 class SwapFix(Cleaner):
     name = "swaps"
+    single_thread_blas = True
     summary = "detect and undo marker-label swaps (continuity events + rigid distances)"
     params = (
         Param("threshold", "length", "20 mm",
@@ -137,10 +137,6 @@ class SwapFix(Cleaner):
     )
 
     def _apply(self, motion):
-        with blas_single_thread():
-            return self._run(motion)
-
-    def _run(self, motion):
         P = motion.positions.copy()
         T, J, _ = P.shape
         swaps: list[dict] = []

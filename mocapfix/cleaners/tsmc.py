@@ -74,8 +74,7 @@ from mocapfix.cleaners.base import Cleaner, Param
 from mocapfix.motion import Motion
 from mocapfix.cleaners.pca_fill import body_frame, implausible_runs, to_global, to_local
 from mocapfix.solvers import dct
-from mocapfix.solvers.lowrank import (blas_single_thread, leave_block_out_residual,
-                                      ppca_fit, svt)
+from mocapfix.solvers.lowrank import leave_block_out_residual, ppca_fit, svt
 
 _CM = 100.0  # cm per metre
 
@@ -145,6 +144,7 @@ class Trust(Cleaner):
     counted (``keep``). See the module docstring."""
 
     name = "trust"
+    single_thread_blas = True
     summary = "flag untrusted samples (robust GCV smoothing residual, Feng 2014 Alg. 1)"
     flags_samples = True
     params = (
@@ -171,10 +171,6 @@ class Trust(Cleaner):
             raise ConfigError(f"{self.step}: min_threshold must not exceed max_threshold")
 
     def _apply(self, motion: Motion):
-        with blas_single_thread():
-            return self._run(motion)
-
-    def _run(self, motion: Motion):
         pos = motion.positions
         T, J, _ = pos.shape
         observed = ~motion.missing
@@ -316,7 +312,7 @@ def moving_reference(pos: np.ndarray, observed: np.ndarray, hold: float = 0.0):
     missing = np.isnan(flat)
     prev, nxt = dct.neighbours(missing)
     bracketed = (prev >= 0) & (nxt < T)                       # observed or an interior gap
-    near_end = _distance_to_observed(missing) <= hold
+    near_end = _distance_to_observed(missing, (prev, nxt)) <= hold
     use = (bracketed | near_end).reshape(T, J, 3).all(axis=2)[:, seen]
     bridged = dct.prefill(flat).reshape(T, J, 3)[:, seen]
     if (use.sum(axis=1) < 3).any():
@@ -336,6 +332,7 @@ class TSMC(Cleaner):
     the module docstring."""
 
     name = "tsmc"
+    single_thread_blas = True
     summary = ("fill gaps and untrusted samples: PCA prediction from the other markers + "
                "low-rank, smooth completion of the rest (Feng 2014 TSMC)")
     params = (
@@ -377,10 +374,6 @@ class TSMC(Cleaner):
     )
 
     def _apply(self, motion: Motion):
-        with blas_single_thread():
-            return self._run(motion)
-
-    def _run(self, motion: Motion):
         pos = motion.positions
         T, J, _ = pos.shape
         observed = ~motion.missing
@@ -502,11 +495,12 @@ class TSMC(Cleaner):
             return out
         return local.reshape(T, -1), back
 
-def _distance_to_observed(missing: np.ndarray) -> np.ndarray:
+def _distance_to_observed(missing: np.ndarray, neighbours=None) -> np.ndarray:
     """Frames from each sample of a (T, C) mask to the nearest non-missing one in its
-    column (0 where observed, inf in an all-missing column)."""
+    column (0 where observed, inf in an all-missing column); ``neighbours`` is
+    :func:`dct.neighbours` of the mask when the caller has it already."""
     T = missing.shape[0]
-    prev, nxt = dct.neighbours(missing)
+    prev, nxt = dct.neighbours(missing) if neighbours is None else neighbours
     t = np.arange(T)[:, None]
     dist = np.minimum(np.where(prev >= 0, t - prev, T), np.where(nxt < T, nxt - t, T))
     return np.where(dist >= T, np.inf, dist.astype(np.float64))
