@@ -150,6 +150,69 @@ def clean(ctx, inputs, outdir, config_path, reports, jobs, as_json, fps, allow_i
     sys.exit(EXIT_SOME_FAILED if failed else EXIT_OK)
 
 
+@main.command("train-dictionary")
+@click.argument("training", nargs=-1, required=True, type=click.Path())
+@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False),
+              help="Model file to write (.npz).")
+@click.option("--method", default="partlet", show_default=True,
+              type=click.Choice(["partlet", "ksvd"]),
+              help="partlet: robust dictionary learning (Feng 2015); ksvd: K-SVD (Xiao 2015).")
+@click.option("--atoms", type=click.IntRange(2, 4096), default=None, help="Atoms per partlet (default 128).")
+@click.option("--window", type=click.IntRange(1, 200), default=None, help="Window length m in samples (default 8).")
+@click.option("--sample-rate", default=None, help="Rate of the window samples, e.g. '30 Hz' (default).")
+@click.option("--lambda", "lam", default=None, help="Outlier weight of eq. 5 as a length (default '50 mm').")
+@click.option("--beta", type=float, default=None, help="Sparsity weight of eq. 5 (default 0.05, relative).")
+@click.option("--iterations", type=click.IntRange(1, 1000), default=None, help="Outer training iterations.")
+@click.option("--max-windows", type=click.IntRange(10, 10_000_000), default=None,
+              help="Training windows per partlet (random subset).")
+@click.option("--seed", type=click.IntRange(0), default=None)
+@click.option("-j", "--jobs", default=1, show_default=True, type=click.IntRange(1, 256),
+              help="Files read in parallel.")
+@click.option("--fps", type=float, default=None, help="Frame rate for files that store none (AMC).")
+@click.pass_context
+def train_dictionary(ctx, training, output, method, atoms, window, sample_rate, lam, beta,
+                     iterations, max_windows, seed, jobs, fps):
+    """Train a model for a trained cleaner from TRAINING files or folders (any format;
+    BVH/AMC by forward kinematics) and write it to OUTPUT. Name it in a config with
+    `model: PATH` (relative to the config file)."""
+    from mocapfix.train import train
+
+    debug = ctx.obj["debug"]
+    bar = None
+    if sys.stderr.isatty():
+        from tqdm import tqdm
+
+        state = {}
+
+        def progress(stage, n, total):
+            nonlocal bar
+            if state.get("stage") != stage:
+                if bar:
+                    bar.close()
+                bar = tqdm(total=total, desc=stage, unit="file" if stage == "read" else "partlet",
+                           file=sys.stderr, leave=False)
+                state["stage"] = stage
+            bar.n = n
+            bar.refresh()
+    else:
+        progress = None
+    params = {"atoms": atoms, "window": window, "sample_rate": sample_rate, "train_lambda": lam,
+              "beta": beta, "train_iterations": iterations, "max_windows": max_windows, "seed": seed}
+    try:
+        summary = train(training, output, method, params, jobs, fps, progress)
+    except MocapfixError as exc:
+        _fail(str(exc), debug, exc)
+    finally:
+        if bar:
+            bar.close()
+    t = summary["training"]
+    st = summary["state"]
+    click.echo(f"wrote {output}: {summary['cleaner']} ({st['method']}), {len(st['joints'])} joints in "
+               f"{len(st['partlets'])} partlets, window {st['window']} at {st['sample_rate']:g} Hz; "
+               f"trained on {len(t['files'])} files, {t['frames']} frames in {t['seconds']:.1f} s; "
+               "unexplained energy " + ", ".join(f"{p} {100 * f:.2f} %" for p, f in st["unexplained"].items()))
+
+
 def _register_bench():
     from mocapfix.bench_cli import bench
 

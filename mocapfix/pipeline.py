@@ -28,7 +28,7 @@ import numpy as np
 import yaml
 
 from mocapfix.cleaners import build
-from mocapfix.cleaners.base import Cleaner
+from mocapfix.cleaners.base import Cleaner, FittedCleaner
 from mocapfix.errors import ConfigError
 from mocapfix.motion import Motion
 
@@ -144,6 +144,12 @@ def _strip_lines(obj):
     return obj
 
 
+def _config_folder(source: str) -> Path | None:
+    """The folder model paths in a config are relative to (None for an in-memory config)."""
+    path = Path(source)
+    return path.parent if path.is_file() else None
+
+
 def parse_config(data, source: str = "<config>") -> Pipeline:
     """Validate a loaded config (dict, possibly carrying ``__line__`` marks)."""
     if not isinstance(data, dict):
@@ -177,6 +183,8 @@ def parse_config(data, source: str = "<config>") -> Pipeline:
             formats = tuple(formats)
         label = f"step {n} ({raw.get('name') or name}){_line_of(raw)}"
         cleaner = build(name, step=f"{source}: {label}", **params)
+        if isinstance(cleaner, FittedCleaner):
+            cleaner.resolve_models(_config_folder(source))
         cleaner.step = label.split(" (line")[0]
         steps.append(Step(cleaner, formats, raw.get("__line__")))
     report = _strip_lines(data.get("report") or {})

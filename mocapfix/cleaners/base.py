@@ -29,7 +29,10 @@ class Param:
     """Declaration of one cleaner parameter.
 
     ``kind``: "length" | "time" | "frequency" | "float" | "int" | "bool" | "choice" | "str"
-    | "list". ``unit`` is the default unit of a bare number for physical kinds.
+    | "list" | "model". ``unit`` is the default unit of a bare number for physical kinds.
+    A "model" value is a model file path (relative to the config file) or the name of a
+    model shipped with mocapfix; it is resolved and its header checked when the config is
+    loaded (:meth:`FittedCleaner.resolve_models`).
     ``low``/``high`` bound the value (in SI for physical kinds, frames excepted);
     ``low_open`` makes the lower bound exclusive.
     """
@@ -85,7 +88,7 @@ class Param:
             if value not in self.choices:
                 raise ConfigError(f"{where} must be {self.describe_range()}, got {value!r}")
             return value
-        if self.kind == "str":
+        if self.kind in ("str", "model"):
             if not isinstance(value, str):
                 raise ConfigError(f"{where} must be a string, got {value!r}")
             return value
@@ -174,3 +177,64 @@ class Cleaner:
     def __repr__(self):
         args = ", ".join(f"{k}={v}" for k, v in self.config().items())
         return f"{type(self).__name__}({args})"
+
+
+class FittedCleaner(Cleaner):
+    """A cleaner with learned state, in the manner of scikit-learn estimators.
+
+    Parameters stay exactly as given. ``fit(motions)`` sets the learned state in
+    trailing-underscore attributes (listed in ``fitted_attributes``; lengths in metres)
+    and never changes a parameter; ``apply`` never changes the cleaner. The state goes to
+    and comes from model files (:mod:`mocapfix.models`) through :meth:`state` and
+    :meth:`load_state`. A cleaner with a ``model`` parameter loads its state from that
+    model when the config is loaded.
+    """
+
+    #: names of the learned arrays (trailing underscore) saved in a model file
+    fitted_attributes: ClassVar[tuple[str, ...]] = ()
+    #: the parameter naming the model file, if the cleaner takes one
+    model_param: ClassVar[str | None] = "model"
+
+    def fit(self, motions, progress=None) -> "FittedCleaner":
+        """Learn the state from ``motions`` (a list of :class:`Motion`); returns self."""
+        raise NotImplementedError
+
+    @property
+    def is_fitted(self) -> bool:
+        return all(getattr(self, a, None) is not None for a in self.fitted_attributes)
+
+    def state(self) -> tuple[dict, dict]:
+        """(JSON-able header fields, {name: array}) of the learned state."""
+        raise NotImplementedError
+
+    def load_state(self, header: dict, arrays: dict) -> "FittedCleaner":
+        """Set the learned state from a model file's header and arrays; returns self."""
+        raise NotImplementedError
+
+    def model_header_fields(self) -> dict:
+        """What a model file records besides the state: the cleaner and its parameters."""
+        return {"cleaner": self.name, "parameters": self.config()}
+
+    def resolve_models(self, base_dir=None) -> None:
+        """Resolve the ``model`` parameter against ``base_dir`` (the config's folder) or the
+        shipped models, read and check its header (a ConfigError naming the step if it is
+        missing, corrupt or made for another cleaner) and load the state (cached per
+        process, so a worker reads each model once)."""
+        from mocapfix import models
+
+        if self.model_param is None:
+            return
+        ref = self.values.get(self.model_param)
+        if ref is None:
+            return
+        path = models.resolve(ref, base_dir, where=f"{self.step}: parameter '{self.model_param}'")
+        header, arrays = models.load(path, cleaner=self.name,
+                                     where=f"{self.step}: parameter '{self.model_param}'")
+        if path.parent != models.SHIPPED_DIR:
+            self.values[self.model_param] = str(path)   # absolute: workers need no config folder
+        try:
+            self.load_state(header, arrays)
+        except (KeyError, ValueError, TypeError) as exc:
+            from mocapfix.errors import ConfigError
+            raise ConfigError(f"{self.step}: model {path} is incompatible with {self.name!r}: "
+                              f"{type(exc).__name__}: {exc}") from None

@@ -1,0 +1,461 @@
+"""Partlet dictionary denoising (Feng et al. 2015, IEEE T-Cybernetics 45(11)), with the
+K-SVD poselet variant of Xiao et al. 2015 (Neurocomputing) as an option.
+
+Pipeline (Feng 2015, Algorithm 1):
+
+1. *Coordinate normalisation* (§III-B-1): every pose is moved into its torso frame — a
+   robust Kabsch fit of the torso joints (root, hips, spine) to the model's template,
+   smoothed in time (:func:`mocapfix.solvers.rigid.torso_frames`). Each joint is then
+   centred on the file's own median position in that frame, so that a subject's
+   proportions (or a sensor's joint placement) are not taken for noise.
+2. *Partlets* (§III-B-2): torso + head, two arms, two legs; the joints at the seams
+   (the torso joint a limb hangs from) belong to several partlets and are averaged back.
+3. *Grouping* (§III-B-3): lagged windows of ``m`` samples, taken every ``dilation`` frames
+   so that a window spans the same time at any frame rate (the model's sample rate), one
+   window starting every ``stride`` frames; strided views, no copies per window.
+4. *Robust structured sparse coding* (§III-D, eq. 11): alternate the Ψ-step — FISTA on
+   ``||Z − DΨ||² + λ2 tr(ΨLΨᵀ) + λ3 ||Ψ||_1`` with L the Laplacian of the symmetric 5-NN
+   ℓ1 graph between windows (eq. 9, 12) — and the E-step of the ℓ2,p noise term (eq. 16–18)
+   with one group per joint sample (x, y, z of one joint at one frame: outliers and
+   occlusion errors act on samples; the paper's "rows" are not defined further). Missing
+   samples have zero weight in the data term (E takes their whole residual), so the
+   cleaner also fills gaps.
+5. *Reconstruction* (§III-D-3): windows averaged where they overlap, partlets merged,
+   normalisation undone.
+
+Scaling, chosen here (the paper tunes λ1, λ2, λ3 per noise setting from a grid): λ3 and
+λ1 are multiples of the noise level σ̂ estimated from the file itself (median absolute
+second difference in the torso frame), so one setting serves 30 dB and 5 dB alike; λ2 is
+relative to ||DᵀD||₂.
+
+Xiao 2015 (``coding: ksvd``): codes by OMP with ``sparsity`` atoms from a K-SVD model;
+``loss: l2`` for Gaussian noise, ``loss: l1`` reweights samples against outliers.
+
+The report's ``unexplained`` is, per partlet, the fraction of the (centred) signal energy
+the dictionary cannot explain on observed samples; ``out_of_sample`` warns when it is far
+above the training figure stored in the model.
+"""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+from numpy.lib.stride_tricks import sliding_window_view
+
+from mocapfix import bodyparts
+from mocapfix.cleaners import register
+from mocapfix.cleaners.base import FittedCleaner, Param
+from mocapfix.errors import ConfigError, MocapfixError
+from mocapfix.motion import Motion
+from mocapfix.solvers import sparse
+from mocapfix.solvers.dct import prefill
+from mocapfix.solvers.lowrank import shrink
+from mocapfix.solvers.rigid import from_frame, kabsch, to_frame, torso_frames
+
+#: a model for a file when no ``model`` is given: shipped name by skeleton convention
+AUTO_MODELS = (("lfemur", "partlet-cmu"), ("kneeleft", "partlet-kinect"))
+
+
+def _windows(X: np.ndarray, m: int, dilation: int, starts: np.ndarray) -> np.ndarray:
+    """(d, n) matrix of windows: column j = vec of X[starts[j] + dilation·k], k < m,
+    X (T, c) → d = m·c (frame-major)."""
+    span = dilation * (m - 1) + 1
+    view = sliding_window_view(X, span, axis=0)[:, :, ::dilation]   # (T-span+1, c, m)
+    return np.ascontiguousarray(np.swapaxes(view[starts], 1, 2)).reshape(len(starts), -1).T
+
+
+def _overlap_average(W: np.ndarray, T: int, c: int, m: int, dilation: int, starts: np.ndarray):
+    """Inverse of :func:`_windows`: average of every window's copy of each frame."""
+    rec = W.T.reshape(len(starts), m, c)
+    out = np.zeros((T, c))
+    count = np.zeros(T)
+    for k in range(m):
+        out[starts + dilation * k] += rec[:, k]
+        count[starts + dilation * k] += 1
+    return out / np.maximum(count, 1)[:, None], count
+
+
+def _starts(T: int, m: int, dilation: int, stride: int) -> np.ndarray:
+    """Window starts: for each phase r < dilation, every ``stride`` window samples
+    (``stride · dilation`` frames) and the last possible one, so that every frame lies in
+    about ``m / stride`` windows."""
+    last = T - (dilation * (m - 1) + 1)
+    if last < 0:
+        return np.zeros(0, dtype=np.intp)
+    parts = []
+    for r in range(min(dilation, last + 1)):
+        s = np.arange(r, last + 1, stride * dilation)
+        tail = last - ((last - r) % dilation)
+        parts.append(np.append(s, tail))
+    return np.unique(np.concatenate(parts))
+
+
+def noise_level(X: np.ndarray) -> float:
+    """σ̂ of white noise on the channels of X (T, c), NaN-aware: the median absolute second
+    difference / 0.6745 / √6 (Var of a second difference of white noise is 6σ²)."""
+    d2 = X[2:] - 2 * X[1:-1] + X[:-2]
+    d2 = np.abs(d2[np.isfinite(d2)])
+    return float(np.median(d2) / 0.6745 / np.sqrt(6.0)) if d2.size else 0.0
+
+
+@register
+class PartletDictionary(FittedCleaner):
+    name = "partlet_dictionary"
+    summary = ("denoise and fill joints with learned partlet dictionaries (Feng et al. 2015; "
+               "K-SVD variant of Xiao et al. 2015)")
+    single_thread_blas = False
+    params = (
+        Param("model", "model", None, "model file or shipped name (default: by skeleton)", nullable=True),
+        Param("coding", "choice", "auto", "robust structured sparse coding (Feng) or ksvd/OMP (Xiao); "
+              "auto = as the model was trained", choices=("auto", "robust", "ksvd")),
+        Param("loss", "choice", "l2", "ksvd coding: l2 (Gaussian noise) or l1 (outliers)", choices=("l2", "l1")),
+        Param("lambda1", "float", 4.0, "ℓ2,p noise weight as a multiple of the noise level", low=0.0, high=1e3),
+        Param("lambda2", "float", 0.0, "graph smoothness weight, relative to ||DᵀD||", low=0.0, high=1e3),
+        Param("lambda3", "float", 0.1, "sparsity weight as a multiple of the noise level", low=0.0, high=1e3),
+        Param("p", "float", 1.0, "p of the ℓ2,p noise norm", low=0.0, low_open=True, high=2.0),
+        Param("min_outlier", "length", "15 mm", "smallest residual the noise term may absorb", unit="mm",
+              low=0.0, high=10.0),
+        Param("ridge", "float", 1e-2, "ridge (relative to ||DᵀD||) of the codes' starting point",
+              low=1e-9, high=1e3),
+        Param("iterations", "int", 3, "E/Ψ alternations", low=1, high=200),
+        Param("fista_iterations", "int", 20, "FISTA iterations per Ψ-step", low=1, high=2000),
+        Param("neighbours", "int", 5, "k of the k-NN graph", low=0, high=50),
+        Param("stride", "int", 4, "window samples between windows of one phase", low=1, high=64),
+        Param("frame_smoothing", "time", "0.05 s", "Gaussian smoothing of the torso frame", unit="s",
+              low=0.0, high=2.0),
+        Param("out_of_sample", "float", 3.0, "warn when unexplained energy exceeds this × training", low=1.0,
+              high=1e6),
+        # training (fit) parameters
+        Param("method", "choice", "partlet", "training: robust dictionary (partlet) or K-SVD",
+              choices=("partlet", "ksvd")),
+        Param("atoms", "int", 128, "training: atoms per partlet dictionary", low=2, high=4096),
+        Param("window", "int", 8, "training: window length m in samples", low=1, high=200),
+        Param("sample_rate", "frequency", "30 Hz", "training: rate of the window samples", unit="Hz",
+              low=1.0, high=10000.0),
+        Param("train_lambda", "length", "50 mm", "training: outlier weight λ of eq. 5 (as a length)",
+              unit="mm", low=0.0, high=10.0),
+        Param("beta", "float", 0.05, "training: sparsity β of eq. 5, relative to the median window norm",
+              low=0.0, high=10.0),
+        Param("sparsity", "int", 6, "ksvd: atoms per window (OMP)", low=1, high=256),
+        Param("train_iterations", "int", 20, "training: outer iterations", low=1, high=1000),
+        Param("max_windows", "int", 12000, "training: windows per partlet (random subset)", low=10,
+              high=10_000_000),
+        Param("seed", "int", 0, "training: random seed", low=0, high=2**31),
+    )
+    fitted_attributes = ("dictionary_", "template_", "joints_", "partlets_")
+
+    def __init__(self, step=None, **values):
+        super().__init__(step, **values)
+        self.dictionary_ = None
+        self.template_ = None
+        self.joints_ = None
+        self.partlets_ = None
+        self.frame_ = None
+        self.unexplained_ = None
+        self.method_ = None
+        self.sample_rate_ = None
+        self.window_ = None
+        self.n_iter_ = None
+        self.training_ = None
+
+    # -- shared normalisation ------------------------------------------------------------
+    def _map_joints(self, names: list[str]) -> np.ndarray:
+        """For every model joint, the index of the file's joint (−1 if the file has none)."""
+        canon = bodyparts.canonical_names(names)
+        where = {c: i for i, c in enumerate(canon)}
+        return np.array([where.get(j, -1) for j in self.joints_], dtype=np.intp)
+
+    def _normalise(self, P: np.ndarray, fps: float):
+        """Model-joint positions P (T, Jm, 3) in metres → (local, R, c, centre)."""
+        frame_pts = P[:, self.frame_]
+        R, c, valid = torso_frames(frame_pts, self.template_,
+                                   smoothing=self.values["frame_smoothing"].si * fps)
+        local = to_frame(P, R, c)
+        with np.errstate(all="ignore"):
+            centre = np.nanmedian(local, axis=0)
+        return local, R, c, centre, valid
+
+    def _dilation(self, fps: float) -> int:
+        return max(1, int(round(fps / self.sample_rate_)))
+
+    # -- fit -----------------------------------------------------------------------------
+    def fit(self, motions, progress=None) -> "PartletDictionary":
+        started = time.perf_counter()
+        motions = list(motions)
+        if not motions:
+            raise MocapfixError("no training motions")
+        first = motions[0]
+        canon = bodyparts.canonical_names(first.names)
+        parents = first.skeleton.parents if first.skeleton is not None else None
+        try:
+            groups = bodyparts.partlets(canon, parents)
+        except ValueError as exc:
+            raise MocapfixError(f"{first.path or 'training motion'}: cannot find the five partlets "
+                                f"from the joint names ({exc})") from None
+        joints = list(canon)
+        frame = bodyparts.frame_joints(canon, groups)
+        m = self.values["window"]
+        rate = self.values["sample_rate"].si
+        # template: generalised Procrustes of the frame joints over (a subset of) all frames
+        pts = []
+        for mo in motions:
+            P = self._model_positions(mo, joints)
+            pts.append(P[:: max(1, len(P) // 400), frame])
+        pool = np.concatenate(pts)
+        pool = pool[~np.isnan(pool).any(axis=(1, 2))]
+        ref = pool[0] - pool[0].mean(axis=0)
+        for _ in range(5):
+            Rr, cs, ct = kabsch(pool, np.broadcast_to(ref, pool.shape), np.ones(pool.shape[:2]))
+            aligned = (pool - cs[:, None]) @ np.swapaxes(Rr, 1, 2) + ct[:, None]
+            ref = aligned.mean(axis=0)
+            ref -= ref.mean(axis=0)
+        self.joints_, self.frame_, self.template_ = joints, np.array(frame), ref
+        self.partlets_ = {k: list(v) for k, v in groups.items()}
+        self.sample_rate_, self.window_ = rate, m
+        rng = np.random.default_rng(self.values["seed"])
+        data = {p: [] for p in bodyparts.PARTLETS}
+        frames = []
+        for mo in motions:
+            P = self._model_positions(mo, joints)
+            local, *_rest, centre, _ = self._normalise(P, mo.fps)
+            X = local - centre
+            dil = self._dilation(mo.fps)
+            frames.append(len(P))
+            starts = _starts(len(P), m, dil, max(1, dil // 2))
+            if not len(starts):
+                continue
+            for p in bodyparts.PARTLETS:
+                Xp = X[:, self.partlets_[p]].reshape(len(P), -1)
+                W = _windows(Xp, m, dil, starts)
+                W = W[:, ~np.isnan(W).any(axis=0)]
+                data[p].append(W)
+        self.dictionary_, self.unexplained_ = {}, {}
+        K = self.values["atoms"]
+        iters = 0
+        for n, p in enumerate(bodyparts.PARTLETS):
+            B = np.concatenate(data[p], axis=1)
+            if B.shape[1] > self.values["max_windows"]:
+                B = B[:, rng.choice(B.shape[1], self.values["max_windows"], replace=False)]
+            if self.values["method"] == "ksvd":
+                D, W, iters = self._train_ksvd(B, K, rng)
+                E = 0.0
+            else:
+                D, W, E, iters = self._train_robust(B, K, rng)
+            R = B - D @ W - E
+            self.unexplained_[p] = float(np.vdot(R, R) / max(np.vdot(B, B), 1e-300))
+            self.dictionary_[p] = D
+            if progress:
+                progress(n + 1, len(bodyparts.PARTLETS))
+        self.method_ = self.values["method"]
+        self.n_iter_ = iters
+        self.training_ = {"frames": int(sum(frames)), "seconds": round(time.perf_counter() - started, 3)}
+        return self
+
+    @staticmethod
+    def _model_positions(motion: Motion, joints: list[str]) -> np.ndarray:
+        canon = bodyparts.canonical_names(motion.names)
+        where = {c: i for i, c in enumerate(canon)}
+        idx = np.array([where.get(j, -1) for j in joints])
+        P = np.full((motion.n_frames, len(joints), 3), np.nan)
+        ok = idx >= 0
+        P[:, ok] = motion.positions[:, idx[ok]] * motion.metres_per_unit
+        return P
+
+    def _init_dictionary(self, B, K, rng):
+        D = B[:, rng.choice(B.shape[1], size=min(K, B.shape[1]), replace=False)].copy()
+        if D.shape[1] < K:
+            D = np.concatenate([D, rng.normal(size=(B.shape[0], K - D.shape[1]))], axis=1)
+        return D / np.maximum(np.linalg.norm(D, axis=0), 1e-12)
+
+    def _train_robust(self, B, K, rng):
+        """Robust dictionary learning, Feng 2015 eq. 5, by coordinate descent (§III-C-2):
+        (W, E)-step = lasso on D (FISTA) and soft-threshold of the residual; D-step = eq. 6."""
+        D = self._init_dictionary(B, K, rng)
+        beta = self.values["beta"] * float(np.median(np.linalg.norm(B, axis=0)))
+        lam = self.values["train_lambda"].si
+        W = np.zeros((K, B.shape[1]))
+        E = np.zeros_like(B)
+        it = 0
+        for it in range(1, self.values["train_iterations"] + 1):
+            G = D.T @ D
+            W, _ = sparse.fista(G, D.T @ (B - E), beta, x0=W, n_iter=15, tol=1e-3)
+            E = shrink(B - D @ W, lam / 2.0) if lam > 0 else np.zeros_like(B)
+            D = sparse.dictionary_step(D, W @ W.T, (B - E) @ W.T, rng=rng, data=B)
+        return D, W, E, it
+
+    def _train_ksvd(self, B, K, rng):
+        """K-SVD (Xiao 2015 §3, after Aharon et al. 2006): OMP codes with ``sparsity`` atoms,
+        then the atom-by-atom rank-1 update."""
+        D = self._init_dictionary(B, K, rng)
+        it = 0
+        W = None
+        for it in range(1, self.values["train_iterations"] + 1):
+            W = sparse.omp(D.T @ D, D.T @ B, self.values["sparsity"])
+            D, W = sparse.ksvd_step(B, D, W, rng=rng)
+        return D, W, it
+
+    # -- model files -----------------------------------------------------------------------
+    def state(self) -> tuple[dict, dict]:
+        if not self.is_fitted:
+            raise MocapfixError(f"{self.step}: not fitted")
+        header = {
+            "state": {"joints": list(self.joints_), "partlets": self.partlets_,
+                      "frame_joints": [int(j) for j in self.frame_], "method": self.method_,
+                      "sample_rate": self.sample_rate_, "window": self.window_,
+                      "unexplained": self.unexplained_, "n_iter": self.n_iter_,
+                      "normalisation": "torso frame (robust Kabsch to template, smoothed), "
+                                       "each joint centred on the file's median"},
+        }
+        arrays = {f"dictionary_{p}": D for p, D in self.dictionary_.items()}
+        arrays["template"] = self.template_
+        return header, arrays
+
+    def load_state(self, header: dict, arrays: dict) -> "PartletDictionary":
+        st = header["state"]
+        self.joints_ = list(st["joints"])
+        self.partlets_ = {p: [int(j) for j in st["partlets"][p]] for p in bodyparts.PARTLETS}
+        self.frame_ = np.array(st["frame_joints"], dtype=np.intp)
+        self.method_ = st["method"]
+        self.sample_rate_ = float(st["sample_rate"])
+        self.window_ = int(st["window"])
+        self.unexplained_ = dict(st["unexplained"])
+        self.n_iter_ = st.get("n_iter")
+        self.training_ = header.get("training")
+        self.template_ = np.asarray(arrays["template"], dtype=float)
+        self.dictionary_ = {}
+        for p in bodyparts.PARTLETS:
+            D = np.asarray(arrays[f"dictionary_{p}"], dtype=float)
+            if D.shape[0] != 3 * len(self.partlets_[p]) * self.window_:
+                raise ValueError(f"dictionary {p} has {D.shape[0]} rows for "
+                                 f"{len(self.partlets_[p])} joints × window {self.window_}")
+            self.dictionary_[p] = D
+        if self.template_.shape != (len(self.frame_), 3):
+            raise ValueError("template does not match the frame joints")
+        return self
+
+    def _ensure_model(self, motion: Motion):
+        if self.is_fitted:
+            return
+        from mocapfix import models
+
+        canon = set(bodyparts.canonical_names(motion.names))
+        for key, name in AUTO_MODELS:
+            if key in canon:
+                if name not in models.shipped():
+                    break
+                header, arrays = models.load(models.shipped()[name], cleaner=self.name)
+                self.load_state(header, arrays)
+                return
+        raise ConfigError(
+            f"{self.step}: no partlet model for this skeleton ({motion.path or 'motion'}: joints "
+            f"{', '.join(motion.names[:6])}…); train one with `mocapfix train-dictionary` and name it "
+            f"with `model:` in the config")
+
+    # -- apply -------------------------------------------------------------------------------
+    def _apply(self, motion: Motion):
+        self._ensure_model(motion)
+        idx = self._map_joints(motion.names)
+        if (idx[self.frame_] < 0).sum() > len(self.frame_) - 3:
+            raise ConfigError(f"{self.step}: the model's torso joints are not in "
+                              f"{motion.path or 'this motion'}; train a model for this skeleton")
+        T = motion.n_frames
+        coding = self.values["coding"] if self.values["coding"] != "auto" else (
+            "ksvd" if self.method_ == "ksvd" else "robust")
+        dil = self._dilation(motion.fps)
+        m = self.window_
+        starts = _starts(T, m, dil, self.values["stride"])
+        info = {"model_joints": int((idx >= 0).sum()), "coding": coding, "dilation": dil}
+        if not len(starts):
+            info["skipped"] = f"{T} frames are fewer than one window ({dil * (m - 1) + 1})"
+            return motion.copy(), info
+        P = np.full((T, len(self.joints_), 3), np.nan)
+        ok = idx >= 0
+        P[:, ok] = motion.positions[:, idx[ok]] * motion.metres_per_unit
+        try:
+            local, R, c, centre, valid = self._normalise(P, motion.fps)
+        except ValueError as exc:
+            info["skipped"] = str(exc)
+            return motion.copy(), info
+        centre = np.where(np.isnan(centre), 0.0, centre)
+        X = local - centre
+        sigma = noise_level(X[:, self.frame_].reshape(T, -1))
+        total = np.zeros_like(X)
+        count = np.zeros(X.shape[:2])
+        unexplained, iters = {}, 0
+        for p in bodyparts.PARTLETS:
+            joints = self.partlets_[p]
+            Xp = X[:, joints]
+            if np.isnan(Xp).all():
+                continue
+            rec, frac, it = self._code_partlet(Xp, self.dictionary_[p], starts, dil, sigma, coding)
+            total[:, joints] += rec
+            count[:, joints] += 1
+            unexplained[p] = round(frac, 5)
+            iters = max(iters, it)
+        cleaned_local = total / np.maximum(count, 1)[..., None] + centre
+        out = from_frame(cleaned_local, R, c) / motion.metres_per_unit
+        pos = motion.positions.copy()
+        write = ok.copy()
+        pos[:, idx[write]] = out[:, write]
+        info.update({"noise_mm": round(sigma * 1e3, 3), "iterations": iters,
+                     "unexplained": unexplained,
+                     "frames_without_torso": int((~valid).sum())})
+        trained = self.unexplained_ or {}
+        high = [p for p, f in unexplained.items()
+                if f > self.values["out_of_sample"] * max(trained.get(p, 0.0), 1e-4) and f > 0.02]
+        if high:
+            info["warning"] = ("motion unlike the training set (out of sample) for "
+                               + ", ".join(high) + ": the dictionary explains little of it")
+        return motion.replace(positions=pos), info
+
+    def _code_partlet(self, Xp, D, starts, dil, sigma, coding):
+        """Robust structured sparse coding of one partlet (eq. 11), or OMP (Xiao 2015).
+        Returns (reconstruction (T, n, 3), unexplained energy fraction, iterations)."""
+        T, n, _ = Xp.shape
+        m = self.window_
+        flat = Xp.reshape(T, -1)
+        missing = np.isnan(Xp).any(axis=2)
+        Z = prefill(flat)
+        Z[np.isnan(Z)] = 0.0
+        Y = _windows(Z, m, dil, starts)
+        G = D.T @ D
+        Lnorm = float(np.linalg.eigvalsh(G)[-1])
+        lam3 = self.values["lambda3"] * sigma * np.sqrt(2.0 * np.log(D.shape[1])) * np.sqrt(m)
+        thr = max(self.values["lambda1"] * sigma * np.sqrt(3.0), self.values["min_outlier"].si)
+        lap = None
+        lam2 = 0.0
+        if coding == "robust" and self.values["neighbours"] > 0 and self.values["lambda2"] > 0:
+            lap = sparse.knn_laplacian(Y.T, k=self.values["neighbours"])
+            lam2 = self.values["lambda2"] * Lnorm
+        step = 1.0 / sparse.lipschitz(G, lap, lam2)
+        ridge = np.linalg.inv(G + (self.values["ridge"] * Lnorm + lam2) * np.eye(len(G)))
+        E = np.zeros((T, n, 3))
+        Psi = None
+        it = 0
+        rec = None
+        p = self.values["p"] if coding == "robust" else 1.0
+        robust = coding == "robust" or self.values["loss"] == "l1"
+        n_outer = self.values["iterations"] if (robust or missing.any()) else 1
+        for it in range(1, n_outer + 1):
+            C = D.T @ Y
+            if coding == "robust":
+                if Psi is None:   # start from the ridge solution: FISTA from zero is slow
+                    Psi = ridge @ C
+                Psi, _ = sparse.fista(G, C, lam3, laplacian=lap, lam_graph=lam2, x0=Psi,
+                                      n_iter=self.values["fista_iterations"], tol=1e-4, step=step)
+            else:
+                Psi = sparse.omp(G, C, self.values["sparsity"])
+            rec, _ = _overlap_average(D @ Psi, T, flat.shape[1], m, dil, starts)
+            rec3 = rec.reshape(T, n, 3)
+            Q = np.where(missing[..., None], 0.0, Xp - rec3)
+            if robust:
+                E = E if it > 1 else Q
+                for _ in range(3):
+                    E = sparse.group_shrink_lp(Q, E, 2.0 * thr, p)
+            Zs = np.where(missing[..., None], rec3, Xp - E)
+            Y = _windows(Zs.reshape(T, -1), m, dil, starts)
+        obs = ~missing
+        signal = np.where(obs[..., None], Xp - E, 0.0)
+        resid = np.where(obs[..., None], Xp - E - rec.reshape(T, n, 3), 0.0)
+        frac = float(np.vdot(resid, resid) / max(np.vdot(signal, signal), 1e-300))
+        return rec.reshape(T, n, 3), frac, it

@@ -1,0 +1,86 @@
+"""``mocapfix train-dictionary``: discover training files, read them (joint positions by
+forward kinematics for BVH/AMC), fit a cleaner's model and write it as a model file
+(:mod:`mocapfix.models`) with its training provenance.
+
+A training method names a fitted cleaner and the parameters that select its training
+algorithm (:data:`METHODS`); other options are that cleaner's parameters.
+"""
+from __future__ import annotations
+
+import time
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+from mocapfix import formats, models
+from mocapfix.cleaners import build
+from mocapfix.cleaners.base import FittedCleaner
+from mocapfix.errors import MocapfixError
+
+#: --method → (cleaner, parameters that choose its training algorithm)
+METHODS: dict[str, tuple[str, dict]] = {
+    "partlet": ("partlet_dictionary", {"method": "partlet"}),
+    "ksvd": ("partlet_dictionary", {"method": "ksvd"}),
+}
+
+
+def discover_training(inputs) -> list[Path]:
+    """Motion files among ``inputs`` (files, or folders searched recursively)."""
+    files: list[Path] = []
+    for raw in inputs:
+        path = Path(raw)
+        if not path.exists():
+            raise MocapfixError(f"{path}: no such file or folder")
+        if path.is_dir():
+            files += sorted(p for p in path.rglob("*") if p.is_file() and not p.name.startswith(".")
+                            and p.suffix.lower() in formats.MOTION_SUFFIXES)
+        else:
+            files.append(path)
+    if not files:
+        raise MocapfixError("no training files found in " + ", ".join(map(str, inputs)))
+    return files
+
+
+def _read(path, fps):
+    return formats.read(path, **({"fps": fps} if fps else {}))
+
+
+def read_all(paths, jobs: int = 1, fps: float | None = None, progress=None):
+    """Read every training file (in ``jobs`` processes); a file that cannot be read is an
+    error naming it — a model must not silently miss part of its training set."""
+    if jobs <= 1 or len(paths) <= 1:
+        out = []
+        for n, p in enumerate(paths):
+            out.append(_read(p, fps))
+            if progress:
+                progress(n + 1, len(paths))
+        return out
+    with ProcessPoolExecutor(max_workers=jobs) as pool:
+        futures = [pool.submit(_read, p, fps) for p in paths]
+        out = []
+        for n, f in enumerate(futures):
+            out.append(f.result())
+            if progress:
+                progress(n + 1, len(paths))
+        return out
+
+
+def train(inputs, output, method: str = "partlet", params: dict | None = None, jobs: int = 1,
+          fps: float | None = None, progress=None) -> dict:
+    """Train a model and write it; returns a summary (the model's header)."""
+    if method not in METHODS:
+        raise MocapfixError(f"unknown training method {method!r} (known: {', '.join(METHODS)})")
+    started = time.perf_counter()
+    cleaner_name, fixed = METHODS[method]
+    cleaner = build(cleaner_name, step=f"train-dictionary --method {method}",
+                    **{k: v for k, v in (params or {}).items() if v is not None}, **fixed)
+    if not isinstance(cleaner, FittedCleaner):
+        raise MocapfixError(f"{cleaner_name} is not a trained cleaner")
+    paths = discover_training(inputs)
+    motions = read_all(paths, jobs, fps, progress=(lambda n, t: progress("read", n, t)) if progress else None)
+    cleaner.fit(motions, progress=(lambda n, t: progress("fit", n, t)) if progress else None)
+    header, arrays = cleaner.state()
+    header.update(cleaner.model_header_fields())
+    header["training"] = models.provenance(paths, [m.n_frames for m in motions],
+                                           time.perf_counter() - started)
+    models.save(output, header, arrays)
+    return {"output": str(output), **header}

@@ -1,0 +1,63 @@
+"""Train the models shipped in ``mocapfix/data/models`` from the CMU corpus in
+``../shared/training/cmu-asfamc`` (47 motions; CMU terms allow shipping models trained on
+them). Anyone can re-run it::
+
+    python scripts/train_models.py [--training DIR] [--out DIR]
+
+- ``partlet-cmu.npz``: partlet dictionaries (Feng 2015) on the 31 CMU ASF joints; used by
+  ``partlet_dictionary`` with no ``model`` on CMU ASF/AMC and CMU BVH skeletons.
+- ``partlet-kinect.npz``: the same method on Kinect v2 joints made from the CMU joints
+  (:data:`mocapfix.bodyparts.ASF_TO_KINECT_V2`), for Kinect v1/v2/Azure skeletons.
+"""
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+
+import numpy as np
+
+from mocapfix import bodyparts, models
+from mocapfix.motion import Motion
+from mocapfix.train import METHODS, discover_training, read_all
+from mocapfix.cleaners import build
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def as_kinect(motion: Motion) -> Motion:
+    """CMU ASF joint positions → Kinect v2 joints (averages of bone ends)."""
+    index = {n: i for i, n in enumerate(motion.names)}
+    pos = np.stack([motion.positions[:, [index[b] for b in bones]].mean(axis=1)
+                    for bones in bodyparts.ASF_TO_KINECT_V2.values()], axis=1)
+    return Motion(pos, list(bodyparts.KINECT_V2_NAMES), motion.fps, units=motion.units,
+                  metres_per_unit=motion.metres_per_unit, format="kinect", path=motion.path)
+
+
+def fit_and_save(motions, paths, out: Path, **params):
+    started = time.perf_counter()
+    cleaner = build(*METHODS["partlet"][:1], **{**METHODS["partlet"][1], **params})
+    cleaner.fit(motions)
+    header, arrays = cleaner.state()
+    header.update(cleaner.model_header_fields())
+    header["training"] = models.provenance(paths, [m.n_frames for m in motions],
+                                           time.perf_counter() - started)
+    models.save(out, header, arrays)
+    print(f"{out}: {time.perf_counter() - started:.1f} s, unexplained "
+          + ", ".join(f"{p} {100 * f:.2f} %" for p, f in header["state"]["unexplained"].items()))
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--training", default=str(REPO.parent / "shared" / "training" / "cmu-asfamc"))
+    ap.add_argument("--out", default=str(REPO / "mocapfix" / "data" / "models"))
+    args = ap.parse_args()
+    paths = discover_training([args.training])
+    motions = read_all(paths, jobs=2)
+    out = Path(args.out)
+    fit_and_save(motions, paths, out / "partlet-cmu.npz")
+    fit_and_save([as_kinect(m) for m in motions], paths, out / "partlet-kinect.npz")
+
+
+if __name__ == "__main__":
+    main()
