@@ -30,7 +30,15 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
-from mocapfix.solvers.lowrank import shrink
+
+
+def soft(X: np.ndarray, tau) -> np.ndarray:
+    """Soft threshold ``sign(X) max(|X| − τ, 0)`` in X's precision, in three passes
+    (:func:`mocapfix.solvers.lowrank.shrink` casts to float64 and allocates more)."""
+    out = np.abs(X)
+    out -= tau
+    np.maximum(out, 0, out=out)
+    return np.copysign(out, X, out=out)
 
 
 def lipschitz(G: np.ndarray, laplacian=None, lam_graph: float = 0.0) -> float:
@@ -51,16 +59,18 @@ def fista(G: np.ndarray, C: np.ndarray, lam, *, laplacian=None, lam_graph: float
     Returns (Ψ, iterations). The gradient is ``2(GΨ − C) + 2λ_g ΨL``.
     """
     K, n = C.shape
-    step = step or 1.0 / lipschitz(G, laplacian, lam_graph)
-    x = np.zeros((K, n)) if x0 is None else x0.copy()
+    step = float(step or 1.0 / lipschitz(G, laplacian, lam_graph))
+    x = np.zeros((K, n), dtype=C.dtype) if x0 is None else x0.astype(C.dtype)
     y, t = x.copy(), 1.0
-    thresh = np.asarray(lam, dtype=float) * step
+    thresh = (np.asarray(lam, dtype=float) * step).astype(C.dtype)
     it = 0
     for it in range(1, n_iter + 1):
         grad = G @ y - C
         if laplacian is not None and lam_graph > 0:
             grad += lam_graph * (laplacian @ y.T).T
-        x_new = shrink(y - 2.0 * step * grad, thresh)
+        grad *= -2.0 * step
+        grad += y
+        x_new = soft(grad, thresh)
         t_new = 0.5 * (1.0 + np.sqrt(1.0 + 4.0 * t * t))
         delta = x_new - x
         y = x_new + ((t - 1.0) / t_new) * delta
@@ -169,6 +179,9 @@ def group_shrink_lp(Q: np.ndarray, E: np.ndarray, lam: float, p: float, *, eps: 
     ``E = Q / (1 + λ Θ)`` with ``Θ_g = (p/2) ||E_g||₂^{p−2}`` per group (the vectors along
     ``axis``), ``E`` the previous estimate. For p = 1 the fixed point is the group soft
     threshold at λ/2; p < 1 is more aggressive on large groups, p = 2 is ridge shrinkage."""
+    if p == 1.0:   # the fixed point in closed form: group soft threshold at λ/2
+        qn = np.sqrt(np.sum(Q * Q, axis=axis, keepdims=True))
+        return Q * np.maximum(1.0 - 0.5 * lam / np.maximum(qn, eps), 0.0)
     norm = np.sqrt(np.sum(E * E, axis=axis, keepdims=True))
     theta = 0.5 * p * np.maximum(norm, eps) ** (p - 2.0)
     return Q / (1.0 + lam * theta)
