@@ -39,7 +39,7 @@ _CMU_BVH_TO_ASF = {
 # Kinect v1 / MSR Action3D / Azure Kinect → Kinect v2 names.
 _KINECT_TO_V2 = {
     "hipcenter": "SpineBase", "spine": "SpineMid", "shouldercenter": "SpineShoulder",
-    "pelvis": "SpineBase", "spine_naval": "SpineMid", "spine_chest": "SpineShoulder",
+    "pelvis": "SpineBase", "spine_navel": "SpineMid", "spine_chest": "SpineShoulder",
     "neck": "Neck", "head": "Head", "shoulder_left": "ShoulderLeft", "elbow_left": "ElbowLeft",
     "wrist_left": "WristLeft", "hand_left": "HandLeft", "handtip_left": "HandTipLeft",
     "thumb_left": "ThumbLeft", "shoulder_right": "ShoulderRight", "elbow_right": "ElbowRight",
@@ -81,7 +81,7 @@ def canonical_names(names: list[str]) -> list[str]:
     present = set(plain)
     if {"chest2", "lefthip"} <= present:
         table = _CMU_BVH_TO_ASF
-    elif present & {"hipcenter", "spinebase", "pelvis", "spine_naval", "elbowleft", "elbow_left"}:
+    elif present & {"hipcenter", "spinebase", "pelvis", "spine_navel", "elbowleft", "elbow_left"}:
         table = {k: v.lower() for k, v in _KINECT_TO_V2.items()}
     else:
         table = {}

@@ -158,8 +158,8 @@ def clean(ctx, inputs, outdir, config_path, reports, jobs, as_json, fps, allow_i
               type=click.Choice(["partlet", "ksvd"]),
               help="partlet: robust dictionary learning (Feng 2015); ksvd: K-SVD (Xiao 2015).")
 @click.option("--atoms", type=click.IntRange(2, 4096), default=None, help="Atoms per partlet (default 128).")
-@click.option("--window", type=click.IntRange(1, 200), default=None, help="Window length m in samples (default 8).")
-@click.option("--sample-rate", default=None, help="Rate of the window samples, e.g. '30 Hz' (default).")
+@click.option("--window", type=click.IntRange(1, 200), default=None, help="Window length m in samples (default 16).")
+@click.option("--sample-rate", default=None, help="Rate of the window samples (default '120 Hz'; '30 Hz' for Kinect).")
 @click.option("--lambda", "lam", default=None, help="Outlier weight of eq. 5 as a length (default '50 mm').")
 @click.option("--beta", type=float, default=None, help="Sparsity weight of eq. 5 (default 0.05, relative).")
 @click.option("--iterations", type=click.IntRange(1, 1000), default=None, help="Outer training iterations.")

@@ -4,7 +4,8 @@ them). Anyone can re-run it::
 
     python scripts/train_models.py [--training DIR] [--out DIR]
 
-- ``partlet-cmu.npz``: partlet dictionaries (Feng 2015) on the 31 CMU ASF joints; used by
+- ``partlet-cmu.npz``: partlet dictionaries (Feng 2015) on the 31 CMU ASF joints, windows of
+  16 frames at 120 Hz; used by
   ``partlet_dictionary`` with no ``model`` on CMU ASF/AMC and CMU BVH skeletons.
 - ``partlet-kinect.npz``: the same method on Kinect v2 joints made from the CMU joints
   (:data:`mocapfix.bodyparts.ASF_TO_KINECT_V2`), for Kinect v1/v2/Azure skeletons.
@@ -56,7 +57,9 @@ def main():
     motions = read_all(paths, jobs=2)
     out = Path(args.out)
     fit_and_save(motions, paths, out / "partlet-cmu.npz")
-    fit_and_save([as_kinect(m) for m in motions], paths, out / "partlet-kinect.npz")
+    # Kinect skeletons come at 30 Hz: windows of 8 samples at 30 Hz (0.27 s)
+    fit_and_save([as_kinect(m) for m in motions], paths, out / "partlet-kinect.npz",
+                 sample_rate="30 Hz", window=8)
 
 
 if __name__ == "__main__":

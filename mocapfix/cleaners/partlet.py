@@ -111,13 +111,14 @@ class PartletDictionary(FittedCleaner):
         Param("loss", "choice", "l2", "ksvd coding: l2 (Gaussian noise) or l1 (outliers)", choices=("l2", "l1")),
         Param("lambda1", "float", 4.0, "ℓ2,p noise weight as a multiple of the noise level", low=0.0, high=1e3),
         Param("lambda2", "float", 0.0, "graph smoothness weight, relative to ||DᵀD||", low=0.0, high=1e3),
-        Param("lambda3", "float", 0.1, "sparsity weight as a multiple of the noise level", low=0.0, high=1e3),
+        Param("lambda3", "float", 1.0, "sparsity weight as a multiple of the noise level", low=0.0, high=1e3),
         Param("p", "float", 1.0, "p of the ℓ2,p noise norm", low=0.0, low_open=True, high=2.0),
         Param("min_outlier", "length", "40 mm", "smallest residual the noise term may absorb", unit="mm",
               low=0.0, high=10.0),
         Param("ridge", "float", 1e-2, "ridge (relative to ||DᵀD||) of the codes' starting point",
               low=1e-9, high=1e3),
         Param("iterations", "int", 3, "E/Ψ alternations", low=1, high=200),
+        Param("fill_iterations", "int", 10, "E/Ψ alternations when samples are missing", low=1, high=500),
         Param("fista_iterations", "int", 20, "FISTA iterations per Ψ-step", low=1, high=2000),
         Param("neighbours", "int", 5, "k of the k-NN graph", low=0, high=50),
         Param("stride", "int", 4, "window samples between windows of one phase", low=1, high=64),
@@ -125,14 +126,14 @@ class PartletDictionary(FittedCleaner):
               low=0.0, high=2.0),
         Param("detail", "bool", True, "add back the residual detail the dictionary misses, "
               "Wiener-weighted against the noise level", ),
-        Param("out_of_sample", "float", 3.0, "warn when unexplained energy exceeds this × training", low=1.0,
+        Param("out_of_sample", "float", 5.0, "warn when unexplained energy exceeds this × training", low=1.0,
               high=1e6),
         # training (fit) parameters
         Param("method", "choice", "partlet", "training: robust dictionary (partlet) or K-SVD",
               choices=("partlet", "ksvd")),
         Param("atoms", "int", 128, "training: atoms per partlet dictionary", low=2, high=4096),
-        Param("window", "int", 8, "training: window length m in samples", low=1, high=200),
-        Param("sample_rate", "frequency", "30 Hz", "training: rate of the window samples", unit="Hz",
+        Param("window", "int", 16, "training: window length m in samples", low=1, high=200),
+        Param("sample_rate", "frequency", "120 Hz", "training: rate of the window samples", unit="Hz",
               low=1.0, high=10000.0),
         Param("train_lambda", "length", "50 mm", "training: outlier weight λ of eq. 5 (as a length)",
               unit="mm", low=0.0, high=10.0),
@@ -374,6 +375,10 @@ class PartletDictionary(FittedCleaner):
         m = self.window_
         starts = _starts(T, m, dil, self.values["stride"])
         info = {"model_joints": int((idx >= 0).sum()), "coding": coding, "dilation": dil}
+        rate = motion.fps / dil
+        if not 0.75 <= rate / self.sample_rate_ <= 1.34:
+            info["warning"] = (f"the model's windows are sampled at {self.sample_rate_:g} Hz, this file's "
+                               f"at {rate:g} Hz: its windows span another time; train a model at this rate")
         if not len(starts):
             info["skipped"] = f"{T} frames are fewer than one window ({dil * (m - 1) + 1})"
             return motion.copy(), info
@@ -413,7 +418,7 @@ class PartletDictionary(FittedCleaner):
         high = [p for p, f in unexplained.items()
                 if f > self.values["out_of_sample"] * max(trained.get(p, 0.0), 1e-4) and f > 0.02]
         if high:
-            info["warning"] = ("motion unlike the training set (out of sample) for "
+            info["warning"] = (info.get("warning", "") + "; " if "warning" in info else "") + ("motion unlike the training set (out of sample) for "
                                + ", ".join(high) + ": the dictionary explains little of it")
         return motion.replace(positions=pos), info
 
@@ -444,7 +449,9 @@ class PartletDictionary(FittedCleaner):
         rec = None
         p = self.values["p"] if coding == "robust" else 1.0
         robust = coding == "robust" or self.values["loss"] == "l1"
-        n_outer = self.values["iterations"] if (robust or missing.any()) else 1
+        n_outer = self.values["iterations"] if robust else 1
+        if missing.any():
+            n_outer = max(n_outer, self.values["fill_iterations"])
         for it in range(1, n_outer + 1):
             C = D.T @ Y
             if coding == "robust":
