@@ -9,6 +9,7 @@ Rules file::
     version: 1
     extends: [kinect]          # optional: preset names or paths whose rules come first
     formats: [kinect]          # optional: default format filter of the rules below
+    exclude: ["*Angles"]       # optional: default include/exclude of the rules below
     rules:
       - metric: missing        # what to judge (see METRICS / `mocapfix configs --rules`)
         scope: joint           # joint (each joint/marker) or file (aggregated); default joint
@@ -42,7 +43,7 @@ STATUS_ORDER = {"OK": 0, "WARN": 1, "FAIL": 2}
 FORMATS = ("c3d", "bvh", "asfamc", "kinect")
 RULES_VERSION = 1
 _RULE_KEYS = {"metric", "scope", "warn", "fail", "formats", "include", "exclude", "name"}
-_TOP_KEYS = {"version", "extends", "formats", "rules"}
+_TOP_KEYS = {"version", "extends", "formats", "include", "exclude", "rules"}
 RULES_DIR = Path(__file__).resolve().parent / "configs" / "rules"
 
 
@@ -59,7 +60,6 @@ class Metric:
     help: str
     agg: str | None = "max"
     below: bool = False
-    file_key: str | None = None
 
     def joint_value(self, joint: dict, file: dict):
         return _GETTERS.get(self.name, lambda j, f: j.get(self.name))(joint, file)
@@ -77,6 +77,7 @@ def _get(*keys):
 
 _GETTERS = {
     "never_seen": lambda j, f: int(bool(j.get("never_seen"))),
+    "longest_gap": _get("longest_gap_s"),
     "correction": _get("correction_mm", "max"),
     "writeback": _get("writeback_residual_mm", "max"),
     "flagged": lambda j, f: (j["outliers_flagged"] / f["frames"]) if f.get("frames") else 0.0,
@@ -307,7 +308,8 @@ def _formats(value, where):
     return tuple(value)
 
 
-def parse_rule(raw, where: str, stage: str | None = None, formats=None) -> Rule:
+def parse_rule(raw, where: str, stage: str | None = None, formats=None, include=(),
+               exclude=()) -> Rule:
     if not isinstance(raw, dict):
         raise ConfigError(f"{where}: each rule is a mapping with 'metric' and 'warn'/'fail'")
     where = f"{where}{_line(raw)}"
@@ -337,7 +339,8 @@ def parse_rule(raw, where: str, stage: str | None = None, formats=None) -> Rule:
         raise ConfigError(f"{where}: 'name' must be a non-empty string")
     return Rule(rname, metric, scope, warn, fail,
                 _formats(raw["formats"], where) if "formats" in raw else formats,
-                _patterns(raw, "include", where), _patterns(raw, "exclude", where), where)
+                _patterns(raw, "include", where) if "include" in raw else tuple(include),
+                _patterns(raw, "exclude", where) if "exclude" in raw else tuple(exclude), where)
 
 
 @dataclass
@@ -485,11 +488,12 @@ def parse_rules(data, source: str = "<rules>", stage: str = "input", _depth: int
         path = base if base is not None and base.is_file() else resolve_rules_path(str(parent))
         rules += load_rules(path, stage, _depth + 1).rules
     formats = _formats(data.get("formats"), source)
+    include, exclude = _patterns(data, "include", source), _patterns(data, "exclude", source)
     items = data.get("rules") or []
     if not isinstance(items, list):
         raise ConfigError(f"{source}{_key_line(data, 'rules')}: 'rules' must be a list")
     for n, raw in enumerate(items, start=1):
-        rules.append(parse_rule(raw, f"{source}: rule {n}", stage, formats))
+        rules.append(parse_rule(raw, f"{source}: rule {n}", stage, formats, include, exclude))
     return RuleSet(rules, source)
 
 
