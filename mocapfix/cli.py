@@ -345,7 +345,7 @@ def _config_body(text: str) -> str:
               help="Write JUnit XML here (one testcase per file).")
 @click.option("--json", "as_json", is_flag=True, help="Print the results as JSON on stdout.")
 @click.option("--fail-on", "fail_on", multiple=True, metavar="RULE=VALUE",
-              help="Set the fail threshold of a rule (or metric), e.g. --fail-on missing=20%%; repeatable.")
+              help="Set the fail threshold of a rule (or metric), e.g. --fail-on missing=20%; repeatable.")
 @click.option("--exit-zero", is_flag=True, help="Exit 0 even when rules fail or files are unreadable.")
 @click.option("--would-clean", "would_clean", metavar="CONFIG",
               help="Also run this pipeline in memory and say what it would fill and leave uncertain.")

@@ -17,14 +17,18 @@ def config_names() -> list[str]:
     return sorted(p.stem for p in CONFIG_DIR.glob("*.yaml"))
 
 
-def config_summary(path: Path) -> str:
-    """The first comment line of a shipped file (what it is for)."""
+def config_summary(path: Path, width: int = 90) -> str:
+    """The first sentence of a shipped file's leading comment (what it is for)."""
+    words = []
     for line in path.read_text(encoding="utf-8").splitlines():
-        if line.startswith("#"):
-            return line.lstrip("# ").strip()
-        if line.strip():
+        if not line.startswith("#"):
             break
-    return ""
+        words.append(line.lstrip("# ").strip())
+    text = " ".join(w for w in words if w)
+    for stop in (". ",):
+        if stop in text:
+            text = text[:text.index(stop) + 1]
+    return text if len(text) <= width else text[:width - 1].rstrip() + "…"
 
 
 def resolve_config(name_or_path) -> Path:
