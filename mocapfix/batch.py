@@ -273,10 +273,13 @@ def _pipeline(config: dict, source: str):
     from mocapfix.pipeline import parse_config
     import json
 
+    from mocapfix.pipeline import UNIT_WARNINGS
+
     key = (source, json.dumps(config, sort_keys=True, default=str))
     if key not in _PIPELINES:
         _PIPELINES.clear()
         _PIPELINES[key] = parse_config(config, source)
+        UNIT_WARNINGS.clear()          # the CLI printed them when it loaded the config
     return _PIPELINES[key]
 
 
