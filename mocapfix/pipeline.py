@@ -11,7 +11,7 @@ Config shape (safe-loaded)::
         cutoff: 6 Hz
         formats: [c3d, kinect]      # optional: run this step only on these formats
     report:                          # optional thresholds of the quality report
-      warn_missing: 0.0
+      warn_missing_after: 0.0        # keys: mocapfix.rules.REPORT_KEYS
       ...
 
 Errors name the file, the line and the key. Running records, per step, which samples it
