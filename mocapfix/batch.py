@@ -1,21 +1,47 @@
-"""Batch cleaning: find the input files, map them to output paths, run them in parallel
-(process pool) with failure isolation, and summarise.
+"""Batches: find the input files, map them to output paths, run one task per file over an
+executor, and hand back a typed result per file as each finishes.
 
-Input trees are never written to: an output path that is an input file is refused, and an
-output folder inside an input folder needs ``allow_inside_input``.
+Shape (DESIGN.md, "Batch as tasks over an injected executor"): :func:`discover_inputs`
+(shared by clean, check and info) → :func:`plan_outputs` (clean) → :func:`run_tasks`
+(``task(item) -> dict`` over a ``concurrent.futures`` executor; a local process pool by
+default; any executor with ``submit`` can be injected) yielding results as they finish.
+
+Discovery in folders skips, with a note: hidden files, our own reports and temporary
+files, files whose suffix is no motion format, ``.csv``/``.txt``/``.tsv`` files whose content
+is not motion data (Nexus/QTM exports, notes), special files (FIFOs, devices, sockets),
+broken links and symlink loops, and names filtered out by ``include``/``exclude``
+patterns. Files named explicitly are always taken (and fail with a clear error if they
+cannot be read). Input trees are never written to.
 """
 from __future__ import annotations
 
+import errno
+import fnmatch
 import os
-import sys
-from concurrent.futures import ProcessPoolExecutor, as_completed
+import stat
+import tempfile
+from concurrent.futures import Executor, ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Callable, Iterator
 
 from mocapfix.errors import ConfigError, MocapfixError
 from mocapfix.formats import MOTION_SUFFIXES
 
 _SKIP_SUFFIXES = (".report.json", ".report.md", ".report.html")
+_TEXT_SUFFIXES = (".csv", ".txt", ".tsv")
+
+
+@dataclass(frozen=True)
+class Found:
+    """An input file and the folder it was found in (None: named explicitly)."""
+
+    path: Path
+    root: Path | None = None
+
+    @property
+    def relative(self) -> Path:
+        return self.path.relative_to(self.root) if self.root is not None else Path(self.path.name)
 
 
 @dataclass(frozen=True)
@@ -24,41 +50,138 @@ class Job:
     output: Path
 
 
-def _is_motion_file(path: Path) -> bool:
-    name = path.name.lower()
-    return (path.suffix.lower() in MOTION_SUFFIXES and not name.startswith(".")
-            and not name.endswith(_SKIP_SUFFIXES) and not name.endswith(".part"))
+@dataclass
+class Discovery:
+    files: list
+    skipped: list          # (path, why) of files passed over in folders
 
 
-def discover(inputs, outdir, allow_inside_input: bool = False) -> list[Job]:
-    """Jobs for the given files and folders (folders are recursed; the output tree mirrors
-    them). Raises ConfigError for a usage problem."""
-    outdir = Path(outdir).resolve()
-    jobs: list[Job] = []
+def _special_kind(mode: int) -> str | None:
+    for test, name in ((stat.S_ISFIFO, "a FIFO"), (stat.S_ISSOCK, "a socket"),
+                       (stat.S_ISCHR, "a character device"), (stat.S_ISBLK, "a block device")):
+        if test(mode):
+            return name
+    return None if stat.S_ISREG(mode) else "not a regular file"
+
+
+def regular_file_problem(path: Path) -> str | None:
+    """Why ``path`` is not a readable regular file (None if it is). Never opens it, so a
+    FIFO cannot block; a symlink loop or a dangling link is named."""
+    try:
+        st = os.stat(path)
+    except OSError as exc:
+        if exc.errno == errno.ELOOP:
+            return "symlink loop"
+        if path.is_symlink():
+            return "broken symlink"
+        return exc.strerror or str(exc)
+    if stat.S_ISDIR(st.st_mode):
+        return None
+    return _special_kind(st.st_mode)
+
+
+def _looks_like_motion(path: Path) -> bool:
+    """Content sniff of a text file found in a folder: any format claims it."""
+    from mocapfix.formats import _MODULES, module
+
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(4096)
+    except OSError:
+        return True          # let the reader report the problem
+    return any(module(name).sniff(head) for name in _MODULES)
+
+
+def _matches(rel: str, patterns) -> bool:
+    name = rel.rsplit("/", 1)[-1]
+    return any(fnmatch.fnmatch(rel, p) or fnmatch.fnmatch(name, p) for p in patterns)
+
+
+def discover_inputs(inputs, include=(), exclude=(), sniff: bool = True) -> Discovery:
+    """Files to process from files and folders (folders recursed in sorted order)."""
+    files: list[Found] = []
+    skipped: list[tuple[str, str]] = []
     for raw in inputs:
         path = Path(raw)
-        if not path.exists():
+        if not path.exists() and not path.is_symlink():
             raise ConfigError(f"{path}: no such file or folder")
-        if path.is_dir():
-            root = path.resolve()
-            if (outdir == root or root in outdir.parents) and not allow_inside_input:
+        problem = regular_file_problem(path)
+        if problem:
+            raise ConfigError(f"{path}: cannot read: {problem}")
+        if not path.is_dir():
+            files.append(Found(Path(os.path.abspath(path))))
+            continue
+        root = path.resolve()
+        for dirpath, dirnames, filenames in os.walk(root):
+            here = Path(dirpath)
+            dirnames[:] = sorted(d for d in dirnames if not d.startswith("."))
+            for name in sorted(filenames):
+                f = here / name
+                rel = f.relative_to(root).as_posix()
+                low = name.lower()
+                if (low.startswith(".") or low.endswith(_SKIP_SUFFIXES) or low.endswith(".part")
+                        or f.suffix.lower() not in MOTION_SUFFIXES):
+                    continue
+                if include and not _matches(rel, include):
+                    skipped.append((str(f), "not matched by --include"))
+                    continue
+                if exclude and _matches(rel, exclude):
+                    skipped.append((str(f), "matched by --exclude"))
+                    continue
+                problem = regular_file_problem(f)
+                if problem:
+                    skipped.append((str(f), problem))
+                    continue
+                if sniff and low.endswith(_TEXT_SUFFIXES) and not _looks_like_motion(f):
+                    skipped.append((str(f), "not motion data (no known layout)"))
+                    continue
+                files.append(Found(f, root))
+    return Discovery(files, skipped)
+
+
+def check_output_folder(outdir) -> Path:
+    """Create ``outdir`` if needed and make sure files can be written there; a path that
+    runs through a file, or a folder we cannot write to, is a ConfigError."""
+    outdir = Path(outdir)
+    try:
+        outdir.mkdir(parents=True, exist_ok=True)
+    except FileExistsError:
+        raise ConfigError(f"{outdir}: output folder is an existing file") from None
+    except NotADirectoryError:
+        raise ConfigError(f"{outdir}: cannot create the output folder: part of the path is a file") from None
+    except OSError as exc:
+        raise ConfigError(f"{outdir}: cannot create the output folder: {exc.strerror or exc}") from None
+    try:
+        fd, probe = tempfile.mkstemp(prefix=".mocapfix-probe.", dir=outdir)
+        os.close(fd)
+        os.unlink(probe)
+    except OSError as exc:
+        raise ConfigError(f"{outdir}: cannot write to the output folder: {exc.strerror or exc}") from None
+    return outdir
+
+
+def _under(path: Path, folder: Path) -> bool:
+    return path == folder or folder in path.parents
+
+
+def plan_outputs(found: list, outdir, allow_inside_input: bool = False, inputs=()) -> list[Job]:
+    """Output path of each input: ``OUTDIR/<path relative to its input folder>``."""
+    outdir = Path(os.path.abspath(outdir))
+    real_out = outdir.resolve() if outdir.exists() else outdir
+    for raw in inputs:
+        p = Path(raw)
+        if p.is_dir():
+            root = p.resolve()
+            if _under(real_out, root) and not allow_inside_input:
                 raise ConfigError(
                     f"output folder {outdir} is inside input folder {root}; choose another "
                     "output folder or pass --allow-inside-input")
-            for dirpath, dirnames, filenames in os.walk(root):
-                here = Path(dirpath)
-                dirnames[:] = sorted(d for d in dirnames if not d.startswith(".")
-                                     and (here / d).resolve() != outdir)
-                for name in sorted(filenames):
-                    f = here / name
-                    if _is_motion_file(f):
-                        jobs.append(Job(f, outdir / f.relative_to(root)))
-        else:
-            jobs.append(Job(path.resolve(), outdir / path.name))
+    jobs = [Job(f.path, outdir / f.relative) for f in found
+            if not _under(f.path, real_out) or f.root is None]
+    sources = {os.path.realpath(j.source) for j in jobs}
     seen: dict[Path, Path] = {}
-    inputs_set = {j.source.resolve() for j in jobs}
     for job in jobs:
-        if job.output.resolve() in inputs_set:
+        if os.path.realpath(job.output) in sources:
             raise ConfigError(f"{job.output}: would overwrite an input file; choose another output folder")
         if job.output in seen:
             raise ConfigError(f"{job.source} and {seen[job.output]} would both be written to {job.output}")
@@ -66,51 +189,109 @@ def discover(inputs, outdir, allow_inside_input: bool = False) -> list[Job]:
     return jobs
 
 
-def _run_one(job: Job, config: dict, source: str, reports, read_options) -> dict:
-    from mocapfix.clean import clean_file
-    from mocapfix.pipeline import parse_config
+def discover(inputs, outdir, allow_inside_input: bool = False, include=(), exclude=()) -> list[Job]:
+    """Jobs for the given files and folders (kept for callers of the old API)."""
+    found = discover_inputs(inputs, include, exclude)
+    return plan_outputs(found.files, outdir, allow_inside_input, inputs)
 
+
+# -- running ------------------------------------------------------------------------------
+
+def error_result(item, message: str) -> dict:
+    source = getattr(item, "source", None) or getattr(item, "path", item)
+    out = {"input": str(source), "status": "ERROR", "error": message}
+    if hasattr(item, "output"):
+        out["output"] = str(item.output)
+    return out
+
+
+def name_the_file(path, message: str) -> str:
+    """Per-file errors always name the file."""
+    return message if str(path) in message else f"{path}: {message}"
+
+
+def run_tasks(task: Callable, items: list, workers: int = 1,
+              executor: Executor | None = None) -> Iterator[tuple[int, dict]]:
+    """Run ``task(item)`` for every item; yield ``(index, result)`` as each finishes.
+
+    ``task`` must be picklable for a process pool and must turn its own failures into an
+    ``ERROR`` result; a task that raises anyway (a killed worker) becomes one here. With
+    ``workers <= 1`` and no executor the tasks run in this process, in order.
+    """
+    if executor is None and (workers <= 1 or len(items) <= 1):
+        for n, item in enumerate(items):
+            yield n, _guarded(task, item)
+        return
+    own = executor is None
+    pool = executor or ProcessPoolExecutor(max_workers=workers)
     try:
-        pipeline = parse_config(config, source)
-        return clean_file(job.source, job.output, pipeline, reports, read_options)
-    except MocapfixError as exc:
-        return {"input": str(job.source), "output": str(job.output), "status": "ERROR", "error": str(exc)}
+        futures = {pool.submit(task, item): n for n, item in enumerate(items)}
+        for fut in as_completed(futures):
+            n = futures[fut]
+            try:
+                result = fut.result()
+            except Exception as exc:  # noqa: BLE001 — e.g. a worker killed by the OS
+                result = error_result(items[n], f"worker failed: {exc}")
+            yield n, result
+    finally:
+        if own:
+            pool.shutdown(cancel_futures=True)
+
+
+def _guarded(task, item) -> dict:
+    try:
+        return task(item)
     except Exception as exc:  # noqa: BLE001 — one bad file must not stop the batch
-        return {"input": str(job.source), "output": str(job.output), "status": "ERROR",
-                "error": f"{job.source}: internal error {type(exc).__name__}: {exc}"}
+        return error_result(item, f"internal error {type(exc).__name__}: {exc}")
+
+
+@dataclass
+class CleanTask:
+    """Clean one job. Parses the pipeline once per worker process (cached)."""
+
+    config: dict
+    source: str
+    reports: tuple = ("json",)
+    read_options: dict | None = None
+
+    def __call__(self, job: Job) -> dict:
+        from mocapfix.clean import clean_file
+
+        try:
+            pipeline = _pipeline(self.config, self.source)
+            return clean_file(job.source, job.output, pipeline, self.reports, self.read_options)
+        except MocapfixError as exc:
+            return error_result(job, name_the_file(job.source, str(exc)))
+        except Exception as exc:  # noqa: BLE001 — one bad file must not stop the batch
+            return error_result(job, f"{job.source}: internal error {type(exc).__name__}: {exc}")
+
+
+_PIPELINES: dict = {}
+
+
+def _pipeline(config: dict, source: str):
+    from mocapfix.pipeline import parse_config
+    import json
+
+    from mocapfix.pipeline import UNIT_WARNINGS
+
+    key = (source, json.dumps(config, sort_keys=True, default=str))
+    if key not in _PIPELINES:
+        _PIPELINES.clear()
+        _PIPELINES[key] = parse_config(config, source)
+        UNIT_WARNINGS.clear()          # the CLI printed them when it loaded the config
+    return _PIPELINES[key]
 
 
 def run_batch(jobs: list[Job], config: dict, source: str, reports=("json",), workers: int = 1,
-              read_options: dict | None = None, progress: bool | None = None) -> list[dict]:
-    """Clean every job; results in job order. ``config`` is the pipeline config as a plain
-    dict (it is re-validated in each worker process)."""
-    if progress is None:
-        progress = sys.stderr.isatty()
-    bar = None
-    if progress and jobs:
-        from tqdm import tqdm
-        bar = tqdm(total=len(jobs), unit="file", file=sys.stderr, leave=False)
+              read_options: dict | None = None, on_result: Callable | None = None,
+              executor: Executor | None = None) -> list[dict]:
+    """Clean every job; results in job order. ``on_result(result)`` is called as each file
+    finishes (for streaming output)."""
+    task = CleanTask(config, source, tuple(reports), read_options)
     results: list[dict | None] = [None] * len(jobs)
-    try:
-        if workers <= 1 or len(jobs) <= 1:
-            for n, job in enumerate(jobs):
-                results[n] = _run_one(job, config, source, reports, read_options)
-                if bar:
-                    bar.update()
-        else:
-            with ProcessPoolExecutor(max_workers=workers) as pool:
-                futures = {pool.submit(_run_one, job, config, source, reports, read_options): n
-                           for n, job in enumerate(jobs)}
-                for fut in as_completed(futures):
-                    n = futures[fut]
-                    try:
-                        results[n] = fut.result()
-                    except Exception as exc:  # noqa: BLE001 — e.g. a worker killed by the OS
-                        results[n] = {"input": str(jobs[n].source), "output": str(jobs[n].output),
-                                      "status": "ERROR", "error": f"worker failed: {exc}"}
-                    if bar:
-                        bar.update()
-    finally:
-        if bar:
-            bar.close()
+    for n, result in run_tasks(task, jobs, workers, executor):
+        results[n] = result
+        if on_result is not None:
+            on_result(result)
     return results  # type: ignore[return-value]

@@ -2,10 +2,12 @@
 formats, write the output and its reports."""
 from __future__ import annotations
 
+import contextlib
 import time
 from pathlib import Path
 
 from mocapfix import formats
+from mocapfix.errors import UnreadableFileError
 from mocapfix.fileio import atomic_write_text
 from mocapfix.motion import Motion
 from mocapfix.pipeline import Pipeline
@@ -32,18 +34,43 @@ def report_paths(output: Path, kinds) -> dict[str, Path]:
     return {k: output.with_name(f"{stem}.report.{k}") for k in kinds}
 
 
+def output_files(output: Path) -> list[Path]:
+    """Every file a clean of ``output`` may write: the motion, an ASF beside an AMC, and
+    the reports of every kind (for removing stale ones)."""
+    return [output, *report_paths(output, REPORT_KINDS).values()]
+
+
+def remove_outputs(paths) -> None:
+    for p in paths:
+        with contextlib.suppress(FileNotFoundError):
+            Path(p).unlink()
+
+
 def clean_file(source: Path, output: Path, pipeline: Pipeline, reports=("json",),
                read_options: dict | None = None) -> dict:
-    """Read, clean, write. Returns a JSON-able summary; raises MocapfixError on failure."""
+    """Read, clean, write. Returns a JSON-able summary; raises MocapfixError on failure.
+
+    Every report is rendered before anything is written, and a failure while writing
+    removes what this call wrote, so a failed file leaves nothing behind. Reports of kinds
+    not asked for this time are removed beside the new output (no stale reports)."""
     motion = formats.read(source, **(read_options or {}))
+    if motion.n_frames == 0:
+        raise UnreadableFileError(source, "holds no frames; nothing to clean")
     result = clean_motion(motion, pipeline)
-    written = formats.write(result.cleaned, output)
     report = build_report(result, pipeline.report)
     paths = report_paths(output, reports)
     writers = {"json": lambda: to_json(report), "md": lambda: to_markdown(report),
                "html": lambda: to_html(report, result)}
-    for kind, path in paths.items():
-        atomic_write_text(path, writers[kind]())
+    texts = {kind: writers[kind]() for kind in paths}
+    written: list[Path] = []
+    try:
+        written = list(formats.write(result.cleaned, output))
+        for kind, path in paths.items():
+            atomic_write_text(path, texts[kind])
+    except BaseException:
+        remove_outputs(written + [p for p in paths.values()])
+        raise
+    remove_outputs(p for k, p in report_paths(output, REPORT_KINDS).items() if k not in paths)
     f = report["file"]
     return {
         "input": str(source), "output": str(output), "written": [str(p) for p in written],
@@ -51,4 +78,5 @@ def clean_file(source: Path, output: Path, pipeline: Pipeline, reports=("json",)
         "frames": f["frames"], "joints": f["joints"], "missing_before": f["missing_before"],
         "missing_after": f["missing_after"], "samples_filled": f["samples_filled"],
         "samples_flagged": f["samples_flagged"], "seconds": round(result.seconds, 4),
+        "reasons": sorted({r for j in report["joints"] for r in j["reasons"] if r.startswith(f["status"])})[:3],
     }

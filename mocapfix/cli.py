@@ -1,7 +1,9 @@
-"""Command line: thin click commands over the library. Errors become one line and an
-exit code (0 ok, 1 some files failed, 2 unreadable input or usage/config error)."""
+"""Command line: thin click commands over the library. Errors become one line and an exit
+code; see README "Exit codes". Each command is one function registered on ``main``; the
+options every command shares (``-q``, ``-v``, ``--debug``) come from :func:`common`."""
 from __future__ import annotations
 
+import functools
 import json
 import sys
 
@@ -10,7 +12,7 @@ import click
 from mocapfix import __version__
 from mocapfix.errors import MocapfixError
 
-EXIT_OK, EXIT_SOME_FAILED, EXIT_USAGE = 0, 1, 2
+EXIT_OK, EXIT_SOME_FAILED, EXIT_USAGE, EXIT_UNREADABLE = 0, 1, 2, 3
 
 
 def _fail(message: str, debug: bool, exc: BaseException | None = None, code: int = EXIT_USAGE):
@@ -18,6 +20,44 @@ def _fail(message: str, debug: bool, exc: BaseException | None = None, code: int
         raise exc
     click.echo(f"mocapfix: error: {message}", err=True)
     sys.exit(code)
+
+
+class Out:
+    """Where a command's lines go, by verbosity: ``-q`` errors and the summary only,
+    default one line per file, ``-v`` details. Lines are flushed as written, so a batch
+    streams off a terminal too."""
+
+    def __init__(self, verbosity: int, err: bool = False):
+        self.verbosity, self.err = verbosity, err
+
+    def line(self, text: str, level: int = 0, err: bool | None = None):
+        if self.verbosity >= level:
+            click.echo(text, err=self.err if err is None else err)
+            (sys.stderr if (self.err if err is None else err) else sys.stdout).flush()
+
+    def error(self, text: str):
+        click.echo(text, err=True)
+        sys.stderr.flush()
+
+
+def common(fn):
+    """-q/-v/--debug on a command (``--debug`` also works before the command)."""
+
+    @click.option("-q", "--quiet", "quiet", is_flag=True, help="Only errors and the summary.")
+    @click.option("-v", "--verbose", "verbose", count=True, help="More detail (reasons, notes).")
+    @click.option("--debug", "debug_here", is_flag=True, help="Show tracebacks instead of one-line errors.")
+    @click.pass_context
+    @functools.wraps(fn)
+    def wrapper(ctx, *args, quiet, verbose, debug_here, **kwargs):
+        root = ctx.find_root()
+        if not isinstance(root.obj, dict):
+            root.obj = {}
+        root.obj["debug"] = bool(root.obj.get("debug")) or debug_here
+        ctx.obj = root.obj
+        ctx.obj["verbosity"] = -1 if quiet else verbose
+        return ctx.invoke(fn, *args, **kwargs)
+
+    return wrapper
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
@@ -29,36 +69,88 @@ def main(ctx, debug):
     ctx.obj = {"debug": debug}
 
 
+def _ctx():
+    return click.get_current_context().obj
+
+
+def _print_warnings(out: Out):
+    from mocapfix.pipeline import UNIT_WARNINGS
+
+    for w in UNIT_WARNINGS:
+        out.error(f"mocapfix: warning: {w}")
+    UNIT_WARNINGS.clear()
+
+
+def _discover(inputs, include, exclude, out: Out):
+    from mocapfix.batch import discover_inputs
+
+    found = discover_inputs(inputs, include, exclude)
+    for path, why in found.skipped:
+        out.line(f"SKIP  {path}: {why}", level=0 if "not motion" not in why else 1, err=True)
+    if found.skipped and out.verbosity == 0:
+        quiet_skips = sum("not motion" in why for _, why in found.skipped)
+        if quiet_skips:
+            out.line(f"note: {quiet_skips} text file(s) are not motion data and were skipped "
+                     "(-v lists them)", err=True)
+    return found
+
+
+_pattern_options = [
+    click.option("--include", multiple=True, metavar="GLOB",
+                 help="Only files (in folders) whose name or relative path matches; repeatable."),
+    click.option("--exclude", multiple=True, metavar="GLOB",
+                 help="Skip files (in folders) whose name or relative path matches; repeatable."),
+]
+
+
+def patterns(fn):
+    for opt in reversed(_pattern_options):
+        fn = opt(fn)
+    return fn
+
+
+# -- info --------------------------------------------------------------------------------------
+
 @main.command()
-@click.argument("files", nargs=-1, required=True, type=click.Path())
+@click.argument("inputs", nargs=-1, required=True, type=click.Path())
 @click.option("--json", "as_json", is_flag=True, help="Print a JSON list instead of text.")
 @click.option("--fps", type=float, default=None,
               help="Frame rate for formats that do not store one (AMC; default 120).")
-@click.pass_context
-def info(ctx, files, as_json, fps):
-    """Frames, rate, joints, units, gaps and tracking state of each FILE."""
+@patterns
+@common
+def info(inputs, as_json, fps, include, exclude):
+    """Frames, rate, markers, gaps, tracking state, analog channels, events and force
+    plates of each file (INPUT may be a folder). Exit 3 if a file could not be read."""
     from mocapfix.formats import read
     from mocapfix.info import format_text, summarise
 
-    debug = ctx.obj["debug"]
+    obj = _ctx()
+    debug, out = obj["debug"], Out(obj["verbosity"])
+    try:
+        found = _discover(inputs, include, exclude, out)
+    except MocapfixError as exc:
+        _fail(str(exc), debug, exc)
     summaries, failed = [], 0
-    for path in files:
+    for f in found.files:
         try:
             options = {"fps": fps} if fps else {}
-            summaries.append(summarise(read(path, **options)))
+            s = summarise(read(f.path, **options))
+            summaries.append(s)
+            if not as_json:
+                out.line(format_text(s, verbose=obj["verbosity"] > 0) + "\n", level=-1)
         except MocapfixError as exc:
             if debug:
                 raise
             failed += 1
-            click.echo(f"mocapfix: error: {exc}", err=True)
-            summaries.append({"path": str(path), "error": str(exc)})
+            out.error(f"mocapfix: error: {exc}")
+            summaries.append({"path": str(f.path), "error": str(exc)})
     if as_json:
         click.echo(json.dumps(summaries, indent=2))
-    else:
-        click.echo("\n".join(format_text(s) for s in summaries if "error" not in s))
     if failed:
-        sys.exit(EXIT_USAGE)
+        sys.exit(EXIT_UNREADABLE)
 
+
+# -- cleaners / configs --------------------------------------------------------------------------
 
 @main.command("cleaners")
 @click.option("--markdown", is_flag=True, help="Print a Markdown table (as in the README).")
@@ -79,6 +171,38 @@ def list_cleaners(markdown):
         click.echo(f"{name:<18} {summary}\n{'':<18} {params}")
 
 
+@main.command("configs")
+@click.argument("name", required=False)
+@click.option("--rules", "rules", is_flag=True, help="Rule sets of `check` instead of pipeline configs.")
+def list_configs(name, rules):
+    """List the shipped configs (and with --rules the shipped rule sets), or print one.
+
+    A shipped config is named by its preset name: `mocapfix clean -c optical-c3d ...`;
+    a rule set likewise: `mocapfix check -r kinect ...`. Copy one to start your own:
+    `mocapfix configs optical-c3d > my.yaml`."""
+    from mocapfix.presets import CONFIG_DIR, config_names, config_summary
+    from mocapfix.rules import RULES_DIR, preset_names
+
+    folder, names = (RULES_DIR, preset_names()) if rules else (CONFIG_DIR, config_names())
+    if name is None:
+        click.echo("rule sets (check -r NAME):" if rules else "pipeline configs (clean -c NAME):")
+        for n in names:
+            click.echo(f"  {n:<16} {config_summary(folder / f'{n}.yaml')}")
+        if not rules:
+            click.echo("rule sets: `mocapfix configs --rules`")
+        return
+    stem = name[:-5] if name.endswith(".yaml") else name
+    if stem not in names:
+        other = preset_names() if not rules else config_names()
+        hint = (" (it is a rule set: add --rules)" if not rules else " (it is a pipeline config: drop --rules)") \
+            if stem in other else ""
+        _fail(f"no shipped {'rule set' if rules else 'config'} named {name!r}{hint}; "
+              f"known: {', '.join(names)}", False)
+    click.echo((folder / f"{stem}.yaml").read_text(encoding="utf-8"), nl=False)
+
+
+# -- clean ---------------------------------------------------------------------------------
+
 def _parse_reports(value: str) -> tuple[str, ...]:
     from mocapfix.clean import REPORT_KINDS
 
@@ -89,66 +213,202 @@ def _parse_reports(value: str) -> tuple[str, ...]:
     return tuple(k for k in kinds if k != "none")
 
 
+def _clean_line(r: dict, verbose: bool) -> str:
+    if r["status"] == "ERROR":
+        return f"ERROR {r['error']}"
+    text = (f"{r['status']:<5} {r['input']} -> {r['output']} "
+            f"(missing {100 * r['missing_before']:.1f} % -> {100 * r['missing_after']:.1f} %, "
+            f"{r['seconds']:.2f} s)")
+    if r.get("skipped"):
+        return f"SKIP  {r['input']}: {r['skipped']}"
+    if verbose and r.get("reasons"):
+        text += "\n      " + "\n      ".join(r["reasons"])
+    return text
+
+
 @main.command()
 @click.argument("inputs", nargs=-1, required=True, type=click.Path())
 @click.option("-o", "--output", "outdir", required=True, type=click.Path(file_okay=False),
               help="Output folder; the input tree is mirrored inside it.")
-@click.option("-c", "--config", "config_path", type=click.Path(dir_okay=False),
-              help="Pipeline config (YAML). Default: the shipped configs/default.yaml.")
+@click.option("-c", "--config", "config_path",
+              help="Pipeline config: a YAML file or a shipped preset name (`mocapfix configs`). "
+                   "Default: default.")
 @click.option("--report", "reports", default="json", show_default=True,
               help="Reports to write beside each output: json, md, html (comma-separated) or none.")
 @click.option("-j", "--jobs", default=1, show_default=True, type=click.IntRange(1, 256),
               help="Files cleaned in parallel (process pool).")
-@click.option("--json", "as_json", is_flag=True, help="Print a JSON summary on stdout.")
+@click.option("--json", "as_json", is_flag=True, help="Print a JSON summary on stdout (per-file lines go to stderr).")
 @click.option("--fps", type=float, default=None, help="Frame rate for files that store none (AMC).")
 @click.option("--allow-inside-input", is_flag=True,
               help="Allow the output folder to lie inside an input folder.")
-@click.pass_context
-def clean(ctx, inputs, outdir, config_path, reports, jobs, as_json, fps, allow_inside_input):
+@click.option("--dry-run", is_flag=True, help="Say what would be cleaned and written; write nothing.")
+@click.option("--overwrite", "policy", flag_value="overwrite",
+              help="Replace outputs (and their reports) left by an earlier run.")
+@click.option("--skip-existing", "policy", flag_value="skip",
+              help="Leave files whose output exists alone (same config only).")
+@patterns
+@common
+def clean(inputs, outdir, config_path, reports, jobs, as_json, fps, allow_inside_input, dry_run,
+          policy, include, exclude):
     """Clean INPUT files or folders with a pipeline of cleaners.
 
-    Exit code 0 when every file was cleaned, 1 when some failed (the others are still
-    written), 2 for a usage or config error.
+    An output that exists already is an error unless --overwrite or --skip-existing is
+    given. Exit code 0 when every file was cleaned, 1 when some failed (the others are
+    still written), 2 for a usage or config error.
     """
     from pathlib import Path
 
-    from mocapfix.batch import discover, run_batch
+    from mocapfix.batch import check_output_folder, plan_outputs, run_batch
+    from mocapfix.clean import output_files, remove_outputs
     from mocapfix.fileio import atomic_write_text
-    from mocapfix.pipeline import default_config_path, load_config
+    from mocapfix.pipeline import load_config
+    from mocapfix.presets import resolve_config
 
-    debug = ctx.obj["debug"]
+    obj = _ctx()
+    debug = obj["debug"]
+    out = Out(obj["verbosity"], err=as_json)
     try:
         kinds = _parse_reports(reports)
-        pipeline = load_config(config_path or default_config_path())
-        job_list = discover(inputs, outdir, allow_inside_input)
-        if not job_list:
+        pipeline = load_config(resolve_config(config_path or "default"))
+        _print_warnings(out)
+        found = _discover(inputs, include, exclude, out)
+        jobs_list = plan_outputs(found.files, outdir, allow_inside_input, inputs)
+        if not jobs_list:
             raise MocapfixError("no motion files found in " + ", ".join(inputs))
+        config_file = Path(outdir) / "mocapfix-config.yaml"
+        config_text = f"# effective config of this run (from {pipeline.source})\n" + pipeline.dump()
+        existing = [j for j in jobs_list if j.output.exists()]
+        if existing and policy is None and not dry_run:
+            shown = ", ".join(str(j.output) for j in existing[:3]) + (" …" if len(existing) > 3 else "")
+            raise MocapfixError(f"{len(existing)} output(s) exist already ({shown}); pass --overwrite "
+                                "to replace them or --skip-existing to keep them")
+        if policy == "skip" and existing and config_file.exists() and \
+                _config_body(config_file.read_text(encoding="utf-8")) != _config_body(config_text):
+            raise MocapfixError(f"{config_file}: the outputs there were made with another config; "
+                                "--skip-existing would mix two configs in one folder (use --overwrite "
+                                "or another output folder)")
+        if not dry_run:
+            check_output_folder(outdir)
     except click.BadParameter as exc:
         _fail(str(exc), debug, exc)
     except MocapfixError as exc:
         _fail(str(exc), debug, exc)
-    Path(outdir).mkdir(parents=True, exist_ok=True)
-    atomic_write_text(Path(outdir) / "mocapfix-config.yaml",
-                      f"# effective config of this run (from {pipeline.source})\n" + pipeline.dump())
-    results = run_batch(job_list, pipeline.config(), str(pipeline.source), kinds, jobs,
-                        {"fps": fps} if fps else None)
+    todo = [j for j in jobs_list if not (policy == "skip" and j.output.exists())]
+    skipped = [j for j in jobs_list if j not in todo]
+    for j in skipped:
+        out.line(f"SKIP  {j.source}: output exists ({j.output})")
+    if dry_run:
+        for j in todo:
+            note = " (replaces the existing output)" if j.output.exists() else ""
+            out.line(f"WOULD {j.source} -> {j.output}{note}", level=-1)
+        out.line(f"dry run: {len(todo)} file(s) would be cleaned with {pipeline.source}, "
+                 f"{len(skipped)} skipped; nothing written", level=-1, err=True)
+        sys.exit(EXIT_OK)
+
+    def stream(r):
+        out.line(_clean_line(r, obj["verbosity"] > 0), level=0 if r["status"] != "ERROR" else -1,
+                 err=True if r["status"] == "ERROR" else None)
+        if r["status"] == "ERROR":
+            # a failed file leaves nothing behind, not even an output of an earlier run
+            remove_outputs(output_files(Path(r["output"])))
+
+    results = run_batch(todo, pipeline.config(), str(pipeline.source), kinds, jobs,
+                        {"fps": fps} if fps else None, on_result=stream)
     failed = [r for r in results if r["status"] == "ERROR"]
+    if len(failed) < len(results):
+        # provenance: written only when this config produced at least one output
+        atomic_write_text(config_file, config_text)
     if as_json:
         click.echo(json.dumps({"files": results, "cleaned": len(results) - len(failed),
-                               "failed": len(failed), "config": str(pipeline.source)}, indent=1))
+                               "failed": len(failed), "skipped": [str(j.source) for j in skipped],
+                               "config": str(pipeline.source)}, indent=1))
     else:
-        for r in results:
-            if r["status"] == "ERROR":
-                click.echo(f"FAILED  {r['error']}", err=True)
-            else:
-                click.echo(f"{r['status']:<7} {r['input']} -> {r['output']} "
-                           f"(missing {100 * r['missing_before']:.1f} % -> {100 * r['missing_after']:.1f} %, "
-                           f"{r['seconds']:.2f} s)")
-        click.echo(f"cleaned {len(results) - len(failed)} of {len(results)} files"
-                   + (f"; {len(failed)} failed: " + ", ".join(r["input"] for r in failed) if failed else ""),
-                   err=bool(failed))
+        out.line(f"cleaned {len(results) - len(failed)} of {len(results)} files"
+                 + (f" ({len(skipped)} skipped: output exists)" if skipped else "")
+                 + (f"; {len(failed)} failed (ERROR): " + ", ".join(r["input"] for r in failed)
+                    if failed else ""), level=-1, err=bool(failed))
     sys.exit(EXIT_SOME_FAILED if failed else EXIT_OK)
 
+
+def _config_body(text: str) -> str:
+    return "\n".join(line for line in text.splitlines() if not line.startswith("#"))
+
+
+# -- check ---------------------------------------------------------------------------------
+
+@main.command()
+@click.argument("inputs", nargs=-1, required=True, type=click.Path())
+@click.option("-r", "--rules", "rules_path", default=None,
+              help="Rules: a YAML file or a shipped rule set (`mocapfix configs --rules`). "
+                   "Default: default (per format).")
+@click.option("--junit", "junit_path", type=click.Path(dir_okay=False),
+              help="Write JUnit XML here (one testcase per file).")
+@click.option("--json", "as_json", is_flag=True, help="Print the results as JSON on stdout.")
+@click.option("--fail-on", "fail_on", multiple=True, metavar="RULE=VALUE",
+              help="Set the fail threshold of a rule (or metric), e.g. --fail-on missing=20%; repeatable.")
+@click.option("--exit-zero", is_flag=True, help="Exit 0 even when rules fail or files are unreadable.")
+@click.option("--would-clean", "would_clean", metavar="CONFIG",
+              help="Also run this pipeline in memory and say what it would fill and leave uncertain.")
+@click.option("-j", "--jobs", default=1, show_default=True, type=click.IntRange(1, 256),
+              help="Files checked in parallel.")
+@click.option("--fps", type=float, default=None, help="Frame rate for files that store none (AMC).")
+@patterns
+@common
+def check(inputs, rules_path, junit_path, as_json, fail_on, exit_zero, would_clean, jobs, fps,
+          include, exclude):
+    """Check INPUT files or folders against quality rules without changing anything.
+
+    One line per file as it finishes: OK, WARN (passes), FAIL (a rule failed) or ERROR
+    (unreadable). Exit 0 all passed, 1 a rule failed, 2 usage or config error, 3 an input
+    could not be read.
+    """
+    import time
+
+    from mocapfix.batch import run_tasks
+    from mocapfix.check import CheckTask, exit_code, summary
+    from mocapfix.fileio import atomic_write_text
+    from mocapfix.pipeline import load_config
+    from mocapfix.presets import resolve_config
+    from mocapfix.render import check_junit, check_line
+    from mocapfix.rules import load_rules, resolve_rules_path
+
+    obj = _ctx()
+    debug = obj["debug"]
+    out = Out(obj["verbosity"], err=as_json)
+    started = time.perf_counter()
+    try:
+        rules = load_rules(resolve_rules_path(rules_path or "default")).with_fail_on(list(fail_on))
+        config = source = None
+        if would_clean:
+            pipeline = load_config(resolve_config(would_clean))
+            _print_warnings(out)
+            config, source = pipeline.config(), str(pipeline.source)
+        found = _discover(inputs, include, exclude, out)
+        if not found.files:
+            raise MocapfixError("no motion files found in " + ", ".join(inputs))
+    except MocapfixError as exc:
+        _fail(str(exc), debug, exc)
+    task = CheckTask(rules, config, source, {"fps": fps} if fps else None)
+    names = [str(f.relative if f.root is None else f.root.name / f.relative) for f in found.files]
+    results: list = [None] * len(found.files)
+    for n, r in run_tasks(task, [f.path for f in found.files], jobs):
+        r["name"] = names[n]
+        results[n] = r
+        level = -1 if r["status"] in ("FAIL", "ERROR") else 0
+        out.line(check_line(r, obj["verbosity"] > 0), level=level)
+    seconds = time.perf_counter() - started
+    if junit_path:
+        atomic_write_text(junit_path, check_junit(
+            [{**r, "path": r["name"]} for r in results], seconds))
+    s = summary(results)
+    if as_json:
+        click.echo(json.dumps({"summary": s, "rules": rules.describe(), "files": results}, indent=1))
+    out.line(f"checked {s['files']} files: {s['OK']} OK, {s['WARN']} WARN, {s['FAIL']} FAIL, "
+             f"{s['ERROR']} ERROR", level=-1, err=True)
+    sys.exit(EXIT_OK if exit_zero else exit_code(results))
+
+
+# -- train-dictionary ----------------------------------------------------------------------
 
 @main.command("train-dictionary")
 @click.argument("training", nargs=-1, required=True, type=click.Path())
@@ -169,17 +429,19 @@ def clean(ctx, inputs, outdir, config_path, reports, jobs, as_json, fps, allow_i
 @click.option("-j", "--jobs", default=1, show_default=True, type=click.IntRange(1, 256),
               help="Files read in parallel.")
 @click.option("--fps", type=float, default=None, help="Frame rate for files that store none (AMC).")
-@click.pass_context
-def train_dictionary(ctx, training, output, method, atoms, window, sample_rate, lam, beta,
+@common
+def train_dictionary(training, output, method, atoms, window, sample_rate, lam, beta,
                      iterations, max_windows, seed, jobs, fps):
     """Train a model for a trained cleaner from TRAINING files or folders (any format;
     BVH/AMC by forward kinematics) and write it to OUTPUT. Name it in a config with
     `model: PATH` (relative to the config file)."""
     from mocapfix.train import train
 
-    debug = ctx.obj["debug"]
+    obj = _ctx()
+    debug = obj["debug"]
+    out = Out(obj["verbosity"])
     bar = None
-    if sys.stderr.isatty():
+    if sys.stderr.isatty() and obj["verbosity"] >= 0:
         from tqdm import tqdm
 
         state = {}
@@ -207,10 +469,10 @@ def train_dictionary(ctx, training, output, method, atoms, window, sample_rate, 
             bar.close()
     t = summary["training"]
     st = summary["state"]
-    click.echo(f"wrote {output}: {summary['cleaner']} ({st['method']}), {len(st['joints'])} joints in "
+    out.line(f"wrote {output}: {summary['cleaner']} ({st['method']}), {len(st['joints'])} joints in "
                f"{len(st['partlets'])} partlets, window {st['window']} at {st['sample_rate']:g} Hz; "
                f"trained on {len(t['files'])} files, {t['frames']} frames in {t['seconds']:.1f} s; "
-               "unexplained energy " + ", ".join(f"{p} {100 * f:.2f} %" for p, f in st["unexplained"].items()))
+               "unexplained energy " + ", ".join(f"{p} {100 * f:.2f} %" for p, f in st["unexplained"].items()), level=-1)
 
 
 def _register_bench():

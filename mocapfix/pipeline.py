@@ -11,7 +11,7 @@ Config shape (safe-loaded)::
         cutoff: 6 Hz
         formats: [c3d, kinect]      # optional: run this step only on these formats
     report:                          # optional thresholds of the quality report
-      warn_missing: 0.0
+      warn_missing_after: 0.0        # keys: mocapfix.rules.REPORT_KEYS
       ...
 
 Errors name the file, the line and the key. Running records, per step, which samples it
@@ -45,6 +45,8 @@ class _LineLoader(yaml.SafeLoader):
 def _construct_mapping(loader, node):
     mapping = loader.construct_mapping(node, deep=True)
     mapping["__line__"] = node.start_mark.line + 1
+    mapping["__keylines__"] = {k.value: k.start_mark.line + 1 for k, _ in node.value
+                               if isinstance(k, yaml.ScalarNode)}
     return mapping
 
 
@@ -138,7 +140,7 @@ def _line_of(obj) -> str:
 
 def _strip_lines(obj):
     if isinstance(obj, dict):
-        return {k: _strip_lines(v) for k, v in obj.items() if k != "__line__"}
+        return {k: _strip_lines(v) for k, v in obj.items() if k not in ("__line__", "__keylines__")}
     if isinstance(obj, list):
         return [_strip_lines(v) for v in obj]
     return obj
@@ -154,7 +156,7 @@ def parse_config(data, source: str = "<config>") -> Pipeline:
     """Validate a loaded config (dict, possibly carrying ``__line__`` marks)."""
     if not isinstance(data, dict):
         raise ConfigError(f"{source}: a config is a mapping with 'version' and 'pipeline'")
-    unknown = sorted(set(data) - _TOP_KEYS - {"__line__"})
+    unknown = sorted(set(data) - _TOP_KEYS - {"__line__", "__keylines__"})
     if unknown:
         raise ConfigError(f"{source}: unknown top-level key(s) {', '.join(map(repr, unknown))} "
                           f"(known: {', '.join(sorted(_TOP_KEYS))})")
@@ -162,17 +164,19 @@ def parse_config(data, source: str = "<config>") -> Pipeline:
     if version != CONFIG_VERSION:
         raise ConfigError(f"{source}: unsupported config version {version!r} (this mocapfix reads {CONFIG_VERSION})")
     steps_data = data.get("pipeline")
-    if not isinstance(steps_data, list) or not steps_data:
-        raise ConfigError(f"{source}: 'pipeline' must be a non-empty list of steps")
+    if not isinstance(steps_data, list):
+        raise ConfigError(f"{source}: 'pipeline' must be a list of steps ([] for a report-only run)")
     steps = []
     for n, raw in enumerate(steps_data, start=1):
         where = f"{source}: step {n}{_line_of(raw)}"
         if not isinstance(raw, dict) or "cleaner" not in raw:
             raise ConfigError(f"{where}: each step is a mapping with a 'cleaner' key")
-        params = {k: _strip_lines(v) for k, v in raw.items() if k not in _STEP_KEYS and k != "__line__"}
+        params = {k: _strip_lines(v) for k, v in raw.items()
+                  if k not in _STEP_KEYS and k not in ("__line__", "__keylines__")}
         name = raw["cleaner"]
         if not isinstance(name, str):
             raise ConfigError(f"{where}: 'cleaner' must be a name, got {name!r}")
+        _check_step_params(name, raw, params, f"{source}: step {n} ({raw.get('name') or name})")
         formats = raw.get("formats")
         if formats is not None:
             if isinstance(formats, str):
@@ -187,10 +191,47 @@ def parse_config(data, source: str = "<config>") -> Pipeline:
             cleaner.resolve_models(_config_folder(source))
         cleaner.step = label.split(" (line")[0]
         steps.append(Step(cleaner, formats, raw.get("__line__")))
-    report = _strip_lines(data.get("report") or {})
-    if not isinstance(report, dict):
-        raise ConfigError(f"{source}: 'report' must be a mapping of thresholds")
+    from mocapfix.rules import validate_report_section
+
+    report = validate_report_section(data.get("report"), source)
     return Pipeline(steps, report, source)
+
+
+def _check_step_params(name: str, raw: dict, params: dict, where: str) -> None:
+    """An unknown parameter is named with its own line; a bare number for a physical
+    parameter is read in the parameter's default unit and noted in ``UNIT_WARNINGS``."""
+    from mocapfix.cleaners import registry
+
+    cls = registry().get(name)
+    if cls is None:
+        return
+    known = {p.name: p for p in cls.params}
+    lines = raw.get("__keylines__") or {}
+    for key in params:
+        line = f" (line {lines[key]})" if key in lines else _line_of(raw)
+        if key not in known:
+            raise ConfigError(f"{where}{line}: unknown parameter {key!r} for cleaner '{name}' "
+                              f"(known: {', '.join(known) or 'none'})")
+        p, value = known[key], params[key]
+        if (p.kind in ("length", "time", "frequency") and isinstance(value, (int, float))
+                and not isinstance(value, bool)):
+            UNIT_WARNINGS.append(f"{where}{line}: {key}: {value} has no unit; read as "
+                                 f"'{value} {p.unit}' — write the unit to say so")
+
+
+#: warnings of the last configs parsed (bare numbers for physical parameters); the CLI
+#: prints and clears them
+UNIT_WARNINGS: list[str] = []
+
+
+def load_yaml(text: str, source: str = "<config>"):
+    """Safe-load YAML with line marks (``__line__`` per mapping, ``__keylines__`` per key)."""
+    try:
+        return yaml.load(text, Loader=_LineLoader)  # noqa: S506 — SafeLoader subclass
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f" (line {mark.line + 1})" if mark is not None else ""
+        raise ConfigError(f"{source}{where}: not valid YAML: {getattr(exc, 'problem', exc)}") from None
 
 
 def load_config(path) -> Pipeline:
@@ -203,13 +244,7 @@ def load_config(path) -> Pipeline:
 
 
 def loads_config(text: str, source: str = "<config>") -> Pipeline:
-    try:
-        data = yaml.load(text, Loader=_LineLoader)  # noqa: S506 — SafeLoader subclass
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = f" (line {mark.line + 1})" if mark is not None else ""
-        raise ConfigError(f"{source}{where}: not valid YAML: {getattr(exc, 'problem', exc)}") from None
-    return parse_config(data, source)
+    return parse_config(load_yaml(text, source), source)
 
 
 def default_config_path() -> Path:

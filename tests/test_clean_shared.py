@@ -34,7 +34,7 @@ def cleaned_shared(tmp_path_factory):
 def test_exit_zero_and_every_file_cleaned(cleaned_shared):
     data, out, result, before, after = cleaned_shared
     assert result.exit_code == 0, result.output[-3000:]
-    summary = json.loads(result.output)
+    summary = json.loads(result.stdout)
     n_inputs = sum(1 for p in data.rglob("*") if p.suffix.lower() in MOTION_SUFFIXES)
     assert summary["failed"] == 0 and summary["cleaned"] == n_inputs
     assert before == after, "an input file was modified"
@@ -42,7 +42,7 @@ def test_exit_zero_and_every_file_cleaned(cleaned_shared):
 
 def test_outputs_readable_by_us_and_reports_written(cleaned_shared):
     data, out, result, *_ = cleaned_shared
-    for f in json.loads(result.output)["files"]:
+    for f in json.loads(result.stdout)["files"]:
         cleaned, original = read(f["output"]), read(f["input"])
         assert cleaned.positions.shape == original.positions.shape, f["input"]
         # nothing observed in the input went missing, and nothing was left worse than read

@@ -29,7 +29,7 @@ def test_info_json_on_sample_data():
     files = sorted(str(p) for p in SAMPLE_DATA.iterdir() if p.suffix != ".asf")
     result = CliRunner().invoke(main, ["info", "--json", *files])
     assert result.exit_code == 0, result.output
-    rows = json.loads(result.output)
+    rows = json.loads(result.stdout)
     assert len(rows) == len(files)
     for row in rows:
         for key in ("path", "format", "frames", "fps", "joints", "units", "missing_fraction",
@@ -50,7 +50,7 @@ def test_info_text_and_unreadable_exit_code(tmp_path):
     bad = tmp_path / "broken.bvh"
     bad.write_text("HIERARCHY\nROOT Hips\n{\n")
     result = CliRunner().invoke(main, ["info", str(SAMPLE_DATA / "walk.bvh"), str(bad)])
-    assert result.exit_code == 2
+    assert result.exit_code == 3            # unreadable input (README "Exit codes")
     assert "walk.bvh" in result.output and "broken.bvh" in result.output
     assert "Traceback" not in result.output
 
@@ -59,7 +59,7 @@ def test_info_text_and_unreadable_exit_code(tmp_path):
 def test_info_reads_every_shared_file(path):
     result = CliRunner().invoke(main, ["info", "--json", str(need(path))])
     assert result.exit_code == 0, result.output
-    row = json.loads(result.output)[0]
+    row = json.loads(result.stdout)[0]
     assert row["frames"] > 0 and row["joints"] > 0 and 0.0 <= row["missing_fraction"] <= 1.0
 
 
@@ -71,7 +71,7 @@ def test_clean_sample_folder_end_to_end(tmp_path):
     result = CliRunner().invoke(main, ["clean", str(src), "-o", str(out), "--report", "json,md,html",
                                        "--json"])
     assert result.exit_code == 0, result.output
-    summary = json.loads(result.output)
+    summary = json.loads(result.stdout)
     assert summary["failed"] == 0 and summary["cleaned"] == 4
     assert _digest(src) == before, "inputs were modified"
     assert (out / "mocapfix-config.yaml").exists()

@@ -62,7 +62,7 @@ def test_unknown_parameter_and_bad_value_are_named():
 def test_structural_errors():
     for text, pattern in [
         ("version: 2\npipeline: [{cleaner: butterworth}]", "version"),
-        ("pipeline: []", "non-empty"),
+        ("version: 1", "list of steps"),
         ("pipeline: [butterworth]", "mapping with a 'cleaner'"),
         ("pipeline: [{cleaner: butterworth}]\nextra: 1", "unknown top-level"),
         ("pipeline: [{cleaner: butterworth, formats: [fbx]}]", "formats"),

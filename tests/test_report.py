@@ -50,3 +50,24 @@ def test_unfilled_gap_warns_and_fails_over_threshold():
     assert b["status"] == "WARN" and "still missing" in b["reasons"][0]
     strict = build_report(clean_motion(motion, pipe), {"fail_missing_after": 0.01})
     assert strict["joints"][1]["status"] == "FAIL" and strict["file"]["status"] == "FAIL"
+
+
+def test_html_plots_the_joints_that_changed_most_not_never_seen_ones():
+    T = 200
+    t = np.arange(T) / 100.0
+    a = np.stack([1000 * t, np.zeros(T), np.full(T, 900.0)], axis=1)
+    pos = np.stack([a, a + [0, 0, -400.0], a + [0, 300.0, 0], a + [0, 600.0, 0]], axis=1)
+    pos[50:60, 1] = np.nan                     # B: a gap the fill closes
+    pos[:, 2] = np.nan                         # C: never seen, stays missing
+    motion = Motion(pos, ["A", "B", "C", "D"], 100.0, units="mm", metres_per_unit=0.001,
+                    format="c3d")
+    pipe = loads_config("pipeline:\n  - cleaner: fill\n    method: linear\n"
+                        "  - cleaner: spikes\n    formats: [kinect]\n")
+    result = clean_motion(motion, pipe)
+    report = build_report(result)
+    assert report["joints"][2]["status"] == "FAIL"          # C: worst status…
+    page = to_html(report, result, n_plots=1)
+    assert "<h3>B — OK</h3>" in page and "<h3>C" not in page  # …but B is the one plotted
+    assert "<title>" in page and "mocapfix report</title>" in page and "`" not in page
+    md = to_markdown(report)
+    assert "| step 2 (spikes)" not in md and "Not run for c3d" in md

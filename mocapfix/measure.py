@@ -1,0 +1,324 @@
+"""Quality measurements, shared by ``info``, ``check`` and ``clean``'s report.
+
+This module only measures; :mod:`mocapfix.rules` judges the figures and
+:mod:`mocapfix.render` prints them. Two sets:
+
+- :func:`measure_input` — what a capture is like as read (``info``, ``check``): per joint
+  missing fraction, gaps, longest gap (s), outlier fraction (the Hampel identifier of the
+  ``spikes`` cleaner with its defaults), jitter (RMS acceleration, m/s²), bone-length
+  variation (std/mean), never-seen flag; per file also dropped frames and timestamp jumps
+  (from the file's time stamps), marker swaps suspected (events the ``swaps`` cleaner
+  repairs, optical marker data only), frame rate.
+- :func:`measure_cleaning` — what a pipeline did (``clean``'s report): missing before and
+  after, which step filled each gap, samples flagged, correction size, jitter and bone
+  variation before and after, rotation write-back residual, and how much of each joint
+  is left *uncertain* (not measured in the input, weighted by the fill's confidence when
+  the cleaned motion carries one).
+
+Lengths are in mm, times in s, accelerations in m/s², whatever the file's units.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from mocapfix.gaps import runs
+from mocapfix.metrics import bone_lengths, rms_acceleration
+from mocapfix.motion import Motion
+
+#: an interval longer than this many times the median is a dropped-frame gap
+GAP_FACTOR = 1.5
+
+
+def finite(x, digits: int = 6) -> float | None:
+    """A JSON-safe float: None for NaN/inf."""
+    x = float(x)
+    return None if not np.isfinite(x) else round(x, digits)
+
+
+@dataclass
+class CleanResult:
+    """Everything the report needs about one cleaned file."""
+
+    original: Motion
+    cleaned: Motion
+    records: list
+    writeback_residual: np.ndarray | None = None
+    seconds: float = 0.0
+
+
+def bones_of(motion: Motion) -> np.ndarray:
+    if motion.skeleton is not None and motion.skeleton.bones:
+        return motion.skeleton.bone_array
+    return np.zeros((0, 2), dtype=np.intp)
+
+
+def bone_variation(positions: np.ndarray, bones: np.ndarray) -> np.ndarray:
+    """std/mean of each bone's length (B,), NaN where a bone is never seen."""
+    if not len(bones):
+        return np.zeros(0)
+    lengths = bone_lengths(positions, bones)
+    seen = np.isfinite(lengths).sum(axis=0)
+    out = np.full(len(bones), np.nan)
+    ok = seen > 1
+    if ok.any():
+        with np.errstate(invalid="ignore", divide="ignore"):
+            out[ok] = np.nanstd(lengths[:, ok], axis=0) / np.nanmean(lengths[:, ok], axis=0)
+    return out
+
+
+def per_joint_bone_variation(var: np.ndarray, bones: np.ndarray, J: int) -> np.ndarray:
+    """(J,) the largest variation of the bones ending at each joint (NaN: none)."""
+    out = np.full(J, np.nan)
+    for (_, child), v in zip(bones, var):
+        if np.isfinite(v) and not (v <= out[child]):
+            out[child] = v
+    return out
+
+
+def jitter(motion: Motion) -> np.ndarray:
+    """RMS acceleration per joint (J,) in m/s²."""
+    if motion.n_frames <= 2:
+        return np.full(motion.n_joints, np.nan)
+    return rms_acceleration(motion.positions, motion.fps) * motion.metres_per_unit
+
+
+def timing(motion: Motion) -> dict:
+    """Dropped frames and irregular time stamps, from ``motion.times`` (uniform without)."""
+    out = {"dropped_frames": 0, "timestamp_jumps": 0, "repeated_frames": 0, "backward_steps": 0,
+           "longest_interval_s": None}
+    times = motion.times
+    if times is None or len(times) < 2:
+        return out
+    dt = np.diff(np.asarray(times, dtype=np.float64))
+    positive = dt[dt > 0]
+    if not len(positive):
+        return out
+    median = float(np.median(positive))
+    late = dt > GAP_FACTOR * median
+    out["dropped_frames"] = int(np.sum(np.maximum(np.round(dt[late] / median) - 1, 1)))
+    out["repeated_frames"] = int(np.sum(dt == 0))
+    out["backward_steps"] = int(np.sum(dt < 0))
+    out["timestamp_jumps"] = int(late.sum()) + out["repeated_frames"] + out["backward_steps"]
+    out["longest_interval_s"] = finite(dt.max())
+    return out
+
+
+def outlier_flags(motion: Motion) -> np.ndarray:
+    """(T, J) samples the ``spikes`` cleaner with its default settings would flag."""
+    from mocapfix.cleaners.spikes import Spikes, hampel_flags
+
+    T, J = motion.positions.shape[:2]
+    if T < 5 or J == 0:
+        return np.zeros((T, J), bool)
+    det = Spikes()
+    half = max(1, int(round(det.frames("window", motion) / 2.0)))
+    flags, _ = hampel_flags(motion.positions, half, det["k"], det.length("min_jump", motion),
+                            det["passes"])
+    return flags & ~motion.missing
+
+
+#: the swap search is quadratic in the number of points: files with more points than this
+#: (C3D files carrying model outputs as points) are not searched, and say so
+MAX_SWAP_POINTS = 120
+
+
+def suspected_swaps(motion: Motion) -> list[dict] | None:
+    """Label swaps the ``swaps`` cleaner finds (optical marker data without a rig);
+    None when not searched (not marker data, or more than MAX_SWAP_POINTS points)."""
+    if motion.rig is not None or motion.format not in ("c3d", "unknown") or motion.n_joints < 3:
+        return []
+    if motion.n_joints > MAX_SWAP_POINTS:
+        return None
+    from mocapfix.cleaners.swaps import SwapFix
+
+    _, info = SwapFix().apply(motion)
+    return list(info.get("swaps", []))
+
+
+def gap_runs(missing: np.ndarray):
+    """Per joint: gap count and longest gap (frames) of a (T, J) mask."""
+    T, J = missing.shape
+    col, start, length = runs(missing)
+    count = np.bincount(col, minlength=J) if len(col) else np.zeros(J, int)
+    longest = np.zeros(J, int)
+    if len(col):
+        np.maximum.at(longest, col, length)
+    return count, longest, (col, start, length)
+
+
+def measure_input(motion: Motion, *, swaps: bool = True, outliers: bool = True) -> dict:
+    """Measurements of a capture as read: ``{"file": {...}, "joints": [{...}]}``."""
+    T, J = motion.positions.shape[:2]
+    fps = float(motion.fps) if motion.fps and np.isfinite(motion.fps) else float("nan")
+    missing = motion.missing
+    count, longest, (_, start, length) = gap_runs(missing)
+    flags = outlier_flags(motion) if outliers else np.zeros((T, J), bool)
+    observed = (~missing).sum(axis=0)
+    jit = jitter(motion)
+    bones = bones_of(motion)
+    bvar = bone_variation(motion.positions, bones)
+    jbvar = per_joint_bone_variation(bvar, bones, J)
+    joints = []
+    for j in range(J):
+        joints.append({
+            "name": motion.names[j],
+            "missing": finite(missing[:, j].mean()) if T else 0.0,
+            "gaps": int(count[j]),
+            "longest_gap_s": finite(longest[j] / fps) if longest[j] else 0.0,
+            "longest_gap_frames": int(longest[j]),
+            "never_seen": bool(T and observed[j] == 0),
+            "outliers": finite(flags[:, j].sum() / observed[j]) if observed[j] else 0.0,
+            "jitter": finite(jit[j]),
+            "bone_variation": finite(jbvar[j]),
+        })
+    swap_list = suspected_swaps(motion) if swaps else []
+    notes = list(motion.notes)
+    if swap_list is None:
+        notes.append(f"marker swaps not searched ({J} points > {MAX_SWAP_POINTS})")
+        swap_list = []
+    file = {
+        "path": motion.path,
+        "format": motion.format,
+        "frames": T,
+        "fps": finite(fps),
+        "duration_s": finite(motion.duration),
+        "joints": J,
+        "units": motion.units,
+        "missing": finite(missing.mean()) if missing.size else 0.0,
+        "gaps": int(len(length)),
+        "interior_gaps": int(np.sum((start > 0) & (start + length < T))),
+        "longest_gap_s": finite(length.max() / fps) if len(length) else 0.0,
+        "longest_gap_frames": int(length.max()) if len(length) else 0,
+        "never_seen": [motion.names[j] for j in range(J) if T and observed[j] == 0],
+        "outliers": finite(flags.sum() / max(int(observed.sum()), 1)),
+        "jitter": finite(np.nanmedian(jit)) if np.isfinite(jit).any() else None,
+        "bone_variation": finite(np.nanmax(bvar)) if np.isfinite(bvar).any() else None,
+        "swaps": swap_list,
+        **timing(motion),
+        "notes": notes,
+    }
+    if motion.confidence is not None and motion.confidence.size:
+        conf = motion.confidence
+        file["tracking"] = {
+            "tracked": float(np.mean(conf >= 1.0)),
+            "inferred": float(np.mean((conf > 0) & (conf < 1.0))),
+            "not_tracked": float(np.mean(conf <= 0)),
+        }
+    return {"file": file, "joints": joints}
+
+
+# -- what a pipeline did ------------------------------------------------------------------
+
+def who_filled(records, T: int, J: int) -> np.ndarray:
+    """(T, J) index into ``records`` of the step that filled each sample (-1: none)."""
+    who = np.full((T, J), -1, dtype=np.intp)
+    for n, rec in enumerate(records):
+        who[rec.filled & (who < 0)] = n
+        who[rec.flagged] = -1          # flagged later → a later filler takes over
+    return who
+
+
+def uncertainty(before: Motion, after: Motion) -> np.ndarray:
+    """(J,) fraction of each joint's frames that rest on no measurement: samples missing in
+    the input (filled or not), each counted as ``1 − confidence`` of the cleaned motion
+    where it carries a per-sample fill confidence, else as 1. A marker rebuilt from 3 % of
+    its data is 97 % uncertain, however complete it looks after cleaning."""
+    miss_b = before.missing
+    weight = np.ones_like(miss_b, dtype=np.float64)
+    conf = after.confidence
+    if conf is not None and conf.shape == miss_b.shape:
+        c = np.clip(np.nan_to_num(conf, nan=0.0), 0.0, 1.0)
+        weight = np.where(after.missing, 1.0, 1.0 - c)
+    T = miss_b.shape[0]
+    return (miss_b * weight).sum(axis=0) / max(T, 1)
+
+
+def measure_cleaning(result: CleanResult) -> dict:
+    """Per-joint and per-file figures of a cleaned file (no status: see rules)."""
+    before, after, records = result.original, result.cleaned, result.records
+    T, J = before.positions.shape[:2]
+    mm = before.metres_per_unit * 1000.0
+    miss_b, miss_a = before.missing, after.missing
+    flagged = np.zeros((T, J), bool)
+    for rec in records:
+        flagged |= rec.flagged
+    who = who_filled(records, T, J)
+    moved = np.linalg.norm(after.positions - before.positions, axis=-1) * mm
+    moved[miss_b | miss_a] = np.nan
+    jitter_b, jitter_a = jitter(before), jitter(after)
+    bones = bones_of(before)
+    var_b, var_a = bone_variation(before.positions, bones), bone_variation(after.positions, bones)
+    unc = uncertainty(before, after)
+    col, start, length = runs(miss_b)
+    labels = [r.step for r in records]
+    joints = []
+    for j in range(J):
+        sel = col == j
+        gaps_filled, gaps_left = [], []
+        for s, n in zip(start[sel], length[sel]):
+            span_who = who[s:s + n, j]
+            if (span_who >= 0).all():
+                steps = np.unique(span_who)
+                gaps_filled.append({"start": int(s), "length": int(n),
+                                    "filled_by": ", ".join(labels[k] for k in steps)})
+            else:
+                gaps_left.append({"start": int(s), "length": int(n),
+                                  "filled_frames": int((span_who >= 0).sum())})
+        mv = moved[:, j]
+        has_mv = np.isfinite(mv).any()
+        entry = {
+            "name": before.names[j],
+            "missing_before": finite(miss_b[:, j].mean()) if T else 0.0,
+            "missing_after": finite(miss_a[:, j].mean()) if T else 0.0,
+            "uncertain": finite(unc[j]),
+            "gaps": {"count": int(sel.sum()),
+                     "longest_frames": int(length[sel].max()) if sel.any() else 0,
+                     "filled": gaps_filled, "unfilled": gaps_left},
+            "outliers_flagged": int(flagged[:, j].sum()),
+            "correction_mm": {"mean": finite(np.nanmean(mv)) if has_mv else 0.0,
+                              "max": finite(np.nanmax(mv)) if has_mv else 0.0},
+            "jitter_before": finite(jitter_b[j]),
+            "jitter_after": finite(jitter_a[j]),
+        }
+        if len(bones):
+            mine = bones[:, 1] == j
+            if mine.any() and np.isfinite(var_b[mine]).any():
+                entry["bone_variation_before"] = finite(np.nanmax(var_b[mine]))
+            if mine.any() and np.isfinite(var_a[mine]).any():
+                entry["bone_variation_after"] = finite(np.nanmax(var_a[mine]))
+        if result.writeback_residual is not None:
+            res = result.writeback_residual[:, j] * mm
+            entry["writeback_residual_mm"] = {"mean": finite(np.nanmean(res)), "max": finite(np.nanmax(res))}
+        joints.append(entry)
+    file = {
+        "path": before.path,
+        "format": before.format,
+        "frames": T,
+        "fps": finite(before.fps),
+        "joints": J,
+        "units": before.units,
+        "missing_before": finite(miss_b.mean()) if miss_b.size else 0.0,
+        "missing_after": finite(miss_a.mean()) if miss_a.size else 0.0,
+        "samples_filled": int((miss_b & ~miss_a).sum()),
+        "samples_flagged": int(flagged.sum()),
+        "gaps_before": int(len(length)),
+        "gaps_unfilled": int(sum(len(j["gaps"]["unfilled"]) for j in joints)),
+        "seconds": finite(result.seconds),
+        "notes": list(before.notes) + [n for n in after.notes if n not in before.notes],
+    }
+    steps = [{"step": r.step, "cleaner": r.cleaner, "seconds": finite(r.seconds),
+              "filled": int(r.filled.sum()), "flagged": int(r.flagged.sum()),
+              "moved_mean_mm": finite(np.mean(r.moved) * mm) if r.moved.size else 0.0,
+              **({"skipped": r.skipped} if r.skipped else {}), "info": r.info}
+             for r in records]
+    out = {"file": file, "steps": steps, "joints": joints}
+    if len(bones):
+        out["bones"] = [{"bone": f"{before.names[a]}-{before.names[b]}",
+                         "variation_before": finite(vb), "variation_after": finite(va)}
+                        for (a, b), vb, va in zip(bones, var_b, var_a)]
+    if result.writeback_residual is not None:
+        res = result.writeback_residual * mm
+        file["writeback_residual_mm"] = {"mean": finite(np.nanmean(res)), "max": finite(np.nanmax(res))}
+    return out

@@ -1,0 +1,45 @@
+"""Shipped configs and rule sets (package data), nameable by preset name.
+
+``-c optical-c3d`` means ``mocapfix/configs/optical-c3d.yaml`` wherever mocapfix is
+installed; ``-r optical-gait`` means ``mocapfix/configs/rules/optical-gait.yaml``. A path
+that exists always wins over a preset of the same name.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+from mocapfix.errors import ConfigError
+
+CONFIG_DIR = Path(__file__).resolve().parent / "configs"
+
+
+def config_names() -> list[str]:
+    return sorted(p.stem for p in CONFIG_DIR.glob("*.yaml"))
+
+
+def config_summary(path: Path, width: int = 90) -> str:
+    """The first sentence of a shipped file's leading comment (what it is for)."""
+    words = []
+    for line in path.read_text(encoding="utf-8").splitlines():
+        if not line.startswith("#"):
+            break
+        words.append(line.lstrip("# ").strip())
+    text = " ".join(w for w in words if w)
+    for stop in (". ",):
+        if stop in text:
+            text = text[:text.index(stop) + 1]
+    return text if len(text) <= width else text[:width - 1].rstrip() + "…"
+
+
+def resolve_config(name_or_path) -> Path:
+    """A pipeline config by path, or a shipped one by preset name."""
+    path = Path(name_or_path)
+    if path.is_file():
+        return path
+    text = str(name_or_path)
+    stem = text[:-5] if text.endswith(".yaml") else text
+    preset = CONFIG_DIR / f"{Path(stem).name}.yaml"
+    if (("/" not in text) or text.startswith("configs/")) and preset.is_file():
+        return preset
+    raise ConfigError(f"{name_or_path}: no such config file or preset "
+                      f"(presets: {', '.join(config_names())}; `mocapfix configs` lists them)")

@@ -1,0 +1,116 @@
+"""`mocapfix check` on the shared archive and on constructed cases: JUnit XML read back by
+a real JUnit consumer (junitparser), one testcase per file, the known-bad files fail,
+nothing is written into the input folder, exit codes 0/1/2/3."""
+from __future__ import annotations
+
+import hashlib
+import json
+import shutil
+
+import junitparser
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from mocapfix.cli import main
+from mocapfix.formats import MOTION_SUFFIXES, write
+from mocapfix.motion import Motion
+from conftest import DATA, SAMPLE_DATA, need
+
+
+def _tree(folder):
+    return {p.relative_to(folder): (hashlib.sha256(p.read_bytes()).hexdigest(), p.stat().st_mtime_ns)
+            for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+@pytest.fixture(scope="module")
+def archive_run(tmp_path_factory):
+    data = need(DATA)
+    before = _tree(data)
+    junit = tmp_path_factory.mktemp("check") / "check.xml"
+    result = CliRunner().invoke(main, ["check", str(data), "-j", "2", "--junit", str(junit), "--json"])
+    return data, before, junit, result
+
+
+def test_archive_junit_is_valid_one_testcase_per_file(archive_run):
+    data, before, junit, result = archive_run
+    assert result.exit_code == 1, result.output          # some rules fail, every file readable
+    xml = junitparser.JUnitXml.fromfile(str(junit))
+    cases = [case for suite in xml for case in suite]
+    motion_files = [p for p in data.rglob("*") if p.is_file() and p.suffix.lower() in MOTION_SUFFIXES]
+    assert len(cases) == len(motion_files) > 40
+    assert len({c.name for c in cases}) == len(cases)
+    failed = {c.name.split("/")[-1]: c for c in cases if not c.is_passed}
+    summary = json.loads(result.stdout)["summary"]
+    assert summary["FAIL"] == len(failed) and summary["ERROR"] == 0
+    # a capture with never-seen markers (34 of 114 in sub_labels) fails on that rule
+    sub = failed["c3dorg_s04_sub_labels.c3d"].result[0]
+    assert isinstance(sub, junitparser.Failure)
+    assert sub.type == "never_seen" and "34 never-seen" in sub.message
+    # a Kinect file with dropped frames (2 timestamp gaps, SOURCES.md) fails on that rule
+    ges = failed["kv2_laban_Ges01_wavehand.csv"].result[0]
+    assert ges.type == "dropped_frames" and "2 dropped frames" in ges.message
+    # a complete optical capture passes
+    assert "cmu_85_02.c3d" not in failed and "hdm05_HDM_mm_01-02_03_120.c3d" not in failed
+
+
+def test_archive_check_writes_nothing_into_the_input(archive_run):
+    data, before, _, _ = archive_run
+    assert _tree(data) == before
+
+
+def _motion(T=200, J=4, fps=100.0):
+    t = np.arange(T) / fps
+    pos = np.stack([np.stack([1000 * t + 100 * j, np.sin(t + j) * 100, np.full(T, 900.0 + j)], 1)
+                    for j in range(J)], axis=1)
+    return Motion(pos, [f"M{j}" for j in range(J)], fps, units="mm", metres_per_unit=0.001, format="c3d")
+
+
+def test_exit_codes_pass_fail_unreadable_usage(tmp_path):
+    good = tmp_path / "good.c3d"
+    write(_motion(), good)
+    runner = CliRunner()
+    r = runner.invoke(main, ["check", str(good), "-r", "optical-gait"])
+    assert r.exit_code == 0, r.output
+    assert r.stdout.startswith("OK ")                    # complete, 100 Hz, smooth
+    gappy = _motion()
+    gappy.positions[20:120, 1] = np.nan                              # 1 s gap, 50 % missing
+    write(gappy, tmp_path / "gappy.c3d")
+    r = runner.invoke(main, ["check", str(tmp_path / "gappy.c3d"), "-r", "optical-gait"])
+    assert r.exit_code == 1 and "FAIL" in r.output and "M1: 50.0 % missing" in r.output
+    r = runner.invoke(main, ["check", str(tmp_path / "gappy.c3d"), "--exit-zero"])
+    assert r.exit_code == 0
+    # a relaxed threshold from the command line lets it pass
+    r = runner.invoke(main, ["check", str(tmp_path / "gappy.c3d"), "-r", "optical-gait",
+                             "--fail-on", "missing=60%", "--fail-on", "longest_gap=2 s"])
+    assert r.exit_code == 0, r.output
+    (tmp_path / "broken.bvh").write_text("HIERARCHY\nROOT Hips\n{\n")
+    r = runner.invoke(main, ["check", str(good), str(tmp_path / "broken.bvh")])
+    assert r.exit_code == 3 and "ERROR" in r.output and "broken.bvh" in r.output
+    bad_rules = tmp_path / "rules.yaml"
+    bad_rules.write_text("rules:\n  - metric: missing\n    warn_missing: 5 %\n")
+    r = runner.invoke(main, ["check", str(good), "-r", str(bad_rules)])
+    assert r.exit_code == 2 and "warn_missing" in r.output and "line 3" in r.output
+    r = runner.invoke(main, ["check", str(good), "--fail-on", "missing"])
+    assert r.exit_code == 2 and "RULE=VALUE" in r.output
+
+
+def test_junit_error_for_unreadable_and_would_clean(tmp_path):
+    src = tmp_path / "in"
+    src.mkdir()
+    shutil.copy(SAMPLE_DATA / "walk_markers.c3d", src / "walk.c3d")
+    (src / "bad.c3d").write_bytes(b"\x02\x50" + b"\x00" * 100)
+    before = _tree(src)
+    junit = tmp_path / "out.xml"
+    r = CliRunner().invoke(main, ["check", str(src), "--junit", str(junit), "--json",
+                                  "--would-clean", "default"])
+    assert r.exit_code == 3
+    cases = {c.name: c for suite in junitparser.JUnitXml.fromfile(str(junit)) for c in suite}
+    assert isinstance(cases["in/bad.c3d"].result[0], junitparser.Error)
+    files = {f["name"]: f for f in json.loads(r.stdout)["files"]}
+    wc = files["in/walk.c3d"]["would_clean"]
+    measured = files["in/walk.c3d"]["file"]
+    # the sample C3D has gaps; the default pipeline fills them all in memory
+    assert measured["gaps"] >= 4 and wc["samples_filled"] > 0 and wc["missing_after"] == 0
+    assert 0 < wc["uncertain"] < measured["missing"] + 1e-9
+    assert _tree(src) == before and not list(src.rglob("*.report.*"))

@@ -1,0 +1,262 @@
+"""The command line as a new user meets it (issue 15) and the path/input defects of issue
+13 that batch discovery owns: streaming, -q/-v, umask, non-motion files, presets, dry
+run, overwrite policy and provenance, errors naming file and line, info on folders,
+symlink loops, FIFOs, bad output folders, empty BVH, NaN thresholds."""
+from __future__ import annotations
+
+import os
+import shutil
+import stat
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+from click.testing import CliRunner
+
+from mocapfix.cli import main
+from conftest import SAMPLE_DATA, hang_guard, shared
+
+C3D, BVH, KIN = SAMPLE_DATA / "walk_markers.c3d", SAMPLE_DATA / "walk.bvh", SAMPLE_DATA / "walk_kinect_v2.csv"
+FAST = "pipeline:\n  - cleaner: fill\n    max_gap: 0.5 s\n"
+
+
+def _cfg(tmp_path, text=FAST, name="cfg.yaml"):
+    p = tmp_path / name
+    p.write_text(text)
+    return str(p)
+
+
+def _folder(tmp_path, *files):
+    src = tmp_path / "in"
+    src.mkdir(exist_ok=True)
+    for f in files:
+        shutil.copy(f, src / f.name)
+    return src
+
+
+def test_lines_stream_as_files_finish_off_a_terminal(tmp_path):
+    src = tmp_path / "in"
+    src.mkdir()
+    for n in range(3):
+        shutil.copy(C3D, src / f"take{n}.c3d")
+    proc = subprocess.Popen([sys.executable, "-m", "mocapfix.cli", "clean", str(src), "-o",
+                             str(tmp_path / "out"), "-c", "default"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    arrivals = []
+    for line in proc.stdout:
+        arrivals.append((time.monotonic(), line))
+    proc.wait()
+    end = time.monotonic()
+    assert proc.returncode == 0, proc.stderr.read()
+    per_file = [t for t, line in arrivals if line.startswith(("OK", "WARN", "FAIL"))]
+    assert len(per_file) == 3
+    # the first file's line came while the others were still being cleaned
+    assert end - per_file[0] > 0.3 * (end - arrivals[0][0]) or end - per_file[0] > 1.0
+
+
+def test_quiet_and_verbose(tmp_path):
+    src = _folder(tmp_path, C3D, KIN)
+    r = CliRunner().invoke(main, ["clean", str(src), "-o", str(tmp_path / "q"), "-c", _cfg(tmp_path), "-q"])
+    assert r.exit_code == 0 and r.stdout.strip().startswith("cleaned 2 of 2") and "->" not in r.stdout
+    r = CliRunner().invoke(main, ["clean", str(src), "-o", str(tmp_path / "v"), "-c", _cfg(tmp_path), "-v"])
+    assert r.exit_code == 0 and "WARN: " in r.stdout          # the reasons of WARN files
+    r = CliRunner().invoke(main, ["check", str(src), "-q"])
+    assert "OK " not in r.stdout and "checked 2 files" in r.output
+    r = CliRunner().invoke(main, ["info", str(C3D), "-v"])
+    assert r.exit_code == 0 and "LEFTWRIST" in r.stdout
+
+
+@pytest.mark.parametrize("mask, mode", [(0o022, 0o644), (0o027, 0o640)])
+def test_outputs_honour_the_umask(tmp_path, mask, mode):
+    old = os.umask(mask)
+    try:
+        r = CliRunner().invoke(main, ["clean", str(C3D), "-o", str(tmp_path / "o"), "-c",
+                                      _cfg(tmp_path), "--report", "json,md"])
+    finally:
+        os.umask(old)
+    assert r.exit_code == 0, r.output
+    for name in ("walk_markers.c3d", "walk_markers.report.json", "walk_markers.report.md",
+                 "mocapfix-config.yaml"):
+        assert stat.S_IMODE((tmp_path / "o" / name).stat().st_mode) == mode, name
+
+
+def test_non_motion_text_is_skipped_and_patterns_filter(tmp_path):
+    src = _folder(tmp_path, C3D, KIN)
+    (src / "notes.txt").write_text("subject 3, second session\nmarkers re-taped after trial 2\n")
+    (src / "Trial01.csv").write_text("Trajectories\n100\n,,Subject:LASI,,\nFrame,Sub Frame,X,Y,Z\n"
+                                     "1,0,1.0,2.0,3.0\n")   # a Nexus export header
+    r = CliRunner().invoke(main, ["clean", str(src), "-o", str(tmp_path / "o"), "-c", _cfg(tmp_path), "-v"])
+    assert r.exit_code == 0, r.output
+    assert "notes.txt: not motion data" in r.output and "Trial01.csv: not motion data" in r.output
+    r = CliRunner().invoke(main, ["clean", str(src), "-o", str(tmp_path / "o2"), "-c", _cfg(tmp_path)])
+    assert r.exit_code == 0 and "2 text file(s) are not motion data" in r.output
+    r = CliRunner().invoke(main, ["clean", str(src), "-o", str(tmp_path / "p"), "-c", _cfg(tmp_path),
+                                  "--include", "*.c3d"])
+    assert r.exit_code == 0 and sorted(p.name for p in (tmp_path / "p").glob("walk*")) == [
+        "walk_markers.c3d", "walk_markers.report.json"]
+    r = CliRunner().invoke(main, ["clean", str(src), "-o", str(tmp_path / "x"), "-c", _cfg(tmp_path),
+                                  "--exclude", "*.c3d"])
+    assert r.exit_code == 0 and not (tmp_path / "x" / "walk_markers.c3d").exists()
+    assert (tmp_path / "x" / "walk_kinect_v2.csv").exists()
+
+
+def test_presets_work_outside_the_repo(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    r = CliRunner().invoke(main, ["configs"])
+    assert r.exit_code == 0 and "optical-c3d" in r.output and "kinect" in r.output
+    r = CliRunner().invoke(main, ["configs", "kinect"])
+    assert r.exit_code == 0 and "lowrank_isometry" in r.output
+    r = CliRunner().invoke(main, ["configs", "--rules", "optical-gait"])
+    assert r.exit_code == 0 and "never_seen" in r.output
+    r = CliRunner().invoke(main, ["configs", "optical-gait"])
+    assert r.exit_code == 2 and "--rules" in r.output
+    r = CliRunner().invoke(main, ["clean", str(KIN), "-o", "out", "-c", "animation-bvh", "--dry-run"])
+    assert r.exit_code == 0, r.output
+    r = CliRunner().invoke(main, ["clean", str(KIN), "-o", "out", "-c", "configs/kinect.yaml", "--dry-run"])
+    assert r.exit_code == 0, r.output
+    r = CliRunner().invoke(main, ["clean", str(KIN), "-o", "out", "-c", "nope"])
+    assert r.exit_code == 2 and "presets:" in r.output
+
+
+def test_dry_run_overwrite_policy_and_true_provenance(tmp_path):
+    src = _folder(tmp_path, C3D, BVH)
+    out = tmp_path / "out"
+    r = CliRunner().invoke(main, ["clean", str(src), "-o", str(out), "-c", _cfg(tmp_path), "--dry-run"])
+    assert r.exit_code == 0 and "WOULD" in r.stdout and not out.exists()
+    good = _cfg(tmp_path)
+    r = CliRunner().invoke(main, ["clean", str(src), "-o", str(out), "-c", good, "--report", "json,md"])
+    assert r.exit_code == 0
+    first_config = (out / "mocapfix-config.yaml").read_text()
+    # a re-run without a policy refuses and writes nothing
+    r = CliRunner().invoke(main, ["clean", str(src), "-o", str(out), "-c", good])
+    assert r.exit_code == 2 and "--overwrite" in r.output
+    # a re-run that fails on every file leaves the record of the first run as it was
+    failing = _cfg(tmp_path, "pipeline:\n  - cleaner: butterworth\n    cutoff: 150 Hz\n", "bad.yaml")
+    r = CliRunner().invoke(main, ["clean", str(src / "walk_markers.c3d"), "-o", str(out), "-c", failing,
+                                  "--overwrite"])
+    assert r.exit_code == 1
+    assert "ERROR" in r.output and "walk_markers.c3d" in r.output and "FAILED" not in r.output
+    assert (out / "mocapfix-config.yaml").read_text() == first_config
+    # …and the failed file's earlier output is gone with it (no output the record denies)
+    assert not (out / "walk_markers.c3d").exists() and not (out / "walk_markers.report.json").exists()
+    # --report none replaces and removes the old reports beside the new output
+    r = CliRunner().invoke(main, ["clean", str(src), "-o", str(out), "-c", good, "--overwrite",
+                                  "--report", "none"])
+    assert r.exit_code == 0, r.output
+    assert not list(out.glob("*.report.*"))
+    # --skip-existing with the same config leaves outputs alone; with another refuses
+    mtime = (out / "walk.bvh").stat().st_mtime_ns
+    r = CliRunner().invoke(main, ["clean", str(src), "-o", str(out), "-c", good, "--skip-existing"])
+    assert r.exit_code == 0 and "SKIP" in r.output and (out / "walk.bvh").stat().st_mtime_ns == mtime
+    other = _cfg(tmp_path, "pipeline:\n  - cleaner: fill\n    max_gap: 0.2 s\n", "other.yaml")
+    r = CliRunner().invoke(main, ["clean", str(src), "-o", str(out), "-c", other, "--skip-existing"])
+    assert r.exit_code == 2 and "another config" in r.output
+
+
+def test_errors_name_the_file_and_the_parameter_line(tmp_path):
+    cfg = _cfg(tmp_path, "pipeline:\n  - cleaner: butterworth\n    cutoff: 150 Hz\n", "nyq.yaml")
+    r = CliRunner().invoke(main, ["clean", str(BVH), "-o", str(tmp_path / "o"), "-c", cfg])
+    assert r.exit_code == 1
+    line = next(ln for ln in r.output.splitlines() if ln.startswith("ERROR"))
+    assert "walk.bvh" in line and "Nyquist" in line
+    cfg = _cfg(tmp_path, "version: 1\npipeline:\n  - cleaner: fill\n    method: pchip\n    max_gapp: 1 s\n",
+               "typo.yaml")
+    r = CliRunner().invoke(main, ["clean", str(BVH), "-o", str(tmp_path / "o2"), "-c", cfg])
+    assert r.exit_code == 2 and "line 5" in r.output and "max_gapp" in r.output
+
+
+def test_bare_numbers_for_physical_parameters_warn(tmp_path):
+    cfg = _cfg(tmp_path, "pipeline:\n  - cleaner: fill\n    max_gap: 50\n", "bare.yaml")
+    r = CliRunner().invoke(main, ["clean", str(BVH), "-o", str(tmp_path / "o"), "-c", cfg])
+    assert r.exit_code == 0
+    assert "warning" in r.output and "max_gap: 50 has no unit; read as '50 s'" in r.output
+    assert "line 3" in r.output
+
+
+def test_debug_after_the_subcommand(tmp_path):
+    cfg = _cfg(tmp_path, "pipeline:\n  - cleaner: nope\n", "nope.yaml")
+    r = CliRunner().invoke(main, ["clean", str(BVH), "-o", str(tmp_path / "o"), "-c", cfg, "--debug"])
+    assert r.exit_code != 0 and type(r.exception).__name__ == "ConfigError"
+    r = CliRunner().invoke(main, ["clean", str(BVH), "-o", str(tmp_path / "o"), "-c", cfg])
+    assert r.exit_code == 2 and "Traceback" not in r.output
+
+
+def test_info_on_a_folder_lists_names_and_c3d_contents(tmp_path):
+    src = _folder(tmp_path, C3D, KIN)
+    r = CliRunner().invoke(main, ["info", str(src)])
+    assert r.exit_code == 0
+    kin, c3d = r.stdout.split("\n\n")[:2]                 # sorted by name
+    assert "walk_markers.c3d" in c3d and "names" in c3d and "analog" in c3d and "events" in c3d
+    assert "tracking" not in c3d and "tracking" in kin
+    plug = shared("c3d/c3dorg_s09_PlugInC3D.c3d")
+    r = CliRunner().invoke(main, ["info", "--json", str(plug)])
+    row = __import__("json").loads(r.stdout)[0]
+    assert row["analog"]["channels"] == 36 and row["analog"]["rate"] == 1200
+    assert row["force_plates"]["count"] == 2 and len(row["events"]) == 8
+    assert "RKNE" in row["names"] and "tracking" not in row
+
+
+# -- issue 13, items 4, 5, 6, 8 -------------------------------------------------------------
+
+def test_symlink_loop_in_an_input_folder_is_skipped(tmp_path):
+    src = _folder(tmp_path, BVH)
+    os.symlink(src / "b.bvh", src / "a.bvh")
+    os.symlink(src / "a.bvh", src / "b.bvh")
+    r = CliRunner().invoke(main, ["clean", str(src), "-o", str(tmp_path / "o"), "-c", _cfg(tmp_path)])
+    assert r.exit_code == 0, r.output
+    assert "symlink loop" in r.output and (tmp_path / "o" / "walk.bvh").exists()
+    r = CliRunner().invoke(main, ["info", str(src)])
+    assert r.exit_code == 0 and "symlink loop" in r.output
+
+
+@pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="no FIFOs on this system")
+def test_fifo_in_an_input_folder_is_skipped_not_waited_on(tmp_path):
+    src = _folder(tmp_path, C3D)
+    os.mkfifo(src / "pipe.c3d")
+    os.mkfifo(src / "pipe.csv")
+    with hang_guard(60):
+        r = CliRunner().invoke(main, ["clean", str(src), "-o", str(tmp_path / "o"), "-c", _cfg(tmp_path)])
+        assert r.exit_code == 0 and "pipe.c3d: a FIFO" in r.output
+        r = CliRunner().invoke(main, ["info", str(src)])
+        assert r.exit_code == 0 and "pipe.csv: a FIFO" in r.output
+        r = CliRunner().invoke(main, ["check", str(src)])
+        assert "pipe.c3d: a FIFO" in r.output
+        r = CliRunner().invoke(main, ["info", str(src / "pipe.c3d")])
+        assert r.exit_code == 2 and "FIFO" in r.output
+
+
+def test_bad_output_folders_are_one_clear_error(tmp_path):
+    afile = tmp_path / "existing_file"
+    afile.write_text("x")
+    r = CliRunner().invoke(main, ["clean", str(BVH), "-o", str(afile / "sub"), "-c", _cfg(tmp_path)])
+    assert r.exit_code == 2 and "part of the path is a file" in r.output
+    assert isinstance(r.exception, SystemExit)          # one line, no traceback
+    locked = Path("/sys/kernel") if os.geteuid() == 0 else tmp_path / "locked"
+    if os.geteuid() != 0:
+        locked.mkdir()
+        locked.chmod(0o500)
+    r = CliRunner().invoke(main, ["clean", str(BVH), "-o", str(locked), "-c", _cfg(tmp_path)])
+    assert r.exit_code == 2 and "cannot write to the output folder" in r.output
+    assert "Traceback" not in r.output
+
+
+def test_empty_bvh_fails_without_leaving_an_output(tmp_path):
+    text = BVH.read_text()
+    head = text[:text.index("Frames:")]
+    src = tmp_path / "in"
+    src.mkdir()
+    (src / "empty.bvh").write_text(head + "Frames: 0\nFrame Time: 0.0166667\n")
+    shutil.copy(BVH, src / "walk.bvh")
+    r = CliRunner().invoke(main, ["clean", str(src), "-o", str(tmp_path / "o"), "-c", _cfg(tmp_path)])
+    assert r.exit_code == 1 and "empty.bvh" in r.output and "internal error" not in r.output
+    assert not (tmp_path / "o" / "empty.bvh").exists()
+    assert not list((tmp_path / "o").glob("empty*")) and (tmp_path / "o" / "walk.bvh").exists()
+
+
+def test_nan_report_threshold_is_refused_before_anything_is_written(tmp_path):
+    cfg = _cfg(tmp_path, FAST + "report:\n  warn_correction_mm: .nan\n", "nan.yaml")
+    r = CliRunner().invoke(main, ["clean", str(BVH), "-o", str(tmp_path / "o"), "-c", cfg])
+    assert r.exit_code == 2 and "line 5" in r.output and "finite" in r.output
+    assert not (tmp_path / "o").exists()

@@ -1,0 +1,130 @@
+"""The rule engine on known answers: thresholds with units, scope, format filters,
+include/exclude, validation errors with line numbers, the report section of configs."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from mocapfix.measure import CleanResult
+from mocapfix.pipeline import StepRecord
+from mocapfix.errors import ConfigError
+from mocapfix.measure import measure_input
+from mocapfix.motion import Motion
+from mocapfix.pipeline import loads_config
+from mocapfix.report import build_report
+from mocapfix.rules import default_rules, load_rules, loads_rules, preset_names, RULES_DIR
+
+
+def _motion(fmt="c3d"):
+    T, fps = 300, 100.0
+    t = np.arange(T) / fps
+    pos = np.stack([np.stack([1000 * t, np.full(T, 100.0 * j), np.full(T, 900.0)], 1)
+                    for j in range(3)], axis=1)
+    pos[100:160, 1] = np.nan          # B: one 0.6 s gap, 20 % missing
+    pos[:, 2] = np.nan                # C: never seen
+    return Motion(pos, ["A", "B", "C"], fps, units="mm", metres_per_unit=0.001, format=fmt)
+
+
+def test_measure_input_known_answers():
+    m = measure_input(_motion())
+    a, b, c = m["joints"]
+    assert a["missing"] == 0 and b["missing"] == pytest.approx(0.2) and c["missing"] == 1.0
+    assert b["gaps"] == 1 and b["longest_gap_s"] == pytest.approx(0.6)
+    assert c["never_seen"] and m["file"]["never_seen"] == ["C"]
+    assert a["outliers"] == 0 and a["jitter"] == pytest.approx(0.0, abs=1e-9)   # a straight line
+
+
+def test_thresholds_scope_and_filters():
+    rules = loads_rules("""
+rules:
+  - metric: missing
+    warn: 10 %
+    fail: 50 %
+    exclude: [C]
+  - metric: longest_gap
+    fail: 50 frames
+  - metric: never_seen
+    scope: file
+    fail: 0
+    formats: [kinect]
+""")
+    verdict = rules.judge(measure_input(_motion()))
+    got = {(f.rule, f.joint, f.level) for f in verdict.findings}
+    # B is 20 % missing → WARN; C excluded from the missing rule; C's longest gap is the
+    # whole take (3 s) and B's 0.6 s = 60 frames > 50 frames → FAIL; never_seen only for Kinect
+    assert got == {("missing", "B", "WARN"), ("longest_gap", "B", "FAIL"), ("longest_gap", "C", "FAIL")}
+    assert verdict.status == "FAIL"
+    kin = rules.judge(measure_input(_motion("kinect")))
+    assert ("never_seen", None, "FAIL") in {(f.rule, f.joint, f.level) for f in kin.findings}
+
+
+def test_file_scope_aggregates_selected_joints():
+    rules = loads_rules("rules:\n  - {metric: missing, scope: file, fail: 30 %, include: [A, B]}\n")
+    assert rules.judge(measure_input(_motion())).status == "OK"      # (0 + 20 %) / 2
+    rules = loads_rules("rules:\n  - {metric: missing, scope: file, fail: 30 %}\n")
+    assert rules.judge(measure_input(_motion())).status == "FAIL"    # C counts: 40 %
+
+
+@pytest.mark.parametrize("text, pattern", [
+    ("rules:\n  - metric: missing\n    warn_missing: 5 %\n", r"line 3.*unknown key.*warn_missing"),
+    ("rules:\n  - metric: nope\n    warn: 1\n", r"line 2.*unknown metric 'nope'"),
+    ("rules:\n  - metric: longest_gap\n    warn: 5\n", r"needs a unit"),
+    ("rules:\n  - metric: missing\n    warn: .nan\n", r"not a finite number"),
+    ("rules:\n  - metric: missing\n    warn: 5\n", r"fraction above 1"),
+    ("rules:\n  - metric: dropped_frames\n    scope: joint\n    fail: 0\n", r"per file only"),
+    ("rules:\n  - metric: missing_after\n    fail: 1 %\n", r"clean's report"),
+    ("rules:\n  - metric: missing\n", r"needs 'warn' or 'fail'"),
+    ("version: 1\nrule: []\n", r"line 2.*unknown top-level key"),
+    ("rules:\n  - metric: missing\n    fail: 1 %\n    formats: [fbx]\n", r"formats"),
+])
+def test_rules_validation_names_the_line(text, pattern):
+    with pytest.raises(ConfigError, match=pattern):
+        loads_rules(text, "r.yaml")
+
+
+def test_shipped_rule_sets_load():
+    assert set(preset_names()) >= {"default", "optical-gait", "kinect", "animation-bvh"}
+    for name in preset_names():
+        assert len(load_rules(RULES_DIR / f"{name}.yaml")) > 0
+    formats = {f for r in default_rules().rules for f in r.formats}
+    assert formats == {"c3d", "kinect", "bvh", "asfamc"}
+
+
+@pytest.mark.parametrize("text, pattern", [
+    ("pipeline: []\nreport:\n  warn_missing: 0.1\n", r"line 3.*unknown key 'warn_missing'"),
+    ("pipeline: []\nreport:\n  fail_missing_after: .nan\n", r"finite number"),
+    ("pipeline: []\nreport:\n  fail_missing_after: 5\n", r"fraction in \[0, 1\]"),
+    ("pipeline: []\nreport:\n  rules:\n    - {metric: missing, fail: 1 %}\n", r"belongs to `check`"),
+])
+def test_config_report_section_is_validated(text, pattern):
+    with pytest.raises(ConfigError, match=pattern):
+        loads_config(text)
+
+
+def test_uncertain_rule_grades_a_marker_rebuilt_from_little_data():
+    T, fps = 400, 100.0
+    t = np.arange(T) / fps
+    a = np.stack([1000 * t, np.zeros(T), np.full(T, 900.0)], 1)
+    truth = np.stack([a, a + [0, 0, -400.0], a + [0, 200.0, 0]], axis=1)
+    pos = truth.copy()
+    pos[12:, 1] = np.nan               # B seen in 3 % of frames, then lost
+    motion = Motion(pos, ["A", "B", "C"], fps, units="mm", metres_per_unit=0.001, format="c3d")
+    # a step that rebuilt B completely (as a PCA fill from A and C would)
+    step = loads_config("pipeline:\n  - cleaner: fill\n").steps[0]
+    rebuilt = motion.replace(positions=truth.copy())
+    result = CleanResult(motion, rebuilt, [StepRecord.compare(step, motion, rebuilt, {}, 0.0)])
+    assert not result.cleaned.missing[:, 1].any()         # looks complete after cleaning…
+    report = build_report(result)
+    b = next(j for j in report["joints"] if j["name"] == "B")
+    assert b["missing_after"] == 0.0
+    assert b["uncertain"] == pytest.approx(0.97)          # …but 97 % of it was rebuilt
+    assert b["status"] == "FAIL" and any("rebuilt" in r for r in b["reasons"])
+    assert report["joints"][0]["status"] == "OK"
+    # a fill confidence on the cleaned motion, where present, lowers the uncertainty
+    conf = np.ones((T, 3))
+    conf[12:, 1] = 0.9
+    result.cleaned.confidence = conf
+    assert build_report(result)["joints"][1]["uncertain"] == pytest.approx(0.097)
+    assert math.isfinite(b["uncertain"])
