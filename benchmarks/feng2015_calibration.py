@@ -217,6 +217,36 @@ def meta_notes(results):
     return results.get("__fixed_notes__", [])
 
 
+def spread(paths, seeds, snrs, log):
+    """Per file, the chosen SNR definition: signal rms, noise σ and the tuned baselines'
+    error / paper at each SNR — how much the answer depends on the trial."""
+    methods = [tuned_method(n) for n in BASELINES]
+    head = ["file", "frames", "rms cm", *[f"{b.split('(')[0]} {s} dB" for s in snrs for b in BASELINES]]
+    lines = ["| " + " | ".join(head) + " |", "|---" * len(head) + "|"]
+    for p in paths:
+        m = formats.read(p)
+        cm = 100 * m.metres_per_unit
+        rms = cm * np.sqrt(np.nanmean(m.positions ** 2))
+        r = measure([m], seeds, {f"snr{s}": {"snr": s, "definition": corrupt.FENG2015_SNR_DEFINITION}
+                                 for s in snrs}, methods, lambda msg, p=p: log(f"{Path(p).name} {msg}"))
+        cells = [f"{r[(f'snr{s}', b)] / PAPER_DANCE[PAPER_NAMES[b]][f'snr{s}']:.2f}"
+                 for s in snrs for b in BASELINES]
+        lines.append(f"| {Path(p).name} | {m.n_frames} | {rms:.0f} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+#: everything after this line of the Markdown file is kept when the tables are rewritten
+#: (the per-trial table of ``--spread`` and the reading of the numbers)
+KEEP = "<!-- kept when the script rewrites the tables above -->"
+
+
+def write_markdown(path, text):
+    path = Path(path)
+    old = path.read_text(encoding="utf-8") if path.exists() else ""
+    tail = old[old.index(KEEP):] if KEEP in old else KEEP + "\n"
+    path.write_text(text + "\n\n" + tail, encoding="utf-8")
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--training", type=int, default=0,
@@ -234,13 +264,25 @@ def main(argv=None):
     ap.add_argument("--json", default=None, help="also save the raw numbers here")
     ap.add_argument("--render", default=None, metavar="JSON",
                     help="only re-render the Markdown from a saved --json")
+    ap.add_argument("--spread", action="store_true",
+                    help="only print, per subject-05 dance trial (shared + training), the "
+                         "tuned baselines' error / paper at the --snrs under the protocol's "
+                         "definition")
     args = ap.parse_args(argv)
+    if args.spread:
+        paths = list(DANCE) + sorted(TRAINING.glob("05_*.amc"))
+        t0 = time.process_time()
+        text = spread(paths, list(range(args.seeds)), [int(x) for x in args.snrs.split(",")],
+                      lambda msg: print(f"[{time.process_time() - t0:6.0f} s CPU] {msg}",
+                                        file=sys.stderr, flush=True))
+        print(text)
+        return
     if args.render:
         saved = json.loads(Path(args.render).read_text())
         results = {tuple(k.split("|")) if "|" in k else k: v for k, v in saved["results"].items()}
         text = render(saved["meta"], results, saved["snrs"], saved["defs"], saved["sizes"])
         print(text)
-        Path(args.markdown).write_text(text + "\n")
+        write_markdown(args.markdown, text)
         return
 
     paths = list(DANCE)
@@ -308,7 +350,7 @@ def main(argv=None):
              "results": {("|".join(k) if isinstance(k, tuple) else k): v
                          for k, v in results.items()}}, indent=1))
     text = render(meta, results, snrs, defs, sizes)
-    Path(args.markdown).write_text(text + "\n")
+    write_markdown(args.markdown, text)
     print(text)
     log("done")
 
