@@ -110,8 +110,8 @@ PROTOCOL_NOTES = {
                 "for the whole motion, every coordinate: MATLAB awgn 'measured'; calibrated "
                 "against the paper's tuned baselines, benchmarks/feng2015_calibration.py), "
                 "outliers on 5–30 % of samples (U(−50, 50) cm per coordinate; size unspecified "
-                "in the paper, calibrated the same way), and mixed (noise, then outliers). RMSE cm per marker (eq. 19). "
-                "The paper's baselines are oracle-tuned: compare them with gaussian(tuned), "
+                "in the paper, calibrated the same way), and mixed (noise, then outliers). "
+                "RMSE cm per marker (eq. 19). The paper's baselines are oracle-tuned: compare them with gaussian(tuned), "
                 "wavelet(tuned), kalman(tuned).",
     "yang2019": "Yang et al. 2019 (IEEE TIP) §IV-A: a fraction of the joint samples gets "
                 "U(−25, 25) cm noise on each coordinate. AJE and ABE in m.",
