@@ -286,14 +286,13 @@ def write(results, methods, notes, wall, args):
               "x, y, z; noise = independent draws on x, y, z. Fractions are exact "
               "(round(f × present samples), drawn without replacement). Seed s → "
               "`numpy.random.default_rng(s)`; the same corruption is given to every method.",
-              "- feng2015: SNR uses the *centred* signal power (each coordinate channel minus "
-              "its temporal mean, averaged over all channels) and one σ for the whole motion, "
-              "noise on every coordinate. Because whole-body translation is in the signal, "
-              "10 dB on a walking trial is σ ≈ 24 cm per coordinate — far more than the "
-              "paper's results suggest they used (their Gaussian filter reaches 4.96 cm at 10 dB), "
-              "so compare trends, not absolute values. Outlier size is unspecified in the "
-              "paper: we use U(−25, 25) cm per coordinate (Yang 2019's range). Mixed = "
-              "noise, then outliers on top.",
+              "- feng2015: SNR uses the *uncentred* signal power mean(x²) of the positions as "
+              "the CMU file puts them (MATLAB `awgn(X, snr, 'measured')`), one σ for the whole "
+              "motion, noise on every coordinate; outliers U(−50, 50) cm per coordinate (size "
+              "unspecified in the paper). Both calibrated so that oracle-tuned Gaussian, "
+              "wavelet and Kalman baselines reproduce the paper's dance rows "
+              "(`benchmarks/feng2015_calibration.py`, section 'Feng 2015: calibrating the "
+              "SNR'). Mixed = noise, then outliers on top.",
               "- yang2019: 'a fraction of entities' read as joint samples, each polluted "
               "sample gets U(−25, 25) cm on each coordinate. All FK joints of the CMU ASF "
               "(31, incl. fingers/thumbs and hip joints) are kept; the paper removed fingers "
@@ -322,6 +321,10 @@ def write(results, methods, notes, wall, args):
               "CMU 05_01 (walk), default parameters, our SNR/outlier reading (see above).", "",
               table, "", "Our best fully-filled method against their method, per setting:", ""]
     parts += [f"- {w}" for w in worse15] + ["", CAVEAT, ""]
+    calibration = HERE / "FENG2015_CALIBRATION.md"       # python benchmarks/feng2015_calibration.py
+    if calibration.exists():
+        parts += ["### Feng 2015: calibrating the SNR and the outlier size (dance)", "",
+                  calibration.read_text(encoding="utf-8").strip(), ""]
     table, worse19 = comparison(y19, YANG2019_TOTAL, list(bench.corrupt.PROTOCOLS["yang2019"]), 4)
     parts += ["### Yang et al. 2019, Table II (Total), AJE m", "",
               "Paper: average over CMU subjects 05–140, 25 joints. Ours: mean over five "

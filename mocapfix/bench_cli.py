@@ -32,7 +32,9 @@ def _debug(ctx) -> bool:
               help="Corruption protocol (see the README, 'Benchmarks').")
 @click.option("--methods", default=None,
               help="Comma-separated registered cleaners and/or baselines (none, "
-                   "linear+gaussian, pca+butterworth). Default: every registered cleaner, "
+                   "linear+gaussian, pca+butterworth), named pipelines, or the oracle-"
+                   "tuned gaussian(tuned), wavelet(tuned), kalman(tuned). Default: every "
+                   "registered cleaner, "
                    "unless --configs is given. Baselines are always included.")
 @click.option("--configs", default=None,
               help="Comma-separated YAML pipeline configs, each benchmarked as one method.")

@@ -119,6 +119,9 @@ class Wavelet(Cleaner):
         Param("wavelet", "str", "sym8", "a discrete wavelet known to PyWavelets"),
         Param("level", "int", None, "decomposition levels (default: automatic)", low=1,
               high=20, nullable=True),
+        Param("threshold", "choice", "bayes", "'bayes' (BayesShrink soft thresholds) or "
+              "'linear' (drop every detail band: a wavelet low-pass)",
+              choices=segments.WAVELET_THRESHOLDS),
         _GAPS,
     )
 
@@ -133,7 +136,7 @@ class Wavelet(Cleaner):
         if motion.positions.size == 0:
             return motion.copy(), {}
         out = segments.wavelet_denoise(_channels(motion), self["wavelet"], self["level"],
-                                       gaps=self["gaps"])
+                                       gaps=self["gaps"], threshold=self["threshold"])
         return _with_channels(motion, out), {}
 
 

@@ -267,8 +267,12 @@ def bayes_shrink(coeffs: list[np.ndarray], sigma: np.ndarray) -> list[np.ndarray
     return out
 
 
+WAVELET_THRESHOLDS = ("bayes", "linear")
+
+
 def wavelet_denoise(x: np.ndarray, wavelet: str = "sym8", level: int | None = None,
-                    gaps: str = "segments", mode: str = "antireflect") -> np.ndarray:
+                    gaps: str = "segments", mode: str = "antireflect", *,
+                    threshold: str = "bayes") -> np.ndarray:
     """Wavelet shrinkage denoising of every column of ``x`` (T, C), NaN-safe.
 
     Discrete wavelet transform (``pywt.wavedec``, boundary ``mode``), robust noise estimate
@@ -283,9 +287,19 @@ def wavelet_denoise(x: np.ndarray, wavelet: str = "sym8", level: int | None = No
     Segments too short for one level (``pywt.dwt_max_level`` = 0, e.g. fewer than
     15 samples for sym8) are left as they are.
 
+    ``threshold``: ``"bayes"`` (above) or ``"linear"``: every detail band of the ``level``
+    finest levels is set to zero, i.e. the projection on the approximation space at
+    ``level`` (linear wavelet smoothing, a low-pass of cut-off ≈ fs / 2^(level+1); it also
+    spreads sparse outliers instead of keeping them, as thresholds tuned on a robust noise
+    estimate do).
+
     Returns the denoised (T, C) array, NaN where ``x`` is NaN.
     """
     import pywt
+
+    if threshold not in WAVELET_THRESHOLDS:
+        raise ValueError(f"unknown wavelet threshold {threshold!r} "
+                         f"(known: {', '.join(WAVELET_THRESHOLDS)})")
 
     w = pywt.Wavelet(wavelet)
 
@@ -296,8 +310,12 @@ def wavelet_denoise(x: np.ndarray, wavelet: str = "sym8", level: int | None = No
             return seg
         lev = max(maxlev - 1, 1) if level is None else min(level, maxlev)
         coeffs = pywt.wavedec(seg, w, mode=mode, level=lev, axis=0)
-        sigma = np.median(np.abs(coeffs[-1]), axis=0) / 0.6745
-        rec = pywt.waverec(bayes_shrink(coeffs, sigma), w, mode=mode, axis=0)
+        if threshold == "linear":
+            shrunk = [coeffs[0]] + [np.zeros_like(d) for d in coeffs[1:]]
+        else:
+            sigma = np.median(np.abs(coeffs[-1]), axis=0) / 0.6745
+            shrunk = bayes_shrink(coeffs, sigma)
+        rec = pywt.waverec(shrunk, w, mode=mode, axis=0)
         return rec[:n]
 
     return _by_gaps(x, func, gaps, min_length=2)
