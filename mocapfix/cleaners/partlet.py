@@ -122,6 +122,8 @@ class PartletDictionary(FittedCleaner):
         Param("fista_iterations", "int", 20, "FISTA iterations per Ψ-step", low=1, high=2000),
         Param("neighbours", "int", 5, "k of the k-NN graph", low=0, high=50),
         Param("stride", "int", 4, "window samples between windows of one phase", low=1, high=64),
+        Param("presmooth", "bool", True, "code windows of the input smoothed as GCV finds noise in it"),
+        Param("frame_gcv", "bool", True, "fit the torso frame to GCV-smoothed torso joints"),
         Param("frame_smoothing", "time", "0.05 s", "Gaussian smoothing of the torso frame", unit="s",
               low=0.0, high=2.0),
         Param("detail", "bool", True, "add back the residual detail the dictionary misses, "
@@ -171,6 +173,19 @@ class PartletDictionary(FittedCleaner):
     def _normalise(self, P: np.ndarray, fps: float):
         """Model-joint positions P (T, Jm, 3) in metres → (local, R, c, centre)."""
         frame_pts = P[:, self.frame_]
+        if self.values["frame_gcv"] and len(P) > 8:
+            # the frame comes from the torso joints smoothed as much as GCV finds noise in
+            # them: under heavy noise a per-frame fit would turn noise into body rotation
+            T = len(P)
+            flat = frame_pts.reshape(T, -1)
+            miss = np.isnan(flat)
+            filled = prefill(flat)
+            ok = ~np.isnan(filled).any(axis=0)
+            if ok.any():
+                sm, _ = gcv_smooth(filled[:, ok], n_pad=min(T // 2, int(round(0.1 * fps))))
+                filled[:, ok] = sm
+            filled[miss] = np.nan
+            frame_pts = filled.reshape(frame_pts.shape)
         R, c, valid = torso_frames(frame_pts, self.template_,
                                    smoothing=self.values["frame_smoothing"].si * fps)
         local = to_frame(P, R, c)
@@ -431,6 +446,11 @@ class PartletDictionary(FittedCleaner):
         missing = np.isnan(Xp).any(axis=2)
         Z = prefill(flat)
         Z[np.isnan(Z)] = 0.0
+        pad = min(T // 2, int(round(0.1 * fps)))
+        presmooth = self.values["presmooth"]
+        if presmooth:
+            Z, _ = gcv_smooth(Z, n_pad=pad)
+            sigma = noise_level(Z)
         Y = _windows(Z, m, dil, starts)
         G = D.T @ D
         Lnorm = float(np.linalg.eigvalsh(G)[-1])
@@ -468,8 +488,10 @@ class PartletDictionary(FittedCleaner):
                 E = E if it > 1 else Q
                 for _ in range(3):
                     E = sparse.group_shrink_lp(Q, E, 2.0 * thr, p)
-            Zs = np.where(missing[..., None], rec3, Xp - E)
-            Y = _windows(Zs.reshape(T, -1), m, dil, starts)
+            Zs = np.where(missing[..., None], rec3, Xp - E).reshape(T, -1)
+            if presmooth:
+                Zs, _ = gcv_smooth(Zs, n_pad=pad)
+            Y = _windows(Zs, m, dil, starts)
         obs = ~missing
         signal = np.where(obs[..., None], Xp - E, 0.0)
         resid = np.where(obs[..., None], Xp - E - rec.reshape(T, n, 3), 0.0)
