@@ -21,6 +21,8 @@ anything is composed or constructed, and turns every failure into one
 """
 from __future__ import annotations
 
+import re
+
 import yaml
 
 from mocapfix.errors import ConfigError
@@ -31,6 +33,7 @@ MAX_DEPTH = 64
 ALIAS_BUDGET = 10_000
 
 _OPEN = (yaml.SequenceStartEvent, yaml.MappingStartEvent)
+_OPENERS = re.compile(r"[\[{](?:\s*[\[{]){64,}")
 _CLOSE = (yaml.SequenceEndEvent, yaml.MappingEndEvent)
 
 
@@ -54,6 +57,14 @@ def check_events(text: str, source: str, *, max_depth: int = MAX_DEPTH,
                  alias_budget: int = ALIAS_BUDGET) -> None:
     """Walk the YAML event stream of ``text`` once and refuse excessive nesting or alias
     expansion (see the module docstring). Raises ConfigError; returns None when fine."""
+    # PyYAML's scanner keeps up to ~1,000 open flow collections as possible simple keys
+    # and rescans them for every token (about 1.5 s for "[[[[..."): catch runs of openers
+    # first; the event walk below bounds every other shape
+    run = _OPENERS.search(text)
+    if run is not None and run.group().count("[") + run.group().count("{") > max_depth:
+        line = text.count("\n", 0, run.start()) + 1
+        raise ConfigError(f"{source} (line {line}): nested deeper than {max_depth} levels "
+                          "(a config is a few levels deep)")
     sizes: dict[str, int] = {}      # anchor -> expanded node count (None while still open)
     stack: list[list] = []          # open collections: [anchor, expanded node count]
     expanded_by_aliases = 0
@@ -123,6 +134,8 @@ def load_yaml(data, source: str = "<config>", *, loader: type = yaml.SafeLoader,
         raise _yaml_error(exc, source) from None
     except RecursionError:  # cannot happen within max_depth; kept as a last guard
         raise ConfigError(f"{source}: nested too deeply to load") from None
+    except ValueError as exc:  # e.g. an integer of more than 4,300 digits
+        raise ConfigError(f"{source}: value cannot be read: {exc}") from None
 
 
 def _line(event) -> str:
@@ -133,4 +146,7 @@ def _line(event) -> str:
 def _yaml_error(exc: yaml.YAMLError, source: str) -> ConfigError:
     mark = getattr(exc, "problem_mark", None)
     where = f" (line {mark.line + 1})" if mark is not None else ""
-    return ConfigError(f"{source}{where}: not valid YAML: {getattr(exc, 'problem', None) or exc}")
+    problem = str(getattr(exc, "problem", None) or exc).strip().splitlines()[0]
+    if isinstance(exc, yaml.reader.ReaderError):  # a character YAML does not allow
+        problem = f"character {exc.character!r} at offset {exc.position} is not allowed in YAML"
+    return ConfigError(f"{source}{where}: not valid YAML: {problem}")
