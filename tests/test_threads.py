@@ -27,9 +27,10 @@ def test_worker_threads_divides_the_cores():
 
 
 def _clean_and_watch(start_threads: int) -> tuple[int, int]:
-    """In a worker: a library default of ``start_threads`` (as numpy gets on a big
-    machine), the pool initializer's limit, then a whole clean while a second thread
-    samples the pools' thread counts (first 300 frames of the sample C3D: PCA fill + filter). Returns (most threads seen, samples taken)."""
+    """In a worker: optionally raise the pools to ``start_threads`` (as numpy's default is
+    on a bigger machine), then clean the first 300 frames of the sample C3D (PCA fill +
+    filter) while a second thread samples the pools' thread counts. Returns (most
+    threads seen, samples taken)."""
     from threadpoolctl import threadpool_limits
 
     motion = read(SAMPLE_DATA / "walk_markers.c3d")
