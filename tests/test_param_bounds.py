@@ -45,6 +45,10 @@ def test_every_physical_parameter_has_an_upper_bound():
     ("{cleaner: spikes, min_jump: 1e6 m}", "'min_jump'.*out of range"),
     ("{cleaner: kalman, measurement_noise: 5e5 mm}", "'measurement_noise'.*out of range"),
     ("{cleaner: rotation_smooth, sigma: 2e7 frames}", "'sigma'.*frames"),
+    # two plain numbers that overflowed (kalman: OverflowError) or broke an
+    # eigendecomposition (tsmc: LinAlgError) on a 60-frame motion
+    ("{cleaner: kalman, accel_noise: 1.0e+300}", "'accel_noise'.*out of range"),
+    ("{cleaner: tsmc, penalty0: 1.0e-300}", "'penalty0'.*out of range"),
 ])
 def test_absurd_physical_values_are_config_errors(step, pattern):
     with pytest.raises(ConfigError, match=pattern) as err:
