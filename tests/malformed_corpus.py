@@ -198,10 +198,12 @@ def _encodings(data: bytes):
 def _generic(name: str, data: bytes, rng, companions: dict, text: bool, prefix: str) -> list[Case]:
     variants = (_truncate(data, rng, 30) + _bitflips(data, rng, 25) + _splices(data, rng, 20)
                 + _garbage(rng, 10))
-    if text:
-        variants += _encodings(data)
-    return [Case(f"{prefix}-{tag}", family(tag), name, {name: raw, **companions})
-            for tag, raw in variants]
+    encodings = _encodings(data) if text else []
+    # every third generic case that reads is also cleaned (the rest only read: cleaning,
+    # write-back and writing cost ~0.3 s a file and near-identical mutants add little)
+    return [Case(f"{prefix}-{tag}", family(tag), name, {name: raw, **companions},
+                 clean=k % 3 == 0 or k >= len(variants))
+            for k, (tag, raw) in enumerate(variants + encodings)]
 
 
 # ------------------------------------------------------------------- per-format specials

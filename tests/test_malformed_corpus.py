@@ -81,6 +81,8 @@ def test_malformed_case(case, tmp_path):
                         clean_file(target, out, CLEAN)
                 except MocapfixError as exc:
                     _names_the_file(exc, [src / n for n in case.files] + [out], strict=False)
+                    left = sorted(p.name for p in out.parent.glob("*")) if out.parent.exists() else []
+                    assert not left, f"a failed clean left {left} behind"
     assert _digest(src) == before, "an input was modified"
 
 

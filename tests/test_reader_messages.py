@@ -56,11 +56,11 @@ def test_c3d_label_record_shorter_than_declared_is_named(tmp_path):
     assert any("declares 36 characters but its record holds 21" in n for n in motion.notes)
 
 
-@pytest.mark.parametrize("rate", [1e30, 2e5])
+@pytest.mark.parametrize("rate", [1e30, 2e5, 1e-30, 5e-4])
 def test_c3d_absurd_rate_is_refused_with_the_cause(tmp_path, rate):
     path = tmp_path / "fast.c3d"
     path.write_bytes(c3d_bytes(small_c3d_points(), LABELS, rate=rate))
-    with pytest.raises(UnreadableFileError, match=r"frame rate .* Hz is above 100000 Hz") as err:
+    with pytest.raises(UnreadableFileError, match=r"frame rate .* Hz is outside 0.001-100000 Hz") as err:
         _read(path)
     assert str(path) in str(err.value)
 
@@ -136,9 +136,10 @@ def test_bvh_without_frames_is_refused_at_read(tmp_path):
     assert str(path) in str(err.value)
 
 
-def test_bvh_absurd_frame_time_is_refused(tmp_path):
+@pytest.mark.parametrize("frame_time", [b"1e-320", b"1e-6", b"1e308", b"2000"])
+def test_bvh_absurd_frame_time_is_refused(tmp_path, frame_time):
     data = (SAMPLE_DATA / "walk.bvh").read_bytes()
     path = tmp_path / "fast.bvh"
-    path.write_bytes(re.sub(rb"Frame Time:\s*\S+", b"Frame Time: 1e-320", data))
-    with pytest.raises(UnreadableFileError, match="rate above 100000 Hz"):
+    path.write_bytes(re.sub(rb"Frame Time:\s*\S+", b"Frame Time: " + frame_time, data))
+    with pytest.raises(UnreadableFileError, match="rate outside 0.001-100000 Hz"):
         _read(path)

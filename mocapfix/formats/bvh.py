@@ -75,7 +75,7 @@ from mocapfix.fileio import atomic_write_bytes, read_input_bytes
 from mocapfix.formats.textenc import refuse_wide_text
 from mocapfix.kinematics import Rig
 from mocapfix.motion import Motion, Skeleton
-from mocapfix.quantity import MAX_FRAME_RATE_HZ
+from mocapfix.quantity import MAX_FRAME_RATE_HZ, MIN_FRAME_RATE_HZ
 
 NAME = "bvh"
 SUFFIXES = (".bvh",)
@@ -482,9 +482,10 @@ def _frame_time(path, word: bytes, line: int) -> float:
     if not (math.isfinite(value) and value > 0):
         raise UnreadableFileError(path, f"Frame Time: {_text(word)!r} must be a positive "
                                         "number of seconds", line=line)
-    if value < 1.0 / MAX_FRAME_RATE_HZ:
-        raise UnreadableFileError(path, f"Frame Time: {_text(word)!r} s is a rate above "
-                                        f"{MAX_FRAME_RATE_HZ:g} Hz (a corrupt field?)", line=line)
+    if not 1.0 / MAX_FRAME_RATE_HZ <= value <= 1.0 / MIN_FRAME_RATE_HZ:
+        raise UnreadableFileError(path, f"Frame Time: {_text(word)!r} s is a rate outside "
+                                        f"{MIN_FRAME_RATE_HZ:g}-{MAX_FRAME_RATE_HZ:g} Hz "
+                                        "(a corrupt field?)", line=line)
     return value
 
 

@@ -72,7 +72,7 @@ import numpy as np
 from mocapfix.errors import UnreadableFileError, WriteError
 from mocapfix.fileio import atomic_open, read_input_bytes
 from mocapfix.motion import Motion
-from mocapfix.quantity import MAX_FRAME_RATE_HZ
+from mocapfix.quantity import MAX_FRAME_RATE_HZ, MIN_FRAME_RATE_HZ
 from mocapfix.units import METRES_PER_UNIT, normalise_unit_name
 
 NAME = "c3d"
@@ -446,9 +446,9 @@ def _read_bytes(path, data: bytes, fps):
         rate = float(fps)
     if rate is None or not np.isfinite(rate) or rate <= 0:
         raise UnreadableFileError(path, "no valid frame rate in POINT:RATE or the header; pass fps")
-    if rate > MAX_FRAME_RATE_HZ:
-        raise UnreadableFileError(path, f"frame rate {rate:g} Hz is above {MAX_FRAME_RATE_HZ:g} Hz "
-                                        "(a corrupt POINT:RATE?); pass fps")
+    if not MIN_FRAME_RATE_HZ <= rate <= MAX_FRAME_RATE_HZ:
+        raise UnreadableFileError(path, f"frame rate {rate:g} Hz is outside {MIN_FRAME_RATE_HZ:g}"
+                                        f"-{MAX_FRAME_RATE_HZ:g} Hz (a corrupt POINT:RATE?); pass fps")
 
     conversion_note = None
     if processor != PROCESSOR_INTEL:
