@@ -130,3 +130,26 @@ def test_load_yaml_refuses_unsafe_loaders():
         load_yaml("a: 1", loader=yaml.UnsafeLoader)
     with pytest.raises(ConfigError):
         load_yaml("a: !!python/object/apply:os.system ['echo hacked']", "x.yaml")
+
+
+@pytest.mark.parametrize("name, data", [
+    ("bomb.yaml", ("pipeline:\n  - cleaner: butterworth\n    x:\n"
+                   + "".join(f"      {line}\n" for line in _bomb())).encode()),
+    ("deep.yaml", b"pipeline: [{cleaner: butterworth, x: " + b"[" * 20000 + b"]" * 20000 + b"}]\n"),
+    ("latin1.yaml", b"pipeline: [{cleaner: butterworth}]\n# caf\xe9\n"),
+    ("formats.yaml", b"pipeline: [{cleaner: butterworth, formats: 5}]\n"),
+])
+def test_cli_reports_a_bad_config_in_one_line_with_exit_2(tmp_path, name, data):
+    from click.testing import CliRunner
+
+    from mocapfix.cli import main
+    from conftest import SAMPLE_DATA
+
+    config = tmp_path / name
+    config.write_bytes(data)
+    with hang_guard(20):
+        result = CliRunner().invoke(main, ["clean", str(SAMPLE_DATA / "walk.bvh"), "-o",
+                                           str(tmp_path / "out"), "-c", str(config)])
+    assert result.exit_code == 2, result.output
+    assert "Traceback" not in result.output and str(config) in result.output
+    assert not (tmp_path / "out").exists() or not any((tmp_path / "out").rglob("*.bvh"))
