@@ -31,6 +31,7 @@ from mocapfix.cleaners import build
 from mocapfix.cleaners.base import Cleaner, FittedCleaner
 from mocapfix.errors import ConfigError
 from mocapfix.motion import Motion
+from mocapfix.yamlsafe import load_yaml as safe_load_yaml
 
 CONFIG_VERSION = 1
 _STEP_KEYS = {"cleaner", "formats", "name"}
@@ -156,7 +157,7 @@ def parse_config(data, source: str = "<config>") -> Pipeline:
     """Validate a loaded config (dict, possibly carrying ``__line__`` marks)."""
     if not isinstance(data, dict):
         raise ConfigError(f"{source}: a config is a mapping with 'version' and 'pipeline'")
-    unknown = sorted(set(data) - _TOP_KEYS - {"__line__", "__keylines__"})
+    unknown = sorted(set(data) - _TOP_KEYS - {"__line__", "__keylines__"}, key=repr)
     if unknown:
         raise ConfigError(f"{source}: unknown top-level key(s) {', '.join(map(repr, unknown))} "
                           f"(known: {', '.join(sorted(_TOP_KEYS))})")
@@ -171,6 +172,9 @@ def parse_config(data, source: str = "<config>") -> Pipeline:
         where = f"{source}: step {n}{_line_of(raw)}"
         if not isinstance(raw, dict) or "cleaner" not in raw:
             raise ConfigError(f"{where}: each step is a mapping with a 'cleaner' key")
+        odd = [k for k in raw if not isinstance(k, str)]
+        if odd:
+            raise ConfigError(f"{where}: parameter names must be words, got {odd[0]!r}")
         params = {k: _strip_lines(v) for k, v in raw.items()
                   if k not in _STEP_KEYS and k not in ("__line__", "__keylines__")}
         name = raw["cleaner"]
@@ -181,9 +185,9 @@ def parse_config(data, source: str = "<config>") -> Pipeline:
         if formats is not None:
             if isinstance(formats, str):
                 formats = [formats]
-            bad = [f for f in formats if f not in _FORMATS]
-            if bad or not isinstance(formats, list):
-                raise ConfigError(f"{where}: 'formats' must list some of {', '.join(sorted(_FORMATS))}, got {formats!r}")
+            if not isinstance(formats, list) or not all(isinstance(f, str) and f in _FORMATS for f in formats):
+                raise ConfigError(f"{where}: 'formats' must list some of {', '.join(sorted(_FORMATS))}, "
+                                  f"got {_strip_lines(formats)!r}")
             formats = tuple(formats)
         label = f"step {n} ({raw.get('name') or name}){_line_of(raw)}"
         cleaner = build(name, step=f"{source}: {label}", **params)
@@ -224,26 +228,25 @@ def _check_step_params(name: str, raw: dict, params: dict, where: str) -> None:
 UNIT_WARNINGS: list[str] = []
 
 
-def load_yaml(text: str, source: str = "<config>"):
-    """Safe-load YAML with line marks (``__line__`` per mapping, ``__keylines__`` per key)."""
-    try:
-        return yaml.load(text, Loader=_LineLoader)  # noqa: S506 — SafeLoader subclass
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = f" (line {mark.line + 1})" if mark is not None else ""
-        raise ConfigError(f"{source}{where}: not valid YAML: {getattr(exc, 'problem', exc)}") from None
+def load_yaml(text, source: str = "<config>"):
+    """Safe-load YAML (text, or bytes checked to be UTF-8) with line marks (``__line__`` per
+    mapping, ``__keylines__`` per key), bounded in size, nesting and alias expansion
+    (:func:`mocapfix.yamlsafe.load_yaml`)."""
+    return safe_load_yaml(text, source, loader=_LineLoader)
 
 
 def load_config(path) -> Pipeline:
     path = Path(path)
     try:
-        text = path.read_text(encoding="utf-8")
+        data = path.read_bytes()
     except OSError as exc:
         raise ConfigError(f"{path}: cannot read config: {exc.strerror or exc}") from None
-    return loads_config(text, str(path))
+    return loads_config(data, str(path))
 
 
-def loads_config(text: str, source: str = "<config>") -> Pipeline:
+def loads_config(text: str | bytes, source: str = "<config>") -> Pipeline:
+    """Parse a config's text (or its bytes, checked to be UTF-8) with bounded nesting and
+    alias expansion (:func:`load_yaml`)."""
     return parse_config(load_yaml(text, source), source)
 
 

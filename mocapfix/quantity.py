@@ -22,6 +22,13 @@ _UNIT_KINDS = {
     # frequency → Hz
     "hz": ("frequency", 1.0),
 }
+#: fastest frame rate a file may declare (optical systems reach ~10 kHz at reduced
+#: resolution); a faster one is a corrupt field, and would turn every time into billions
+#: of frames
+MAX_FRAME_RATE_HZ = 100_000.0
+#: slowest: one frame in 1,000 s (a corrupt rate field, or a Frame Time of 1e308 s)
+MIN_FRAME_RATE_HZ = 0.001
+
 _PATTERN = re.compile(r"^\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*([A-Za-z]*)\s*$")
 
 

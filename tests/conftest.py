@@ -51,6 +51,11 @@ def shared(relpath: str) -> Path:
     return need(DATA / relpath)
 
 
+class Hang(BaseException):
+    """Raised by :func:`hang_guard`. A BaseException, not TimeoutError: TimeoutError is an
+    OSError, which readers turn into "malformed file" errors, hiding the hang."""
+
+
 @contextlib.contextmanager
 def hang_guard(seconds: int = 10):
     """Fail instead of hanging forever (a generous guard, not a timing assertion)."""
@@ -59,7 +64,7 @@ def hang_guard(seconds: int = 10):
         return
 
     def _timeout(signum, frame):
-        raise TimeoutError(f"reader did not return within {seconds} s")
+        raise Hang(f"no answer within {seconds} s")
 
     previous = signal.signal(signal.SIGALRM, _timeout)
     signal.alarm(seconds)

@@ -35,7 +35,18 @@ class Param:
     loaded (:meth:`FittedCleaner.resolve_models`).
     ``low``/``high`` bound the value (in SI for physical kinds, frames excepted);
     ``low_open`` makes the lower bound exclusive.
+
+    Physical parameters always have an upper bound: ``high`` or, when it is None, the
+    kind's ceiling in :data:`CEILINGS` (a time longer than an hour, a length over 100 m, a
+    frequency over 100 kHz is a typo, and kernels sized from them would not fit in memory).
+    A time given in frames is bounded by ``high`` seconds at :data:`MAX_RATE_HZ` (the frame
+    rate is not known when the config is read), and never more than :data:`MAX_FRAMES`.
     """
+
+    #: upper bound (SI) of each physical kind when a parameter declares none
+    CEILINGS: ClassVar[dict] = {"length": 100.0, "time": 3600.0, "frequency": 1e5}
+    MAX_RATE_HZ: ClassVar[float] = 10_000.0
+    MAX_FRAMES: ClassVar[float] = 1e6
 
     name: str
     kind: str
@@ -48,11 +59,19 @@ class Param:
     choices: tuple = ()
     nullable: bool = False
 
+    def upper(self) -> float | None:
+        """The upper bound: ``high``, or the kind's ceiling for physical kinds."""
+        return self.CEILINGS.get(self.kind) if self.high is None else self.high
+
+    def max_frames(self) -> float:
+        """Upper bound of a time given in frames."""
+        return min(self.upper() * self.MAX_RATE_HZ, self.MAX_FRAMES)
+
     def describe_range(self) -> str:
         if self.kind == "choice":
             return "one of " + ", ".join(map(str, self.choices))
         lo = "" if self.low is None else (f"> {self.low:g}" if self.low_open else f">= {self.low:g}")
-        hi = "" if self.high is None else f"<= {self.high:g}"
+        hi = "" if self.upper() is None else f"<= {self.upper():g}"
         rng = " and ".join(x for x in (lo, hi) if x)
         unit = f" {self.si_unit()}" if self.kind in _PHYSICAL else ""
         return f"{self.kind} {rng}{unit}".strip()
@@ -68,7 +87,11 @@ class Param:
             raise ConfigError(f"{where} needs a value ({self.describe_range()})")
         if self.kind in _PHYSICAL:
             q = parse_quantity(value, self.kind, self.unit, where)
-            self._check_range(q.si if q.si is not None else q.frames, where, value)
+            if q.frames is not None and q.frames > self.max_frames():
+                raise ConfigError(f"{where} = {value!r} is out of range (allowed: at most "
+                                  f"{self.max_frames():g} frames, {self.describe_range()})")
+            self._check_range(q.si if q.si is not None else q.frames, where, value,
+                              upper=q.si is not None)
             return q
         if self.kind == "bool":
             if not isinstance(value, bool):
@@ -98,9 +121,10 @@ class Param:
             return list(value)
         raise AssertionError(self.kind)
 
-    def _check_range(self, number: float, where: str, shown):
+    def _check_range(self, number: float, where: str, shown, upper: bool = True):
         low_bad = self.low is not None and (number <= self.low if self.low_open else number < self.low)
-        high_bad = self.high is not None and number > self.high
+        high = self.upper() if upper else None
+        high_bad = high is not None and number > high
         if low_bad or high_bad:
             raise ConfigError(f"{where} = {shown!r} is out of range (allowed: {self.describe_range()})")
 

@@ -162,7 +162,7 @@ class Kalman(Cleaner):
     summary = "constant-velocity Kalman filter + RTS smoother per coordinate"
     params = (
         Param("accel_noise", "float", 0.5, "sqrt of the acceleration spectral density, "
-              "m/s^2/sqrt(Hz)", low=0.0, low_open=True),
+              "m/s^2/sqrt(Hz)", low=0.0, low_open=True, high=1e4),
         Param("measurement_noise", "length", "1 mm", "std of the measurement noise",
               unit="mm", low=0.0, low_open=True),
         Param("fill", "bool", False, "keep the smoothed trajectory in interior gaps"),

@@ -108,7 +108,7 @@ class Spikes(Cleaner):
     summary = "mark spikes/outliers missing (Hampel on the residual to a robust local fit)"
     params = (
         Param("window", "time", "0.08 s", "length of the local-fit window", unit="s",
-              low=0.0, low_open=True),
+              low=0.0, low_open=True, high=2.0),
         Param("k", "float", 5.0, "threshold in robust standard deviations (MAD × 1.4826)",
               low=1.0, high=100.0),
         Param("min_jump", "length", "10 mm", "smallest residual ever flagged", unit="mm",

@@ -346,7 +346,7 @@ class TSMC(Cleaner):
               low=0.0, low_open=True, high=1.0),
         Param("max_iter", "int", 300, "iteration cap", low=1, high=100000),
         Param("penalty0", "float", 1.25, "initial ALM penalties λ1 = λ2, times 1/||X||_2 "
-              "(Lin, Chen & Ma 2010 use 1.25)", low=0.0, low_open=True),
+              "(Lin, Chen & Ma 2010 use 1.25)", low=1e-9, high=1e9),
         Param("observed", "choice", "auto", "observed samples: keep them, replace by the "
               "model (paper), smooth every channel by GCV, or smooth only noisy channels",
               choices=("keep", "model", "smooth", "auto")),

@@ -66,6 +66,7 @@ import numpy as np
 
 from mocapfix.errors import UnreadableFileError, UnsupportedFeatureError, WriteError
 from mocapfix.fileio import atomic_write_bytes, read_input_bytes
+from mocapfix.formats.textenc import UTF8_BOM, refuse_wide_text
 from mocapfix.kinematics import Rig, euler_to_matrix
 from mocapfix.motion import Motion, Skeleton
 from mocapfix.units import asf_length_unit
@@ -155,6 +156,7 @@ def sniff(head: bytes) -> bool:
 def _decode(path: Path, data: bytes) -> str:
     if not data.strip():
         raise UnreadableFileError(path, "file is empty")
+    refuse_wide_text(path, data, Path(path).suffix.lstrip(".").upper() or "ASF/AMC")
     if b"\x00" in data[:4096]:
         raise UnreadableFileError(path, "binary data where ASF/AMC text was expected")
     return data.decode("latin-1")    # byte-exact round trip, never fails
@@ -193,7 +195,8 @@ def axis_matrix(angles_xyz: np.ndarray, order: str, degrees: bool) -> np.ndarray
 class _AsfParser:
     def __init__(self, path: Path, text: str):
         self.path = path
-        self.lines = text.split("\n")
+        bom = UTF8_BOM.decode("latin-1")  # read and written back as the file's bytes
+        self.lines = (text[len(bom):] if text.startswith(bom) else text).split("\n")
         self.asf = AsfSkeleton()
         self.bone: dict | None = None
         self.in_limits = False
@@ -477,8 +480,14 @@ def build_rig(asf: AsfSkeleton, layout: list[tuple[str, int]], degrees: bool) ->
 def _amc_header(path, lines: list[str]) -> tuple[int, dict]:
     """Index of the first frame line and the header flags."""
     flags = {"degrees": None, "fully_specified": False, "unknown": []}
+    bom = UTF8_BOM.decode("latin-1")  # a UTF-8 byte-order mark: kept in the header line
     for i, raw in enumerate(lines):
         line = raw.strip()
+        if i == 0 and line.startswith(bom):
+            line = line[len(bom):].strip()
+            if _INT_RE.match(line):
+                raise UnreadableFileError(path, "a UTF-8 byte-order mark before the first frame "
+                                                "number and no header: remove the mark", 1)
         if not line or line.startswith("#"):
             continue
         if line.startswith(":"):

@@ -72,8 +72,10 @@ import numpy as np
 
 from mocapfix.errors import UnreadableFileError, WriteError
 from mocapfix.fileio import atomic_write_bytes, read_input_bytes
+from mocapfix.formats.textenc import refuse_wide_text
 from mocapfix.kinematics import Rig
 from mocapfix.motion import Motion, Skeleton
+from mocapfix.quantity import MAX_FRAME_RATE_HZ, MIN_FRAME_RATE_HZ
 
 NAME = "bvh"
 SUFFIXES = (".bvh",)
@@ -465,6 +467,9 @@ def _declared_frames(path, word: bytes, line: int) -> int:
                                   line=line) from None
     if count < 0:
         raise UnreadableFileError(path, f"Frames: {count} is negative", line=line)
+    if count == 0:
+        raise UnreadableFileError(path, "Frames: 0 — the file holds a skeleton but no motion "
+                                        "to clean", line=line)
     return count
 
 
@@ -477,6 +482,10 @@ def _frame_time(path, word: bytes, line: int) -> float:
     if not (math.isfinite(value) and value > 0):
         raise UnreadableFileError(path, f"Frame Time: {_text(word)!r} must be a positive "
                                         "number of seconds", line=line)
+    if not 1.0 / MAX_FRAME_RATE_HZ <= value <= 1.0 / MIN_FRAME_RATE_HZ:
+        raise UnreadableFileError(path, f"Frame Time: {_text(word)!r} s is a rate outside "
+                                        f"{MIN_FRAME_RATE_HZ:g}-{MAX_FRAME_RATE_HZ:g} Hz "
+                                        "(a corrupt field?)", line=line)
     return value
 
 
@@ -550,6 +559,7 @@ def read(path, fps: float | None = None, allow_truncated: bool = False, **option
     frames of a truncated file (with a note) instead of refusing it."""
     path = Path(path)
     data = read_input_bytes(path)
+    refuse_wide_text(path, data, "BVH")
     notes: list[str] = []
     start = len(_BOM) if data.startswith(_BOM) else 0
     motion_match = _MOTION_LINE.search(data, start)

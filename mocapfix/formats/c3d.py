@@ -72,6 +72,7 @@ import numpy as np
 from mocapfix.errors import UnreadableFileError, WriteError
 from mocapfix.fileio import atomic_open, read_input_bytes
 from mocapfix.motion import Motion
+from mocapfix.quantity import MAX_FRAME_RATE_HZ, MIN_FRAME_RATE_HZ
 from mocapfix.units import METRES_PER_UNIT, normalise_unit_name
 
 NAME = "c3d"
@@ -156,7 +157,8 @@ class C3DParam:
             if len(dims) <= 1:
                 return [text]
             width = dims[0]
-            count = int(np.prod(dims[1:])) if width else 0
+            count = int(np.prod(dims[1:], dtype=np.int64)) if width else 0
+            count = min(count, -(-len(text) // width) if width else 0)  # strings held, not declared
             return [text[i * width:(i + 1) * width] for i in range(count)]
         dtype = {1: "<i1", 2: "<i2", 4: "<f4"}.get(bpe)
         if dtype is None or len(self.data) % abs(bpe):
@@ -444,6 +446,9 @@ def _read_bytes(path, data: bytes, fps):
         rate = float(fps)
     if rate is None or not np.isfinite(rate) or rate <= 0:
         raise UnreadableFileError(path, "no valid frame rate in POINT:RATE or the header; pass fps")
+    if not MIN_FRAME_RATE_HZ <= rate <= MAX_FRAME_RATE_HZ:
+        raise UnreadableFileError(path, f"frame rate {rate:g} Hz is outside {MIN_FRAME_RATE_HZ:g}"
+                                        f"-{MAX_FRAME_RATE_HZ:g} Hz (a corrupt POINT:RATE?); pass fps")
 
     conversion_note = None
     if processor != PROCESSOR_INTEL:
@@ -641,6 +646,10 @@ def _labels(get, parameters, n_points, notes) -> list[str]:
                 if key != "LABELS":
                     break
                 continue
+            problem = _label_problem(param)
+            if problem:
+                notes.append(f"POINT:{key} {problem}; its labels are not used")
+                continue
             raw += param.value
             if len(raw) >= n_points:
                 break
@@ -678,6 +687,19 @@ def _labels(get, parameters, n_points, notes) -> list[str]:
         notes.append("duplicate marker labels made unique: " + ", ".join(renamed[:10])
                      + (" ..." if len(renamed) > 10 else ""))
     return names
+
+
+def _label_problem(param: C3DParam) -> str | None:
+    """Why a label parameter cannot be a list of labels (None when it can): labels are a
+    (width, count) character array; more dimensions are accepted only when they are 1."""
+    dims = param.dims
+    declared = int(np.prod(dims, dtype=np.int64)) if dims else 1
+    if len(dims) > 2 and any(d != 1 for d in dims[2:]):
+        shown = ", ".join(map(str, dims[:8])) + (", ..." if len(dims) > 8 else "")
+        return f"has {len(dims)} dimensions ({shown}) (a label list has 2: width and count)"
+    if declared != len(param.data):
+        return f"declares {declared} characters but its record holds {len(param.data)}"
+    return None
 
 
 def _units(param, notes) -> tuple[str, float]:

@@ -43,11 +43,14 @@ def local_polyfit(x: np.ndarray, w: np.ndarray, half: int, degree: int = 2,
     T, J, D = x.shape
     w = np.where(np.isnan(x).any(axis=2), 0.0, np.asarray(w, dtype=np.float64))
     xw = np.where(w[..., None] > 0, x, 0.0) * w[..., None]
-    offsets = np.arange(-half, half + 1)
-    u = offsets / float(max(half, 1))
-    kernel = np.ones(2 * half + 1)
+    # the window is cut at T - 1 samples each side (farther taps only meet the zero
+    # padding), so the kernels and their cost stay O(T) whatever ``half`` is
+    reach = max(0, min(int(half), T - 1))
+    offsets = np.arange(-reach, reach + 1)
+    u = offsets / float(max(reach, 1))
+    kernel = np.ones(2 * reach + 1)
     if leave_out:
-        kernel[half] = 0.0
+        kernel[reach] = 0.0
     n = degree + 1
     S = np.stack([ndimage.correlate1d(w, kernel * u ** k, axis=0, mode="constant")
                   for k in range(2 * degree + 1)], axis=-1)                    # (T, J, 2d+1)
@@ -68,6 +71,9 @@ def local_polyfit(x: np.ndarray, w: np.ndarray, half: int, degree: int = 2,
     return fit, z[..., 0], np.where(empty, 0.0, support)
 
 
+_MEDIAN_BLOCK = 1 << 22  # values sorted at once by moving_median (32 MiB of float64)
+
+
 def moving_median(x: np.ndarray, half: int) -> np.ndarray:
     """Median over the ``2 half + 1`` samples centred on each sample, along axis 0,
     ignoring NaN (windows are truncated at the ends; a window with no value gives NaN).
@@ -78,12 +84,24 @@ def moving_median(x: np.ndarray, half: int) -> np.ndarray:
     from numpy.lib.stride_tricks import sliding_window_view
 
     x = np.asarray(x, dtype=np.float64)
-    if half < 1 or x.shape[0] == 0:
+    T = x.shape[0]
+    if half < 1 or T == 0:
+        return x.copy()
+    half = min(int(half), T - 1) if T > 1 else 0  # farther samples are NaN padding
+    if half < 1:
         return x.copy()
     pad = [(half, half)] + [(0, 0)] * (x.ndim - 1)
     view = sliding_window_view(np.pad(x, pad, constant_values=np.nan), 2 * half + 1, axis=0)
-    srt = np.sort(view, axis=-1)
-    n = np.sum(~np.isnan(view), axis=-1)
-    lo = np.take_along_axis(srt, np.maximum((n - 1) // 2, 0)[..., None], axis=-1)[..., 0]
-    hi = np.take_along_axis(srt, np.maximum(n // 2, 0)[..., None], axis=-1)[..., 0]
-    return np.where(n > 0, 0.5 * (lo + hi), np.nan)
+    # sorted windows are (rows, ..., 2 half + 1): done in blocks of rows so that memory
+    # stays bounded (about _MEDIAN_BLOCK values) however wide the window is
+    per_row = max(1, view[:1].size)
+    step = max(1, _MEDIAN_BLOCK // per_row)
+    out = np.empty(x.shape)
+    for start in range(0, T, step):
+        block = view[start:start + step]
+        srt = np.sort(block, axis=-1)
+        n = np.sum(~np.isnan(block), axis=-1)
+        lo = np.take_along_axis(srt, np.maximum((n - 1) // 2, 0)[..., None], axis=-1)[..., 0]
+        hi = np.take_along_axis(srt, np.maximum(n // 2, 0)[..., None], axis=-1)[..., 0]
+        out[start:start + step] = np.where(n > 0, 0.5 * (lo + hi), np.nan)
+    return out

@@ -1,0 +1,45 @@
+"""Text encodings the text readers (BVH, ASF/AMC) do not read, named instead of being
+reported as garbage.
+
+The formats are ASCII in practice; UTF-8 (with or without a byte-order mark) and Latin-1
+bytes in names are read. UTF-16 and UTF-32 (what some Windows editors and Excel's
+"Unicode text" save) are recognised by their byte-order mark, or without one by the NUL
+byte in every other (or every fourth) position of ASCII text, and refused with a message
+saying how to convert the file.
+"""
+from __future__ import annotations
+
+from mocapfix.errors import UnreadableFileError
+
+UTF8_BOM = b"\xef\xbb\xbf"
+_BOMS = (
+    (b"\xff\xfe\x00\x00", "UTF-32 (little-endian)"),
+    (b"\x00\x00\xfe\xff", "UTF-32 (big-endian)"),
+    (b"\xff\xfe", "UTF-16 (little-endian)"),
+    (b"\xfe\xff", "UTF-16 (big-endian)"),
+)
+
+
+def wide_encoding(data: bytes) -> str | None:
+    """Name of the UTF-16/32 encoding ``data`` is in, or None."""
+    for bom, name in _BOMS:
+        if data.startswith(bom):
+            return name
+    head = data[:512]
+    if len(head) >= 16 and head.count(0) >= len(head) // 3:
+        for phase, name in ((1, "UTF-16 (little-endian, no byte-order mark)"),
+                            (0, "UTF-16 (big-endian, no byte-order mark)")):
+            zeros = head[phase::2]
+            if zeros.count(0) >= 0.9 * len(zeros) and head[1 - phase::2].count(0) < 0.1 * len(zeros):
+                return name
+        if head[1::4].count(0) >= 0.9 * len(head[1::4]) and head[::4].count(0) < 0.1 * len(head[::4]):
+            return "UTF-32 (little-endian, no byte-order mark)"
+    return None
+
+
+def refuse_wide_text(path, data: bytes, what: str) -> None:
+    """Raise UnreadableFileError naming the encoding when ``data`` is UTF-16/32 text."""
+    name = wide_encoding(data)
+    if name is not None:
+        raise UnreadableFileError(path, f"{what} file is {name} text; mocapfix reads ASCII/UTF-8 "
+                                        f"{what}: save it as UTF-8 (e.g. iconv -f UTF-16 -t UTF-8)")

@@ -1,0 +1,152 @@
+"""Bounded YAML loading for configs and rule files.
+
+A YAML document can ask for far more work than its size suggests: an alias "bomb"
+(``a: &a [x, x]``, ``b: &b [*a, *a]``, … — the "billion laughs" of XML) is a few hundred
+bytes that expand to billions of nodes when anything walks the loaded data; a deeply nested
+``[[[[…]]]]`` makes PyYAML's composer and constructor, and any recursive walk of the result,
+exceed Python's recursion limit; a byte that is not UTF-8 makes ``str.decode`` raise.
+
+:func:`load_yaml` checks all of that on the parser's event stream (a flat sequence,
+walked with an explicit stack: no recursion, one pass, O(size of the text)) *before*
+anything is composed or constructed, and turns every failure into one
+:class:`~mocapfix.errors.ConfigError` naming the source and, where known, the line:
+
+* the text must be UTF-8 (a UTF-8 byte-order mark is allowed) and at most ``max_bytes``;
+* nesting deeper than ``max_depth`` collections is refused;
+* the nodes that aliases add when expanded (an alias counts the full size of what it
+  names, aliases inside it included) must stay within ``alias_budget``; an alias to a
+  collection that is still open (a recursive structure) or to an undefined anchor is
+  refused;
+* only the safe tags are constructed (``yaml.SafeLoader`` or a subclass).
+"""
+from __future__ import annotations
+
+import re
+
+import yaml
+
+from mocapfix.errors import ConfigError
+
+#: defaults sized for pipeline configs (the shipped ones have < 200 nodes and depth < 6)
+MAX_BYTES = 1 << 20
+MAX_DEPTH = 64
+ALIAS_BUDGET = 10_000
+
+_OPEN = (yaml.SequenceStartEvent, yaml.MappingStartEvent)
+_OPENERS = re.compile(r"[\[{](?:\s*[\[{]){64,}")
+_CLOSE = (yaml.SequenceEndEvent, yaml.MappingEndEvent)
+
+
+def decode_text(data: bytes, source: str, max_bytes: int = MAX_BYTES) -> str:
+    """UTF-8 text of a config file (BOM dropped), or a ConfigError naming the bad byte."""
+    if len(data) > max_bytes:
+        raise ConfigError(f"{source}: config is {len(data):,} bytes, more than the "
+                          f"{max_bytes:,} a config may have")
+    if data[:2] in (b"\xff\xfe", b"\xfe\xff"):
+        raise ConfigError(f"{source}: config is UTF-16 text; save it as UTF-8")
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = data[:exc.start].count(b"\n") + 1
+        raise ConfigError(f"{source} (line {line}): not UTF-8 text (byte 0x{data[exc.start]:02x} "
+                          f"at offset {exc.start}); save the config as UTF-8") from None
+    return text[1:] if text.startswith("\ufeff") else text
+
+
+def check_events(text: str, source: str, *, max_depth: int = MAX_DEPTH,
+                 alias_budget: int = ALIAS_BUDGET) -> None:
+    """Walk the YAML event stream of ``text`` once and refuse excessive nesting or alias
+    expansion (see the module docstring). Raises ConfigError; returns None when fine."""
+    # PyYAML's scanner keeps up to ~1,000 open flow collections as possible simple keys
+    # and rescans them for every token (about 1.5 s for "[[[[..."): catch runs of openers
+    # first; the event walk below bounds every other shape
+    run = _OPENERS.search(text)
+    if run is not None and run.group().count("[") + run.group().count("{") > max_depth:
+        line = text.count("\n", 0, run.start()) + 1
+        raise ConfigError(f"{source} (line {line}): nested deeper than {max_depth} levels "
+                          "(a config is a few levels deep)")
+    sizes: dict[str, int] = {}      # anchor -> expanded node count (None while still open)
+    stack: list[list] = []          # open collections: [anchor, expanded node count]
+    expanded_by_aliases = 0
+    try:
+        for event in yaml.parse(text, Loader=yaml.SafeLoader):
+            if isinstance(event, _OPEN):
+                if len(stack) >= max_depth:
+                    raise ConfigError(f"{source}{_line(event)}: nested deeper than {max_depth} "
+                                      "levels (a config is a few levels deep)")
+                if event.anchor is not None:
+                    sizes[event.anchor] = None
+                stack.append([event.anchor, 1])
+                continue
+            if isinstance(event, _CLOSE):
+                anchor, size = stack.pop()
+                if anchor is not None:
+                    sizes[anchor] = size
+                if stack:
+                    stack[-1][1] += size
+                continue
+            if isinstance(event, yaml.ScalarEvent):
+                if event.anchor is not None:
+                    sizes[event.anchor] = 1
+                if stack:
+                    stack[-1][1] += 1
+                continue
+            if isinstance(event, yaml.AliasEvent):
+                if event.anchor not in sizes:
+                    raise ConfigError(f"{source}{_line(event)}: alias *{event.anchor} names no "
+                                      "anchor defined before it")
+                size = sizes[event.anchor]
+                if size is None:
+                    raise ConfigError(f"{source}{_line(event)}: alias *{event.anchor} refers to "
+                                      "the collection it is inside (a recursive structure)")
+                expanded_by_aliases += size
+                if expanded_by_aliases > alias_budget:
+                    raise ConfigError(
+                        f"{source}{_line(event)}: aliases expand to more than {alias_budget:,} "
+                        "nodes (an alias 'bomb'?); write the values out instead")
+                if stack:
+                    stack[-1][1] += size
+    except yaml.YAMLError as exc:
+        raise _yaml_error(exc, source) from None
+
+
+def load_yaml(data, source: str = "<config>", *, loader: type = yaml.SafeLoader,
+              max_bytes: int = MAX_BYTES, max_depth: int = MAX_DEPTH,
+              alias_budget: int = ALIAS_BUDGET):
+    """Load one YAML document from ``data`` (bytes or str) within the bounds above.
+
+    ``loader`` must be ``yaml.SafeLoader`` or a subclass (e.g. one that records lines).
+    Every failure is a :class:`ConfigError` naming ``source``.
+    """
+    if not (isinstance(loader, type) and issubclass(loader, yaml.SafeLoader)):
+        raise TypeError("load_yaml needs yaml.SafeLoader or a subclass")
+    if isinstance(data, (bytes, bytearray)):
+        text = decode_text(bytes(data), source, max_bytes)
+    else:
+        text = str(data)
+        if len(text) > max_bytes:
+            raise ConfigError(f"{source}: config is {len(text):,} characters, more than the "
+                              f"{max_bytes:,} a config may have")
+    check_events(text, source, max_depth=max_depth, alias_budget=alias_budget)
+    try:
+        return yaml.load(text, Loader=loader)  # noqa: S506 — a SafeLoader subclass, checked above
+    except yaml.YAMLError as exc:
+        raise _yaml_error(exc, source) from None
+    except RecursionError:  # cannot happen within max_depth; kept as a last guard
+        raise ConfigError(f"{source}: nested too deeply to load") from None
+    except ValueError as exc:  # e.g. an integer of more than 4,300 digits
+        raise ConfigError(f"{source}: value cannot be read: {exc}") from None
+
+
+def _line(event) -> str:
+    mark = getattr(event, "start_mark", None)
+    return f" (line {mark.line + 1})" if mark is not None else ""
+
+
+def _yaml_error(exc: yaml.YAMLError, source: str) -> ConfigError:
+    mark = getattr(exc, "problem_mark", None)
+    where = f" (line {mark.line + 1})" if mark is not None else ""
+    problem = str(getattr(exc, "problem", None) or exc).strip().splitlines()[0]
+    if isinstance(exc, yaml.reader.ReaderError):  # a character YAML does not allow
+        problem = f"character {exc.character!r} at offset {exc.position} is not allowed in YAML"
+    return ConfigError(f"{source}{where}: not valid YAML: {problem}")
