@@ -24,12 +24,18 @@ _LEG = ("hipjoint", "hip", "femur", "thigh", "upleg", "upperleg", "knee", "tibia
         "asi", "psi")
 _FRAME_EXCLUDE = ("head", "neck", "skull", "nose", "eye", "ear", "jaw")
 
-# CMU BVH conversions (cgspeed): BVH joint → the ASF bone whose end it sits at.
+# CMU BVH conversions (cgspeed): BVH joint → the ASF bone whose end it sits at (checked on
+# the rest offsets of cmu_cgspeed_131_01.bvh against 05.asf, bone by bone).
 _CMU_BVH_TO_ASF = {
     "hips": "root", "lefthip": "lhipjoint", "leftknee": "lfemur", "leftankle": "ltibia",
     "lefttoe": "lfoot", "lefttoe_end": "ltoes", "righthip": "rhipjoint", "rightknee": "rfemur",
-    "rightankle": "rtibia", "righttoe": "rfoot", "righttoe_end": "rtoes", "chest": "lowerback",
-    "chest2": "upperback", "lowerneck": "thorax", "neck": "lowerneck", "head": "upperneck",
+    "rightankle": "rtibia", "righttoe": "rfoot", "righttoe_end": "rtoes",
+    # the conversion has two spine bones for the ASF's three: Chest2, where the collars
+    # hang, is the thorax; Chest lies between lowerback and upperback and maps to neither
+    "chest2": "thorax", "neck": "lowerneck", "head": "upperneck",
+    # joints at a zero offset from another one share its position (and its ASF bone)
+    "lhipjoint": "root", "rhipjoint": "root", "lowerback": "root", "lowerneck": "thorax",
+    "leftcollar": "thorax", "rightcollar": "thorax", "lthumb": "lwrist", "rthumb": "rwrist",
     "head_end": "head", "leftshoulder": "lclavicle", "leftelbow": "lhumerus",
     "leftwrist": "lradius", "lhand": "lwrist", "lfingers": "lhand", "lfingers_end": "lfingers",
     "lthumb_end": "lthumb", "rightshoulder": "rclavicle", "rightelbow": "rhumerus",

@@ -52,6 +52,7 @@ above the training figure stored in the model.
 from __future__ import annotations
 
 import time
+import warnings
 
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
@@ -180,9 +181,18 @@ class PartletDictionary(FittedCleaner):
     # -- shared normalisation ------------------------------------------------------------
     def _map_joints(self, names: list[str]) -> np.ndarray:
         """For every model joint, the index of the file's joint (−1 if the file has none)."""
-        canon = bodyparts.canonical_names(names)
-        where = {c: i for i, c in enumerate(canon)}
+        where: dict[str, int] = {}
+        for i, c in enumerate(bodyparts.canonical_names(names)):
+            where.setdefault(c, i)
         return np.array([where.get(j, -1) for j in self.joints_], dtype=np.intp)
+
+    def _written_joints(self, names: list[str]) -> tuple[np.ndarray, np.ndarray]:
+        """(file joints, model joints) to write: every file joint whose name maps to a model
+        joint (joints a conversion placed at a zero offset share one model joint)."""
+        model = {j: k for k, j in enumerate(self.joints_)}
+        pairs = [(f, model[c]) for f, c in enumerate(bodyparts.canonical_names(names)) if c in model]
+        f, k = zip(*pairs) if pairs else ((), ())
+        return np.array(f, dtype=np.intp), np.array(k, dtype=np.intp)
 
     def _normalise(self, P: np.ndarray, fps: float):
         """Model-joint positions P (T, Jm, 3) in metres → (local, R, c, centre)."""
@@ -203,7 +213,8 @@ class PartletDictionary(FittedCleaner):
         R, c, valid = torso_frames(frame_pts, self.template_,
                                    smoothing=self.values["frame_smoothing"].si * fps)
         local = to_frame(P, R, c)
-        with np.errstate(all="ignore"):
+        with warnings.catch_warnings():   # model joints the file lacks are all NaN
+            warnings.simplefilter("ignore", RuntimeWarning)
             centre = np.nanmedian(local, axis=0)
         return local, R, c, centre, valid
 
@@ -438,8 +449,9 @@ class PartletDictionary(FittedCleaner):
         cleaned_local = total / np.maximum(count, 1)[..., None] + centre
         out = from_frame(cleaned_local, R, c) / motion.metres_per_unit
         pos = motion.positions.copy()
-        write = ok.copy()
-        pos[:, idx[write]] = out[:, write]
+        file_j, model_j = self._written_joints(motion.names)
+        pos[:, file_j] = out[:, model_j]
+        info["unmodelled_joints"] = [n for i, n in enumerate(motion.names) if i not in set(file_j)]
         info.update({"noise_mm": round(sigma * 1e3, 3), "iterations": iters,
                      "unexplained": unexplained,
                      "frames_without_torso": int((~valid).sum())})
