@@ -110,14 +110,19 @@ def main():
     print(f"### Held-out CMU dance (05_02, 05_10; {span}; {args.seeds} seeds), RMSE cm\n")
     print(table(rows, SETTINGS, PAPER_DANCE))
     print("\nCPU s per file: " + ", ".join(f"{k} {np.mean(v):.2f}" for k, v in secs.items()))
-    rows, secs, extra = run(walks, SETTINGS, args.walk_seeds, args.frames)
+    rows, secs, _ = run(walks, SETTINGS, args.walk_seeds, args.frames)
     print(f"\n### Out of sample: CMU BVH walks (131_01, 131_03; {span}; {args.walk_seeds} seed), RMSE cm\n")
     print(table(rows, SETTINGS))
+    from mocapfix.cleaners import build
+
     trained = models.load(models.shipped()["partlet-cmu"])[0]["state"]["unexplained"]
-    print("\nUnexplained energy (partlet_dictionary, first seed of snr30): training "
+    print("\nUnexplained energy of the clean motion (partlet_dictionary): training "
           + ", ".join(f"{p} {100 * f:.2f} %" for p, f in trained.items()))
-    for name, u in extra.items():
-        print(f"- {name}: " + ", ".join(f"{p} {100 * f:.2f} %" for p, f in (u or {}).items()))
+    for path in dance + walks:
+        clean = formats.read(path).replace(rig=None, channels=None)
+        _, info = build("partlet_dictionary").apply(clean)
+        print(f"- {path.name}: " + ", ".join(f"{p} {100 * f:.2f} %" for p, f in info["unexplained"].items())
+              + (f" (warning: {info['warning']})" if "warning" in info else ""))
 
 
 if __name__ == "__main__":
