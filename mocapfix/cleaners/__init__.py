@@ -20,6 +20,7 @@ _MODULES = (
     "mocapfix.cleaners.rotations",
     "mocapfix.cleaners.lowrank_isometry",
     "mocapfix.cleaners.tsmc",
+    "mocapfix.cleaners.depth_skeleton",
 )
 _loaded = False
 
