@@ -77,33 +77,49 @@ def _norm(x):
 
 
 def leg_swap_frames(P: np.ndarray, names: list[str], parents: np.ndarray | None,
-                    half: int, threshold: float) -> np.ndarray:
-    """Frames (T,) where the leg chains look exchanged (module docstring, stage 1)."""
+                    threshold: float) -> np.ndarray:
+    """Frames (T,) where the leg chains are exchanged (module docstring, stage 1): the
+    labelling (kept / exchanged per frame) of least cost by Viterbi (two states)."""
     T = P.shape[0]
     pairs = _side_pairs(names, _LEG)
     root = _pelvis(names)
-    if not pairs or root is None or T < 5:
+    if not pairs or root is None or T < 3:
         return np.zeros(T, bool)
     L = [a for a, _ in pairs]
     R = [b for _, b in pairs]
     rel = P - P[:, root:root + 1]
-    ref = moving_median(rel[:, L + R].reshape(T, -1), half).reshape(T, 2 * len(L), 3)
-    refL, refR = ref[:, :len(L)], ref[:, len(L):]
-    xL, xR = rel[:, L], rel[:, R]
-    keep = np.nansum(_norm(xL - refL) + _norm(xR - refR), axis=1)
-    swap = np.nansum(_norm(xL - refR) + _norm(xR - refL), axis=1)
+    Y = (rel[:, L], rel[:, R])                           # the data labelled as stored
+    # path length of the relabelled chains between frames t-1 and t: [prev, cur]
+    step = np.zeros((T, 2, 2))
+    for ps in range(2):
+        for cs in range(2):
+            a_prev, b_prev = (Y[0], Y[1]) if ps == 0 else (Y[1], Y[0])
+            a_cur, b_cur = (Y[0], Y[1]) if cs == 0 else (Y[1], Y[0])
+            d = _norm(a_cur[1:] - a_prev[:-1]) + _norm(b_cur[1:] - b_prev[:-1])
+            step[1:, ps, cs] = np.nansum(d, axis=1)
+    unary = np.zeros((T, 2))
+    unary[:, 1] = threshold
     if parents is not None:
-        knees = [(a, b) for a, b in pairs if normalise_name(names[a]).startswith("knee")]
-        for a, b in knees:
+        for a, b in pairs:
             pa, pb = parents[a], parents[b]
-            if pa < 0 or pb < 0:
-                continue
+            if pa < 0 or pb < 0 or pa in (b,) or pb in (a,) or pa in L + R or pb in L + R:
+                continue                                 # only bones from the hips
             la, lb = _norm(P[:, a] - P[:, pa]), _norm(P[:, b] - P[:, pb])
             ma, mb = np.nanmedian(la), np.nanmedian(lb)
-            cross_a, cross_b = _norm(P[:, b] - P[:, pa]), _norm(P[:, a] - P[:, pb])
-            keep = keep + np.nan_to_num(np.abs(la - ma) + np.abs(lb - mb))
-            swap = swap + np.nan_to_num(np.abs(cross_a - ma) + np.abs(cross_b - mb))
-    return (keep - swap > threshold) & (swap < 0.5 * keep)
+            xa, xb = _norm(P[:, b] - P[:, pa]), _norm(P[:, a] - P[:, pb])
+            unary[:, 0] += np.nan_to_num(np.abs(la - ma) + np.abs(lb - mb))
+            unary[:, 1] += np.nan_to_num(np.abs(xa - ma) + np.abs(xb - mb))
+    cost = unary[0].copy()
+    back = np.zeros((T, 2), dtype=np.int8)
+    for t in range(1, T):
+        total = cost[:, None] + step[t]                  # [prev, cur]
+        back[t] = np.argmin(total, axis=0)
+        cost = total[back[t], [0, 1]] + unary[t]
+    state = np.zeros(T, dtype=np.int8)
+    state[-1] = int(np.argmin(cost))
+    for t in range(T - 1, 0, -1):
+        state[t - 1] = back[t, state[t]]
+    return state == 1
 
 
 def _fill_ends_from_parent(Z, missing, parents, order, max_gap_frames):
@@ -159,10 +175,9 @@ class KinectSkeleton(Cleaner):
               "3: jerk)", low=1, high=4),
         Param("inferred_noise", "length", "60 mm", "error assumed for Inferred joints",
               unit="mm", low=0.0, low_open=True),
-        Param("swap_window", "time", "0.4 s", "half-width of the running median the leg "
-              "chains are compared with", unit="s", low=0.0, low_open=True),
-        Param("swap_threshold", "length", "80 mm", "least gain (summed over the chain) of "
-              "exchanging the legs in a frame; 0 disables", unit="mm", low=0.0),
+        Param("swap_threshold", "length", "30 mm", "evidence (shorter leg paths and hip-knee "
+              "bones closer to their lengths) a frame needs to be called leg-swapped; 0 "
+              "disables", unit="mm", low=0.0),
         Param("outlier_k", "float", 4.5, "outlier threshold in noise σ (3-D)", low=1.0,
               high=100.0),
         Param("min_outlier", "length", "60 mm", "smallest residual ever called an outlier",
@@ -195,16 +210,10 @@ class KinectSkeleton(Cleaner):
         swapped = np.zeros(T, bool)
         thr = self.length("swap_threshold", motion) * mpu
         if thr > 0:
-            half = max(2, int(round(self.values["swap_window"].si * motion.fps)))
-            pairs = _side_pairs(names, _LEG)
-            for _ in range(2):
-                frames = leg_swap_frames(P, names, parents, half, thr) & ~swapped
-                if not frames.any():
-                    break
-                for a, b in pairs:
-                    P[np.ix_(frames, [a, b])] = P[np.ix_(frames, [b, a])]
-                    conf[np.ix_(frames, [a, b])] = conf[np.ix_(frames, [b, a])]
-                swapped |= frames
+            swapped = leg_swap_frames(P, names, parents, thr)
+            for a, b in _side_pairs(names, _LEG):
+                P[np.ix_(swapped, [a, b])] = P[np.ix_(swapped, [b, a])]
+                conf[np.ix_(swapped, [a, b])] = conf[np.ix_(swapped, [b, a])]
         info["leg_swap_frames"] = int(swapped.sum())
 
         # 2-5. weights, noise model, GCV smoothing, outliers
