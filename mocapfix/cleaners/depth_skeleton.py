@@ -33,7 +33,8 @@ Written for mocapfix (issue 12); each stage cites the method it uses:
    (:func:`mocapfix.solvers.bone_projection.project_lengths`), each joint moving in
    proportion to its variance (tracked σ_j(z)², inferred ``inferred_noise``², filled
    (2 ``inferred_noise``)²) with ``bone_stiffness``. Bones that are exactly constant in
-   the input (MSR Action3D stores some) stay exactly constant.
+   the input (MSR Action3D stores some) keep that length exactly: their child joints are
+   put back at it, parents first.
 
 The output keeps the file's rows and timestamps (the writers change only samples).
 """
@@ -52,6 +53,9 @@ from mocapfix.solvers.segments import fillable
 
 _LEG = ("knee", "ankle", "foot")
 _PELVIS = ("spinebase", "hipcenter", "pelvis")
+_TORSO = {"spinebase", "spinemid", "spineshoulder", "neck", "head", "hipleft", "hipright",
+          "shoulderleft", "shoulderright", "hipcenter", "spine", "shouldercenter", "pelvis",
+          "spinenavel", "spinechest"}
 #: cutoff frequencies (Hz) whose λ form the GCV grid
 _CUTOFFS = np.geomspace(0.7, 12.0, 14)
 
@@ -76,8 +80,7 @@ def _norm(x):
     return np.sqrt(np.sum(x * x, axis=-1))
 
 
-def leg_swap_frames(P: np.ndarray, names: list[str], parents: np.ndarray | None,
-                    threshold: float) -> np.ndarray:
+def leg_swap_frames(P: np.ndarray, names: list[str], threshold: float) -> np.ndarray:
     """Frames (T,) where the leg chains are exchanged (module docstring, stage 1): the
     labelling (kept / exchanged per frame) of least cost by Viterbi (two states)."""
     T = P.shape[0]
@@ -99,16 +102,6 @@ def leg_swap_frames(P: np.ndarray, names: list[str], parents: np.ndarray | None,
             step[1:, ps, cs] = np.nansum(d, axis=1)
     unary = np.zeros((T, 2))
     unary[:, 1] = threshold
-    if parents is not None:
-        for a, b in pairs:
-            pa, pb = parents[a], parents[b]
-            if pa < 0 or pb < 0 or pa in (b,) or pb in (a,) or pa in L + R or pb in L + R:
-                continue                                 # only bones from the hips
-            la, lb = _norm(P[:, a] - P[:, pa]), _norm(P[:, b] - P[:, pb])
-            ma, mb = np.nanmedian(la), np.nanmedian(lb)
-            xa, xb = _norm(P[:, b] - P[:, pa]), _norm(P[:, a] - P[:, pb])
-            unary[:, 0] += np.nan_to_num(np.abs(la - ma) + np.abs(lb - mb))
-            unary[:, 1] += np.nan_to_num(np.abs(xa - ma) + np.abs(xb - mb))
     cost = unary[0].copy()
     back = np.zeros((T, 2), dtype=np.int8)
     for t in range(1, T):
@@ -173,6 +166,8 @@ class KinectSkeleton(Cleaner):
     params = (
         Param("order", "int", 3, "derivative penalised by the smoother (2: acceleration, "
               "3: jerk)", low=1, high=4),
+        Param("cutoff", "frequency", None, "fixed smoothing cut-off instead of the GCV "
+              "choice per joint (null: GCV)", unit="Hz", low=0.0, low_open=True, nullable=True),
         Param("inferred_noise", "length", "60 mm", "error assumed for Inferred joints",
               unit="mm", low=0.0, low_open=True),
         Param("swap_threshold", "length", "30 mm", "evidence (shorter leg paths and hip-knee "
@@ -188,6 +183,8 @@ class KinectSkeleton(Cleaner):
         Param("bone_stiffness", "float", 1.0, "share of each bone-length correction applied "
               "per sweep (0: no bone step)", low=0.0, high=1.0),
         Param("depth_model", "bool", True, "let the jitter grow with camera depth"),
+        Param("torso_frame", "bool", True, "smooth the torso centroid and every joint "
+              "relative to it separately"),
     )
 
     def _apply(self, motion: Motion):
@@ -210,7 +207,7 @@ class KinectSkeleton(Cleaner):
         swapped = np.zeros(T, bool)
         thr = self.length("swap_threshold", motion) * mpu
         if thr > 0:
-            swapped = leg_swap_frames(P, names, parents, thr)
+            swapped = leg_swap_frames(P, names, thr)
             for a, b in _side_pairs(names, _LEG):
                 P[np.ix_(swapped, [a, b])] = P[np.ix_(swapped, [b, a])]
                 conf[np.ix_(swapped, [a, b])] = conf[np.ix_(swapped, [b, a])]
@@ -227,18 +224,22 @@ class KinectSkeleton(Cleaner):
         depth = P[..., 2]
         use_depth = self["depth_model"] and np.nanmin(depth) > 0.2 if observed.any() else False
 
-        def fit(weights):
+        fixed = None if self["cutoff"] is None else self.hertz("cutoff")
+
+        def fit(weights, data=None):
+            data = P if data is None else data
             Z = np.full_like(P, np.nan)
             cut = np.full(J, np.nan)
             for j in range(J):
                 w = weights[:, j]
                 if (w > 0).sum() <= order + 1:
                     continue
-                y = np.where(w[:, None] > 0, P[:, j], 0.0)
+                y = np.where(w[:, None] > 0, data[:, j], 0.0)
                 wbar = float(w[w > 0].mean())
-                grid = whittaker.lambda_for_cutoff(_CUTOFFS, wbar, h, order)
+                cutoffs = _CUTOFFS if fixed is None else np.array([fixed])
+                grid = whittaker.lambda_for_cutoff(cutoffs, wbar, h, order)
                 Z[:, j], lam, _ = whittaker.smooth_gcv(y, w, t, grid, order=order, bands=bands)
-                cut[j] = _CUTOFFS[np.argmin(np.abs(grid - lam))]
+                cut[j] = cutoffs[np.argmin(np.abs(grid - lam))]
             return Z, cut
 
         sig0 = 0.01
@@ -274,6 +275,21 @@ class KinectSkeleton(Cleaner):
             if not new.any():
                 break
             flagged |= new
+        torso = [i for i, n in enumerate(names) if normalise_name(n) in _TORSO]
+        if self["torso_frame"] and len(torso) >= 3:
+            # centroid of the torso joints (smoothed values where a joint is not trusted):
+            # smoothed on its own, and every joint relative to it
+            good = tracked & ~flagged
+            src = np.where(good[..., None], P, Z)[:, torso]
+            C = np.nanmean(src, axis=1)
+            okc = ~np.isnan(C).any(axis=1)
+            if okc.sum() > order + 1:
+                wc = okc.astype(float)
+                cgrid = whittaker.lambda_for_cutoff(_CUTOFFS, 1.0, h, order)
+                Cs, _, _ = whittaker.smooth_gcv(np.where(okc[:, None], C, 0.0), wc, t, cgrid,
+                                                order=order, bands=bands)
+                Zrel, cut = fit(np.where(flagged | ~okc[:, None], 0.0, weights), P - C[:, None])
+                Z = Zrel + Cs[:, None]
         info.update(outliers=int(flagged.sum()), depth_exponent=round(p_exp, 3),
                     noise_mm={names[j]: round(float(scale[j]) * 1e3, 2) for j in range(J)},
                     cutoff_hz={names[j]: round(float(c), 2) for j, c in enumerate(cut)
@@ -295,15 +311,30 @@ class KinectSkeleton(Cleaner):
             bones = motion.skeleton.bone_array
             good = tracked & ~flagged
             lengths = np.full(len(bones), np.nan)
+            constant = np.zeros(len(bones), bool)
             for i, (a, b) in enumerate(bones):
+                seen = observed[:, a] & observed[:, b]
+                raw = _norm(P[seen, a] - P[seen, b])
+                if len(raw) >= 3 and np.ptp(raw) <= max(2e-5 * np.max(raw), 1e-5):
+                    # stored constant to the file's 6 decimals
+                    constant[i], lengths[i] = True, float(np.median(raw))
+                    continue
                 both = good[:, a] & good[:, b]
+                if both.sum() < 3:                # never both tracked: every frame seen
+                    both = seen & ~flagged[:, a] & ~flagged[:, b]
                 if both.sum() >= 3:
-                    raw = _norm(P[both, a] - P[both, b])
-                    if np.ptp(raw) < 1e-9:      # stored exactly constant: keep it
-                        lengths[i] = raw[0]
-                    else:
-                        lengths[i] = np.median(_norm(out[both, a] - out[both, b]))
+                    lengths[i] = np.median(_norm(out[both, a] - out[both, b]))
             var = np.where(tracked & ~flagged, sigma ** 2,
                            np.where(inferred & ~flagged, sig_inf ** 2, (2 * sig_inf) ** 2))
             out = project_lengths(out, bones, lengths, var, sweeps=8, stiffness=k)
+            # bones the file stores at an exactly constant length (MSR Action3D) end
+            # exactly at it: the child is put back on the sphere, parents first
+            rank = {j: r for r, j in enumerate(_topological(motion.skeleton.parents))}
+            for i in sorted(np.flatnonzero(constant), key=lambda i: rank[int(bones[i][1])]):
+                a, b = bones[i]
+                d = out[:, b] - out[:, a]
+                n = _norm(d)[:, None]
+                with np.errstate(invalid="ignore", divide="ignore"):
+                    out[:, b] = np.where(n > 0, out[:, a] + d * (lengths[i] / n), out[:, b])
+            info["constant_bones"] = int(constant.sum())
         return motion.replace(positions=out / mpu), info
