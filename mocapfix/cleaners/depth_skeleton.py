@@ -183,6 +183,8 @@ class KinectSkeleton(Cleaner):
         Param("bone_stiffness", "float", 1.0, "share of each bone-length correction applied "
               "per sweep (0: no bone step)", low=0.0, high=1.0),
         Param("depth_model", "bool", True, "let the jitter grow with camera depth"),
+        Param("limb_frame", "bool", True, "estimate untrusted samples (inferred, missing, "
+              "outliers) from the parent joint and the smoothed offset to it"),
         Param("torso_frame", "bool", True, "smooth the torso centroid and every joint "
               "relative to it separately"),
     )
@@ -290,6 +292,24 @@ class KinectSkeleton(Cleaner):
                                                 order=order, bands=bands)
                 Zrel, cut = fit(np.where(flagged | ~okc[:, None], 0.0, weights), P - C[:, None])
                 Z = Zrel + Cs[:, None]
+        if self["limb_frame"] and parents is not None:
+            # untrusted samples (inferred, missing, outliers) from the parent: the smooth of
+            # the joint's offset to its parent, added to the parent's estimate, parents
+            # first -- an occluded hand follows the tracked elbow
+            trusted = tracked & ~flagged
+            with np.errstate(divide="ignore"):
+                var = np.where(flagged, np.inf, 1.0 / weights)
+            has_parent = parents >= 0
+            pidx = np.where(has_parent, parents, 0)
+            wrel = np.where(has_parent[None, :], 1.0 / (var + var[:, pidx]), 0.0)
+            Zr, _ = fit(wrel, P - P[:, pidx])
+            for j in _topological(parents):
+                pj = parents[j]
+                if pj < 0:
+                    continue
+                rows = ~(tracked | inferred)[:, j] | flagged[:, j]
+                rows &= ~np.isnan(Zr[:, j]).any(axis=1)
+                Z[rows, j] = Z[rows, pj] + Zr[rows, j]
         info.update(outliers=int(flagged.sum()), depth_exponent=round(p_exp, 3),
                     noise_mm={names[j]: round(float(scale[j]) * 1e3, 2) for j in range(J)},
                     cutoff_hz={names[j]: round(float(c), 2) for j, c in enumerate(cut)
