@@ -127,12 +127,17 @@ def test_msr_constant_bones_stay_constant_and_bones_do_not_get_worse(path):
 
 
 @pytest.mark.parametrize("path", shared_files("kinect"))
-def test_real_files_bones_steadier_and_few_samples_moved_far(path):
+def test_real_files_bones_steadier_and_tracked_samples_rarely_moved_far(path):
+    """Measured share of Tracked samples moved by > 5 cm: 0-1.2 % on the Kinect v2 and MSR
+    files, 7-13 % on UTKinect (rows 0.07-0.4 s apart; Kinect v1 bones varying by 14 %)."""
     from tests.conftest import need
 
     m = formats.read(need(path))
     out, _ = build("kinect_skeleton").apply(m)
-    assert _bone_var(out).mean() < _bone_var(m).mean()
+    assert _bone_var(out).mean() < 0.5 * _bone_var(m).mean()
     moved = np.linalg.norm(out.positions - m.positions, axis=-1) * m.metres_per_unit
-    both = ~m.missing & ~out.missing
-    assert np.mean(moved[both] > 0.05) < 0.15       # measured at most 11 % (UTKinect s02)
+    tracked = ~m.missing & ~out.missing
+    if m.confidence is not None:
+        tracked &= m.confidence >= 0.75
+    share = np.mean(moved[tracked] > 0.05)
+    assert share < (0.15 if "utkinect" in path.name else 0.03), share

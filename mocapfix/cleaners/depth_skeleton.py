@@ -22,8 +22,9 @@ Written for mocapfix (issue 12); each stage cites the method it uses:
    time axis (``Motion.times``: dropped frames are where they happened) with the
    strength chosen by GCV (:mod:`mocapfix.solvers.whittaker`), d = ``order``: the
    penalty on the d-th derivative leaves accelerations alone for d = 3.
-5. **Outliers.** Samples whose residual exceeds ``max(outlier_k σ, min_outlier)`` get
-   weight 0 and the joint is refitted (``passes`` rounds): tracked is trusted unless the
+5. **Outliers.** Samples whose residual exceeds ``max(outlier_k max(σ, σ_local),
+   min_outlier)`` (σ_local: median residual over ±3 samples / 1.5382, Hampel's local
+   scale, so a stretch the smooth cannot follow is not called an outlier) get weight 0 and the joint is refitted (``passes`` rounds): tracked is trusted unless the
    geometry says otherwise. Their fitted value replaces them.
 6. **Fill.** Missing samples in interior gaps of at most ``max_gap`` take the smooth
    (a spline through the gap); gaps at the ends of at most ``max_gap`` are filled from
@@ -202,8 +203,12 @@ class KinectSkeleton(Cleaner):
                 else np.where(motion.missing, 0.0, motion.confidence))
         t = (np.asarray(motion.times, dtype=np.float64) if motion.times is not None
              else np.arange(T) / motion.fps)
-        if np.any(np.diff(t) <= 0):               # repeated / backward stamps: use indices
+        dt = np.diff(t)
+        if np.any(dt < 0):                        # backward stamps: use indices
             t = np.arange(T) / motion.fps
+        elif np.any(dt == 0):                     # repeated stamps: a quarter frame apart
+            step = 0.25 / motion.fps
+            t = t + step * np.cumsum(np.r_[0.0, dt == 0])
         parents = motion.skeleton.parents if motion.skeleton is not None else None
         names = list(motion.names)
 
@@ -274,7 +279,11 @@ class KinectSkeleton(Cleaner):
         for _ in range(self["passes"] + 1):
             Z, cut = fit(np.where(flagged, 0.0, weights))
             res = _norm(P - Z)
-            limit = np.maximum(self["outlier_k"] * np.where(tracked, sigma, sigma_inf), floor)
+            # a stretch the smooth cannot follow (fast motion, sparse rows) has large
+            # residuals all along and is not an outlier: Hampel's local scale
+            local = np.nan_to_num(moving_median(np.where(observed, res, np.nan), 3)) / 1.5382
+            base = np.maximum(np.where(tracked, sigma, sigma_inf), local)
+            limit = np.maximum(self["outlier_k"] * base, floor)
             new = observed & (res > limit) & ~flagged
             if not new.any():
                 break
@@ -351,20 +360,23 @@ class KinectSkeleton(Cleaner):
         if k > 0 and motion.skeleton is not None and len(motion.skeleton.bones):
             bones = motion.skeleton.bone_array
             good = tracked & ~flagged
-            lengths = np.full(len(bones), np.nan)
+            lengths = np.full((T, len(bones)), np.nan)
             constant = np.zeros(len(bones), bool)
             for i, (a, b) in enumerate(bones):
                 seen = observed[:, a] & observed[:, b]
                 raw = _norm(P[seen, a] - P[seen, b])
                 if len(raw) >= 3 and np.ptp(raw) <= max(2e-5 * np.max(raw), 1e-5):
                     # stored constant to the file's 6 decimals
-                    constant[i], lengths[i] = True, float(np.median(raw))
+                    constant[i], lengths[:, i] = True, float(np.median(raw))
                     continue
                 both = good[:, a] & good[:, b]
                 if both.sum() < 3:                # never both tracked: every frame seen
                     both = seen & ~flagged[:, a] & ~flagged[:, b]
-                if both.sum() >= 3:
-                    lengths[i] = np.median(_norm(out[both, a] - out[both, b]))
+                if both.sum() < 3:
+                    continue
+                # one length per bone (letting it drift below 0.3-1 Hz kept UTKinect's
+                # bone variation at 0.11-0.13 of 0.14: its bones change slowly with pose)
+                lengths[:, i] = np.median(_norm(out[both, a] - out[both, b]))
             var = np.where(tracked & ~flagged, sigma ** 2,
                            np.where(inferred & ~flagged, sig_inf ** 2, (2 * sig_inf) ** 2))
             out = project_lengths(out, bones, lengths, var, sweeps=8, stiffness=k)
@@ -376,6 +388,6 @@ class KinectSkeleton(Cleaner):
                 d = out[:, b] - out[:, a]
                 n = _norm(d)[:, None]
                 with np.errstate(invalid="ignore", divide="ignore"):
-                    out[:, b] = np.where(n > 0, out[:, a] + d * (lengths[i] / n), out[:, b])
+                    out[:, b] = np.where(n > 0, out[:, a] + d * (lengths[:, i, None] / n), out[:, b])
             info["constant_bones"] = int(constant.sum())
         return motion.replace(positions=out / mpu), info

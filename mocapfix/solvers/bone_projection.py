@@ -19,25 +19,30 @@ import numpy as np
 
 def project_lengths(P: np.ndarray, bones: np.ndarray, lengths: np.ndarray, w: np.ndarray, *,
                     sweeps: int = 8, stiffness: float = 1.0) -> np.ndarray:
-    """Project ``P`` (T, J, 3) toward bone ``lengths`` (B,) for ``bones`` (B, 2); ``w``
+    """Project ``P`` (T, J, 3) toward bone ``lengths`` (B,) or per frame (T, B) for
+    ``bones`` (B, 2); ``w``
     (T, J) inverse masses (0: the joint does not move). Samples with NaN stay NaN and
     bones touching them are skipped in that frame."""
     P = np.array(P, dtype=np.float64, copy=True)
     bones = np.asarray(bones, dtype=np.intp).reshape(-1, 2)
     w = np.asarray(w, dtype=np.float64)
+    lengths = np.asarray(lengths, dtype=np.float64)
+    per_frame = lengths.ndim == 2
     for _ in range(max(0, sweeps)):
-        for (a, b), L in zip(bones, lengths):
-            if not np.isfinite(L) or L <= 0:
+        for i, (a, b) in enumerate(bones):
+            L = lengths[:, i] if per_frame else lengths[i]
+            if not np.any(np.isfinite(L) & (L > 0)):
                 continue
             d = P[:, b] - P[:, a]
             length = np.sqrt(np.sum(d * d, axis=1))
             wa, wb = w[:, a], w[:, b]
             total = wa + wb
-            ok = np.isfinite(length) & (length > 1e-9) & (total > 0)
+            ok = np.isfinite(length) & (length > 1e-9) & (total > 0) & np.isfinite(L) & (L > 0)
             if not ok.any():
                 continue
             k = np.zeros_like(length)
-            k[ok] = stiffness * (length[ok] - L) / (length[ok] * total[ok])
+            Lok = L[ok] if per_frame else L
+            k[ok] = stiffness * (length[ok] - Lok) / (length[ok] * total[ok])
             step = d * k[:, None]
             P[ok, a] += (wa[ok, None] * step[ok])
             P[ok, b] -= (wb[ok, None] * step[ok])
