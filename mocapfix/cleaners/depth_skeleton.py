@@ -54,11 +54,10 @@ from mocapfix.solvers.segments import fillable
 
 _LEG = ("knee", "ankle", "foot")
 _PELVIS = ("spinebase", "hipcenter", "pelvis")
-_TORSO = {"spinebase", "spinemid", "spineshoulder", "neck", "head", "hipleft", "hipright",
-          "shoulderleft", "shoulderright", "hipcenter", "spine", "shouldercenter", "pelvis",
-          "spinenavel", "spinechest"}
 #: cutoff frequencies (Hz) whose λ form the GCV grid
-_CUTOFFS = np.geomspace(0.7, 12.0, 14)
+_CUTOFFS = np.geomspace(0.7, 12.0, 8)
+#: GCV chooses the smoothing on at most this many frames (the middle of a long file)
+_GCV_FRAMES = 3000
 
 
 def _side_pairs(names: list[str], parts) -> list[tuple[int, int]]:
@@ -101,18 +100,31 @@ def leg_swap_frames(P: np.ndarray, names: list[str], threshold: float) -> np.nda
             a_cur, b_cur = (Y[0], Y[1]) if cs == 0 else (Y[1], Y[0])
             d = _norm(a_cur[1:] - a_prev[:-1]) + _norm(b_cur[1:] - b_prev[:-1])
             step[1:, ps, cs] = np.nansum(d, axis=1)
-    unary = np.zeros((T, 2))
-    unary[:, 1] = threshold
-    cost = unary[0].copy()
-    back = np.zeros((T, 2), dtype=np.int8)
+    # two-state Viterbi; plain floats: a numpy call per frame costs more than the sums
+    s00, s01, s10, s11 = (step[:, 0, 0].tolist(), step[:, 0, 1].tolist(),
+                          step[:, 1, 0].tolist(), step[:, 1, 1].tolist())
+    u1 = float(threshold)
+    c0, c1 = 0.0, u1
+    back0 = bytearray(T)
+    back1 = bytearray(T)
     for t in range(1, T):
-        total = cost[:, None] + step[t]                  # [prev, cur]
-        back[t] = np.argmin(total, axis=0)
-        cost = total[back[t], [0, 1]] + unary[t]
+        a, b = c0 + s00[t], c1 + s10[t]                  # into state 0 from 0 / from 1
+        if b < a:
+            back0[t], n0 = 1, b
+        else:
+            n0 = a
+        a, b = c0 + s01[t], c1 + s11[t]                  # into state 1
+        if b < a:
+            back1[t], n1 = 1, b + u1
+        else:
+            n1 = a + u1
+        c0, c1 = n0, n1
     state = np.zeros(T, dtype=np.int8)
-    state[-1] = int(np.argmin(cost))
+    cur = 0 if c0 <= c1 else 1
+    state[-1] = cur
     for t in range(T - 1, 0, -1):
-        state[t - 1] = back[t, state[t]]
+        cur = back1[t] if cur else back0[t]
+        state[t - 1] = cur
     return state == 1
 
 
@@ -188,8 +200,6 @@ class KinectSkeleton(Cleaner):
               "value shrinkage before the final smooth"),
         Param("limb_frame", "bool", True, "estimate untrusted samples (inferred, missing, "
               "outliers) from the parent joint and the smoothed offset to it"),
-        Param("torso_frame", "bool", True, "smooth the torso centroid and every joint "
-              "relative to it separately"),
     )
 
     def _apply(self, motion: Motion):
@@ -235,25 +245,58 @@ class KinectSkeleton(Cleaner):
 
         fixed = None if self["cutoff"] is None else self.hertz("cutoff")
 
-        def fit(weights, data=None):
+        sub_cache = {}
+
+        def bands_for(win):
+            key = (win.start, win.stop)
+            if key not in sub_cache:
+                sub_cache[key] = whittaker.penalty_bands(t[win], order)
+            return sub_cache[key]
+
+        def fit(weights, data=None, cut=None, prev=None, joints=None):
+            """Per joint GCV smooth (``cut``: reuse these cut-offs, one solve per joint);
+            only ``joints`` are refitted, the others are taken from ``prev``."""
             data = P if data is None else data
-            Z = np.full_like(P, np.nan)
-            cut = np.full(J, np.nan)
-            for j in range(J):
+            Z = np.full_like(P, np.nan) if prev is None else prev.copy()
+            new_cut = np.full(J, np.nan) if cut is None else cut.copy()
+            for j in (range(J) if joints is None else joints):
                 w = weights[:, j]
                 if (w > 0).sum() <= order + 1:
+                    Z[:, j] = np.nan
                     continue
                 y = np.where(w[:, None] > 0, data[:, j], 0.0)
                 wbar = float(w[w > 0].mean())
-                cutoffs = _CUTOFFS if fixed is None else np.array([fixed])
-                grid = whittaker.lambda_for_cutoff(cutoffs, wbar, h, order)
-                Z[:, j], lam, _ = whittaker.smooth_gcv(y, w, t, grid, order=order, bands=bands)
-                cut[j] = cutoffs[np.argmin(np.abs(grid - lam))]
+                if fixed is not None or (cut is not None and np.isfinite(cut[j])):
+                    c = fixed if fixed is not None else cut[j]
+                    lam = float(whittaker.lambda_for_cutoff(c, wbar, h, order))
+                    Z[:, j] = whittaker.smooth(y, w, t, lam, order=order, bands=bands)
+                    new_cut[j] = c
+                    continue
+                # GCV on the middle _GCV_FRAMES frames of a long file, then one solve
+                win = slice(max(0, (T - _GCV_FRAMES) // 2), max(0, (T - _GCV_FRAMES) // 2)
+                            + min(T, _GCV_FRAMES))
+                ww = w[win]
+                if (ww > 0).sum() <= order + 1:
+                    win, ww = slice(0, T), w
+                wb = float(ww[ww > 0].mean())
+                grid = whittaker.lambda_for_cutoff(_CUTOFFS, wb, h, order)[::-1]
+                sub_bands = bands if win == slice(0, T) else bands_for(win)
+                zs, lam, _ = whittaker.smooth_gcv(y[win], ww, t[win], grid, order=order,
+                                                  bands=sub_bands, refine=True)
+                # the cut-off of the chosen λ (inverse of lambda_for_cutoff)
+                c = (wb / (h * lam)) ** (1.0 / (2 * order)) / (2.0 * np.pi)
+                new_cut[j] = c
+                if win == slice(0, T):
+                    Z[:, j] = zs
+                else:
+                    lam = float(whittaker.lambda_for_cutoff(c, wbar, h, order))
+                    Z[:, j] = whittaker.smooth(y, w, t, lam, order=order, bands=bands)
+            cut = new_cut
             return Z, cut
 
         sig0 = 0.01
         w0 = np.where(tracked, 1.0 / sig0 ** 2, np.where(inferred, 1.0 / sig_inf ** 2, 0.0))
-        Z, _ = fit(w0)
+        Z, cut0 = fit(w0)
         res = _norm(P - Z)
         sigma = np.full((T, J), sig0)
         p_exp = 0.0
@@ -276,8 +319,8 @@ class KinectSkeleton(Cleaner):
         weights = np.where(tracked, 1.0 / sigma ** 2, np.where(inferred, 1.0 / sigma_inf ** 2, 0.0))
         flagged = np.zeros((T, J), bool)
         floor = self.length("min_outlier", motion) * mpu
+        Z, cut = fit(weights, cut=cut0)
         for _ in range(self["passes"] + 1):
-            Z, cut = fit(np.where(flagged, 0.0, weights))
             res = _norm(P - Z)
             # a stretch the smooth cannot follow (fast motion, sparse rows) has large
             # residuals all along and is not an outlier: Hampel's local scale
@@ -288,21 +331,8 @@ class KinectSkeleton(Cleaner):
             if not new.any():
                 break
             flagged |= new
-        torso = [i for i, n in enumerate(names) if normalise_name(n) in _TORSO]
-        if self["torso_frame"] and len(torso) >= 3:
-            # centroid of the torso joints (smoothed values where a joint is not trusted):
-            # smoothed on its own, and every joint relative to it
-            good = tracked & ~flagged
-            src = np.where(good[..., None], P, Z)[:, torso]
-            C = np.nanmean(src, axis=1)
-            okc = ~np.isnan(C).any(axis=1)
-            if okc.sum() > order + 1:
-                wc = okc.astype(float)
-                cgrid = whittaker.lambda_for_cutoff(_CUTOFFS, 1.0, h, order)
-                Cs, _, _ = whittaker.smooth_gcv(np.where(okc[:, None], C, 0.0), wc, t, cgrid,
-                                                order=order, bands=bands)
-                Zrel, cut = fit(np.where(flagged | ~okc[:, None], 0.0, weights), P - C[:, None])
-                Z = Zrel + Cs[:, None]
+            Z, cut = fit(np.where(flagged, 0.0, weights), cut=cut, prev=Z,
+                         joints=np.flatnonzero(new.any(axis=0)))
         if self["spatial_shrink"] and T > 3 * J:
             # the joints move together: optimal singular-value shrinkage (Gavish & Donoho
             # 2017) of the noise-whitened (T, 3J) trajectories, then the smoother again
@@ -319,7 +349,7 @@ class KinectSkeleton(Cleaner):
                 Y2 = np.full_like(Y, np.nan)
                 Y2[okrow] = ((Xs + mean) * sd).reshape(-1, J, 3)
                 w2 = np.where(trusted & okrow[:, None], weights, 0.0)
-                Z2, cut = fit(w2, np.where(np.isnan(Y2), 0.0, Y2))
+                Z2, _ = fit(w2, np.where(np.isnan(Y2), 0.0, Y2), cut=cut)
                 Z = np.where(trusted[..., None] & okrow[:, None, None], Z2, Z)
                 info["spatial_rank"] = rank
         if self["limb_frame"] and parents is not None:
@@ -332,7 +362,8 @@ class KinectSkeleton(Cleaner):
             has_parent = parents >= 0
             pidx = np.where(has_parent, parents, 0)
             wrel = np.where(has_parent[None, :], 1.0 / (var + var[:, pidx]), 0.0)
-            Zr, _ = fit(wrel, P - P[:, pidx])
+            need = np.flatnonzero((~trusted).any(axis=0) & has_parent)
+            Zr, _ = fit(wrel, P - P[:, pidx], joints=need)
             for j in _topological(parents):
                 pj = parents[j]
                 if pj < 0:

@@ -25,25 +25,21 @@ def project_lengths(P: np.ndarray, bones: np.ndarray, lengths: np.ndarray, w: np
     bones touching them are skipped in that frame."""
     P = np.array(P, dtype=np.float64, copy=True)
     bones = np.asarray(bones, dtype=np.intp).reshape(-1, 2)
-    w = np.asarray(w, dtype=np.float64)
     lengths = np.asarray(lengths, dtype=np.float64)
     per_frame = lengths.ndim == 2
+    Q = np.ascontiguousarray(P.transpose(1, 0, 2))        # (J, T, 3): joints contiguous
+    W = np.ascontiguousarray(np.asarray(w, dtype=np.float64).T)
     for _ in range(max(0, sweeps)):
         for i, (a, b) in enumerate(bones):
             L = lengths[:, i] if per_frame else lengths[i]
             if not np.any(np.isfinite(L) & (L > 0)):
                 continue
-            d = P[:, b] - P[:, a]
-            length = np.sqrt(np.sum(d * d, axis=1))
-            wa, wb = w[:, a], w[:, b]
-            total = wa + wb
-            ok = np.isfinite(length) & (length > 1e-9) & (total > 0) & np.isfinite(L) & (L > 0)
-            if not ok.any():
-                continue
-            k = np.zeros_like(length)
-            Lok = L[ok] if per_frame else L
-            k[ok] = stiffness * (length[ok] - Lok) / (length[ok] * total[ok])
-            step = d * k[:, None]
-            P[ok, a] += (wa[ok, None] * step[ok])
-            P[ok, b] -= (wb[ok, None] * step[ok])
-    return P
+            d = Q[b] - Q[a]
+            length = np.sqrt(np.einsum("ij,ij->i", d, d))
+            wa, wb = W[a], W[b]
+            with np.errstate(invalid="ignore", divide="ignore"):
+                k = stiffness * (length - L) / (length * (wa + wb))
+            k = np.where(np.isfinite(k) & (length > 1e-9), k, 0.0)
+            Q[a] += d * (wa * k)[:, None]
+            Q[b] -= d * (wb * k)[:, None]
+    return Q.transpose(1, 0, 2).copy()

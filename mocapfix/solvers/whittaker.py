@@ -71,8 +71,10 @@ def effective_dof(n: int, h: float, lam_over_w: np.ndarray, order: int) -> np.nd
 
 
 def smooth_gcv(y: np.ndarray, w: np.ndarray, t: np.ndarray, grid: np.ndarray, *,
-               order: int = 2, bands: np.ndarray | None = None):
-    """The smooth of ``y`` (T, C) at the λ of ``grid`` with the lowest GCV score.
+               order: int = 2, bands: np.ndarray | None = None, refine: bool = False):
+    """The smooth of ``y`` (T, C) at the λ of ``grid`` (increasing) with the lowest GCV
+    score; with ``refine`` the geometric midpoints on both sides of the best grid value
+    are tried too.
 
     Returns (z, lam, edf). Weights are relative (only their ratios matter to the fit;
     GCV uses the mean weight of the observed samples)."""
@@ -84,15 +86,23 @@ def smooth_gcv(y: np.ndarray, w: np.ndarray, t: np.ndarray, grid: np.ndarray, *,
         return np.where(seen[:, None], y, np.nan), float("nan"), float(n)
     h = float(np.median(np.diff(t))) if len(t) > 1 else 1.0
     wbar = float(w[seen].mean())
-    edf = effective_dof(n, h, np.asarray(grid) / wbar, order)
-    best = None
-    for lam, e in zip(grid, edf):
-        z = smooth(y, w, t, lam, order=order, bands=bands)
-        r = np.where(seen[:, None], y - z, 0.0)
-        rss = float(np.sum(w[:, None] * r * r))
-        score = n * rss / max(n - e, 1e-9) ** 2
-        if best is None or score < best[0]:
-            best = (score, z, float(lam), float(e))
+
+    def evaluate(lams):
+        out = []
+        for lam, e in zip(lams, effective_dof(n, h, np.asarray(lams) / wbar, order)):
+            z = smooth(y, w, t, lam, order=order, bands=bands)
+            r = np.where(seen[:, None], y - z, 0.0)
+            rss = float(np.sum(w[:, None] * r * r))
+            out.append((n * rss / max(n - e, 1e-9) ** 2, z, float(lam), float(e)))
+        return out
+
+    grid = np.asarray(grid, dtype=np.float64)
+    results = evaluate(grid)
+    k = int(np.argmin([r[0] for r in results]))
+    best = results[k]
+    if refine and len(grid) > 1:
+        mids = [np.sqrt(grid[k] * grid[i]) for i in (k - 1, k + 1) if 0 <= i < len(grid)]
+        best = min([best] + evaluate(mids), key=lambda r: r[0])
     return best[1], best[2], best[3]
 
 
