@@ -142,3 +142,15 @@ def test_real_files_bones_steadier_and_tracked_samples_rarely_moved_far(path):
         tracked &= m.confidence >= 0.75
     share = np.mean(moved[tracked] > 0.05)
     assert share < (0.15 if "utkinect" in path.name else 0.05), share
+
+
+def test_spikes_fire_on_30_fps_skeletons():
+    """At 30 fps the 0.08 s window was one frame a side and nothing was ever flagged
+    (issue 12). Two injected spikes of 15-20 cm in a real Kinect v2 file are found, and
+    nothing else with a Kinect-sized floor."""
+    m = formats.read(shared("kinect/kv2_laban_Ges01_wavehand.csv"))
+    P = m.positions.copy()
+    P[50, 7] += [0.2, 0.0, 0.0]
+    P[90, 15] += [0.0, 0.15, 0.0]
+    out, info = build("spikes", min_jump="60 mm").apply(m.replace(positions=P))
+    assert sorted(map(tuple, np.argwhere(out.missing & ~m.missing).tolist())) == [(50, 7), (90, 15)]
