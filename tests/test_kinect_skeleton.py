@@ -47,6 +47,14 @@ def test_bone_projection_reaches_the_lengths_and_spares_heavy_joints():
     np.testing.assert_allclose(np.linalg.norm(out[0, 2] - out[0, 1]), 0.5, atol=1e-6)
 
 
+def test_bone_projection_does_not_spread_missing_samples():
+    P = np.array([[[0, 0, 0], [0, 1.2, 0], [np.nan, np.nan, np.nan]]], float)
+    out = project_lengths(P, np.array([[0, 1], [1, 2]]), np.array([1.0, 0.5]),
+                          np.ones((1, 3)), sweeps=5)
+    assert np.isnan(out[0, 2]).all() and np.isfinite(out[0, :2]).all()
+    np.testing.assert_allclose(np.linalg.norm(out[0, 1] - out[0, 0]), 1.0, atol=1e-6)
+
+
 # -- leg confusion ------------------------------------------------------------------------
 def _bench_file(tmp_path, scenario, seed=0, name="asfamc/60_10.amc"):
     truth = bk.kinect_truth(formats.read(shared(name)), np.random.default_rng(seed))

@@ -39,7 +39,9 @@ def project_lengths(P: np.ndarray, bones: np.ndarray, lengths: np.ndarray, w: np
             wa, wb = W[a], W[b]
             with np.errstate(invalid="ignore", divide="ignore"):
                 k = stiffness * (length - L) / (length * (wa + wb))
-            k = np.where(np.isfinite(k) & (length > 1e-9), k, 0.0)
+            ok = np.isfinite(k) & (length > 1e-9)
+            d = np.where(ok[:, None], d, 0.0)            # a missing end moves nothing
+            k = np.where(ok, k, 0.0)
             Q[a] += d * (wa * k)[:, None]
             Q[b] -= d * (wb * k)[:, None]
     return Q.transpose(1, 0, 2).copy()
