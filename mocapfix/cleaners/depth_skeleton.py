@@ -393,7 +393,7 @@ class KinectSkeleton(Cleaner):
                 Y2 = np.full_like(Y, np.nan)
                 Y2[okrow] = ((Xs + mean) * sd).reshape(-1, J, 3)
                 w2 = np.where(trusted & okrow[:, None], weights, 0.0)
-                Z2, _ = fit(w2, np.where(np.isnan(Y2), 0.0, Y2), cut=cut)
+                Z2, _ = fit(w2, np.where(np.isnan(Y2), 0.0, Y2))
                 Z = np.where(trusted[..., None] & okrow[:, None, None], Z2, Z)
                 info["spatial_rank"] = rank
         if self["limb_frame"] and parents is not None:
