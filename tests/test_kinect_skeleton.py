@@ -162,3 +162,22 @@ def test_spikes_fire_on_30_fps_skeletons():
     P[90, 15] += [0.0, 0.15, 0.0]
     out, info = build("spikes", min_jump="60 mm").apply(m.replace(positions=P))
     assert sorted(map(tuple, np.argwhere(out.missing & ~m.missing).tolist())) == [(50, 7), (90, 15)]
+
+
+@pytest.mark.parametrize("path", shared_files("kinect", "kv2_*"))
+def test_fast_kinect_csv_writer_writes_what_the_general_one_writes(path):
+    """The per-frame writer of the headerless Kinect CSVs gives the same text as the
+    per-sample one, for moved, filled and removed samples."""
+    from tests.conftest import need
+
+    m = formats.read(need(path))
+    out, _ = build("kinect_skeleton").apply(m)
+    P = out.positions.copy()
+    P[5, 3] = np.nan                                # a removed sample
+    P[7] = np.nan                                   # a removed frame
+    P[9, 2] = m.positions[9, 2]                     # an unchanged one
+    out = out.replace(positions=P)
+    fast = kf._fast_csv_text(m.source, out)
+    m.source.layout = "generic"                     # force the per-sample path
+    assert fast == kf._patched_text(m.source, out)
+    assert fast != "".join(line + end for line, end in zip(m.source.lines, m.source.endings))
