@@ -28,7 +28,7 @@ def _debug(ctx) -> bool:
 @click.command("bench")
 @click.argument("clean_files", nargs=-1, required=True, type=click.Path(dir_okay=False))
 @click.option("--protocol", required=True,
-              type=click.Choice(["feng2015", "yang2019", "feng2014", "occlusion"]),
+              type=click.Choice(["feng2015", "yang2019", "feng2014", "occlusion", "kinect"]),
               help="Corruption protocol (see the README, 'Benchmarks').")
 @click.option("--methods", default=None,
               help="Comma-separated registered cleaners and/or baselines (none, "
@@ -56,6 +56,10 @@ def bench(ctx, clean_files, protocol, methods, configs, seeds, settings, json_ou
     from mocapfix import bench as bench_lib
     from mocapfix.fileio import atomic_write_text
 
+    if protocol == "kinect":  # CMU captures made into Kinect v2 CSVs: its own runner
+        from mocapfix.bench_kinect import main as kinect_main
+
+        sys.exit(kinect_main(ctx, clean_files, configs, seeds, settings, json_out, md_out, quiet))
     try:
         method_list, notes = bench_lib.resolve_methods(_split(methods), _split(configs))
         progress = None if quiet else (lambda msg: click.echo(f"bench: {msg}", err=True))

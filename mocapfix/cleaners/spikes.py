@@ -121,7 +121,9 @@ class Spikes(Cleaner):
         T, J, _ = pos.shape
         if pos.size == 0:
             return motion.copy(), {"flagged": 0, "flagged_per_marker": {}}
-        half = max(1, int(round(self.frames("window", motion) / 2.0)))
+        # at least 2 samples a side: with one, the leave-one-out quadratic of a 30 fps
+        # skeleton had no support and nothing was ever flagged (issue 12)
+        half = max(2, int(round(self.frames("window", motion) / 2.0)))
         flags, thr = hampel_flags(pos, half, self["k"], self.length("min_jump", motion),
                                   self["passes"])
         flags &= ~motion.missing

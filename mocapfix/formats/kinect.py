@@ -899,7 +899,55 @@ def _sample_edits(source: KinectSource, motion: Motion):
             yield int(t), int(j), "fill" if source.missing[t, j] else "move"
 
 
+def _fast_csv_text(source: KinectSource, motion: Motion) -> str:
+    """:func:`_patched_text` for the headerless Kinect CSVs (one line per frame, fields
+    at fixed places): the same tokens, without a Python object per sample -- a cleaned
+    10-minute recording (450,000 samples) is written in seconds, not minutes."""
+    new = motion.positions
+    new_missing = np.isnan(new).any(axis=2)
+    same = np.all(new == source.original, axis=2)
+    unchanged = np.where(source.missing, new_missing, same & ~new_missing)
+    lines = list(source.lines)
+    rows = np.flatnonzero(~unchanged.all(axis=1))
+    line_of = source.line_of[rows, 0].tolist()
+    values_all = new[rows].tolist()
+    removed_all = new_missing[rows].tolist()
+    filled_all = source.missing[rows].tolist()
+    edit_all = (~unchanged[rows]).tolist()
+    for r in range(len(rows)):
+        li = line_of[r]
+        fields = lines[li].split(",")
+        values, removed, filled, edit = values_all[r], removed_all[r], filled_all[r], edit_all[r]
+        for j in range(len(edit)):
+            if not edit[j]:
+                continue
+            f0 = 1 + 4 * j
+            if removed[j]:                                      # removed: NotTracked
+                fields[f0 + 3] = _pad(fields[f0 + 3], "0")
+                continue
+            v = values[j]
+            for k in range(3):
+                tok = fields[f0 + k]
+                if "e" in tok or "E" in tok or tok != tok.strip():
+                    fields[f0 + k] = _pad(tok, _format_like(v[k], tok))
+                else:
+                    dot = tok.find(".")
+                    d = 0 if dot < 0 else len(tok) - dot - 1
+                    fields[f0 + k] = f"{v[k]:.{d if d > 6 else 6}f}"
+            if filled[j]:                                       # filled: Inferred
+                fields[f0 + 3] = _pad(fields[f0 + 3], "1")
+        lines[li] = ",".join(fields)
+    deleted = set(source.skip_lines)
+    out = [source.bom]
+    for i, line in enumerate(lines):
+        if i not in deleted:
+            out.append(line + source.endings[i])
+    return "".join(out)
+
+
 def _patched_text(source: KinectSource, motion: Motion) -> str:
+    if source.layout in ("kinect_v2_csv", "kinect_v1_csv") and source.sep == ",":
+        return _fast_csv_text(source, motion)
     lines = list(source.lines)
     edited: dict[int, _Line] = {}
     deleted: set[int] = set(source.skip_lines)

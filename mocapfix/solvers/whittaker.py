@@ -1,0 +1,113 @@
+"""Weighted Whittaker smoothing on an uneven time axis, with the smoothing strength chosen
+from the data by generalised cross-validation.
+
+The smoother (Whittaker 1923; Eilers 2003, "A perfect smoother", Anal. Chem. 75, eq. 3
+with weights, eq. 6) minimises over z
+
+    Σ_i w_i (y_i − z_i)²  +  λ Σ_i Δ_i (d! · z[t_i, …, t_{i+d}])²
+
+where ``z[t_i, …, t_{i+d}]`` is the d-th divided difference (so ``d! ·`` it approximates
+the d-th derivative on any time axis, dropped frames included) and ``Δ_i = (t_{i+d} −
+t_i) / d`` its share of the time axis (the penalty approximates ``λ ∫ (z^{(d)})² dt``):
+λ is in physical units and means the same at 15 or 30 fps. Weights 0 mark missing
+samples, which the solution interpolates (a natural spline of degree 2d − 1 through the
+gap). The normal equations ``(W + λ DᵀΔD) z = W y`` are banded (bandwidth d) and solved
+with a banded Cholesky factorisation, O(T d²) per channel group.
+
+Choice of λ: GCV (Craven & Wahba 1979) ``V(λ) = n · RSS_w / (n − edf)²`` over a grid,
+with ``edf = tr(H)`` taken from the smoother's spectrum on an even grid with even
+weights, ``Σ_k 1 / (1 + λ h / w̄ · (2 sin(π k / 2n))^{2d} / h^{2d})`` (Eilers 2003 §"Cross-
+validation" uses the exact diagonal; this closed form avoids the O(T) inverse and is
+exact away from the ends for an even grid).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy.linalg import solveh_banded
+
+
+def penalty_bands(t: np.ndarray, order: int) -> np.ndarray:
+    """``DᵀΔD`` of the module docstring in LAPACK lower banded storage, (order + 1, T)."""
+    t = np.asarray(t, dtype=np.float64)
+    T, d = len(t), order
+    ab = np.zeros((d + 1, T))
+    n = T - d
+    if n <= 0:
+        return ab
+    # coefficients of d! x the d-th divided difference on t_i..t_{i+d}
+    idx = np.arange(n)[:, None] + np.arange(d + 1)[None, :]
+    tt = t[idx]                                              # (n, d+1)
+    diff = tt[:, :, None] - tt[:, None, :]                   # (n, d+1, d+1)
+    eye = np.eye(d + 1, dtype=bool)
+    prod = np.prod(np.where(eye, 1.0, diff), axis=2)
+    c = math.factorial(d) / prod                             # (n, d+1)
+    delta = (tt[:, -1] - tt[:, 0]) / d
+    for p in range(d + 1):
+        for q in range(p, d + 1):
+            ab[q - p, p:p + n] += c[:, p] * c[:, q] * delta
+    return ab
+
+
+def smooth(y: np.ndarray, w: np.ndarray, t: np.ndarray, lam: float, *, order: int = 2,
+           bands: np.ndarray | None = None) -> np.ndarray:
+    """The weighted Whittaker smooth of ``y`` (T, C) with weights ``w`` (T,), common to
+    the C channels (NaN in ``y`` where ``w`` is 0)."""
+    y = np.asarray(y, dtype=np.float64)
+    ab = (penalty_bands(t, order) if bands is None else bands) * lam
+    ab[0] = ab[0] + w + 1e-12
+    rhs = np.where(w[:, None] > 0, y, 0.0) * w[:, None]
+    return solveh_banded(ab, rhs, lower=True, check_finite=False)
+
+
+def effective_dof(n: int, h: float, lam_over_w: np.ndarray, order: int) -> np.ndarray:
+    """Trace of the hat matrix of the even-grid (step h), even-weight smoother (module
+    docstring) for every value of ``λ / w̄`` given (the penalty's Δ = h included)."""
+    k = np.arange(n)
+    mu = h * (2.0 * np.sin(np.pi * k / (2.0 * n))) ** (2 * order) / h ** (2 * order)
+    lam_over_w = np.atleast_1d(lam_over_w)
+    return np.sum(1.0 / (1.0 + lam_over_w[:, None] * mu[None, :]), axis=1)
+
+
+def smooth_gcv(y: np.ndarray, w: np.ndarray, t: np.ndarray, grid: np.ndarray, *,
+               order: int = 2, bands: np.ndarray | None = None, refine: bool = False):
+    """The smooth of ``y`` (T, C) at the λ of ``grid`` (increasing) with the lowest GCV
+    score; with ``refine`` the geometric midpoints on both sides of the best grid value
+    are tried too.
+
+    Returns (z, lam, edf). Weights are relative (only their ratios matter to the fit;
+    GCV uses the mean weight of the observed samples)."""
+    t = np.asarray(t, dtype=np.float64)
+    bands = penalty_bands(t, order) if bands is None else bands
+    seen = w > 0
+    n = int(seen.sum())
+    if n <= order + 1:
+        return np.where(seen[:, None], y, np.nan), float("nan"), float(n)
+    h = float(np.median(np.diff(t))) if len(t) > 1 else 1.0
+    wbar = float(w[seen].mean())
+
+    def evaluate(lams):
+        out = []
+        for lam, e in zip(lams, effective_dof(n, h, np.asarray(lams) / wbar, order)):
+            z = smooth(y, w, t, lam, order=order, bands=bands)
+            r = np.where(seen[:, None], y - z, 0.0)
+            rss = float(np.sum(w[:, None] * r * r))
+            out.append((n * rss / max(n - e, 1e-9) ** 2, z, float(lam), float(e)))
+        return out
+
+    grid = np.asarray(grid, dtype=np.float64)
+    results = evaluate(grid)
+    k = int(np.argmin([r[0] for r in results]))
+    best = results[k]
+    if refine and len(grid) > 1:
+        mids = [np.sqrt(grid[k] * grid[i]) for i in (k - 1, k + 1) if 0 <= i < len(grid)]
+        best = min([best] + evaluate(mids), key=lambda r: r[0])
+    return best[1], best[2], best[3]
+
+
+def lambda_for_cutoff(cutoff_hz, mean_weight: float, h: float, order: int) -> np.ndarray:
+    """λ whose even-grid (step h) smoother has gain 1/2 at ``cutoff_hz``:
+    λ h (2π f)^{2d} = w̄ (low-frequency approximation of the spectrum above)."""
+    f = np.asarray(cutoff_hz, dtype=np.float64)
+    return mean_weight / (h * (2.0 * np.pi * f) ** (2 * order))
