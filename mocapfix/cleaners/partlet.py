@@ -45,9 +45,11 @@ the paper tunes λ1, λ2, λ3 per noise setting from a grid, we ship one setting
 Xiao 2015 (``coding: ksvd``): codes by OMP with ``sparsity`` atoms from a K-SVD model;
 ``loss: l2`` for Gaussian noise, ``loss: l1`` reweights samples against outliers.
 
-The report's ``unexplained`` is, per partlet, the fraction of the (centred) signal energy
-the dictionary cannot explain on observed samples; ``out_of_sample`` warns when it is far
-above the training figure stored in the model.
+The report's ``unexplained`` is, per partlet, the fraction of the energy of the coded
+(smoothed, outlier-free, centred) signal the dictionary cannot explain on observed samples;
+a limb above ``out_of_sample`` (0.5 %) is reported as motion unlike the training set
+(measured, clean: held-out CMU dance 0.03–0.07 %, CMU walk 05_01 ≤ 0.12 %, the CMU BVH walks'
+arms 0.4–1.2 %).
 """
 from __future__ import annotations
 
@@ -143,8 +145,8 @@ class PartletDictionary(FittedCleaner):
               low=0.0, high=2.0),
         Param("detail", "bool", True, "add back the residual detail the dictionary misses, "
               "Wiener-weighted against the noise level", ),
-        Param("out_of_sample", "float", 5.0, "warn when unexplained energy exceeds this × training", low=1.0,
-              high=1e6),
+        Param("out_of_sample", "float", 0.005, "warn when a partlet's dictionary leaves more than this "
+              "fraction of its energy unexplained", low=0.0, high=1.0),
         # training (fit) parameters
         Param("method", "choice", "partlet", "training: robust dictionary (partlet) or K-SVD",
               choices=("partlet", "ksvd")),
@@ -455,9 +457,9 @@ class PartletDictionary(FittedCleaner):
         info.update({"noise_mm": round(sigma * 1e3, 3), "iterations": iters,
                      "unexplained": unexplained,
                      "frames_without_torso": int((~valid).sum())})
-        trained = self.unexplained_ or {}
-        high = [p for p, f in unexplained.items()
-                if f > self.values["out_of_sample"] * max(trained.get(p, 0.0), 1e-4) and f > 0.02]
+        # limbs only: in the torso frame the torso itself barely moves, so what its dictionary
+        # leaves is mostly the noise left after smoothing, not novelty
+        high = [p for p, f in unexplained.items() if p != "torso" and f > self.values["out_of_sample"]]
         if high:
             info["warning"] = (info.get("warning", "") + "; " if "warning" in info else "") + ("motion unlike the training set (out of sample) for "
                                + ", ".join(high) + ": the dictionary explains little of it")
@@ -519,9 +521,12 @@ class PartletDictionary(FittedCleaner):
                 Zs, _ = gcv_smooth(Zs, n_pad=pad)
             Y = _windows(Zs, m, dil, starts)
         obs = ~missing
-        signal = np.where(obs[..., None], Xp - E, 0.0)
         resid = np.where(obs[..., None], Xp - E - rec.reshape(T, n, 3), 0.0)
-        frac = float(np.vdot(resid, resid) / max(np.vdot(signal, signal), 1e-300))
+        # out of sample: the energy of the coded (smoothed, outlier-free) signal the
+        # dictionary leaves, as a fraction of that signal's energy
+        coded = np.where(obs[..., None], Zs.reshape(T, n, 3), 0.0)
+        left = np.where(obs[..., None], Zs.reshape(T, n, 3) - rec.reshape(T, n, 3), 0.0)
+        frac = float(np.vdot(left, left) / max(np.vdot(coded, coded), 1e-300))
         rec3 = rec.reshape(T, n, 3)
         if self.values["detail"]:
             # samples the noise term took as outliers get no detail back
