@@ -24,6 +24,7 @@ _MODULES = (
     "mocapfix.cleaners.rotations",
     "mocapfix.cleaners.lowrank_isometry",
     "mocapfix.cleaners.tsmc",
+    "mocapfix.cleaners.pma",
 )
 _loaded = False
 
@@ -41,6 +42,7 @@ _WHERE = {
     "lowrank_isometry": "mocapfix.cleaners.lowrank_isometry",
     "trust": "mocapfix.cleaners.tsmc",
     "tsmc": "mocapfix.cleaners.tsmc",
+    "pma": "mocapfix.cleaners.pma",
 }
 
 

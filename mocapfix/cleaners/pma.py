@@ -1,0 +1,136 @@
+"""``pma``: gap filling by model averaging with soft distance constraints, after Tits et
+al. 2018 (PLoS ONE 13(7): e0199744); the kernels and the method are described in
+:mod:`mocapfix.solvers.pma`. Written from the paper's description as a baseline for the
+versus-peers benchmark (``benchmarks/versus_peers.py``) and usable as a cleaner.
+
+The members are the four local/global fillers of :mod:`mocapfix.solvers.pma` and the
+Gløersen weighted PCA (``fill_pca``, run once on the whole capture); ``members`` can add
+``tsmc`` (the default C3D filler) or drop any of them. Observed samples are never changed.
+The per-sample spread of the members around their average is returned in
+``Motion.confidence`` of the filled samples as ``exp(-spread / confidence_scale)``.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from mocapfix.cleaners import build, register
+from mocapfix.cleaners.base import Cleaner, Param
+from mocapfix.errors import ConfigError
+from mocapfix.gaps import runs
+from mocapfix.motion import Motion
+from mocapfix.solvers import pma
+
+_EXTERNAL = ("pca", "tsmc")
+
+
+@register
+class PMA(Cleaner):
+    name = "pma"
+    single_thread_blas = True
+    summary = ("fill gaps by a plausibility-weighted average of five fillers with soft "
+               "distance constraints (Tits et al. 2018 'PMA')")
+    params = (
+        Param("members", "list", ["interp", "poly", "grnn", "linear", "pca"],
+              "fillers averaged: interp, poly, grnn, linear, pca, tsmc"),
+        Param("neighbours", "int", 3, "rigid neighbours of the local fillers", low=1, high=20),
+        Param("constraint_neighbours", "int", 3, "most rigid neighbours of the soft "
+              "distance constraint (0: no constraint)", low=0, high=10),
+        Param("width", "float", 2.0, "the constraint keeps each distance within mean ± "
+              "width × standard deviation", low=0.0, low_open=True),
+        Param("weight_scale", "length", "300 mm", "distance scale of the global regression's "
+              "marker weights", unit="mm", low=0.0, low_open=True),
+        Param("sd_floor", "length", "1 mm", "smallest distance deviation in the plausibility "
+              "weights", unit="mm", low=0.0, low_open=True),
+        Param("max_gap", "time", None, "longest gap filled (null: all)", unit="s", low=0.0,
+              nullable=True),
+        Param("fill_ends", "bool", True, "also fill leading/trailing gaps"),
+        Param("confidence_scale", "length", "10 mm", "member spread at which a filled "
+              "sample's confidence is 1/e", unit="mm", low=0.0, low_open=True),
+    )
+
+    def _validate(self):
+        bad = [m for m in self["members"] if m not in pma.LOCAL_FILLERS + _EXTERNAL]
+        if bad or not self["members"]:
+            raise ConfigError(f"{self.step}: parameter 'members' must list some of "
+                              f"{', '.join(pma.LOCAL_FILLERS + _EXTERNAL)}, got {self['members']!r}")
+
+    def _external(self, motion: Motion) -> dict[str, np.ndarray]:
+        out = {}
+        if "pca" in self["members"]:
+            out["pca"] = build("fill_pca", fill_ends=True, min_observed=0.0).apply(motion)[0].positions
+        if "tsmc" in self["members"]:
+            out["tsmc"] = build("tsmc", observed="keep").apply(motion)[0].positions
+        return out
+
+    def _apply(self, motion: Motion):
+        pos = motion.positions
+        T, J, _ = pos.shape
+        observed = ~motion.missing
+        info = {"gaps": 0, "gaps_filled": 0, "filled": 0, "weights": {}}
+        if T < 3 or observed.all() or observed.sum(axis=0).max(initial=0) < 2:
+            return motion.copy(), info
+        mu, sd = pma.distance_stats(pos, observed)
+        external = self._external(motion)
+        local = tuple(m for m in self["members"] if m in pma.LOCAL_FILLERS)
+        max_gap = None if self["max_gap"] is None else self.frames("max_gap", motion)
+        floor = self.length("sd_floor", motion)
+        width = self["width"]
+        out = pos.copy()
+        conf = np.ones((T, J)) if motion.confidence is None else motion.confidence.copy()
+        conf[~observed] = 0.0
+        weight_sum: dict[str, float] = {}
+        col, start, length = runs(~observed)
+        for j, s, n in zip(col, start, length):
+            e = s + n
+            if n == T or (max_gap is not None and n > max_gap):
+                continue
+            if (s == 0 or e == T) and not self["fill_ends"]:
+                continue
+            info["gaps"] += 1
+            frames = np.arange(max(s - 1, 0), min(e + 1, T))
+            seen = observed[frames].all(axis=0)
+            seen[j] = False
+            cand = np.flatnonzero(seen & np.isfinite(sd[j]))
+            cand = cand[np.argsort(sd[j, cand], kind="stable")]
+            train = np.flatnonzero(observed[:, j])
+            _, fills = pma.gap_fills(pos, observed, j, s, e, cand[:self["neighbours"]], train,
+                                     cand, fillers=local, mu=mu,
+                                     weight_scale=self.length("weight_scale", motion))
+            data = pos[frames, j]
+            for name, full in external.items():
+                value = full[frames, j]
+                if not np.isnan(value[(frames >= s) & (frames < e)]).any():
+                    fills[name] = np.where(np.isnan(value), data, value)
+            if not fills:
+                continue
+            gap_rows = (frames >= s) & (frames < e)
+            has0, has1 = s > 0, e < T
+            fills = {k: pma.meet_borders(v, data, has0, has1)[gap_rows] for k, v in fills.items()}
+            names = list(fills)
+            stack = np.stack([fills[k] for k in names])              # (M, n, 3)
+            rig = cand[:5]
+            if len(rig):
+                others = pos[np.ix_(frames[gap_rows], rig)]
+                score = np.array([pma.plausibility(f, others, mu[j, rig], sd[j, rig], floor)
+                                  for f in stack])
+                w = 1.0 / (score + 1e-3)
+            else:
+                w = np.ones(len(names))
+            w /= w.sum()
+            avg = np.tensordot(w, stack, axes=1)
+            spread = np.sqrt(np.tensordot(w, ((stack - avg) ** 2).sum(axis=2), axes=1))
+            k = self["constraint_neighbours"]
+            if k and len(cand):
+                rig = cand[:k]
+                avg = pma.soft_distance_constraint(
+                    avg, pos[np.ix_(frames[gap_rows], rig)], mu[j, rig],
+                    np.maximum(sd[j, rig], floor), width)
+            out[s:e, j] = avg
+            conf[s:e, j] = np.exp(-spread / self.length("confidence_scale", motion))
+            info["gaps_filled"] += 1
+            info["filled"] += int(n)
+            for name, wk in zip(names, w):
+                weight_sum[name] = weight_sum.get(name, 0.0) + float(wk)
+        if info["gaps_filled"]:
+            info["weights"] = {k: round(v / info["gaps_filled"], 3) for k, v in weight_sum.items()}
+        return motion.replace(positions=out, confidence=conf), info
