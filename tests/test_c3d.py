@@ -32,10 +32,12 @@ SOURCES = {
     "c3dorg_s01_Eb015sr.c3d": (450, 26, 50, "mm", 1.9),
     "c3dorg_s02_DEC_INT.C3D": (89, 36, 50, "mm", 7.1),
     "c3dorg_s02_pc_real.c3d": (89, 36, 50, "mm", 7.1),
-    "c3dorg_s04_sub_labels.c3d": (333, 114, 60, "mm", 54.8),
+    # s04 and s09: SOURCES counts every (0,0,0) as missing (54.8 / 43.2 %); model outputs
+    # (POINT:ANGLES, FORCES, ...) of exactly (0,0,0) are values, not gaps, so fewer here
+    "c3dorg_s04_sub_labels.c3d": (333, 114, 60, "mm", 52.03),
     "c3dorg_s06_MACsample.c3d": (180, 33, 60, None, 60.0),
     "c3dorg_s08_TESTBPI.c3d": (450, 26, 50, "mm", 1.9),
-    "c3dorg_s09_PlugInC3D.c3d": (281, 86, 60, "mm", 43.2),
+    "c3dorg_s09_PlugInC3D.c3d": (281, 86, 60, "mm", 38.02),
     "c3dorg_s13_Dance.c3d": (499, 40, 65.05, None, 0.0),
     "c3dorg_s20_phasespace_sample.c3d": (701, 40, 30, None, 4.6),
     "c3dorg_s22_BKINtechnologies.c3d": (5065, 2, 1000, None, 0.0),
@@ -101,7 +103,10 @@ def test_missing_and_positions_match_py_c3d(path):
         return
     points = points[:motion.n_frames]
     # py-c3d flags residual < 0 and NaN; vendor (0,0,0) gaps are ours on top
-    theirs = (points[..., 3] < 0) | (points[..., :3] == 0).all(axis=2)
+    # (markers only: a model output of (0,0,0) is a value)
+    markers = np.ones(motion.n_joints, bool) if motion.kinds is None else \
+        np.array([k == "marker" for k in motion.kinds])
+    theirs = (points[..., 3] < 0) | ((points[..., :3] == 0).all(axis=2) & markers)
     np.testing.assert_array_equal(motion.missing, theirs)
     valid = ~motion.missing
     tolerance = 1e-4 * max(1.0, float(np.nanmax(np.abs(motion.positions))))

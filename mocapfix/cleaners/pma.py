@@ -16,7 +16,6 @@ import numpy as np
 from mocapfix.cleaners import build, register
 from mocapfix.cleaners.base import Cleaner, Param
 from mocapfix.errors import ConfigError
-from mocapfix.gaps import runs
 from mocapfix.motion import Motion
 from mocapfix.solvers import pma
 
@@ -44,6 +43,13 @@ class PMA(Cleaner):
         Param("max_gap", "time", None, "longest gap filled (null: all)", unit="s", low=0.0,
               nullable=True),
         Param("fill_ends", "bool", True, "also fill leading/trailing gaps"),
+        Param("weights", "choice", "plausibility", "how members are weighted per gap: "
+              "'plausibility' (Tits 2018: how well the fill keeps its neighbour distances), "
+              "'validation' (inverse squared error of each member on gaps of the same length "
+              "cut where the marker was seen) or 'best' (the member with the lowest such error)",
+              choices=("plausibility", "validation", "best")),
+        Param("validation_copies", "int", 2, "weights: validation/best — synthetic gaps per "
+              "real gap", low=1, high=20),
         Param("confidence_scale", "length", "10 mm", "member spread at which a filled "
               "sample's confidence is 1/e", unit="mm", low=0.0, low_open=True),
     )
@@ -79,38 +85,27 @@ class PMA(Cleaner):
         conf = np.ones((T, J)) if motion.confidence is None else motion.confidence.copy()
         conf[~observed] = 0.0
         weight_sum: dict[str, float] = {}
-        col, start, length = runs(~observed)
-        for j, s, n in zip(col, start, length):
-            e = s + n
-            if n == T or (max_gap is not None and n > max_gap):
-                continue
-            if (s == 0 or e == T) and not self["fill_ends"]:
-                continue
-            info["gaps"] += 1
-            frames = np.arange(max(s - 1, 0), min(e + 1, T))
-            seen = observed[frames].all(axis=0)
-            seen[j] = False
-            cand = np.flatnonzero(seen & np.isfinite(sd[j]))
-            cand = cand[np.argsort(sd[j, cand], kind="stable")]
-            train = np.flatnonzero(observed[:, j])
-            _, fills = pma.gap_fills(pos, observed, j, s, e, cand[:self["neighbours"]], train,
-                                     cand, fillers=local, mu=mu,
-                                     weight_scale=self.length("weight_scale", motion))
-            data = pos[frames, j]
-            for name, full in external.items():
-                value = full[frames, j]
-                if not np.isnan(value[(frames >= s) & (frames < e)]).any():
-                    fills[name] = np.where(np.isnan(value), data, value)
+        gaps = pma.gap_list(observed, max_gap, self["fill_ends"])
+        info["gaps"] = len(gaps)
+        members = pma.member_fills(pos, observed, gaps, external, local=local,
+                                   neighbours=self["neighbours"], mu=mu, sd=sd,
+                                   weight_scale=self.length("weight_scale", motion))
+        validated = (self._validation_errors(motion, observed, gaps, local, mu, sd)
+                     if self["weights"] != "plausibility" else [{}] * len(gaps))
+        for (j, s, e), (cand, fills), verr in zip(gaps, members, validated):
+            n = e - s
+            frames = np.arange(s, e)
             if not fills:
                 continue
-            gap_rows = (frames >= s) & (frames < e)
-            has0, has1 = s > 0, e < T
-            fills = {k: pma.meet_borders(v, data, has0, has1)[gap_rows] for k, v in fills.items()}
             names = list(fills)
             stack = np.stack([fills[k] for k in names])              # (M, n, 3)
             rig = cand[:5]
-            if len(rig):
-                others = pos[np.ix_(frames[gap_rows], rig)]
+            if all(k in verr for k in names):
+                mse = np.array([verr[k] for k in names])
+                w = (mse == mse.min()).astype(float) if self["weights"] == "best" \
+                    else 1.0 / (mse + 1e-12 + 1e-6 * mse.min())
+            elif len(rig):
+                others = pos[np.ix_(frames, rig)]
                 score = np.array([pma.plausibility(f, others, mu[j, rig], sd[j, rig], floor)
                                   for f in stack])
                 w = 1.0 / (score + 1e-3)
@@ -123,14 +118,49 @@ class PMA(Cleaner):
             if k and len(cand):
                 rig = cand[:k]
                 avg = pma.soft_distance_constraint(
-                    avg, pos[np.ix_(frames[gap_rows], rig)], mu[j, rig],
+                    avg, pos[np.ix_(frames, rig)], mu[j, rig],
                     np.maximum(sd[j, rig], floor), width)
             out[s:e, j] = avg
             conf[s:e, j] = np.exp(-spread / self.length("confidence_scale", motion))
             info["gaps_filled"] += 1
             info["filled"] += int(n)
-            for name, wk in zip(names, w):
+            for name, wk in zip(names, w / w.sum()):
                 weight_sum[name] = weight_sum.get(name, 0.0) + float(wk)
         if info["gaps_filled"]:
-            info["weights"] = {k: round(v / info["gaps_filled"], 3) for k, v in weight_sum.items()}
+            info["weights_mean"] = {k: round(v / info["gaps_filled"], 3) for k, v in weight_sum.items()}
         return motion.replace(positions=out, confidence=conf), info
+
+    def _validation_errors(self, motion, observed, gaps, local, mu, sd):
+        """Per gap: member name → mean squared error on synthetic gaps of the same length
+        cut at random (seeded) places where the marker and its borders were seen."""
+        pos = motion.positions
+        T = pos.shape[0]
+        rng = np.random.default_rng(0)
+        sums = [dict() for _ in gaps]
+        for _ in range(self["validation_copies"]):
+            cut = observed.copy()
+            synth = []
+            for gi, (j, s, e) in enumerate(gaps):
+                n = e - s
+                if T - n - 1 < 1:
+                    continue
+                c = np.concatenate([[0], np.cumsum(cut[:, j])])
+                u = np.arange(1, T - n)
+                good = u[(c[u + n + 1] - c[u - 1]) == n + 2]
+                if not len(good):
+                    continue
+                u = int(rng.choice(good))
+                cut[u:u + n, j] = False
+                synth.append((gi, j, u, u + n))
+            if not synth:
+                break
+            pos2 = np.where(cut[..., None], pos, np.nan)
+            external = self._external(motion.replace(positions=pos2, confidence=None))
+            fills = pma.member_fills(pos2, cut, [g[1:] for g in synth], external, local=local,
+                                     neighbours=self["neighbours"], mu=mu, sd=sd,
+                                     weight_scale=self.length("weight_scale", motion))
+            for (gi, j, u, v), (_, f) in zip(synth, fills):
+                for name, value in f.items():
+                    err = float(np.mean(np.sum((value - pos[u:v, j]) ** 2, axis=1)))
+                    sums[gi].setdefault(name, []).append(err)
+        return [{k: float(np.mean(v)) for k, v in d.items()} for d in sums]

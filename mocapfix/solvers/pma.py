@@ -226,3 +226,53 @@ def soft_distance_constraint(x: np.ndarray, others: np.ndarray, mu: np.ndarray, 
             corr = np.where(d[..., None] > 0, v * ((target - d) / d)[..., None], 0.0)
         x += corr.mean(axis=1)
     return x
+
+
+# -- the loop over gaps, shared by ``pma`` and ``fill_ensemble`` -----------------------------
+
+def gap_list(observed: np.ndarray, max_gap: float | None = None, fill_ends: bool = True):
+    """(marker, start, stop) of every gap to fill: runs of missing samples of markers seen
+    at least once, at most ``max_gap`` frames, end gaps only with ``fill_ends``."""
+    from mocapfix.gaps import runs
+
+    T = observed.shape[0]
+    out = []
+    for j, s, n in zip(*runs(~observed)):
+        e = s + n
+        if n == T or (max_gap is not None and n > max_gap):
+            continue
+        if (s == 0 or e == T) and not fill_ends:
+            continue
+        out.append((int(j), int(s), int(e)))
+    return out
+
+
+def member_fills(pos, observed, gaps, external, *, local=LOCAL_FILLERS, neighbours: int = 3,
+                 weight_scale: float = 300.0, mu=None, sd=None):
+    """Every member's fill of every gap, ramped to meet the borders.
+
+    ``external``: name → (T, J, 3) fills computed elsewhere (NaN where not filled). Returns
+    one entry per gap: ``(cand, fills)`` with ``cand`` the markers observed on the gap and
+    its borders, most rigid first, and ``fills`` name → (gap length, 3)."""
+    T = pos.shape[0]
+    if mu is None:
+        mu, sd = distance_stats(pos, observed)
+    out = []
+    for j, s, e in gaps:
+        frames = np.arange(max(s - 1, 0), min(e + 1, T))
+        seen = observed[frames].all(axis=0)
+        seen[j] = False
+        cand = np.flatnonzero(seen & np.isfinite(sd[j]))
+        cand = cand[np.argsort(sd[j, cand], kind="stable")]
+        train = np.flatnonzero(observed[:, j])
+        _, fills = gap_fills(pos, observed, j, s, e, cand[:neighbours], train, cand,
+                             fillers=local, mu=mu, weight_scale=weight_scale)
+        data = np.where(observed[frames, j][:, None], pos[frames, j], np.nan)
+        gap_rows = (frames >= s) & (frames < e)
+        for name, full in external.items():
+            value = full[frames, j]
+            if not np.isnan(value[gap_rows]).any():
+                fills[name] = np.where(np.isnan(value), data, value)
+        fills = {k: meet_borders(v, data, s > 0, e < T)[gap_rows] for k, v in fills.items()}
+        out.append((cand, fills))
+    return out
