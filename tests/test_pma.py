@@ -72,3 +72,29 @@ def test_beats_members_and_spline_on_cmu_85_02(seed):
     assert full < gap_rmse("fill", method="spline", max_gap=None)
     assert full < gap_rmse("fill_pca", fill_ends=True)
     assert full < gap_rmse("pma", members=["linear"])
+
+
+def test_default_fills_the_start_gap_without_a_jump():
+    """c3dorg_s01_Eb015pi: PV3 misses its first 47 frames. The default's fill must not
+    plateau and then jump to meet the data: no frame-to-frame step in the gap or onto its
+    border larger than the largest step of the marker's own data."""
+    from mocapfix.pipeline import default_config_path, load_config
+
+    m = read(shared("c3d/c3dorg_s01_Eb015pi.c3d"))
+    j = m.index("PV3")
+    gap = np.flatnonzero(m.missing[:, j])
+    assert gap.tolist() == list(range(47))
+    out, records = load_config(default_config_path()).run(m)
+    steps = np.linalg.norm(np.diff(out.positions[:48, j], axis=0), axis=1)
+    own = np.nanmax(np.linalg.norm(np.diff(m.positions[:, j], axis=0), axis=1))
+    assert not np.isnan(steps).any()
+    assert steps.max() < own
+    # observed samples are left as measured, except those the trust step judged wrong
+    seen = ~m.missing
+    changed = seen & (out.positions != m.positions).any(axis=2)
+    untrusted = sum(r.flagged for r in records)
+    assert untrusted.sum() < 0.001 * seen.sum()
+    assert not (changed & ~untrusted).any()
+    # the filled samples carry a confidence below 1 that falls with the distance to the data
+    conf = out.confidence[gap, j]
+    assert np.all((conf > 0) & (conf < 1)) and conf[0] < conf[-1]

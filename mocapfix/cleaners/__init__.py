@@ -43,6 +43,7 @@ _WHERE = {
     "trust": "mocapfix.cleaners.tsmc",
     "tsmc": "mocapfix.cleaners.tsmc",
     "pma": "mocapfix.cleaners.pma",
+    "fill_ensemble": "mocapfix.cleaners.pma",
 }
 
 

@@ -247,11 +247,13 @@ def gap_list(observed: np.ndarray, max_gap: float | None = None, fill_ends: bool
     return out
 
 
-def member_fills(pos, observed, gaps, external, *, local=LOCAL_FILLERS, neighbours: int = 3,
+def member_fills(pos, observed, gaps, external, *, local=LOCAL_FILLERS, neighbours=3,
                  weight_scale: float = 300.0, mu=None, sd=None):
     """Every member's fill of every gap, ramped to meet the borders.
 
-    ``external``: name → (T, J, 3) fills computed elsewhere (NaN where not filled). Returns
+    ``external``: name → (T, J, 3) fills computed elsewhere (NaN where not filled);
+    ``neighbours``: K, or several K (the local fillers then run once per K, named
+    ``interp3``, ``interp5``, ...). Returns
     one entry per gap: ``(cand, fills)`` with ``cand`` the markers observed on the gap and
     its borders, most rigid first, and ``fills`` name → (gap length, 3)."""
     T = pos.shape[0]
@@ -265,8 +267,15 @@ def member_fills(pos, observed, gaps, external, *, local=LOCAL_FILLERS, neighbou
         cand = np.flatnonzero(seen & np.isfinite(sd[j]))
         cand = cand[np.argsort(sd[j, cand], kind="stable")]
         train = np.flatnonzero(observed[:, j])
-        _, fills = gap_fills(pos, observed, j, s, e, cand[:neighbours], train, cand,
-                             fillers=local, mu=mu, weight_scale=weight_scale)
+        fills = {}
+        sizes = (neighbours,) if np.isscalar(neighbours) else tuple(neighbours)
+        for n, K in enumerate(sizes):
+            # the global regression does not depend on K: computed once
+            names = local if n == 0 else tuple(f for f in local if f != "linear")
+            _, part = gap_fills(pos, observed, j, s, e, cand[:K], train, cand, fillers=names,
+                                mu=mu, weight_scale=weight_scale)
+            fills.update({f + ("" if len(sizes) == 1 or f == "linear" else str(K)): v
+                          for f, v in part.items()})
         data = np.where(observed[frames, j][:, None], pos[frames, j], np.nan)
         gap_rows = (frames >= s) & (frames < e)
         for name, full in external.items():
@@ -276,3 +285,4 @@ def member_fills(pos, observed, gaps, external, *, local=LOCAL_FILLERS, neighbou
         fills = {k: meet_borders(v, data, s > 0, e < T)[gap_rows] for k, v in fills.items()}
         out.append((cand, fills))
     return out
+
