@@ -50,6 +50,9 @@ class PMA(Cleaner):
         Param("max_gap", "time", None, "longest gap filled (null: all)", unit="s", low=0.0,
               nullable=True),
         Param("fill_ends", "bool", True, "also fill leading/trailing gaps"),
+        Param("short_gap", "time", None, "interior gaps up to this long are filled first by "
+              "PCHIP per channel (spike holes, dropouts) and count as seen for the rest "
+              "(null: every gap goes through the members)", unit="s", low=0.0, nullable=True),
         Param("weights", "choice", "plausibility", "how members are weighted per gap: "
               "'plausibility' (Tits 2018: how well the fill keeps its neighbour distances), "
               "'validation' (inverse squared error of each member on gaps of the same length "
@@ -91,7 +94,6 @@ class PMA(Cleaner):
         if T < 3 or observed.all() or observed.sum(axis=0).max(initial=0) < 2:
             return motion.copy(), info
         mu, sd = pma.distance_stats(pos, observed)
-        external = self._external(motion)
         local = tuple(m for m in self["members"] if m in pma.LOCAL_FILLERS)
         max_gap = None if self["max_gap"] is None else self.frames("max_gap", motion)
         floor = self.length("sd_floor", motion)
@@ -102,14 +104,21 @@ class PMA(Cleaner):
         weight_sum: dict[str, float] = {}
         gaps = pma.gap_list(observed, max_gap, self["fill_ends"])
         info["gaps"] = len(gaps)
+        horizon = self.frames("confidence_horizon", motion)
+        if self["short_gap"] is not None and self.frames("short_gap", motion) >= 1:
+            gaps = self._fill_short(out, conf, gaps, self.frames("short_gap", motion), horizon)
+            info["gaps_filled"] = info["gaps"] - len(gaps)
+            info["filled"] = int((~np.isnan(out).any(axis=2) & ~observed).sum())
+            pos, observed = out.copy(), ~np.isnan(out).any(axis=2)
+        work = motion if pos is motion.positions else motion.replace(positions=pos)
+        external = self._external(work)
         members = pma.member_fills(pos, observed, gaps, external, local=local,
                                    neighbours=self["neighbours"], mu=mu, sd=sd,
                                    weight_scale=self.length("weight_scale", motion))
         ks = self["neighbours"]
         expected = (len([f for f in local if f != "linear"]) * len(ks) + ("linear" in local)
                     + len(external))
-        horizon = self.frames("confidence_horizon", motion)
-        validated = (self._validation_errors(motion, observed, gaps, local, mu, sd)
+        validated = (self._validation_errors(work, observed, gaps, local, mu, sd)
                      if self["weights"] != "plausibility" else [{}] * len(gaps))
         for (j, s, e), (cand, fills), verr in zip(gaps, members, validated):
             n = e - s
@@ -155,6 +164,25 @@ class PMA(Cleaner):
             info["weights_mean"] = {k: round(v / info["gaps_filled"], 3) for k, v in weight_sum.items()}
         return motion.replace(positions=out, confidence=conf), info
 
+    @staticmethod
+    def _fill_short(out, conf, gaps, short, horizon):
+        """PCHIP-fill (in place) the interior gaps of at most ``short`` frames; returns the
+        gaps left for the members."""
+        from mocapfix.solvers.segments import interpolate_gaps
+
+        T, J, _ = out.shape
+        filled, target = interpolate_gaps(out.reshape(T, 3 * J), "pchip", short)
+        done = target.reshape(T, J, 3).all(axis=2)
+        out[done] = filled.reshape(T, J, 3)[done]
+        rest = []
+        for j, s, e in gaps:
+            if done[s:e, j].all():
+                t = np.arange(s, e)
+                conf[s:e, j] = np.exp(-np.minimum(t - s + 1, e - t) / horizon)
+            else:
+                rest.append((j, s, e))
+        return rest
+
     def _validation_errors(self, motion, observed, gaps, local, mu, sd):
         """Per gap: member name → mean squared error on synthetic gaps of the same length
         cut at random (seeded) places where the marker and its borders were seen."""
@@ -198,18 +226,18 @@ def _defaults(params, **new):
 
 @register
 class FillEnsemble(PMA):
-    """The PMA engine with what measurably beats the paper's choices: the local fillers run
-    with 3 and with 5 rigid neighbours (nine members with the global regression and
-    ``fill_pca``), and each gap's members are weighted by their inverse squared error on
+    """The PMA engine with what measurably beats the paper's choices: the three local
+    fillers run with 3 and with 5 rigid neighbours (seven members with the global
+    regression), and each gap's members are weighted by their inverse squared error on
     synthetic gaps of the same length cut where the marker was seen (``weights:
     validation``), not by the plausibility of their neighbour distances. Measured with the
-    ``occlusion`` gaps (benchmarks/versus_peers.py; gap RMSE, seeds 0–1): HDM05 (first
-    1,500 frames) 2.63 / 4.24 mm against 3.98 / 7.57 for ``pma``; CMU 85_02 37.9 / 15.3
-    against 41.4 / 14.6. About 3× the run time of ``pma`` (members run on two validation
-    copies)."""
+    ``occlusion`` gaps (gap RMSE, seeds 0 / 1): HDM05 (first 1,500 frames) 2.63 / 4.24 mm
+    (with ``fill_pca`` as an eighth member) against 3.98 / 7.57 for ``pma``; CMU 85_02
+    38.2 / 15.3 against 41.4 / 14.6 (37.9 / 15.3 with ``fill_pca``, at 6× the time: it
+    is left out). benchmarks/versus_peers.py has the table over eleven captures."""
 
     name = "fill_ensemble"
-    summary = ("fill gaps by averaging nine fillers weighted by their error on synthetic "
+    summary = ("fill gaps by averaging seven fillers weighted by their error on synthetic "
                "gaps, with soft distance constraints (PMA-style ensemble)")
     params = _defaults(PMA.params, neighbours=[3, 5], weights="validation",
-                       members=["interp", "poly", "grnn", "linear"])
+                       members=["interp", "poly", "grnn", "linear"], short_gap="0.05 s")

@@ -85,6 +85,8 @@ def _frames(points: np.ndarray, ref: np.ndarray | None):
 def _reference(points: np.ndarray) -> np.ndarray:
     """Mean shape of (n, K, 3) point sets, after one rigid alignment to the first frame's
     centred shape (enough for a consistent local frame)."""
+    if len(points) > 100:                       # a mean shape needs no more frames
+        points = points[np.linspace(0, len(points) - 1, 100).astype(int)]
     centred = points - points.mean(axis=1, keepdims=True)
     if points.shape[1] < 3:
         return centred.mean(axis=0)
@@ -248,12 +250,13 @@ def gap_list(observed: np.ndarray, max_gap: float | None = None, fill_ends: bool
 
 
 def member_fills(pos, observed, gaps, external, *, local=LOCAL_FILLERS, neighbours=3,
-                 weight_scale: float = 300.0, mu=None, sd=None):
+                 weight_scale: float = 300.0, mu=None, sd=None, max_train: int = 600):
     """Every member's fill of every gap, ramped to meet the borders.
 
     ``external``: name → (T, J, 3) fills computed elsewhere (NaN where not filled);
     ``neighbours``: K, or several K (the local fillers then run once per K, named
-    ``interp3``, ``interp5``, ...). Returns
+    ``interp3``, ``interp5``, ...); ``max_train``: the regressions learn from at most this
+    many frames where the marker is seen (evenly spaced). Returns
     one entry per gap: ``(cand, fills)`` with ``cand`` the markers observed on the gap and
     its borders, most rigid first, and ``fills`` name → (gap length, 3)."""
     T = pos.shape[0]
@@ -267,6 +270,8 @@ def member_fills(pos, observed, gaps, external, *, local=LOCAL_FILLERS, neighbou
         cand = np.flatnonzero(seen & np.isfinite(sd[j]))
         cand = cand[np.argsort(sd[j, cand], kind="stable")]
         train = np.flatnonzero(observed[:, j])
+        if len(train) > max_train:          # the regressions need no more: cost stays O(gaps)
+            train = train[np.linspace(0, len(train) - 1, max_train).astype(int)]
         fills = {}
         sizes = (neighbours,) if np.isscalar(neighbours) else tuple(neighbours)
         for n, K in enumerate(sizes):
