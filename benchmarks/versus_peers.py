@@ -15,6 +15,7 @@ left unfilled is counted in ``unfilled``, not as an error). Methods:
 * ``default`` — ``configs/default.yaml`` (the whole C3D pipeline).
 
     python benchmarks/versus_peers.py [--seeds 2] [--max-frames 1500] [--only NAME ...]
+        [--min-seconds 2]     (c3d.org s02, 9 markers × 1.8 s, needs --min-seconds 1.5)
 
 Prints Markdown tables: gap RMSE per capture, and each method's ratio to ``pma``.
 """
@@ -93,6 +94,8 @@ def main():
                     help="longer captures are cut to their first N frames")
     ap.add_argument("--only", nargs="*", help="capture file names to run")
     ap.add_argument("--methods", nargs="*", help="methods to run (default: all)")
+    ap.add_argument("--min-seconds", type=float, default=2.0,
+                    help="shortest complete block taken from a file with gaps")
     args = ap.parse_args()
     methods = {k: parse_config({"version": 1, "pipeline": v}, k) for k, v in METHODS.items()}
     methods["default"] = load_config(REPO / "configs" / "default.yaml")
@@ -108,7 +111,8 @@ def main():
             print(f"(missing: {path})")
             continue
         motion = read(path)
-        clean = motion if not motion.missing.any() and motion.kinds is None else complete_block(motion)
+        clean = (motion if not motion.missing.any() and motion.kinds is None
+                 else complete_block(motion, args.min_seconds))
         if clean is None:
             print(f"(no complete block in {name})")
             continue

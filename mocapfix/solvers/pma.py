@@ -44,7 +44,7 @@ from mocapfix.solvers.rigid import kabsch
 LOCAL_FILLERS = ("interp", "poly", "grnn", "linear")
 
 
-def distance_stats(pos: np.ndarray, observed: np.ndarray, min_frames: int = 10):
+def distance_stats(pos: np.ndarray, observed: np.ndarray, min_frames: int = 3):
     """Mean and standard deviation (J, J) of every inter-marker distance over the frames
     where both markers are observed (NaN with fewer than ``min_frames`` such frames)."""
     T, J, _ = pos.shape
