@@ -508,3 +508,20 @@ def test_valid_point_at_the_origin_is_not_written_as_a_gap(tmp_path):
     assert not back.missing[gap[0], gap[1]]
     scale = abs(motion.source.scale)
     np.testing.assert_allclose(back.positions[gap[0], gap[1]], [0.0, -scale, 0.0], atol=1e-6)
+
+
+def test_int16_fill_beyond_the_file_range_stays_a_gap(tmp_path):
+    """A filled sample the int16 grid cannot hold is written as a gap, not a failed file;
+    the other fills are written."""
+    motion = C.read(shared("c3d/c3dorg_s04_sub_labels.c3d"))
+    assert motion.source.storage == "int16"
+    gaps = np.argwhere(motion.missing)
+    pos = motion.positions.copy()
+    (t0, j0), (t1, j1) = gaps[0], gaps[-1]
+    pos[t0, j0] = [1e6, 0.0, 0.0]
+    pos[t1, j1] = [100.0, 200.0, 300.0]
+    C.write(motion.replace(positions=pos), tmp_path / "out.c3d")
+    back = C.read(tmp_path / "out.c3d")
+    assert back.missing[t0, j0]
+    assert not back.missing[t1, j1]
+    np.testing.assert_allclose(back.positions[t1, j1], [100, 200, 300], atol=motion.source.scale)

@@ -6,6 +6,9 @@ versus-peers benchmark (``benchmarks/versus_peers.py``) and usable as a cleaner.
 The members are the four local/global fillers of :mod:`mocapfix.solvers.pma` and the
 Gløersen weighted PCA (``fill_pca``, run once on the whole capture); ``members`` can add
 ``tsmc`` (the default C3D filler) or drop any of them. Observed samples are never changed.
+A gap whose fill leaves the capture volume (the box of every observed sample grown by 10 %
+of its size per side, as in ``fill_pca``) is left missing and counted in
+``rejected_samples``.
 Every filled sample gets a confidence in ``Motion.confidence`` (observed samples keep
 theirs): ``exp(-spread / confidence_scale) · exp(-d / confidence_horizon) · m / M``, with
 ``spread`` the weighted RMS distance of the members from their average, ``d`` the time to
@@ -118,6 +121,10 @@ class PMA(Cleaner):
         ks = self["neighbours"]
         expected = (len([f for f in local if f != "linear"]) * len(ks) + ("linear" in local)
                     + len(external))
+        seen_points = motion.positions[~motion.missing]
+        lo, hi = seen_points.min(axis=0), seen_points.max(axis=0)
+        box_lo, box_hi = lo - 0.1 * (hi - lo), hi + 0.1 * (hi - lo)
+        info["rejected_samples"] = 0
         validated = (self._validation_errors(work, observed, gaps, local, mu, sd)
                      if self["weights"] != "plausibility" else [{}] * len(gaps))
         for (j, s, e), (cand, fills), verr in zip(gaps, members, validated):
@@ -148,6 +155,11 @@ class PMA(Cleaner):
                 avg = pma.soft_distance_constraint(
                     avg, pos[np.ix_(frames, rig)], mu[j, rig],
                     np.maximum(sd[j, rig], floor), width)
+            if ((avg < box_lo) | (avg > box_hi)).any():
+                # outside the capture volume: the members do not know this marker; leave
+                # the gap for the next step and the report (as fill_pca and tsmc do)
+                info["rejected_samples"] += int(n)
+                continue
             out[s:e, j] = avg
             # confidence: the members' agreement, the distance to the nearest observed
             # sample, and the share of the members that could fill this gap

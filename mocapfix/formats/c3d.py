@@ -820,6 +820,19 @@ def _splice(motion: Motion, source: C3DSource, path, mark_missing: bool) -> byte
     deleted = new_missing & ~source.missing
     still_missing = new_missing & source.missing
 
+    if source.storage == "int16":
+        # a fill the file's int16 grid cannot hold (beyond ±32767 × POINT:SCALE) is far
+        # outside where the markers ever were: it stays a gap (logged) rather than failing
+        # the file; a *measured* sample moved out of range is still an error
+        with np.errstate(invalid="ignore"):
+            unrepresentable = filled & (np.abs(np.rint(new / source.scale)) > 32767).any(axis=2)
+        if unrepresentable.any():
+            log.warning("%s: %d filled samples lie beyond the int16 range of the file; "
+                        "written as gaps", path, int(unrepresentable.sum()))
+            filled = filled & ~unrepresentable
+            still_missing = still_missing | unrepresentable
+            new = np.where(unrepresentable[..., None], old, new)
+
     points = source.points.copy()
     encode = filled | modified
     if encode.any():
