@@ -54,7 +54,7 @@ class PMA(Cleaner):
               nullable=True),
         Param("fill_ends", "bool", True, "also fill leading/trailing gaps"),
         Param("short_gap", "time", None, "interior gaps up to this long are filled first by "
-              "PCHIP per channel (spike holes, dropouts) and count as seen for the rest "
+              "a cubic Hermite curve (spike holes, dropouts) and count as seen for the rest "
               "(null: every gap goes through the members)", unit="s", low=0.0, nullable=True),
         Param("weights", "choice", "plausibility", "how members are weighted per gap: "
               "'plausibility' (Tits 2018: how well the fill keeps its neighbour distances), "
@@ -84,7 +84,8 @@ class PMA(Cleaner):
     def _external(self, motion: Motion) -> dict[str, np.ndarray]:
         out = {}
         if "pca" in self["members"]:
-            out["pca"] = build("fill_pca", fill_ends=True, min_observed=0.0).apply(motion)[0].positions
+            pca = build("fill_pca", fill_ends=True, min_observed=0.0)
+            out["pca"] = pca.apply(motion)[0].positions
         if "tsmc" in self["members"]:
             out["tsmc"] = build("tsmc", observed="keep").apply(motion)[0].positions
         return out
@@ -93,7 +94,7 @@ class PMA(Cleaner):
         pos = motion.positions
         T, J, _ = pos.shape
         observed = ~motion.missing
-        info = {"gaps": 0, "gaps_filled": 0, "filled": 0, "weights": {}}
+        info = {"gaps": 0, "gaps_filled": 0, "filled": 0, "weights_mean": {}}
         if T < 3 or observed.all() or observed.sum(axis=0).max(initial=0) < 2:
             return motion.copy(), info
         mu, sd = pma.distance_stats(pos, observed)
@@ -173,27 +174,22 @@ class PMA(Cleaner):
             for name, wk in zip(names, w / w.sum()):
                 weight_sum[name] = weight_sum.get(name, 0.0) + float(wk)
         if info["gaps_filled"]:
-            info["weights_mean"] = {k: round(v / info["gaps_filled"], 3) for k, v in weight_sum.items()}
+            averaged = max(sum(weight_sum.values()), 1e-12)     # one unit per averaged gap
+            info["weights_mean"] = {k: round(v / averaged, 3) for k, v in weight_sum.items()}
         return motion.replace(positions=out, confidence=conf), info
 
     @staticmethod
     def _fill_short(out, conf, gaps, short, horizon):
-        """PCHIP-fill (in place) the interior gaps of at most ``short`` frames; returns the
-        gaps left for the members."""
-        from mocapfix.solvers.segments import interpolate_gaps
-
-        T, J, _ = out.shape
-        filled, target = interpolate_gaps(out.reshape(T, 3 * J), "pchip", short)
-        done = target.reshape(T, J, 3).all(axis=2)
-        out[done] = filled.reshape(T, J, 3)[done]
-        rest = []
-        for j, s, e in gaps:
-            if done[s:e, j].all():
-                t = np.arange(s, e)
-                conf[s:e, j] = np.exp(-np.minimum(t - s + 1, e - t) / horizon)
-            else:
-                rest.append((j, s, e))
-        return rest
+        """Fill (in place) the interior gaps of at most ``short`` frames by cubic Hermite
+        curves (:func:`mocapfix.solvers.pma.hermite_short_gaps`); returns the gaps left
+        for the members."""
+        observed = ~np.isnan(out).any(axis=2)
+        small = [g for g in gaps if g[2] - g[1] <= short]
+        done = set(pma.hermite_short_gaps(out, observed, small))
+        for j, s, e in done:
+            t = np.arange(s, e)
+            conf[s:e, j] = np.exp(-np.minimum(t - s + 1, e - t) / horizon)
+        return [g for g in gaps if g not in done]
 
     def _validation_errors(self, motion, observed, gaps, local, mu, sd):
         """Per gap: member name → mean squared error on synthetic gaps of the same length

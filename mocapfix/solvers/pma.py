@@ -291,3 +291,27 @@ def member_fills(pos, observed, gaps, external, *, local=LOCAL_FILLERS, neighbou
         out.append((cand, fills))
     return out
 
+
+
+def hermite_short_gaps(pos: np.ndarray, observed: np.ndarray, gaps) -> list:
+    """Fill (in place) the interior gaps ``(j, s, e)`` of ``pos`` (T, J, 3) by a cubic
+    Hermite curve through the bounding samples, with one-sided difference slopes where the
+    samples beyond are observed (the chord's slope otherwise). Meant for holes of a few
+    frames (spike holes, dropouts), where it matches PCHIP without loading SciPy.
+    Returns the gaps it filled."""
+    T = pos.shape[0]
+    done = []
+    for j, s, e in gaps:
+        if s == 0 or e >= T:
+            continue
+        n = e - s
+        p0, p1 = pos[s - 1, j], pos[e, j]
+        chord = (p1 - p0) / (n + 1)
+        m0 = pos[s - 1, j] - pos[s - 2, j] if s >= 2 and observed[s - 2, j] else chord
+        m1 = pos[e + 1, j] - pos[e, j] if e + 1 < T and observed[e + 1, j] else chord
+        u = (np.arange(1, n + 1) / (n + 1))[:, None]
+        h00, h10 = 2 * u ** 3 - 3 * u ** 2 + 1, u ** 3 - 2 * u ** 2 + u
+        h01, h11 = -2 * u ** 3 + 3 * u ** 2, u ** 3 - u ** 2
+        pos[s:e, j] = h00 * p0 + h10 * (n + 1) * m0 + h01 * p1 + h11 * (n + 1) * m1
+        done.append((j, s, e))
+    return done
