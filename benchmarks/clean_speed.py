@@ -6,8 +6,13 @@
    including reading, writing and the JSON report.
 2. A batch of 20 corrupted captures (85_02 and a 1,500-frame slice of HDM05, 10 seeds
    each): wall time with ``-j 1`` and ``-j 2``.
+3. Issue 16's case and its scaling: 85_02 looped to 1,125 / 4,500 / 18,000 frames, 25 %
+   of the markers with 1–3 gaps of 0.1–1.5 s, 2 mm jitter, 2 % spikes of 20–100 mm
+   (``occlusion`` ``mixed``), ``mocapfix clean`` end to end, with the peak resident memory
+   of the process; and the start-up cost (``mocapfix --version`` against
+   ``mocapfix cleaners``, which loads every cleaner module).
 
-    python benchmarks/clean_speed.py
+    python benchmarks/clean_speed.py [--scaling]     (--scaling: case 3 only)
 """
 from __future__ import annotations
 
@@ -64,5 +69,43 @@ def main():
         print(f"| 20 corrupted captures | {t1:.1f} | {t2:.1f} | {t1 / t2:.2f}× |")
 
 
+def _peak_mib_of(args) -> tuple[float, float]:
+    """Wall time and peak RSS (MiB) of one child process."""
+    code = ("import resource, subprocess, sys, time; t = time.perf_counter(); "
+            "subprocess.run(sys.argv[1:], check=True, capture_output=True); "
+            "print(time.perf_counter() - t, "
+            "resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024)")
+    out = subprocess.run([sys.executable, "-c", code, *args], check=True, capture_output=True,
+                         text=True).stdout.split()
+    return float(out[0]), float(out[1])
+
+
+def scaling():
+    base = read(DATA / "cmu_85_02.c3d")
+    cli = [sys.executable, "-m", "mocapfix.cli"]
+    start = {what: min(_peak_mib_of(cli + [what])[0] for _ in range(3))
+             for what in ("--version", "cleaners")}
+    version, cleaners = start.values()
+    print(f"\nstart-up: `mocapfix --version` {version:.2f} s, `mocapfix cleaners` {cleaners:.2f} s")
+    print("\n| frames × markers (85_02 looped, mixed corruption) | `mocapfix clean` wall (s) "
+          "| peak RSS (MiB) |")
+    print("|---|---:|---:|")
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        for T in (1125, 4500, 18000):
+            reps = -(-T // (2 * base.n_frames))
+            long = np.concatenate([base.positions, base.positions[::-1]] * reps)[:T]
+            corrupted, _ = occlusion(_fresh(base, long), "mixed", 0)
+            write(_fresh(base, corrupted.positions), tmp / f"c{T}.c3d")
+            runs = [_peak_mib_of(cli + ["clean", str(tmp / f"c{T}.c3d"), "-o", str(tmp / f"o{T}_{k}")])
+                    for k in range(2)]
+            print(f"| {T} × {base.n_joints} | {min(r[0] for r in runs):.2f} | "
+                  f"{max(r[1] for r in runs):.0f} |")
+
+
 if __name__ == "__main__":
-    main()
+    if "--scaling" in sys.argv:
+        scaling()
+    else:
+        main()
+        scaling()

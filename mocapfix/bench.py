@@ -83,6 +83,9 @@ NAMED: dict[str, dict] = {
     "trust+tsmc(paper)": {"version": 1, "pipeline": [
         {"cleaner": "trust"}, {"cleaner": "tsmc", "prior": "none"}]},
     "trust+tsmc": {"version": 1, "pipeline": [{"cleaner": "trust"}, {"cleaner": "tsmc"}]},
+    # issue 16's peer: model averaging of five fillers with soft distance constraints
+    # (Tits et al. 2018, our implementation; fills gaps only, no denoising)
+    "pma": {"version": 1, "pipeline": [{"cleaner": "pma"}]},
 }
 
 #: per protocol: (metric key, header, decimals); the first one is the headline metric.

@@ -7,6 +7,11 @@ channel values they store (``channels``) and the rig that maps channels to posit
 (``rig``, see :mod:`mocapfix.kinematics`); their positions are the rig's forward
 kinematics. ``source`` is whatever the writer needs to reproduce the file and is never
 touched by cleaners.
+
+``kinds`` (optional, one entry per joint) says what each point is when a file stores more
+than markers: "marker", or e.g. "angle", "force", "moment", "power", "scalar" for the model
+outputs a C3D keeps as points (POINT:ANGLES, ...). The pipeline cleans only markers and
+passes the others through unchanged. None means every point is a marker or joint.
 """
 from __future__ import annotations
 
@@ -65,6 +70,7 @@ class Motion:
     source: Any = None
     path: str | None = None
     notes: list[str] = field(default_factory=list)
+    kinds: list[str] | None = None
 
     def __post_init__(self):
         self.positions = np.asarray(self.positions, dtype=np.float64)
@@ -79,6 +85,8 @@ class Motion:
                 raise ValueError("confidence must be (T, J)")
         if self.channels is not None:
             self.channels = np.asarray(self.channels, dtype=np.float64)
+        if self.kinds is not None and len(self.kinds) != len(self.names):
+            raise ValueError(f"{len(self.kinds)} kinds for {len(self.names)} joints")
 
     # -- shape ---------------------------------------------------------------
     @property

@@ -10,6 +10,9 @@ Config shape (safe-loaded)::
       - cleaner: butterworth
         cutoff: 6 Hz
         formats: [c3d, kinect]      # optional: run this step only on these formats
+        exclude: ["Probe*"]         # optional: markers this step leaves alone
+    markers: ["*"]                   # optional: markers the whole pipeline cleans
+    exclude: [RASI]                  # optional: markers the whole pipeline leaves alone
     report:                          # optional thresholds of the quality report
       warn_missing_after: 0.0        # keys: mocapfix.rules.REPORT_KEYS
       ...
@@ -31,11 +34,12 @@ from mocapfix.cleaners import build
 from mocapfix.cleaners.base import Cleaner, FittedCleaner
 from mocapfix.errors import ConfigError
 from mocapfix.motion import Motion
+from mocapfix.selection import Selection, cleanable, put, take
 from mocapfix.yamlsafe import load_yaml as safe_load_yaml
 
 CONFIG_VERSION = 1
-_STEP_KEYS = {"cleaner", "formats", "name"}
-_TOP_KEYS = {"version", "pipeline", "report"}
+_STEP_KEYS = {"cleaner", "formats", "name", "markers", "exclude"}
+_TOP_KEYS = {"version", "pipeline", "report", "markers", "exclude"}
 _FORMATS = {"c3d", "bvh", "asfamc", "kinect"}
 
 
@@ -59,6 +63,7 @@ class Step:
     cleaner: Cleaner
     formats: tuple[str, ...] | None = None
     line: int | None = None
+    select: Selection | None = None
 
     @property
     def label(self) -> str:
@@ -72,6 +77,8 @@ class Step:
         out.update(self.cleaner.config())
         if self.formats:
             out["formats"] = list(self.formats)
+        if self.select is not None:
+            out.update(self.select.config())
         return out
 
 
@@ -80,10 +87,13 @@ class Pipeline:
     steps: list[Step]
     report: dict = field(default_factory=dict)
     source: str | None = None
+    select: Selection | None = None
 
     def config(self) -> dict:
         """The effective config (every parameter, defaults included) as a plain dict."""
         out = {"version": CONFIG_VERSION, "pipeline": [s.config() for s in self.steps]}
+        if self.select is not None:
+            out.update(self.select.config())
         if self.report:
             out["report"] = dict(self.report)
         return out
@@ -98,10 +108,23 @@ class Pipeline:
                 records.append(StepRecord.not_run(step, motion, "not for this format"))
                 continue
             started = time.perf_counter()
-            out, info = step.cleaner.apply(motion)
+            out, info = self._apply_step(step, motion)
             records.append(StepRecord.compare(step, motion, out, info, time.perf_counter() - started))
             motion = out
         return motion, records
+
+    def _apply_step(self, step: Step, motion: Motion) -> tuple[Motion, dict]:
+        """Run one step on the markers it may clean (see :mod:`mocapfix.selection`); the
+        other points come back unchanged."""
+        cols = cleanable(motion, self.select, step.select)
+        if cols.all():
+            return step.cleaner.apply(motion)
+        if not cols.any():
+            return motion.copy(), {"skipped": "no marker selected"}
+        part, info = step.cleaner.apply(take(motion, cols))
+        info = dict(info or {})
+        info["points_not_cleaned"] = int((~cols).sum())
+        return put(motion, cols, part), info
 
 
 @dataclass
@@ -194,19 +217,19 @@ def parse_config(data, source: str = "<config>") -> Pipeline:
         if isinstance(cleaner, FittedCleaner):
             cleaner.resolve_models(_config_folder(source))
         cleaner.step = label.split(" (line")[0]
-        steps.append(Step(cleaner, formats, raw.get("__line__")))
+        steps.append(Step(cleaner, formats, raw.get("__line__"), Selection.parse(raw, where)))
     from mocapfix.rules import validate_report_section
 
     report = validate_report_section(data.get("report"), source)
-    return Pipeline(steps, report, source)
+    return Pipeline(steps, report, source, Selection.parse(data, source))
 
 
 def _check_step_params(name: str, raw: dict, params: dict, where: str) -> None:
     """An unknown parameter is named with its own line; a bare number for a physical
     parameter is read in the parameter's default unit and noted in ``UNIT_WARNINGS``."""
-    from mocapfix.cleaners import registry
+    from mocapfix.cleaners import lookup
 
-    cls = registry().get(name)
+    cls = lookup(name)
     if cls is None:
         return
     known = {p.name: p for p in cls.params}

@@ -9,7 +9,6 @@ capture. The kernels live in :mod:`mocapfix.solvers.segments` and
 from __future__ import annotations
 
 import numpy as np
-from scipy import signal
 
 from mocapfix.cleaners import register
 from mocapfix.cleaners.base import Cleaner, Param
@@ -99,6 +98,8 @@ class Butterworth(Cleaner):
                 f"{motion.fps / 2.0:g} Hz of this motion ({motion.fps:g} fps)")
         if motion.positions.size == 0:
             return motion.copy(), {}
+        from scipy import signal      # imported here: loading it costs ~0.5 s
+
         sos = signal.butter(self["order"], cutoff, btype="low", fs=motion.fps, output="sos")
         pad = max(segments.default_padlen(sos), int(np.ceil(motion.fps / cutoff)))
         out = segments.filtfilt(_channels(motion), sos, gaps=self["gaps"], padlen=pad)
@@ -126,6 +127,8 @@ class Wavelet(Cleaner):
     )
 
     def _validate(self):
+        if self["wavelet"] == "sym8":     # the default: no need to load pywt to check it
+            return
         import pywt
 
         if self["wavelet"] not in pywt.wavelist(kind="discrete"):

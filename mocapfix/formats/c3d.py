@@ -439,6 +439,15 @@ def _read_bytes(path, data: bytes, fps):
 
     names = _labels(get, parameters, n_points, notes)
     units, metres = _units(get("POINT:UNITS"), notes)
+    kinds = point_kinds(get, names)
+    if kinds is not None:
+        # a model output of exactly (0, 0, 0) is a value (no ground reaction in swing),
+        # not a gap: only the residual flag and NaN make it missing
+        model = np.array([k != "marker" for k in kinds])
+        zero = (model[None, :] & (points[..., :3] == 0).all(axis=2)
+                & (_residual_words(points, storage) >= 0))
+        positions[zero] = 0.0
+        missing = missing & ~zero
 
     if fps is not None:
         if rate is not None and not np.isclose(fps, rate):
@@ -470,9 +479,46 @@ def _read_bytes(path, data: bytes, fps):
         residual=residual, camera_mask=camera_mask, positions=positions.copy(), missing=missing,
         names=list(names), units=units, metres_per_unit=metres, first_frame=h["first_frame"],
         events=_events(header), prefix=bytes(prefix), tail=tail, conversion_note=conversion_note)
+    if kinds is not None:
+        other = [n for n, k in zip(names, kinds) if k != "marker"]
+        notes.append(f"{len(other)} points are model outputs, not markers (POINT:"
+                     f"{'/'.join(sorted({k.upper() + 'S' for k in kinds if k != 'marker'}))}); "
+                     "cleaning passes them through unchanged")
     return Motion(positions=positions, names=names, fps=float(rate), units=units,
                   metres_per_unit=metres, format=NAME, confidence=(~missing).astype(np.float64),
-                  source=source, path=str(path), notes=notes)
+                  source=source, path=str(path), notes=notes, kinds=kinds)
+
+
+#: POINT parameters that list model outputs stored as points (Vicon Plug-in Gait and
+#: others; POINT:TYPE_GROUPS may name more)
+MODEL_OUTPUT_GROUPS = ("ANGLES", "FORCES", "MOMENTS", "POWERS", "SCALARS", "REACTIONS")
+
+
+def point_kinds(get, names: list[str]) -> list[str] | None:
+    """Per point: "marker", or the kind of model output ("angle", "force", ...) when its
+    label is listed in POINT:ANGLES, FORCES, MOMENTS, POWERS, SCALARS, REACTIONS or a
+    group named in POINT:TYPE_GROUPS. None when the file lists no model outputs."""
+    groups = list(MODEL_OUTPUT_GROUPS)
+    typed = get("POINT:TYPE_GROUPS")
+    if typed is not None:
+        values = typed.value if isinstance(typed.value, (list, tuple)) else [typed.value]
+        for name in [str(v).strip().upper() for v in values][0::2]:
+            if name and name not in groups:
+                groups.append(name)
+    kind_of: dict[str, str] = {}
+    for group in groups:
+        listed = get(f"POINT:{group}")
+        if listed is None or not isinstance(listed.value, (list, tuple)):
+            continue
+        kind = group.lower()[:-1] if group.endswith("S") else group.lower()
+        for label in listed.value:
+            label = str(label).strip()
+            if label:
+                kind_of.setdefault(label, kind)
+    if not kind_of:
+        return None
+    kinds = [kind_of.get(n, "marker") for n in names]
+    return kinds if any(k != "marker" for k in kinds) else None
 
 
 def _unpack_header(header: bytes) -> dict:
@@ -795,6 +841,19 @@ def _splice(motion: Motion, source: C3DSource, path, mark_missing: bool) -> byte
     modified = changed & ~new_missing & ~source.missing
     deleted = new_missing & ~source.missing
     still_missing = new_missing & source.missing
+
+    if source.storage == "int16":
+        # a fill the file's int16 grid cannot hold (beyond ±32767 × POINT:SCALE) is far
+        # outside where the markers ever were: it stays a gap (logged) rather than failing
+        # the file; a *measured* sample moved out of range is still an error
+        with np.errstate(invalid="ignore"):
+            unrepresentable = filled & (np.abs(np.rint(new / source.scale)) > 32767).any(axis=2)
+        if unrepresentable.any():
+            log.warning("%s: %d filled samples lie beyond the int16 range of the file; "
+                        "written as gaps", path, int(unrepresentable.sum()))
+            filled = filled & ~unrepresentable
+            still_missing = still_missing | unrepresentable
+            new = np.where(unrepresentable[..., None], old, new)
 
     points = source.points.copy()
     encode = filled | modified

@@ -1,4 +1,6 @@
-"""Rigid alignment kernels: batched Kabsch fits and a robust, temporally smooth body frame.
+"""Rigid alignment kernels: batched Kabsch fits (shared by the body-frame alignments of
+``fill_pca``, ``tsmc``, the model-averaging gap filler and ``partlet_dictionary``) and a
+robust, temporally smooth body frame.
 
 :func:`kabsch` is the weighted orthogonal Procrustes fit of Kabsch (1976), batched over
 frames (3 × 3 SVDs, no frame loop). :func:`torso_frames` is the pose normalisation of

@@ -31,7 +31,6 @@ import math
 from typing import Callable
 
 import numpy as np
-from scipy import interpolate, ndimage, signal
 
 from mocapfix.gaps import runs
 
@@ -155,6 +154,8 @@ def interpolate_gaps(x: np.ndarray, method: str = "pchip", max_gap: float | None
     for c in col:
         key = np.packbits(missing[:, c]).tobytes() + np.packbits(target[:, c]).tobytes()
         groups.setdefault(key, []).append(int(c))
+    from scipy import interpolate      # imported here: loading it costs ~0.5 s
+
     for cols in groups.values():
         cols = np.asarray(cols)
         obs = ~missing[:, cols[0]]
@@ -217,6 +218,8 @@ def filtfilt(x: np.ndarray, sos: np.ndarray, gaps: str = "segments",
     sos = np.atleast_2d(np.asarray(sos, dtype=np.float64))
     pad = default_padlen(sos) if padlen is None else int(padlen)
 
+    from scipy import signal
+
     def func(seg):
         padded, p = extend(seg, pad)
         y = signal.sosfiltfilt(sos, padded, axis=0, padtype=None)
@@ -239,6 +242,7 @@ def gaussian(x: np.ndarray, sigma: float, gaps: str = "segments",
     if sigma <= 0:
         return np.asarray(x, dtype=np.float64).copy()
     radius = int(math.ceil(truncate * sigma))
+    from scipy import ndimage
 
     def func(seg):
         padded, p = extend(seg, radius)

@@ -1,0 +1,107 @@
+"""Which markers a pipeline or one of its steps cleans: ``markers:`` and ``exclude:`` in a
+config (exact names or shell-style glob patterns, ``*``, ``?``, ``[abc]``, matched
+case-sensitively against the whole name, e.g. ``"Probe*"``, ``"*:C7"``), and the points a
+file says are not markers (``Motion.kinds``: C3D model outputs such as POINT:ANGLES),
+which are never cleaned.
+
+Running a step on a selection hands the cleaner a Motion with only the selected columns
+and writes its result back into the full motion; the rest is returned bit-identical.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from fnmatch import fnmatchcase
+
+import numpy as np
+
+from mocapfix.errors import ConfigError
+from mocapfix.motion import Motion, Skeleton
+
+
+@dataclass(frozen=True)
+class Selection:
+    """``markers`` (None = every marker) minus ``exclude``; patterns or names."""
+
+    markers: tuple[str, ...] | None = None
+    exclude: tuple[str, ...] = ()
+
+    @classmethod
+    def parse(cls, raw: dict, where: str) -> "Selection | None":
+        """From a config mapping's ``markers``/``exclude`` keys (None when neither)."""
+        if "markers" not in raw and "exclude" not in raw:
+            return None
+        out = {}
+        for key in ("markers", "exclude"):
+            value = raw.get(key)
+            if value is None:
+                continue
+            if isinstance(value, str):
+                value = [value]
+            if not isinstance(value, list) or not all(isinstance(v, str) and v for v in value):
+                raise ConfigError(f"{where}: '{key}' must be a marker name, a glob pattern or a "
+                                  f"list of them, got {value!r}")
+            out[key] = tuple(value)
+        return cls(out.get("markers"), out.get("exclude", ()))
+
+    def mask(self, names: list[str]) -> np.ndarray:
+        def hit(name, patterns):
+            return any(fnmatchcase(name, p) for p in patterns)
+        keep = np.array([self.markers is None or hit(n, self.markers) for n in names], bool)
+        keep &= np.array([not hit(n, self.exclude) for n in names], bool)
+        return keep
+
+    def config(self) -> dict:
+        out = {}
+        if self.markers is not None:
+            out["markers"] = list(self.markers)
+        if self.exclude:
+            out["exclude"] = list(self.exclude)
+        return out
+
+
+def cleanable(motion: Motion, *selections: "Selection | None") -> np.ndarray:
+    """(J,) True for the points the pipeline may clean: markers (not model outputs) that
+    every given selection keeps."""
+    keep = np.ones(motion.n_joints, bool)
+    if motion.kinds is not None:
+        keep &= np.array([k == "marker" for k in motion.kinds], bool)
+    for sel in selections:
+        if sel is not None:
+            keep &= sel.mask(motion.names)
+    return keep
+
+
+def take(motion: Motion, cols: np.ndarray) -> Motion:
+    """The Motion of the points ``cols`` (J,) bool only (rig/channels formats refused: their
+    positions are tied to every joint of the rig)."""
+    if motion.rig is not None or motion.channels is not None:
+        raise ConfigError(f"{motion.path or 'motion'}: 'markers'/'exclude' select markers of "
+                          f"marker data (C3D, Kinect), not joints of a {motion.format} rig")
+    idx = np.flatnonzero(cols)
+    skeleton = None
+    if motion.skeleton is not None:
+        new = -np.ones(motion.n_joints, dtype=np.intp)
+        new[idx] = np.arange(len(idx))
+        parents = [int(new[p]) if p >= 0 else -1 for p in motion.skeleton.parents[idx]]
+        bones = [(int(new[a]), int(new[b])) for a, b in motion.skeleton.bones
+                 if new[a] >= 0 and new[b] >= 0]
+        skeleton = Skeleton(np.array(parents, dtype=np.intp), bones)
+    return motion.replace(
+        positions=motion.positions[:, idx].copy(), names=[motion.names[i] for i in idx],
+        confidence=None if motion.confidence is None else motion.confidence[:, idx].copy(),
+        kinds=None if motion.kinds is None else [motion.kinds[i] for i in idx],
+        skeleton=skeleton)
+
+
+def put(motion: Motion, cols: np.ndarray, part: Motion) -> Motion:
+    """``motion`` with the points ``cols`` replaced by ``part`` (from :func:`take`)."""
+    idx = np.flatnonzero(cols)
+    positions = motion.positions.copy()
+    positions[:, idx] = part.positions
+    confidence = None if motion.confidence is None else motion.confidence.copy()
+    if part.confidence is not None:
+        if confidence is None:
+            confidence = (~motion.missing).astype(np.float64)
+        confidence[:, idx] = part.confidence
+    return motion.replace(positions=positions, confidence=confidence,
+                          notes=list(part.notes))

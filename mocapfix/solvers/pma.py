@@ -1,0 +1,317 @@
+"""Gap filling by averaging several fillers, after Tits, Laraba, Caulier, Tilmanne &
+Dutoit (2018), "Robust and automatic motion-capture data recovery using soft skeleton
+constraints and model averaging", PLoS ONE 13(7): e0199744 ("PMA").
+
+Written from the paper's description (no code of its authors was used). Per gap of a
+marker ``j`` (a run of missing frames ``s..e-1``, bounded by the observed frames ``s-1``
+and ``e`` when they exist):
+
+1. *Neighbours*: the markers observed on every frame of the gap and at its borders,
+   ranked by how rigidly they move with ``j`` (the standard deviation of their distance
+   to ``j`` over the frames where both are seen; :func:`distance_stats`).
+2. *Fillers* (each returns ``j`` on the gap and at the border frames):
+
+   - ``interp`` — local interpolation: ``j``'s coordinates in the rigid frame of its
+     closest neighbours at the two borders, interpolated linearly across the gap;
+   - ``poly`` — local polynomial regression (degree 2, ridge) of ``j`` on the neighbours'
+     coordinates, both in the neighbours' rigid frame;
+   - ``grnn`` — generalised regression neural network (Specht 1991; a Nadaraya–Watson
+     kernel regression) of the same variables;
+   - ``linear`` — global weighted linear regression (ridge) of ``j`` on every marker
+     observed through the gap, in their common body frame, the columns weighted by
+     ``exp(-d² / 2s²)`` of their mean distance ``d`` to ``j``;
+   - any fills passed in by the caller (the cleaner passes ``fill_pca``: Gløersen &
+     Federolf's weighted PCA).
+3. *Borders*: every fill gets the linear ramp ``(1-f)(x(s-1) - F(s-1)) + f(x(e) - F(e))``
+   so it meets the data at both ends of the gap (the one available offset, held, at an
+   end gap).
+4. *Averaging*: fill ``k`` gets the weight ``1 / mean z²``, ``z = (d - μ)/σ`` over the
+   gap frames and the neighbours, with ``d`` the fill's distance to a neighbour and
+   ``μ, σ`` the observed distribution of that distance (:func:`plausibility`).
+5. *Soft constraint*: where the average lies outside ``μ ± c σ`` of its distance to one of
+   its 1–3 most rigid neighbours, it is moved radially onto the interval's edge (corrections
+   of the violated neighbours averaged, a few rounds; :func:`soft_distance_constraint`).
+
+Kernels are vectorised over the frames of a gap; the loop is over gaps.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from mocapfix.solvers.rigid import kabsch
+
+#: the fillers computed here (the caller may add its own, e.g. weighted PCA)
+LOCAL_FILLERS = ("interp", "poly", "grnn", "linear")
+
+
+def distance_stats(pos: np.ndarray, observed: np.ndarray, min_frames: int = 3):
+    """Mean and standard deviation (J, J) of every inter-marker distance over the frames
+    where both markers are observed (NaN with fewer than ``min_frames`` such frames)."""
+    T, J, _ = pos.shape
+    filled = np.where(observed[..., None], pos, 0.0)
+    mu = np.full((J, J), np.nan)
+    sd = np.full((J, J), np.nan)
+    for j in range(J):
+        both = observed & observed[:, j:j + 1]
+        n = both.sum(axis=0)
+        d = np.linalg.norm(filled - filled[:, j:j + 1], axis=2)
+        d = np.where(both, d, 0.0)
+        ok = n >= min_frames
+        m = d.sum(axis=0) / np.maximum(n, 1)
+        v = (np.where(both, (d - m) ** 2, 0.0)).sum(axis=0) / np.maximum(n - 1, 1)
+        mu[j, ok] = m[ok]
+        sd[j, ok] = np.sqrt(v[ok])
+    return mu, sd
+
+
+def _frames(points: np.ndarray, ref: np.ndarray | None):
+    """Rigid transform of each frame of ``points`` (n, K, 3) onto ``ref`` (K, 3); with
+    fewer than 3 points a translation only. Returns ``(to_local, to_global)`` functions of
+    (n, M, 3) arrays."""
+    n, K, _ = points.shape
+    centre = points.mean(axis=1)
+    if K < 3:
+        return (lambda x: x - centre[:, None]), (lambda x: x + centre[:, None])
+    R, cs, ct = kabsch(points, np.broadcast_to(ref, points.shape), np.ones((n, K)))
+
+    def to_local(x):
+        return (x - cs[:, None]) @ np.swapaxes(R, 1, 2) + ct[:, None]
+
+    def to_global(x):
+        return (x - ct[:, None]) @ R + cs[:, None]
+    return to_local, to_global
+
+
+def _reference(points: np.ndarray) -> np.ndarray:
+    """Mean shape of (n, K, 3) point sets, after one rigid alignment to the first frame's
+    centred shape (enough for a consistent local frame)."""
+    if len(points) > 100:                       # a mean shape needs no more frames
+        points = points[np.linspace(0, len(points) - 1, 100).astype(int)]
+    centred = points - points.mean(axis=1, keepdims=True)
+    if points.shape[1] < 3:
+        return centred.mean(axis=0)
+    ref = centred[0]
+    R, cs, ct = kabsch(points, np.broadcast_to(ref, points.shape), np.ones(points.shape[:2]))
+    return ((points - cs[:, None]) @ np.swapaxes(R, 1, 2) + ct[:, None]).mean(axis=0)
+
+
+def _ridge(X: np.ndarray, Y: np.ndarray, lam: float = 1e-3):
+    """Ridge regression with standardised features; returns a predictor."""
+    mx, sx = X.mean(axis=0), X.std(axis=0)
+    sx[sx < 1e-9] = 1.0
+    my = Y.mean(axis=0)
+    Z = (X - mx) / sx
+    A = Z.T @ Z + lam * len(Z) * np.eye(Z.shape[1])
+    B = np.linalg.solve(A, Z.T @ (Y - my))
+    return lambda Xn: ((Xn - mx) / sx) @ B + my
+
+
+def _grnn(X: np.ndarray, Y: np.ndarray, max_train: int = 800):
+    """GRNN (Specht 1991) predictor: Gaussian-kernel weighted mean of the training targets;
+    spread = the median distance of a training point to its 5th nearest neighbour."""
+    if len(X) > max_train:
+        pick = np.linspace(0, len(X) - 1, max_train).astype(int)
+        X, Y = X[pick], Y[pick]
+    mx, sx = X.mean(axis=0), X.std(axis=0)
+    sx[sx < 1e-9] = 1.0
+    Z = (X - mx) / sx
+    sq = (Z ** 2).sum(axis=1)
+    D2 = np.maximum(sq[:, None] + sq[None, :] - 2 * Z @ Z.T, 0.0)
+    k = min(5, len(Z) - 1)
+    spread2 = float(np.median(np.partition(D2, k, axis=1)[:, k])) if k > 0 else 1.0
+    spread2 = max(spread2, 1e-9)
+
+    def predict(Xn):
+        Zn = (Xn - mx) / sx
+        d2 = np.maximum((Zn ** 2).sum(axis=1)[:, None] + sq[None, :] - 2 * Zn @ Z.T, 0.0)
+        d2 -= d2.min(axis=1, keepdims=True)              # stable exponent
+        w = np.exp(-0.5 * d2 / spread2)
+        return (w @ Y) / w.sum(axis=1, keepdims=True)
+    return predict
+
+
+def _poly(z: np.ndarray) -> np.ndarray:
+    return np.concatenate([z, z ** 2], axis=1)
+
+
+def gap_fills(pos, observed, j, s, e, neighbours, train, body, *, fillers=LOCAL_FILLERS,
+              weight_scale: float = 300.0, mu=None):
+    """The local fillers' estimates of marker ``j`` on frames ``s-1 .. e`` (the gap plus
+    the border frames that exist), as a dict name → (n, 3) array over ``frames``.
+
+    ``neighbours``: indices of the rigid neighbours (observed on ``frames``); ``train``:
+    frames where ``j`` and ``body`` are observed; ``body``: every marker observed on
+    ``frames`` (for ``linear``). ``weight_scale`` in the data's units."""
+    T = pos.shape[0]
+    frames = np.arange(max(s - 1, 0), min(e + 1, T))
+    out = {}
+    K = len(neighbours)
+    if K:
+        tr_local = train[observed[np.ix_(train, neighbours)].all(axis=1)]
+        nb = pos[np.ix_(frames, neighbours)]
+        ref = _reference(pos[np.ix_(tr_local, neighbours)] if len(tr_local) else nb)
+        loc, glob = _frames(nb, ref)
+        if "interp" in fillers:
+            lj = loc(np.nan_to_num(pos[frames, j])[:, None])[:, 0]
+            n = len(frames)
+            have0, have1 = s > 0, e < T
+            a = lj[0] if have0 else lj[-1]
+            b = lj[-1] if have1 else lj[0]
+            f = (np.arange(n) / max(n - 1, 1))[:, None]
+            out["interp"] = glob(((1 - f) * a + f * b)[:, None])[:, 0]
+        if len(tr_local) >= max(10, 2 * K):
+            tl, _ = _frames(pos[np.ix_(tr_local, neighbours)], ref)
+            Xt = tl(pos[np.ix_(tr_local, neighbours)]).reshape(len(tr_local), -1)
+            Yt = tl(pos[tr_local, j][:, None])[:, 0]
+            Xg = loc(nb).reshape(len(frames), -1)
+            if "poly" in fillers and K >= 3:
+                out["poly"] = glob(_ridge(_poly(Xt), Yt)(_poly(Xg))[:, None])[:, 0]
+            if "grnn" in fillers and K >= 3:
+                out["grnn"] = glob(_grnn(Xt, Yt)(Xg)[:, None])[:, 0]
+    if "linear" in fillers and len(body) >= 3:
+        tr = train[observed[np.ix_(train, body)].all(axis=1)]
+        if len(tr) >= max(10, len(body)):
+            ref = _reference(pos[np.ix_(tr, body)])
+            tl, _ = _frames(pos[np.ix_(tr, body)], ref)
+            loc, glob = _frames(pos[np.ix_(frames, body)], ref)
+            d = mu[j, body] if mu is not None else np.zeros(len(body))
+            w = np.repeat(np.exp(-0.5 * (np.nan_to_num(d, nan=1e9) / weight_scale) ** 2), 3)
+            Xt = tl(pos[np.ix_(tr, body)]).reshape(len(tr), -1) * w
+            Yt = tl(pos[tr, j][:, None])[:, 0]
+            Xg = loc(pos[np.ix_(frames, body)]).reshape(len(frames), -1) * w
+            keep = w > 1e-6
+            if keep.sum() >= 3:
+                out["linear"] = glob(_ridge(Xt[:, keep], Yt)(Xg[:, keep])[:, None])[:, 0]
+    return frames, out
+
+
+def meet_borders(fill: np.ndarray, data: np.ndarray, has_start: bool, has_end: bool):
+    """Add the linear ramp that makes ``fill`` (n, 3: border, gap, border rows as present)
+    equal ``data`` at the border rows (Tits 2018: fills meet the gap's ends)."""
+    n = len(fill)
+    d0 = data[0] - fill[0] if has_start else None
+    d1 = data[-1] - fill[-1] if has_end else None
+    if d0 is None and d1 is None:
+        return fill
+    if d0 is None:
+        d0 = d1
+    if d1 is None:
+        d1 = d0
+    f = (np.arange(n) / max(n - 1, 1))[:, None]
+    return fill + (1 - f) * d0 + f * d1
+
+
+def plausibility(fill: np.ndarray, others: np.ndarray, mu: np.ndarray, sd: np.ndarray,
+                 floor: float) -> float:
+    """Mean squared z-score of the distances from ``fill`` (n, 3) to ``others`` (n, K, 3)
+    against their observed mean ``mu`` (K,) and standard deviation ``sd`` (K,), the
+    deviation floored at ``floor``. Lower is more plausible."""
+    d = np.linalg.norm(others - fill[:, None], axis=2)
+    z = (d - mu) / np.maximum(sd, floor)
+    return float(np.mean(z ** 2))
+
+
+def soft_distance_constraint(x: np.ndarray, others: np.ndarray, mu: np.ndarray, sd: np.ndarray,
+                             width: float = 2.0, rounds: int = 5) -> np.ndarray:
+    """Move each row of ``x`` (n, 3) radially onto ``mu ± width·sd`` of its distance to
+    ``others`` (n, K, 3) where it lies outside (corrections averaged over the K
+    neighbours, ``rounds`` times): Tits 2018's soft skeleton constraint."""
+    x = x.copy()
+    lo, hi = mu - width * sd, mu + width * sd
+    for _ in range(rounds):
+        v = x[:, None] - others
+        d = np.linalg.norm(v, axis=2)
+        target = np.clip(d, lo, hi)
+        if np.allclose(target, d):
+            break
+        with np.errstate(invalid="ignore", divide="ignore"):
+            corr = np.where(d[..., None] > 0, v * ((target - d) / d)[..., None], 0.0)
+        x += corr.mean(axis=1)
+    return x
+
+
+# -- the loop over gaps, shared by ``pma`` and ``fill_ensemble`` -----------------------------
+
+def gap_list(observed: np.ndarray, max_gap: float | None = None, fill_ends: bool = True):
+    """(marker, start, stop) of every gap to fill: runs of missing samples of markers seen
+    at least once, at most ``max_gap`` frames, end gaps only with ``fill_ends``."""
+    from mocapfix.gaps import runs
+
+    T = observed.shape[0]
+    out = []
+    for j, s, n in zip(*runs(~observed)):
+        e = s + n
+        if n == T or (max_gap is not None and n > max_gap):
+            continue
+        if (s == 0 or e == T) and not fill_ends:
+            continue
+        out.append((int(j), int(s), int(e)))
+    return out
+
+
+def member_fills(pos, observed, gaps, external, *, local=LOCAL_FILLERS, neighbours=3,
+                 weight_scale: float = 300.0, mu=None, sd=None, max_train: int = 600):
+    """Every member's fill of every gap, ramped to meet the borders.
+
+    ``external``: name → (T, J, 3) fills computed elsewhere (NaN where not filled);
+    ``neighbours``: K, or several K (the local fillers then run once per K, named
+    ``interp3``, ``interp5``, ...); ``max_train``: the regressions learn from at most this
+    many frames where the marker is seen (evenly spaced). Returns
+    one entry per gap: ``(cand, fills)`` with ``cand`` the markers observed on the gap and
+    its borders, most rigid first, and ``fills`` name → (gap length, 3)."""
+    T = pos.shape[0]
+    if mu is None:
+        mu, sd = distance_stats(pos, observed)
+    out = []
+    for j, s, e in gaps:
+        frames = np.arange(max(s - 1, 0), min(e + 1, T))
+        seen = observed[frames].all(axis=0)
+        seen[j] = False
+        cand = np.flatnonzero(seen & np.isfinite(sd[j]))
+        cand = cand[np.argsort(sd[j, cand], kind="stable")]
+        train = np.flatnonzero(observed[:, j])
+        if len(train) > max_train:          # the regressions need no more: cost stays O(gaps)
+            train = train[np.linspace(0, len(train) - 1, max_train).astype(int)]
+        fills = {}
+        sizes = (neighbours,) if np.isscalar(neighbours) else tuple(neighbours)
+        for n, K in enumerate(sizes):
+            # the global regression does not depend on K: computed once
+            names = local if n == 0 else tuple(f for f in local if f != "linear")
+            _, part = gap_fills(pos, observed, j, s, e, cand[:K], train, cand, fillers=names,
+                                mu=mu, weight_scale=weight_scale)
+            fills.update({f + ("" if len(sizes) == 1 or f == "linear" else str(K)): v
+                          for f, v in part.items()})
+        data = np.where(observed[frames, j][:, None], pos[frames, j], np.nan)
+        gap_rows = (frames >= s) & (frames < e)
+        for name, full in external.items():
+            value = full[frames, j]
+            if not np.isnan(value[gap_rows]).any():
+                fills[name] = np.where(np.isnan(value), data, value)
+        fills = {k: meet_borders(v, data, s > 0, e < T)[gap_rows] for k, v in fills.items()}
+        out.append((cand, fills))
+    return out
+
+
+
+def hermite_short_gaps(pos: np.ndarray, observed: np.ndarray, gaps) -> list:
+    """Fill (in place) the interior gaps ``(j, s, e)`` of ``pos`` (T, J, 3) by a cubic
+    Hermite curve through the bounding samples, with one-sided difference slopes where the
+    samples beyond are observed (the chord's slope otherwise). Meant for holes of a few
+    frames (spike holes, dropouts), where it matches PCHIP without loading SciPy.
+    Returns the gaps it filled."""
+    T = pos.shape[0]
+    done = []
+    for j, s, e in gaps:
+        if s == 0 or e >= T:
+            continue
+        n = e - s
+        p0, p1 = pos[s - 1, j], pos[e, j]
+        chord = (p1 - p0) / (n + 1)
+        m0 = pos[s - 1, j] - pos[s - 2, j] if s >= 2 and observed[s - 2, j] else chord
+        m1 = pos[e + 1, j] - pos[e, j] if e + 1 < T and observed[e + 1, j] else chord
+        u = (np.arange(1, n + 1) / (n + 1))[:, None]
+        h00, h10 = 2 * u ** 3 - 3 * u ** 2 + 1, u ** 3 - 2 * u ** 2 + u
+        h01, h11 = -2 * u ** 3 + 3 * u ** 2, u ** 3 - u ** 2
+        pos[s:e, j] = h00 * p0 + h10 * (n + 1) * m0 + h01 * p1 + h11 * (n + 1) * m1
+        done.append((j, s, e))
+    return done

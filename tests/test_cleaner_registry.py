@@ -1,0 +1,33 @@
+"""The cleaner registry: the name → module map agrees with what the modules register, and
+building the default pipeline does not load the heavy scipy/pywt modules it does not use."""
+import subprocess
+import sys
+
+from mocapfix import cleaners
+
+
+def test_name_map_matches_registered_cleaners():
+    reg = cleaners.registry()
+    assert set(cleaners._WHERE) == set(reg)
+    for name, module in cleaners._WHERE.items():
+        assert reg[name].__module__ == module
+
+
+def test_default_pipeline_loads_no_unused_heavy_module():
+    code = ("import sys\n"
+            "from mocapfix.pipeline import load_config, default_config_path\n"
+            "load_config(default_config_path())\n"
+            "print(' '.join(m for m in ('scipy.signal', 'scipy.interpolate', 'pywt', "
+            "'mocapfix.cleaners.rotations', 'mocapfix.cleaners.lowrank_isometry') "
+            "if m in sys.modules))\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == ""
+
+
+def test_unknown_cleaner_names_the_known_ones():
+    import pytest
+
+    from mocapfix.errors import ConfigError
+
+    with pytest.raises(ConfigError, match="known: .*tsmc"):
+        cleaners.build("no_such_cleaner")
