@@ -202,6 +202,53 @@ def test_units_do_not_matter():
     assert np.allclose(a.positions, b.positions * 1000.0, atol=1e-6)
 
 
+# -- the temporal term (β) and the gap-edge bridge, where they matter ------------------------
+
+@pytest.fixture(scope="module")
+def amc_random_missing():
+    """CMU 05_01 joint positions (598 frames × 31 joints) with 40 % of the samples missing
+    at random (the TSMC paper's protocol), seeds 0 and 1."""
+    import mocapfix
+    from mocapfix.corrupt import apply_protocol
+
+    truth = mocapfix.read(shared("asfamc/05_01.amc"))
+    return truth, [apply_protocol(truth, "feng2014", "random-missing", seed=s)[0] for s in (0, 1)]
+
+
+def _tsmc_mm(truth, bad, **params):
+    from mocapfix.metrics import rmse
+
+    out, _ = build("tsmc", prior="none", **params).apply(bad)
+    return rmse(out.positions, truth.positions) * truth.metres_per_unit * 1000.0
+
+
+def test_temporal_term_fills_isolated_missing_samples(amc_random_missing):
+    """With the paper's model (``prior: none``) on isolated missing samples the smoothness
+    term β/2 ||M O||² does the filling: measured 1.39 / 1.38 mm with β = 3 against
+    10.5 / 10.3 mm with β = 0 (pure low-rank completion). With the default ``prior: pca``
+    on the occlusion cases β = 0 changes the RMSE by < 1.5 % (issue 14)."""
+    truth, cases = amc_random_missing
+    for bad in cases:
+        with_beta = _tsmc_mm(truth, bad)
+        without = _tsmc_mm(truth, bad, beta=0.0)
+        assert with_beta < 0.2 * without, (with_beta, without)
+
+
+def test_gap_edge_bridge_helps_on_isolated_missing_samples(amc_random_missing, monkeypatch):
+    """The bridge carries the model's offset from the samples at a gap's edges into the gap:
+    on isolated missing samples with ``prior: none`` it lowers the RMSE from 1.67 / 1.61 mm
+    to 1.39 / 1.38 mm (measured). With the default ``prior: pca`` it changes the occlusion
+    results by < 1 % (the PCA prediction already meets the gap's edges)."""
+    import mocapfix.cleaners.tsmc as tsmc_module
+
+    truth, cases = amc_random_missing
+    bridged = [_tsmc_mm(truth, bad) for bad in cases]
+    monkeypatch.setattr(tsmc_module, "bridge_residual", lambda d, tau: np.zeros_like(d))
+    plain = [_tsmc_mm(truth, bad) for bad in cases]
+    for a, b in zip(bridged, plain):
+        assert a < 0.9 * b, (a, b)
+
+
 # -- real captures against the classical pipelines -------------------------------------------
 
 CLASSICAL = {
