@@ -115,7 +115,24 @@ def run(pipeline: str, motion):
 def rmse_mm(pipeline: str, capture: str, scenario: str, seed: int) -> float:
     """RMSE in mm over every sample of the capture. ``pipeline``: 'default' (the shipped
     configs/default.yaml), 'scipy_linear_gaussian', 'scipy_spline', 'classical' (best of
-    CLASSICAL), 'pca' (WITH_PCA)."""
+    CLASSICAL), 'pca' (WITH_PCA).
+
+    With MOCAPFIX_BASELINE_CACHE set to a folder, the baselines' values (not the
+    default's) are kept there across processes — for benchmarks/mutation_check.py, whose
+    mutants never touch the baselines; the tests do not set it."""
+    cache = os.environ.get("MOCAPFIX_BASELINE_CACHE")
+    if not cache or pipeline == "default":
+        return _rmse_mm(pipeline, capture, scenario, seed)
+    path = Path(cache) / f"{pipeline}-{capture}-{scenario}-{seed}.txt"
+    if path.exists():
+        return float(path.read_text())
+    value = _rmse_mm(pipeline, capture, scenario, seed)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(repr(value))
+    return value
+
+
+def _rmse_mm(pipeline: str, capture: str, scenario: str, seed: int) -> float:
     from mocapfix.metrics import rmse
 
     ref = truth(capture)
