@@ -155,5 +155,7 @@ def over_seeds(pipeline: str, capture: str, scenario: str) -> np.ndarray:
 
 
 def ratios(pipeline: str, baseline: str, capture: str, scenario: str) -> np.ndarray:
-    """Per-seed RMSE ratio pipeline / baseline."""
-    return over_seeds(pipeline, capture, scenario) / over_seeds(baseline, capture, scenario)
+    """Per-seed RMSE ratio pipeline / baseline (NaN where both are exact, 0 / 0)."""
+    ours, theirs = over_seeds(pipeline, capture, scenario), over_seeds(baseline, capture, scenario)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return ours / theirs
