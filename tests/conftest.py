@@ -7,6 +7,7 @@ Tests that use the real captures in ``../shared/data`` get their paths from
 from __future__ import annotations
 
 import contextlib
+import fnmatch
 import os
 import signal
 from pathlib import Path
@@ -26,17 +27,54 @@ def _missing(what: str):
     pytest.skip(message)
 
 
-def shared_files(subdir: str, pattern: str = "*") -> list:
-    """Parametrisation list of files in ``DATA/subdir`` matching ``pattern``.
+#: Every file of the shared data, by folder, as listed in ../shared/data/SOURCES.md. The
+#: per-file tests are parametrised from this table, not from what happens to be on disk,
+#: so a missing file fails its own test under MOCAPFIX_REQUIRE_DATA=1, and
+#: tests/test_shared_data.py checks that the disk holds exactly these files.
+EXPECTED_FILES = {
+    "c3d": (
+        "btk_ADemo1_pc_integer.c3d", "btk_Gait.c3d", "btk_PiG_Motion-FlatFoot-Hole.c3d",
+        "btk_mocap36_optitrack.c3d", "c3dorg_s01_Eb015pi.c3d", "c3dorg_s01_Eb015sr.c3d",
+        "c3dorg_s01_Eb015vr.c3d", "c3dorg_s02_DEC_INT.C3D", "c3dorg_s02_pc_real.c3d",
+        "c3dorg_s04_sub_labels.c3d", "c3dorg_s06_MACsample.c3d", "c3dorg_s08_TESTBPI.c3d",
+        "c3dorg_s09_PlugInC3D.c3d", "c3dorg_s13_Dance.c3d", "c3dorg_s20_phasespace_sample.c3d",
+        "c3dorg_s22_BKINtechnologies.c3d", "c3dorg_s28_dynamic.C3D", "cmu_85_02.c3d",
+        "ezc3d_BTS.c3d", "ezc3d_Optotrak.c3d", "ezc3d_Qualisys.c3d",
+        "hdm05_HDM_mm_01-02_03_120.c3d", "ktk_racing_full.c3d", "ktk_tennis_serve_nan.c3d",
+        "numediart_03_rolling.c3d",
+    ),
+    "asfamc": (
+        "05.asf", "05_01.amc", "05_02.amc", "05_10.amc", "13.asf", "13_39.amc", "143.asf",
+        "143_35.amc", "18.asf", "18_15.amc", "60.asf", "60_10.amc", "61.asf", "61_10.amc",
+        "90.asf", "90_31.amc",
+    ),
+    "bvh": (
+        "bandai_dataset-1_walk_normal_001.bvh", "bandai_dataset-2_run_normal_001.bvh",
+        "bvhpython_test_freebvh.bvh", "bvhpython_test_mocapbank.bvh", "cmu_cgspeed_131_01.bvh",
+        "cmu_cgspeed_131_03.bvh", "pymo_AV_8Walk_Meredith_HVHA_Rep1.bvh",
+    ),
+    "kinect": (
+        "kv1_msr3d_a01_s01_e01_skeleton3D.txt", "kv1_msr3d_a06_s03_e02_skeleton3D.txt",
+        "kv1_msr3d_a10_s06_e02_skeleton3D.txt", "kv1_msr3d_a16_s08_e02_skeleton3D.txt",
+        "kv1_utkinect_joints_s01_e01.txt", "kv1_utkinect_joints_s02_e01.txt",
+        "kv1_utkinect_joints_s05_e02.txt", "kv2_laban_Ges01_wavehand.csv",
+        "kv2_laban_Ges02_balancinghands.csv", "kv2_laban_Ges03_drawlines.csv",
+        "kv2_laban_Ges04_comehere.csv", "kv2_laban_KinectReader_joints.csv",
+    ),
+}
 
-    If none are found the list holds one ``None`` entry; the test must call
-    :func:`need` on it, which skips or (under MOCAPFIX_REQUIRE_DATA=1) fails.
-    """
-    folder = DATA / subdir
-    files = sorted(p for p in folder.glob(pattern) if p.is_file()) if folder.is_dir() else []
-    if not files:
-        return [pytest.param(None, id=f"{subdir}-missing")]
-    return [pytest.param(p, id=p.name) for p in files]
+
+def expected_names(subdir: str, pattern: str = "*") -> list:
+    """Names of :data:`EXPECTED_FILES` ``[subdir]`` matching the glob ``pattern``."""
+    return [n for n in EXPECTED_FILES[subdir] if fnmatch.fnmatchcase(n, pattern)]
+
+
+def shared_files(subdir: str, pattern: str = "*") -> list:
+    """Parametrisation list of the expected files (:data:`EXPECTED_FILES`) of
+    ``DATA/subdir`` matching ``pattern`` — one entry per listed file whether it is on disk
+    or not; the test must call :func:`need` on it, which skips or (under
+    MOCAPFIX_REQUIRE_DATA=1) fails for a missing file."""
+    return [pytest.param(DATA / subdir / name, id=name) for name in expected_names(subdir, pattern)]
 
 
 def need(path) -> Path:

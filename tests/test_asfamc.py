@@ -2,14 +2,13 @@
 on paper, an independent textbook forward-kinematics check, and malformed inputs."""
 from __future__ import annotations
 
-import time
 from pathlib import Path
 
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from conftest import need, shared, shared_files
+from conftest import hang_guard, need, shared, shared_files
 from mocapfix import formats
 from mocapfix.errors import UnreadableFileError, UnsupportedFeatureError, WriteError
 from mocapfix.formats import asfamc
@@ -132,10 +131,8 @@ def test_fk_matches_independent_textbook_computation(amc_name, asf_name):
 @pytest.mark.parametrize("amc", AMC_FILES)
 def test_every_cmu_file_reads_with_its_asf(amc):
     amc = need(amc)
-    start = time.perf_counter()
-    motion = formats.read(amc)
-    elapsed = time.perf_counter() - start
-    assert elapsed < 1.0, f"{amc.name} took {elapsed:.2f} s"
+    with hang_guard(60):                 # read time: benchmarks/formats_io.py
+        motion = formats.read(amc)
     assert motion.format == "asfamc"
     assert motion.n_frames == EXPECTED_FRAMES[amc.name]
     assert motion.n_joints == 31 and motion.names[0] == "root"
@@ -160,9 +157,8 @@ def test_every_cmu_file_reads_with_its_asf(amc):
 def test_unchanged_motion_writes_byte_identical_files(amc, tmp_path):
     amc = need(amc)
     motion = asfamc.read(amc)
-    start = time.perf_counter()
-    written = formats.write(motion, tmp_path / amc.name)
-    assert time.perf_counter() - start < 1.0
+    with hang_guard(60):                 # write time: benchmarks/formats_io.py
+        written = formats.write(motion, tmp_path / amc.name)
     asf_source = Path(motion.source.asf_path)
     assert written == [tmp_path / amc.name, tmp_path / asf_source.name]
     assert written[0].read_bytes() == amc.read_bytes()

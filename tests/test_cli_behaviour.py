@@ -107,7 +107,7 @@ def test_presets_work_outside_the_repo(tmp_path, monkeypatch):
     r = CliRunner().invoke(main, ["configs"])
     assert r.exit_code == 0 and "optical-c3d" in r.output and "kinect" in r.output
     r = CliRunner().invoke(main, ["configs", "kinect"])
-    assert r.exit_code == 0 and "lowrank_isometry" in r.output
+    assert r.exit_code == 0 and "kinect_skeleton" in r.output
     r = CliRunner().invoke(main, ["configs", "--rules", "optical-gait"])
     assert r.exit_code == 0 and "never_seen" in r.output
     r = CliRunner().invoke(main, ["configs", "optical-gait"])

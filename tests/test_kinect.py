@@ -6,12 +6,11 @@ index jumps, confidence shares), not values taken from the reader.
 from __future__ import annotations
 
 import re
-import time
 
 import numpy as np
 import pytest
 
-from conftest import need, shared, shared_files
+from conftest import hang_guard, need, shared, shared_files
 from mocapfix import formats
 from mocapfix.errors import UnreadableFileError
 from mocapfix.formats import kinect
@@ -234,12 +233,13 @@ def test_real_file_changed_values_round_trip(path, tmp_path):
             assert a == b
 
 
-def test_largest_files_read_fast():
+def test_largest_files_read_without_hanging():
+    """A hang guard only; the read time is measured by benchmarks/formats_io.py."""
     for name in ("kv1_utkinect_joints_s02_e01.txt", "kv2_laban_KinectReader_joints.csv"):
         path = shared(f"kinect/{name}")
-        start = time.perf_counter()
-        formats.read(path)
-        assert time.perf_counter() - start < 1.0
+        with hang_guard(60):
+            motion = formats.read(path)
+        assert motion.n_frames == EXPECTED[name][1]
 
 
 def test_crlf_file_round_trips(tmp_path):

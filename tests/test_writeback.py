@@ -77,9 +77,10 @@ def test_real_bvh_perturbed_positions_write_back(path):
     new = solve_channels(motion.rig, ch, target)
     size = np.ptp(motion.positions[0], axis=0).max()
     err = np.linalg.norm(motion.rig.positions(new) - target, axis=-1)
-    # joints whose twist is invisible in positions (single child) cannot be recovered
-    # exactly, so require a small error relative to the skeleton, not zero
-    assert np.median(err) < 1e-3 * size and err.max() < 0.05 * size
+    # the perturbed pose has the same bones, so it is reachable: the twist of a joint with
+    # one child is invisible in positions but also does not move them. Measured on the 7
+    # shared files: median 9e-18–4e-17, max 2e-16–2e-15 of the skeleton size.
+    assert err.max() < 1e-9 * size
 
 
 def test_real_amc_perturbed_positions_write_back():
