@@ -109,6 +109,28 @@ def patterns(fn):
     return fn
 
 
+_executor_options = [
+    click.option("--scheduler", metavar="tcp://HOST:PORT", default=None,
+                 help="Run the files on this Dask cluster (extra: pip install 'mocapfix[dask]'; "
+                      "workers need the inputs and outputs at the same paths)."),
+    click.option("--dask-workers", type=click.IntRange(1, 1024), default=None, metavar="N",
+                 help="Run the files on a local Dask cluster of N worker processes (extra: dask)."),
+]
+
+
+def executors(fn):
+    """--scheduler / --dask-workers (Dask) beside a command's -j (local processes)."""
+    for opt in reversed(_executor_options):
+        fn = opt(fn)
+    return fn
+
+
+def _executor_spec(jobs, scheduler, dask_workers):
+    from mocapfix.executors import ExecutorSpec
+
+    return ExecutorSpec(jobs, scheduler, dask_workers).check()
+
+
 # -- info --------------------------------------------------------------------------------------
 
 @main.command()
@@ -247,9 +269,10 @@ def _clean_line(r: dict, verbose: bool) -> str:
 @click.option("--skip-existing", "policy", flag_value="skip",
               help="Leave files whose output exists alone (same config only).")
 @patterns
+@executors
 @common
 def clean(inputs, outdir, config_path, reports, jobs, as_json, fps, allow_inside_input, dry_run,
-          policy, include, exclude):
+          policy, include, exclude, scheduler, dask_workers):
     """Clean INPUT files or folders with a pipeline of cleaners.
 
     An output that exists already is an error unless --overwrite or --skip-existing is
@@ -269,6 +292,7 @@ def clean(inputs, outdir, config_path, reports, jobs, as_json, fps, allow_inside
     out = Out(obj["verbosity"], err=as_json)
     try:
         kinds = _parse_reports(reports)
+        spec = _executor_spec(jobs, scheduler, dask_workers)
         pipeline = load_config(resolve_config(config_path or "default"))
         _print_warnings(out)
         found = _discover(inputs, include, exclude, out)
@@ -312,8 +336,11 @@ def clean(inputs, outdir, config_path, reports, jobs, as_json, fps, allow_inside
             # a failed file leaves nothing behind, not even an output of an earlier run
             remove_outputs(output_files(Path(r["output"])))
 
-    results = run_batch(todo, pipeline.config(), str(pipeline.source), kinds, jobs,
-                        {"fps": fps} if fps else None, on_result=stream)
+    try:
+        results = run_batch(todo, pipeline.config(), str(pipeline.source), kinds, jobs,
+                            {"fps": fps} if fps else None, on_result=stream, spec=spec)
+    except MocapfixError as exc:        # e.g. the Dask scheduler cannot be reached
+        _fail(str(exc), debug, exc)
     failed = [r for r in results if r["status"] == "ERROR"]
     if len(failed) < len(results):
         # provenance: written only when this config produced at least one output
@@ -353,9 +380,10 @@ def _config_body(text: str) -> str:
               help="Files checked in parallel.")
 @click.option("--fps", type=float, default=None, help="Frame rate for files that store none (AMC).")
 @patterns
+@executors
 @common
 def check(inputs, rules_path, junit_path, as_json, fail_on, exit_zero, would_clean, jobs, fps,
-          include, exclude):
+          include, exclude, scheduler, dask_workers):
     """Check INPUT files or folders against quality rules without changing anything.
 
     One line per file as it finishes: OK, WARN (passes), FAIL (a rule failed) or ERROR
@@ -377,6 +405,7 @@ def check(inputs, rules_path, junit_path, as_json, fail_on, exit_zero, would_cle
     out = Out(obj["verbosity"], err=as_json)
     started = time.perf_counter()
     try:
+        spec = _executor_spec(jobs, scheduler, dask_workers)
         rules = load_rules(resolve_rules_path(rules_path or "default")).with_fail_on(list(fail_on))
         config = source = None
         if would_clean:
@@ -391,11 +420,14 @@ def check(inputs, rules_path, junit_path, as_json, fail_on, exit_zero, would_cle
     task = CheckTask(rules, config, source, {"fps": fps} if fps else None)
     names = [str(f.relative if f.root is None else f.root.name / f.relative) for f in found.files]
     results: list = [None] * len(found.files)
-    for n, r in run_tasks(task, [f.path for f in found.files], jobs):
-        r["name"] = names[n]
-        results[n] = r
-        level = -1 if r["status"] in ("FAIL", "ERROR") else 0
-        out.line(check_line(r, obj["verbosity"] > 0), level=level)
+    try:
+        for n, r in run_tasks(task, [f.path for f in found.files], jobs, spec=spec):
+            r["name"] = names[n]
+            results[n] = r
+            level = -1 if r["status"] in ("FAIL", "ERROR") else 0
+            out.line(check_line(r, obj["verbosity"] > 0), level=level)
+    except MocapfixError as exc:        # e.g. the Dask scheduler cannot be reached
+        _fail(str(exc), debug, exc)
     seconds = time.perf_counter() - started
     if junit_path:
         atomic_write_text(junit_path, check_junit(
@@ -429,9 +461,10 @@ def check(inputs, rules_path, junit_path, as_json, fail_on, exit_zero, would_cle
 @click.option("-j", "--jobs", default=1, show_default=True, type=click.IntRange(1, 256),
               help="Files read in parallel.")
 @click.option("--fps", type=float, default=None, help="Frame rate for files that store none (AMC).")
+@executors
 @common
 def train_dictionary(training, output, method, atoms, window, sample_rate, lam, beta,
-                     iterations, max_windows, seed, jobs, fps):
+                     iterations, max_windows, seed, jobs, fps, scheduler, dask_workers):
     """Train a model for a trained cleaner from TRAINING files or folders (any format;
     BVH/AMC by forward kinematics) and write it to OUTPUT. Name it in a config with
     `model: PATH` (relative to the config file)."""
@@ -461,7 +494,8 @@ def train_dictionary(training, output, method, atoms, window, sample_rate, lam, 
     params = {"atoms": atoms, "window": window, "sample_rate": sample_rate, "train_lambda": lam,
               "beta": beta, "train_iterations": iterations, "max_windows": max_windows, "seed": seed}
     try:
-        summary = train(training, output, method, params, jobs, fps, progress)
+        summary = train(training, output, method, params, jobs, fps, progress,
+                        spec=_executor_spec(jobs, scheduler, dask_workers))
     except MocapfixError as exc:
         _fail(str(exc), debug, exc)
     finally:
