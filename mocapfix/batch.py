@@ -302,8 +302,12 @@ class CleanTask:
         from mocapfix.clean import clean_file
 
         try:
+            from mocapfix.manifest import file_sha256
+
             pipeline = _pipeline(self.config, self.source)
-            return clean_file(job.source, job.output, pipeline, self.reports, self.read_options)
+            result = clean_file(job.source, job.output, pipeline, self.reports, self.read_options)
+            result["input_sha256"] = file_sha256(job.source)      # for the manifest
+            return result
         except MocapfixError as exc:
             return error_result(job, name_the_file(job.source, str(exc)))
         except Exception as exc:  # noqa: BLE001 — one bad file must not stop the batch

@@ -284,6 +284,7 @@ def clean(inputs, outdir, config_path, reports, jobs, as_json, fps, allow_inside
     from mocapfix.batch import check_output_folder, plan_outputs, run_batch
     from mocapfix.clean import output_files, remove_outputs
     from mocapfix.fileio import atomic_write_text
+    from mocapfix.manifest import Manifest, run_key
     from mocapfix.pipeline import load_config
     from mocapfix.presets import resolve_config
 
@@ -301,11 +302,17 @@ def clean(inputs, outdir, config_path, reports, jobs, as_json, fps, allow_inside
             raise MocapfixError("no motion files found in " + ", ".join(inputs))
         config_file = Path(outdir) / "mocapfix-config.yaml"
         config_text = f"# effective config of this run (from {pipeline.source})\n" + pipeline.dump()
-        existing = [j for j in jobs_list if j.output.exists()]
+        manifest = Manifest(outdir, run_key(config_text, kinds, {"fps": fps} if fps else None))
+        finished = set() if policy == "overwrite" else {j for j in jobs_list if manifest.finished(j)}
+        existing = [j for j in jobs_list if j.output.exists() and j not in finished
+                    and not manifest.interrupted(j)]
         if existing and policy is None and not dry_run:
             shown = ", ".join(str(j.output) for j in existing[:3]) + (" …" if len(existing) > 3 else "")
+            other = any(str(j.source) in manifest.records for j in existing)
             raise MocapfixError(f"{len(existing)} output(s) exist already ({shown}); pass --overwrite "
-                                "to replace them or --skip-existing to keep them")
+                                "to replace them or --skip-existing to keep them"
+                                + ("; the folder's manifest records them made with another config, "
+                                   "report kinds, --fps, version or input" if other else ""))
         if policy == "skip" and existing and config_file.exists() and \
                 _config_body(config_file.read_text(encoding="utf-8")) != _config_body(config_text):
             raise MocapfixError(f"{config_file}: the outputs there were made with another config; "
@@ -317,10 +324,11 @@ def clean(inputs, outdir, config_path, reports, jobs, as_json, fps, allow_inside
         _fail(str(exc), debug, exc)
     except MocapfixError as exc:
         _fail(str(exc), debug, exc)
-    todo = [j for j in jobs_list if not (policy == "skip" and j.output.exists())]
+    todo = [j for j in jobs_list if j not in finished and not (policy == "skip" and j.output.exists())]
     skipped = [j for j in jobs_list if j not in todo]
     for j in skipped:
-        out.line(f"SKIP  {j.source}: output exists ({j.output})")
+        why = "finished earlier" if j in finished else "output exists"
+        out.line(f"SKIP  {j.source}: {why} ({j.output})")
     if dry_run:
         for j in todo:
             note = " (replaces the existing output)" if j.output.exists() else ""
@@ -335,14 +343,17 @@ def clean(inputs, outdir, config_path, reports, jobs, as_json, fps, allow_inside
         if r["status"] == "ERROR":
             # a failed file leaves nothing behind, not even an output of an earlier run
             remove_outputs(output_files(Path(r["output"])))
+        manifest.record(r)               # resumable: one record per finished file
 
+    manifest.start(todo)
     try:
         results = run_batch(todo, pipeline.config(), str(pipeline.source), kinds, jobs,
                             {"fps": fps} if fps else None, on_result=stream, spec=spec)
     except MocapfixError as exc:        # e.g. the Dask scheduler cannot be reached
         _fail(str(exc), debug, exc)
+    manifest.close()
     failed = [r for r in results if r["status"] == "ERROR"]
-    if len(failed) < len(results):
+    if len(failed) < len(results) or finished:
         # provenance: written only when this config produced at least one output
         atomic_write_text(config_file, config_text)
     if as_json:
@@ -351,7 +362,8 @@ def clean(inputs, outdir, config_path, reports, jobs, as_json, fps, allow_inside
                                "config": str(pipeline.source)}, indent=1))
     else:
         out.line(f"cleaned {len(results) - len(failed)} of {len(results)} files"
-                 + (f" ({len(skipped)} skipped: output exists)" if skipped else "")
+                 + (f" ({len(skipped)} skipped: {'finished earlier' if finished else 'output exists'})"
+                    if skipped else "")
                  + (f"; {len(failed)} failed (ERROR): " + ", ".join(r["input"] for r in failed)
                     if failed else ""), level=-1, err=bool(failed))
     sys.exit(EXIT_SOME_FAILED if failed else EXIT_OK)
