@@ -93,6 +93,13 @@ def open_executor(spec: ExecutorSpec, n_items: int):
                 raise ConfigError(f"cannot reach the Dask scheduler {spec.scheduler}: {exc}") from None
             where = f"Dask scheduler {spec.scheduler}"
         else:
+            import dask
+
+            # Dask's nanny sets MALLOC_TRIM_THRESHOLD_=65536 in its workers by default;
+            # with it a clean ran 1.7x slower (every large numpy temporary mmapped and
+            # unmapped: sample C3D 1.65 s against 0.98 s in a plain worker process)
+            stack.enter_context(dask.config.set(
+                {"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}))
             cluster = stack.enter_context(distributed.LocalCluster(
                 n_workers=spec.dask_workers, threads_per_worker=1, processes=True,
                 dashboard_address=None, silence_logs=40))
