@@ -32,8 +32,9 @@ def _jobs(outdir):
 
 
 def _tree(folder: Path) -> dict:
-    """Every file under ``folder``: motion files as bytes, reports as JSON without the
-    timing fields (the only thing that differs between two runs of the same config)."""
+    """Every file under ``folder`` but the manifest (times of day): motion files as bytes,
+    reports as JSON without the timing fields (the only thing that differs between two
+    runs of the same config)."""
     def drop_seconds(x):
         if isinstance(x, dict):
             return {k: drop_seconds(v) for k, v in x.items() if k != "seconds"}
@@ -43,7 +44,7 @@ def _tree(folder: Path) -> dict:
 
     out = {}
     for p in sorted(folder.rglob("*")):
-        if p.is_file():
+        if p.is_file() and p.name != "mocapfix-manifest.jsonl":
             rel = p.relative_to(folder).as_posix()
             out[rel] = drop_seconds(json.loads(p.read_text())) if p.name.endswith(".report.json") \
                 else p.read_bytes()
@@ -165,3 +166,23 @@ def test_thread_policy_numbers(monkeypatch):
     assert threads.blas_threads(1) == threads.cores()          # capped at the cores
     monkeypatch.delenv("MOCAPFIX_BLAS_THREADS")
     assert threads.blas_threads(1) == threads.SINGLE_FILE_THREADS
+
+
+def test_check_on_dask_matches_local():
+    import distributed
+
+    from mocapfix.check import CheckTask
+    from mocapfix.rules import load_rules, resolve_rules_path
+
+    task = CheckTask(load_rules(resolve_rules_path("default")))
+    paths = [f.path for f in discover_inputs([SAMPLE_DATA]).files]
+
+    def strip(results):
+        return {r["path"]: {k: v for k, v in r.items() if k != "seconds"} for _, r in results}
+
+    local = strip(run_tasks(task, paths))
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=False,
+                                  dashboard_address=None) as cluster, distributed.Client(cluster) as client:
+        dask = strip(run_tasks(task, paths, executor=client.get_executor(pure=False)))
+    assert len(local) == 4 and local == dask
+    assert {r["status"] for r in local.values()} <= {"OK", "WARN", "FAIL"}
