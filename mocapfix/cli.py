@@ -275,7 +275,9 @@ def clean(inputs, outdir, config_path, reports, jobs, as_json, fps, allow_inside
           policy, include, exclude, scheduler, dask_workers):
     """Clean INPUT files or folders with a pipeline of cleaners.
 
-    An output that exists already is an error unless --overwrite or --skip-existing is
+    Files an earlier run of the same config finished (recorded in the output folder's
+    mocapfix-manifest.jsonl, input unchanged) are skipped, so a killed run resumes; any
+    other output that exists already is an error unless --overwrite or --skip-existing is
     given. Exit code 0 when every file was cleaned, 1 when some failed (the others are
     still written), 2 for a usage or config error.
     """
@@ -354,7 +356,7 @@ def clean(inputs, outdir, config_path, reports, jobs, as_json, fps, allow_inside
     manifest.close()
     failed = [r for r in results if r["status"] == "ERROR"]
     if len(failed) < len(results) or finished:
-        # provenance: written only when this config produced at least one output
+        # provenance: written only when this config produced (or kept) at least one output
         atomic_write_text(config_file, config_text)
     if as_json:
         click.echo(json.dumps({"files": results, "cleaned": len(results) - len(failed),
