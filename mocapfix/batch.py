@@ -20,7 +20,8 @@ import fnmatch
 import os
 import stat
 import tempfile
-from concurrent.futures import Executor, ProcessPoolExecutor, as_completed
+import threading
+from concurrent.futures import FIRST_COMPLETED, Executor, wait
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Iterator
@@ -211,31 +212,74 @@ def name_the_file(path, message: str) -> str:
 
 
 def run_tasks(task: Callable, items: list, workers: int = 1,
-              executor: Executor | None = None) -> Iterator[tuple[int, dict]]:
+              executor: Executor | None = None, spec=None,
+              window: int | None = None) -> Iterator[tuple[int, dict]]:
     """Run ``task(item)`` for every item; yield ``(index, result)`` as each finishes.
 
+    Where: an injected ``executor`` (anything with ``submit``), else ``spec``
+    (:class:`mocapfix.executors.ExecutorSpec`: local processes or Dask), else ``workers``
+    local processes. With one worker (or one item) and no executor the tasks run in this
+    process, in order. In worker processes every task runs with one BLAS thread
+    (:mod:`mocapfix.threads`). At most ``window`` tasks (default: twice the executor's
+    slots) are in flight, so memory does not grow with the number of items.
+
     ``task`` must be picklable for a process pool and must turn its own failures into an
-    ``ERROR`` result; a task that raises anyway (a killed worker) becomes one here. With
-    ``workers <= 1`` and no executor the tasks run in this process, in order.
+    ``ERROR`` result; a task that raises anyway (a killed worker) becomes one here.
     """
-    if executor is None and (workers <= 1 or len(items) <= 1):
-        for n, item in enumerate(items):
-            yield n, _guarded(task, item)
+    from mocapfix.executors import ExecutorSpec, open_executor
+
+    if executor is not None:
+        yield from _run_on(executor, task, items, window or max(2, 2 * workers))
         return
-    own = executor is None
-    pool = executor or ProcessPoolExecutor(max_workers=workers)
+    with open_executor(spec or ExecutorSpec(jobs=workers), len(items)) as running:
+        if running.executor is None:
+            from mocapfix.threads import blas_threads, limit_blas
+
+            limit_blas(blas_threads(1))
+            for n, item in enumerate(items):
+                yield n, _guarded(task, item)
+            return
+        yield from _run_on(running.executor, task, items, window or 2 * running.slots)
+
+
+@dataclass(frozen=True)
+class InWorker:
+    """``task`` run in a batch worker: BLAS held to ``threads`` threads first."""
+
+    task: Callable
+    threads: int = 1
+
+    def __call__(self, item):
+        from mocapfix.threads import limit_blas
+
+        limit_blas(self.threads)
+        return self.task(item)
+
+
+def _run_on(pool: Executor, task, items: list, window: int) -> Iterator[tuple[int, dict]]:
+    work = InWorker(task)
+    pending: dict = {}
+    it = iter(enumerate(items))
     try:
-        futures = {pool.submit(task, item): n for n, item in enumerate(items)}
-        for fut in as_completed(futures):
-            n = futures[fut]
-            try:
-                result = fut.result()
-            except Exception as exc:  # noqa: BLE001 — e.g. a worker killed by the OS
-                result = error_result(items[n], f"worker failed: {exc}")
-            yield n, result
+        while True:
+            while len(pending) < max(1, window):
+                nxt = next(it, None)
+                if nxt is None:
+                    break
+                pending[pool.submit(work, nxt[1])] = nxt[0]
+            if not pending:
+                return
+            done, _ = wait(pending, return_when=FIRST_COMPLETED)
+            for fut in done:
+                n = pending.pop(fut)
+                try:
+                    result = fut.result()
+                except Exception as exc:  # noqa: BLE001 — e.g. a worker killed by the OS
+                    result = error_result(items[n], f"worker failed: {exc}")
+                yield n, result
     finally:
-        if own:
-            pool.shutdown(cancel_futures=True)
+        for fut in pending:
+            fut.cancel()
 
 
 def _guarded(task, item) -> dict:
@@ -258,8 +302,12 @@ class CleanTask:
         from mocapfix.clean import clean_file
 
         try:
+            from mocapfix.manifest import file_sha256
+
             pipeline = _pipeline(self.config, self.source)
-            return clean_file(job.source, job.output, pipeline, self.reports, self.read_options)
+            result = clean_file(job.source, job.output, pipeline, self.reports, self.read_options)
+            result["input_sha256"] = file_sha256(job.source)      # for the manifest
+            return result
         except MocapfixError as exc:
             return error_result(job, name_the_file(job.source, str(exc)))
         except Exception as exc:  # noqa: BLE001 — one bad file must not stop the batch
@@ -267,30 +315,33 @@ class CleanTask:
 
 
 _PIPELINES: dict = {}
+_PIPELINES_LOCK = threading.Lock()
 
 
 def _pipeline(config: dict, source: str):
-    from mocapfix.pipeline import parse_config
+    """The parsed pipeline of ``config``, parsed once per process (a Dask worker's threads
+    share it; models are cached per process by :mod:`mocapfix.models`)."""
     import json
 
-    from mocapfix.pipeline import UNIT_WARNINGS
+    from mocapfix.pipeline import UNIT_WARNINGS, parse_config
 
     key = (source, json.dumps(config, sort_keys=True, default=str))
-    if key not in _PIPELINES:
-        _PIPELINES.clear()
-        _PIPELINES[key] = parse_config(config, source)
-        UNIT_WARNINGS.clear()          # the CLI printed them when it loaded the config
-    return _PIPELINES[key]
+    with _PIPELINES_LOCK:
+        if key not in _PIPELINES:
+            _PIPELINES.clear()
+            _PIPELINES[key] = parse_config(config, source)
+            UNIT_WARNINGS.clear()          # the CLI printed them when it loaded the config
+        return _PIPELINES[key]
 
 
 def run_batch(jobs: list[Job], config: dict, source: str, reports=("json",), workers: int = 1,
               read_options: dict | None = None, on_result: Callable | None = None,
-              executor: Executor | None = None) -> list[dict]:
+              executor: Executor | None = None, spec=None) -> list[dict]:
     """Clean every job; results in job order. ``on_result(result)`` is called as each file
     finishes (for streaming output)."""
     task = CleanTask(config, source, tuple(reports), read_options)
     results: list[dict | None] = [None] * len(jobs)
-    for n, result in run_tasks(task, jobs, workers, executor):
+    for n, result in run_tasks(task, jobs, workers, executor, spec):
         results[n] = result
         if on_result is not None:
             on_result(result)

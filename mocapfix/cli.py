@@ -109,6 +109,28 @@ def patterns(fn):
     return fn
 
 
+_executor_options = [
+    click.option("--scheduler", metavar="tcp://HOST:PORT", default=None,
+                 help="Run the files on this Dask cluster (extra: pip install 'mocapfix[dask]'; "
+                      "workers need the inputs and outputs at the same paths)."),
+    click.option("--dask-workers", type=click.IntRange(1, 1024), default=None, metavar="N",
+                 help="Run the files on a local Dask cluster of N worker processes (extra: dask)."),
+]
+
+
+def executors(fn):
+    """--scheduler / --dask-workers (Dask) beside a command's -j (local processes)."""
+    for opt in reversed(_executor_options):
+        fn = opt(fn)
+    return fn
+
+
+def _executor_spec(jobs, scheduler, dask_workers):
+    from mocapfix.executors import ExecutorSpec
+
+    return ExecutorSpec(jobs, scheduler, dask_workers).check()
+
+
 # -- info --------------------------------------------------------------------------------------
 
 @main.command()
@@ -247,12 +269,15 @@ def _clean_line(r: dict, verbose: bool) -> str:
 @click.option("--skip-existing", "policy", flag_value="skip",
               help="Leave files whose output exists alone (same config only).")
 @patterns
+@executors
 @common
 def clean(inputs, outdir, config_path, reports, jobs, as_json, fps, allow_inside_input, dry_run,
-          policy, include, exclude):
+          policy, include, exclude, scheduler, dask_workers):
     """Clean INPUT files or folders with a pipeline of cleaners.
 
-    An output that exists already is an error unless --overwrite or --skip-existing is
+    Files an earlier run of the same config finished (recorded in the output folder's
+    mocapfix-manifest.jsonl, input unchanged) are skipped, so a killed run resumes; any
+    other output that exists already is an error unless --overwrite or --skip-existing is
     given. Exit code 0 when every file was cleaned, 1 when some failed (the others are
     still written), 2 for a usage or config error.
     """
@@ -261,6 +286,7 @@ def clean(inputs, outdir, config_path, reports, jobs, as_json, fps, allow_inside
     from mocapfix.batch import check_output_folder, plan_outputs, run_batch
     from mocapfix.clean import output_files, remove_outputs
     from mocapfix.fileio import atomic_write_text
+    from mocapfix.manifest import Manifest, run_key
     from mocapfix.pipeline import load_config
     from mocapfix.presets import resolve_config
 
@@ -269,6 +295,7 @@ def clean(inputs, outdir, config_path, reports, jobs, as_json, fps, allow_inside
     out = Out(obj["verbosity"], err=as_json)
     try:
         kinds = _parse_reports(reports)
+        spec = _executor_spec(jobs, scheduler, dask_workers)
         pipeline = load_config(resolve_config(config_path or "default"))
         _print_warnings(out)
         found = _discover(inputs, include, exclude, out)
@@ -277,11 +304,17 @@ def clean(inputs, outdir, config_path, reports, jobs, as_json, fps, allow_inside
             raise MocapfixError("no motion files found in " + ", ".join(inputs))
         config_file = Path(outdir) / "mocapfix-config.yaml"
         config_text = f"# effective config of this run (from {pipeline.source})\n" + pipeline.dump()
-        existing = [j for j in jobs_list if j.output.exists()]
+        manifest = Manifest(outdir, run_key(config_text, kinds, {"fps": fps} if fps else None))
+        finished = set() if policy == "overwrite" else {j for j in jobs_list if manifest.finished(j)}
+        existing = [j for j in jobs_list if j.output.exists() and j not in finished
+                    and not manifest.interrupted(j)]
         if existing and policy is None and not dry_run:
             shown = ", ".join(str(j.output) for j in existing[:3]) + (" …" if len(existing) > 3 else "")
+            other = any(str(j.source) in manifest.records for j in existing)
             raise MocapfixError(f"{len(existing)} output(s) exist already ({shown}); pass --overwrite "
-                                "to replace them or --skip-existing to keep them")
+                                "to replace them or --skip-existing to keep them"
+                                + ("; the folder's manifest records them made with another config, "
+                                   "report kinds, --fps, version or input" if other else ""))
         if policy == "skip" and existing and config_file.exists() and \
                 _config_body(config_file.read_text(encoding="utf-8")) != _config_body(config_text):
             raise MocapfixError(f"{config_file}: the outputs there were made with another config; "
@@ -293,10 +326,11 @@ def clean(inputs, outdir, config_path, reports, jobs, as_json, fps, allow_inside
         _fail(str(exc), debug, exc)
     except MocapfixError as exc:
         _fail(str(exc), debug, exc)
-    todo = [j for j in jobs_list if not (policy == "skip" and j.output.exists())]
+    todo = [j for j in jobs_list if j not in finished and not (policy == "skip" and j.output.exists())]
     skipped = [j for j in jobs_list if j not in todo]
     for j in skipped:
-        out.line(f"SKIP  {j.source}: output exists ({j.output})")
+        why = "finished earlier" if j in finished else "output exists"
+        out.line(f"SKIP  {j.source}: {why} ({j.output})")
     if dry_run:
         for j in todo:
             note = " (replaces the existing output)" if j.output.exists() else ""
@@ -311,12 +345,18 @@ def clean(inputs, outdir, config_path, reports, jobs, as_json, fps, allow_inside
         if r["status"] == "ERROR":
             # a failed file leaves nothing behind, not even an output of an earlier run
             remove_outputs(output_files(Path(r["output"])))
+        manifest.record(r)               # resumable: one record per finished file
 
-    results = run_batch(todo, pipeline.config(), str(pipeline.source), kinds, jobs,
-                        {"fps": fps} if fps else None, on_result=stream)
+    manifest.start(todo)
+    try:
+        results = run_batch(todo, pipeline.config(), str(pipeline.source), kinds, jobs,
+                            {"fps": fps} if fps else None, on_result=stream, spec=spec)
+    except MocapfixError as exc:        # e.g. the Dask scheduler cannot be reached
+        _fail(str(exc), debug, exc)
+    manifest.close()
     failed = [r for r in results if r["status"] == "ERROR"]
-    if len(failed) < len(results):
-        # provenance: written only when this config produced at least one output
+    if len(failed) < len(results) or finished:
+        # provenance: written only when this config produced (or kept) at least one output
         atomic_write_text(config_file, config_text)
     if as_json:
         click.echo(json.dumps({"files": results, "cleaned": len(results) - len(failed),
@@ -324,7 +364,8 @@ def clean(inputs, outdir, config_path, reports, jobs, as_json, fps, allow_inside
                                "config": str(pipeline.source)}, indent=1))
     else:
         out.line(f"cleaned {len(results) - len(failed)} of {len(results)} files"
-                 + (f" ({len(skipped)} skipped: output exists)" if skipped else "")
+                 + (f" ({len(skipped)} skipped: {'finished earlier' if finished else 'output exists'})"
+                    if skipped else "")
                  + (f"; {len(failed)} failed (ERROR): " + ", ".join(r["input"] for r in failed)
                     if failed else ""), level=-1, err=bool(failed))
     sys.exit(EXIT_SOME_FAILED if failed else EXIT_OK)
@@ -353,9 +394,10 @@ def _config_body(text: str) -> str:
               help="Files checked in parallel.")
 @click.option("--fps", type=float, default=None, help="Frame rate for files that store none (AMC).")
 @patterns
+@executors
 @common
 def check(inputs, rules_path, junit_path, as_json, fail_on, exit_zero, would_clean, jobs, fps,
-          include, exclude):
+          include, exclude, scheduler, dask_workers):
     """Check INPUT files or folders against quality rules without changing anything.
 
     One line per file as it finishes: OK, WARN (passes), FAIL (a rule failed) or ERROR
@@ -377,6 +419,7 @@ def check(inputs, rules_path, junit_path, as_json, fail_on, exit_zero, would_cle
     out = Out(obj["verbosity"], err=as_json)
     started = time.perf_counter()
     try:
+        spec = _executor_spec(jobs, scheduler, dask_workers)
         rules = load_rules(resolve_rules_path(rules_path or "default")).with_fail_on(list(fail_on))
         config = source = None
         if would_clean:
@@ -391,11 +434,14 @@ def check(inputs, rules_path, junit_path, as_json, fail_on, exit_zero, would_cle
     task = CheckTask(rules, config, source, {"fps": fps} if fps else None)
     names = [str(f.relative if f.root is None else f.root.name / f.relative) for f in found.files]
     results: list = [None] * len(found.files)
-    for n, r in run_tasks(task, [f.path for f in found.files], jobs):
-        r["name"] = names[n]
-        results[n] = r
-        level = -1 if r["status"] in ("FAIL", "ERROR") else 0
-        out.line(check_line(r, obj["verbosity"] > 0), level=level)
+    try:
+        for n, r in run_tasks(task, [f.path for f in found.files], jobs, spec=spec):
+            r["name"] = names[n]
+            results[n] = r
+            level = -1 if r["status"] in ("FAIL", "ERROR") else 0
+            out.line(check_line(r, obj["verbosity"] > 0), level=level)
+    except MocapfixError as exc:        # e.g. the Dask scheduler cannot be reached
+        _fail(str(exc), debug, exc)
     seconds = time.perf_counter() - started
     if junit_path:
         atomic_write_text(junit_path, check_junit(
@@ -429,9 +475,10 @@ def check(inputs, rules_path, junit_path, as_json, fail_on, exit_zero, would_cle
 @click.option("-j", "--jobs", default=1, show_default=True, type=click.IntRange(1, 256),
               help="Files read in parallel.")
 @click.option("--fps", type=float, default=None, help="Frame rate for files that store none (AMC).")
+@executors
 @common
 def train_dictionary(training, output, method, atoms, window, sample_rate, lam, beta,
-                     iterations, max_windows, seed, jobs, fps):
+                     iterations, max_windows, seed, jobs, fps, scheduler, dask_workers):
     """Train a model for a trained cleaner from TRAINING files or folders (any format;
     BVH/AMC by forward kinematics) and write it to OUTPUT. Name it in a config with
     `model: PATH` (relative to the config file)."""
@@ -461,7 +508,8 @@ def train_dictionary(training, output, method, atoms, window, sample_rate, lam, 
     params = {"atoms": atoms, "window": window, "sample_rate": sample_rate, "train_lambda": lam,
               "beta": beta, "train_iterations": iterations, "max_windows": max_windows, "seed": seed}
     try:
-        summary = train(training, output, method, params, jobs, fps, progress)
+        summary = train(training, output, method, params, jobs, fps, progress,
+                        spec=_executor_spec(jobs, scheduler, dask_workers))
     except MocapfixError as exc:
         _fail(str(exc), debug, exc)
     finally:

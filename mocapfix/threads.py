@@ -1,66 +1,73 @@
-"""BLAS/OpenMP thread policy: never more threads than cores.
+"""BLAS thread policy: how many threads numpy's BLAS/LAPACK may use.
 
-numpy's OpenBLAS (and any OpenMP runtime SciPy loads) starts one thread per core. A batch
-of ``N`` worker processes on ``C`` cores would then run ``N x C`` threads on ``C`` cores;
-issue 13 measured a single clean 2x slower on a 16-core machine for that reason. The
-policy: each of ``N`` workers gets ``max(1, C // N)`` threads (one per worker when there
-are at least as many workers as cores). Kernels may lower the limit further inside
-(:func:`mocapfix.solvers.lowrank.blas_single_thread`); nothing raises it.
+- In a batch, every worker process (a local process-pool worker, a Dask worker) runs its
+  BLAS with **one** thread: the files are the parallelism, and N workers × M BLAS threads
+  on N cores only adds contention (issue 13 measured 16 OpenBLAS threads per worker on a
+  16-core machine).
+- For a single file (or ``-j 1``, which cleans in the calling process) the limit is
+  :data:`SINGLE_FILE_THREADS`, measured with the default pipeline, 1 against 2 OpenBLAS
+  threads, three alternating runs each on a loaded 2-core machine: the 2.8 MB HDM05 C3D
+  (``shared/data/c3d/hdm05_HDM_mm_01-02_03_120.c3d``) 5.0/6.2/7.2 s against 6.3/4.4/5.8 s,
+  the bundled ``sample_data/walk_markers.c3d`` 0.94/0.98/1.00 s against 0.95/1.41/0.99 s:
+  no gain beyond the run-to-run spread (the decompositions are of C x C matrices with
+  C = 3 x markers, and the solvers that matter hold BLAS to one thread themselves,
+  :func:`mocapfix.solvers.lowrank.blas_single_thread`), so one. ``MOCAPFIX_BLAS_THREADS``
+  overrides it for a single-process run (capped at the cores available).
+- Never more threads than cores available to the process.
 
-Wiring (batch runner)::
-
-    from mocapfix import threads
-    n = threads.worker_threads(workers)
-    ProcessPoolExecutor(max_workers=workers, initializer=threads.limit_process_threads,
-                        initargs=(n,))
-
-and, for a run in the calling process (``-j 1``), ``threads.limit_process_threads(
-threads.worker_threads(1))`` or leave the libraries' default (one thread per core).
+The limits are set with ``threadpoolctl`` (a runtime dependency) for the whole process,
+once per process; kernels may lower them further for their own span, never raise them.
 """
 from __future__ import annotations
 
 import os
 
-_ENV = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "BLIS_NUM_THREADS",
-        "VECLIB_MAXIMUM_THREADS", "NUMEXPR_NUM_THREADS")
-_limiter = None  # the process-wide threadpoolctl limit, kept alive while it applies
+#: BLAS threads when one file is cleaned in this process (see the module docstring).
+SINGLE_FILE_THREADS = 1
+
+_LIMITED: dict = {}
 
 
-def available_cores() -> int:
-    """Cores this process may run on (CPU affinity, e.g. a container's or taskset's share)."""
+def cores() -> int:
+    """Cores this process may run on."""
     try:
         return max(1, len(os.sched_getaffinity(0)))
     except (AttributeError, OSError):
         return max(1, os.cpu_count() or 1)
 
 
-def worker_threads(workers: int, cores: int | None = None) -> int:
-    """BLAS/OpenMP threads for each of ``workers`` processes sharing ``cores``."""
-    cores = available_cores() if cores is None else max(1, int(cores))
-    return max(1, cores // max(1, int(workers)))
+def blas_threads(workers: int) -> int:
+    """BLAS threads per process for a run with ``workers`` worker processes."""
+    if workers > 1:
+        return 1
+    wanted = os.environ.get("MOCAPFIX_BLAS_THREADS", "")
+    n = int(wanted) if wanted.isdigit() else SINGLE_FILE_THREADS
+    return max(1, min(n, cores()))
 
 
-def limit_process_threads(threads: int) -> None:
-    """Hold every BLAS/OpenMP pool of this process to ``threads`` from now on.
-
-    Sets the environment (for libraries loaded later, and for child processes) and limits
-    the pools already loaded through threadpoolctl. Meant as a worker initializer.
-    """
-    global _limiter
-    threads = max(1, int(threads))
-    for name in _ENV:
-        os.environ[name] = str(threads)
+def limit_blas(threads: int) -> None:
+    """Hold BLAS/OpenMP pools of this process to ``threads`` (once per process and value;
+    cheap to call before every task)."""
+    key = (os.getpid(), threads)
+    if key in _LIMITED:
+        return
     from threadpoolctl import threadpool_limits
 
-    _limiter = threadpool_limits(limits=threads)
+    threadpool_limits(threads)
+    _LIMITED.clear()
+    _LIMITED[key] = True
 
 
-def pool_threads() -> dict[str, int]:
-    """The thread count of each loaded BLAS/OpenMP pool, by library (``threadpool_info``)."""
+def worker_init(threads: int = 1) -> None:
+    """Initializer of a batch worker process: environment for any library loaded later,
+    and the live BLAS pools."""
+    for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+        os.environ[var] = str(threads)
+    limit_blas(threads)
+
+
+def max_blas_threads() -> int:
+    """Largest thread count among the BLAS pools loaded in this process (0: none)."""
     from threadpoolctl import threadpool_info
 
-    out: dict[str, int] = {}
-    for pool in threadpool_info():
-        key = f"{pool.get('internal_api')}:{os.path.basename(pool.get('filepath', ''))}"
-        out[key] = max(out.get(key, 0), int(pool.get("num_threads", 0)))
-    return out
+    return max((i["num_threads"] for i in threadpool_info() if i.get("user_api") == "blas"), default=0)

@@ -8,7 +8,7 @@ algorithm (:data:`METHODS`); other options are that cleaner's parameters.
 from __future__ import annotations
 
 import time
-from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass
 from pathlib import Path
 
 from mocapfix import formats, models
@@ -40,32 +40,39 @@ def discover_training(inputs) -> list[Path]:
     return files
 
 
-def _read(path, fps):
-    return formats.read(path, **({"fps": fps} if fps else {}))
+@dataclass(frozen=True)
+class ReadTask:
+    """Read one training file (picklable, for a process pool or Dask); a failure is an
+    ERROR result naming the file."""
+
+    fps: float | None = None
+
+    def __call__(self, path):
+        try:
+            return formats.read(path, **({"fps": self.fps} if self.fps else {}))
+        except MocapfixError as exc:
+            return {"input": str(path), "status": "ERROR", "error": str(exc)}
 
 
-def read_all(paths, jobs: int = 1, fps: float | None = None, progress=None):
-    """Read every training file (in ``jobs`` processes); a file that cannot be read is an
+def read_all(paths, jobs: int = 1, fps: float | None = None, progress=None, spec=None):
+    """Read every training file (in ``jobs`` local processes, or on the executor ``spec``
+    names: :class:`mocapfix.executors.ExecutorSpec`); a file that cannot be read is an
     error naming it — a model must not silently miss part of its training set."""
-    if jobs <= 1 or len(paths) <= 1:
-        out = []
-        for n, p in enumerate(paths):
-            out.append(_read(p, fps))
-            if progress:
-                progress(n + 1, len(paths))
-        return out
-    with ProcessPoolExecutor(max_workers=jobs) as pool:
-        futures = [pool.submit(_read, p, fps) for p in paths]
-        out = []
-        for n, f in enumerate(futures):
-            out.append(f.result())
-            if progress:
-                progress(n + 1, len(paths))
-        return out
+    from mocapfix.batch import run_tasks
+
+    out: list = [None] * len(paths)
+    for done, (n, motion) in enumerate(run_tasks(ReadTask(fps), list(paths), jobs, spec=spec), 1):
+        if isinstance(motion, dict):
+            raise MocapfixError(motion["error"] if str(paths[n]) in motion["error"]
+                                else f"{paths[n]}: {motion['error']}")
+        out[n] = motion
+        if progress:
+            progress(done, len(paths))
+    return out
 
 
 def train(inputs, output, method: str = "partlet", params: dict | None = None, jobs: int = 1,
-          fps: float | None = None, progress=None) -> dict:
+          fps: float | None = None, progress=None, spec=None) -> dict:
     """Train a model and write it; returns a summary (the model's header)."""
     if method not in METHODS:
         raise MocapfixError(f"unknown training method {method!r} (known: {', '.join(METHODS)})")
@@ -76,7 +83,8 @@ def train(inputs, output, method: str = "partlet", params: dict | None = None, j
     if not isinstance(cleaner, FittedCleaner):
         raise MocapfixError(f"{cleaner_name} is not a trained cleaner")
     paths = discover_training(inputs)
-    motions = read_all(paths, jobs, fps, progress=(lambda n, t: progress("read", n, t)) if progress else None)
+    motions = read_all(paths, jobs, fps, progress=(lambda n, t: progress("read", n, t)) if progress else None,
+                       spec=spec)
     cleaner.fit(motions, progress=(lambda n, t: progress("fit", n, t)) if progress else None)
     header, arrays = cleaner.state()
     header.update(cleaner.model_header_fields())

@@ -101,4 +101,4 @@ def test_report_page_in_headless_chromium(tmp_path, sample):
     if sample.endswith(".c3d"):
         assert "spikes" not in rows and "tsmc" in rows
     else:
-        assert "tsmc" not in rows and "spikes" in rows
+        assert "tsmc" not in rows and "kinect_skeleton" in rows

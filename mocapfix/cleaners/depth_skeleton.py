@@ -194,7 +194,7 @@ class KinectSkeleton(Cleaner):
         Param("cutoff", "frequency", None, "fixed smoothing cut-off instead of the GCV "
               "choice per joint (null: GCV)", unit="Hz", low=0.0, low_open=True, nullable=True),
         Param("inferred_noise", "length", "60 mm", "error assumed for Inferred joints",
-              unit="mm", low=0.0, low_open=True),
+              unit="mm", low=1e-4, high=2.0),
         Param("inferred_debias", "bool", True, "remove the offset of Inferred runs measured "
               "at their ends against the Tracked samples"),
         Param("debiased_factor", "float", 0.5, "error of a debiased Inferred sample, as a "

@@ -1,0 +1,141 @@
+"""The manifest of an output folder: what each input became, so a batch can resume.
+
+``OUTDIR/mocapfix-manifest.jsonl`` is a journal, one JSON record per line, appended as each
+file finishes (one ``write`` of one line, then ``fsync``: a record is either whole or, after
+a crash mid-write, an unparsable last line that is ignored). The last record of an input
+wins. Fields: ``input`` (absolute path), ``input_sha256``, ``output`` and ``files``
+(relative to the output folder), ``status`` (``done``, ``failed``, or ``started`` — written
+for every file of a run before it begins), ``quality`` (OK/WARN/FAIL), ``config_sha256``
+(of the effective config text), ``reports``, ``read_options``, ``version`` (mocapfix),
+``time``; ``error`` for a failed file.
+
+A file is *finished* when its last record is ``done`` with this run's config hash, report
+kinds, read options and mocapfix version, its input's sha256 is unchanged and its output
+files all exist. A re-run skips finished files; an output whose last record is ``started``
+under the same run key was written by an interrupted run of this same config (killed
+between writing and recording) and may be replaced without ``--overwrite``. At the end of a
+run the journal is rewritten (atomically) with one record per input.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import time
+from pathlib import Path
+
+from mocapfix import __version__
+from mocapfix.fileio import atomic_write_text
+
+MANIFEST_NAME = "mocapfix-manifest.jsonl"
+_KEY_FIELDS = ("config_sha256", "reports", "read_options", "version")
+
+
+def file_sha256(path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def run_key(config_text: str, reports, read_options: dict | None) -> dict:
+    """What determines a run's outputs besides the input: config, report kinds, read
+    options, mocapfix version."""
+    body = "\n".join(line for line in config_text.splitlines() if not line.startswith("#"))
+    return {"config_sha256": hashlib.sha256(body.encode("utf-8")).hexdigest(),
+            "reports": sorted(reports), "read_options": dict(sorted((read_options or {}).items())),
+            "version": __version__}
+
+
+class Manifest:
+    """The journal of one output folder (see the module docstring)."""
+
+    def __init__(self, outdir, key: dict):
+        self.outdir = Path(os.path.abspath(outdir))
+        self.path = self.outdir / MANIFEST_NAME
+        self.key = key
+        self.records: dict[str, dict] = {}
+        self._fd: int | None = None
+        if self.path.exists():
+            for line in self.path.read_text(encoding="utf-8", errors="replace").splitlines():
+                try:
+                    rec = json.loads(line)
+                except ValueError:
+                    continue                      # a torn last line after a crash
+                if isinstance(rec, dict) and isinstance(rec.get("input"), str):
+                    self.records[rec["input"]] = rec
+
+    def _same_run(self, rec: dict) -> bool:
+        return all(rec.get(f) == self.key[f] for f in _KEY_FIELDS)
+
+    def finished(self, job) -> bool:
+        """``job`` was cleaned by an earlier run of this config and nothing changed since."""
+        rec = self.records.get(str(job.source))
+        if not rec or rec.get("status") != "done" or not self._same_run(rec):
+            return False
+        if rec.get("output") != self._rel(job.output):
+            return False
+        if not all((self.outdir / f).is_file() for f in rec.get("files", [])):
+            return False
+        try:
+            return file_sha256(job.source) == rec.get("input_sha256")
+        except OSError:
+            return False
+
+    def interrupted(self, job) -> bool:
+        """``job`` was started by a run of this same config that did not record its end."""
+        rec = self.records.get(str(job.source))
+        return bool(rec) and rec.get("status") == "started" and self._same_run(rec)
+
+    def _rel(self, path) -> str:
+        p = Path(path)
+        try:
+            return p.relative_to(self.outdir).as_posix()
+        except ValueError:
+            return str(p)
+
+    # -- writing ----------------------------------------------------------------------
+
+    def _append(self, records: list[dict]) -> None:
+        if not records:
+            return
+        if self._fd is None:
+            self.outdir.mkdir(parents=True, exist_ok=True)
+            self._fd = os.open(self.path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o666)
+        data = "".join(json.dumps(r, sort_keys=True) + "\n" for r in records).encode("utf-8")
+        os.write(self._fd, data)
+        os.fsync(self._fd)
+        for r in records:
+            self.records[r["input"]] = r
+
+    def start(self, jobs) -> None:
+        """Record that these jobs are about to run (one write for all)."""
+        now = _now()
+        self._append([{"input": str(j.source), "output": self._rel(j.output), "status": "started",
+                       "time": now, **self.key} for j in jobs])
+
+    def record(self, result: dict) -> None:
+        """Record one finished file from its batch result (call as each finishes)."""
+        rec = {"input": result["input"], "output": self._rel(result.get("output", "")),
+               "time": _now(), **self.key}
+        if result["status"] == "ERROR":
+            rec.update(status="failed", error=result.get("error", ""))
+        else:
+            files = [*result.get("written", []), *result.get("reports", [])]
+            rec.update(status="done", quality=result["status"],
+                       input_sha256=result.get("input_sha256"), files=[self._rel(f) for f in files])
+        self._append([rec])
+
+    def close(self, compact: bool = True) -> None:
+        """Close the journal; with ``compact`` rewrite it with one record per input."""
+        if self._fd is not None:
+            os.close(self._fd)
+            self._fd = None
+        if compact and self.records:
+            atomic_write_text(self.path, "".join(json.dumps(r, sort_keys=True) + "\n"
+                                                 for r in self.records.values()))
+
+
+def _now() -> str:
+    return time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())

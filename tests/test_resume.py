@@ -1,0 +1,173 @@
+"""Resumable batches (issue 13): the manifest in the output folder lets a re-run skip the
+files an earlier run finished — also after that run was killed — and redo only the rest,
+with the same outputs as one uninterrupted run."""
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+from click.testing import CliRunner
+
+from conftest import SAMPLE_DATA
+from mocapfix.cli import main
+from mocapfix.manifest import MANIFEST_NAME
+
+CFG = "pipeline:\n  - cleaner: spikes\n  - cleaner: fill\n    max_gap: 0.5 s\n  - cleaner: gaussian\n"
+
+
+def _inputs(tmp_path, copies=3) -> Path:
+    src = tmp_path / "in"
+    for n in range(copies):
+        shutil.copytree(SAMPLE_DATA, src / f"take{n}")
+    return src
+
+
+def _cfg(tmp_path) -> str:
+    p = tmp_path / "cfg.yaml"
+    p.write_text(CFG)
+    return str(p)
+
+
+def _records(outdir: Path) -> dict:
+    recs = {}
+    path = outdir / MANIFEST_NAME
+    if path.exists():
+        for line in path.read_text().splitlines():
+            try:
+                r = json.loads(line)
+            except ValueError:
+                continue
+            recs[r["input"]] = r
+    return recs
+
+
+def _done(outdir: Path) -> set:
+    return {k for k, r in _records(outdir).items() if r["status"] == "done"}
+
+
+def _outputs(folder: Path) -> dict:
+    def drop_seconds(x):
+        if isinstance(x, dict):
+            return {k: drop_seconds(v) for k, v in x.items() if k != "seconds"}
+        if isinstance(x, list):
+            return [drop_seconds(v) for v in x]
+        return x
+
+    out = {}
+    for p in sorted(folder.rglob("*")):
+        if p.is_file() and p.name != MANIFEST_NAME:
+            rel = p.relative_to(folder).as_posix()
+            out[rel] = drop_seconds(json.loads(p.read_text())) if p.name.endswith(".report.json") \
+                else p.read_bytes()
+    return out
+
+
+def _run(*args):
+    return CliRunner().invoke(main, ["clean", *map(str, args)])
+
+
+def test_killed_batch_resumes_and_skips_finished_files(tmp_path):
+    src, cfg = _inputs(tmp_path), _cfg(tmp_path)
+    out = tmp_path / "out"
+    env = {**os.environ, "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}
+    proc = subprocess.Popen([sys.executable, "-m", "mocapfix.cli", "clean", str(src), "-o", str(out),
+                             "-c", cfg, "-j", "2"], env=env, start_new_session=True,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.monotonic() + 240
+    try:
+        while len(_done(out)) < 3 and proc.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.02)
+        os.killpg(proc.pid, signal.SIGKILL)               # the parent and its workers
+    finally:
+        proc.wait(timeout=30)
+    done_at_kill = _done(out)
+    total = 12                                            # 3 copies × 4 motion files
+    assert 3 <= len(done_at_kill) < total, "the batch finished before it could be killed"
+    assert not list(out.rglob("*.part"))                  # atomic outputs: nothing half-written
+
+    r = _run(src, "-o", out, "-c", cfg, "-j", "2")
+    assert r.exit_code == 0, r.output
+    skipped = {line.split()[1].rstrip(":") for line in r.output.splitlines() if line.startswith("SKIP")}
+    assert skipped == done_at_kill                        # finished files are not redone ...
+    assert f"cleaned {total - len(done_at_kill)} of {total - len(done_at_kill)} files" in r.output
+    assert len(_done(out)) == total                       # ... and the rest are
+    assert len((out / MANIFEST_NAME).read_text().splitlines()) == total   # compacted
+
+    fresh = tmp_path / "fresh"
+    assert _run(src, "-o", fresh, "-c", cfg).exit_code == 0
+    a, b = _outputs(out), _outputs(fresh)
+    assert sorted(a) == sorted(b) and len(a) > total
+    for rel in a:
+        assert a[rel] == b[rel], rel
+
+
+def test_what_a_rerun_redoes(tmp_path):
+    src, cfg = _inputs(tmp_path, copies=1), _cfg(tmp_path)
+    out = tmp_path / "out"
+    assert _run(src, "-o", out, "-c", cfg, "-q").exit_code == 0
+    c3d = src / "take0" / "walk_markers.c3d"
+    first = _records(out)
+
+    # nothing changed: everything skipped, nothing rewritten
+    mtimes = {p: p.stat().st_mtime_ns for p in out.rglob("*.c3d")}
+    r = _run(src, "-o", out, "-c", cfg)
+    assert r.exit_code == 0 and r.output.count("finished earlier") == 4 + 1   # 4 lines + summary
+    assert {p: p.stat().st_mtime_ns for p in out.rglob("*.c3d")} == mtimes
+
+    # a changed input is not finished: its old output is in the way (exit 2, as before)
+    data = bytearray(c3d.read_bytes())
+    data[-1] ^= 1
+    c3d.write_bytes(bytes(data))
+    r = _run(src, "-o", out, "-c", cfg)
+    assert r.exit_code == 2 and "1 output(s) exist already" in r.output and "manifest" in r.output
+    # --overwrite redoes everything and records the new input hash
+    assert _run(src, "-o", out, "-c", cfg, "--overwrite", "-q").exit_code == 0
+    assert _records(out)[str(c3d)]["input_sha256"] != first[str(c3d)]["input_sha256"]
+
+    # another config: not finished either
+    other = tmp_path / "other.yaml"
+    other.write_text(CFG.replace("0.5 s", "0.25 s"))
+    assert _run(src, "-o", out, "-c", other).exit_code == 2
+
+    # an output deleted by hand is redone; the others skipped
+    (out / "take0" / "walk.bvh").unlink()
+    r = _run(src, "-o", out, "-c", cfg)
+    assert r.exit_code == 0 and "cleaned 1 of 1 files (3 skipped: finished earlier)" in r.output
+
+
+def test_interrupted_output_and_torn_record(tmp_path):
+    """A file whose output was written but whose record was not (killed in between) is
+    redone without --overwrite; a torn last line of the journal is ignored."""
+    src, cfg = _inputs(tmp_path, copies=1), _cfg(tmp_path)
+    out = tmp_path / "out"
+    assert _run(src, "-o", out, "-c", cfg, "-q").exit_code == 0
+    lines = (out / MANIFEST_NAME).read_text().splitlines()
+    recs = [json.loads(x) for x in lines]
+    victim = next(r for r in recs if r["input"].endswith("walk.bvh"))
+    started = {k: v for k, v in victim.items() if k not in ("files", "quality", "input_sha256")}
+    started["status"] = "started"
+    torn = json.dumps(recs[0])[:40]
+    (out / MANIFEST_NAME).write_text("\n".join(lines + [json.dumps(started), torn]))
+    r = _run(src, "-o", out, "-c", cfg)
+    assert r.exit_code == 0, r.output
+    assert "cleaned 1 of 1 files (3 skipped: finished earlier)" in r.output
+    assert _records(out)[victim["input"]]["status"] == "done"
+
+
+def test_failed_file_is_retried(tmp_path):
+    src, cfg = _inputs(tmp_path, copies=1), _cfg(tmp_path)
+    bad = src / "take0" / "broken.bvh"
+    bad.write_text("HIERARCHY\nROOT x\n{\n")
+    out = tmp_path / "out"
+    r = _run(src, "-o", out, "-c", cfg)
+    assert r.exit_code == 1
+    assert _records(out)[str(bad)]["status"] == "failed"
+    bad.write_bytes((src / "take0" / "walk.bvh").read_bytes())
+    r = _run(src, "-o", out, "-c", cfg)
+    assert r.exit_code == 0 and "cleaned 1 of 1 files (4 skipped: finished earlier)" in r.output
