@@ -21,6 +21,7 @@ _MODULES = (
     "mocapfix.cleaners.lowrank_isometry",
     "mocapfix.cleaners.tsmc",
     "mocapfix.cleaners.partlet",
+    "mocapfix.cleaners.mssa",
 )
 _loaded = False
 
