@@ -28,15 +28,21 @@ from mocapfix.errors import ConfigError
 from mocapfix.kinematics import nearest_branch
 from mocapfix.motion import Motion
 from mocapfix.solvers import segments
+from mocapfix.solvers.rotchannels import continuous_quaternions
 from mocapfix.writeback import solve_channels
 
 
-def continuous_quaternions(q: np.ndarray) -> np.ndarray:
-    """Flip signs of a (T, 4) quaternion track so consecutive samples have a positive dot
-    product (the shortest path between equal rotations)."""
-    dots = np.einsum("ti,ti->t", q[1:], q[:-1])
-    flips = np.concatenate([[1.0], np.cumprod(np.where(dots < 0, -1.0, 1.0))])
-    return q * flips[:, None]
+def _channels_from_positions(motion: Motion) -> np.ndarray:
+    """The motion's channels; when an earlier step cleaned the positions, they are first
+    written back into the channels, so position and channel cleaning compose."""
+    ch = motion.channels.copy()
+    if not np.allclose(motion.rig.positions(ch), motion.positions, rtol=0, atol=1e-9, equal_nan=False):
+        ch = solve_channels(motion.rig, ch, motion.positions)
+    return ch
+
+
+def _rotation_columns(rig) -> list[int]:
+    return [c for cols in rig.rot_columns for c in cols]
 
 
 @register
@@ -68,10 +74,7 @@ class RotationSmooth(Cleaner):
         rig = motion.rig
         if rig is None or motion.channels is None or motion.n_frames < 3:
             return motion.copy(), {"skipped": "no rotation channels"}
-        ch = motion.channels.copy()
-        if not np.allclose(rig.positions(ch), motion.positions, rtol=0, atol=1e-9, equal_nan=False):
-            # an earlier step cleaned positions: take them into the channels first
-            ch = solve_channels(rig, ch, motion.positions)
+        ch = _channels_from_positions(motion)
         full = [j for j in range(rig.n_joints) if len(rig.rot_axes[j]) == 3]
         partial = [c for j in range(rig.n_joints) if 0 < len(rig.rot_axes[j]) < 3
                    for c in rig.rot_columns[j]]
@@ -100,3 +103,55 @@ class RotationSmooth(Cleaner):
         return motion.replace(channels=ch, positions=positions), {
             "joints_as_quaternions": len(full), "angle_channels": len(partial),
             "translation_channels": int(trans.size) if self["translations"] else 0}
+
+
+@register
+class EulerSmooth(Cleaner):
+    """The curve editor's filters on the Euler angle curves themselves: each rotation
+    channel is unwrapped (±180° jumps removed), optionally median-filtered, then
+    Gaussian-smoothed, and put back on the file's branch. The animator's baselines of the
+    ``rotations`` bench protocol (a Gaussian; a median then a Gaussian); unlike
+    ``rotation_smooth`` they filter each Euler angle independently, so near gimbal lock
+    they mix axes."""
+
+    name = "euler_smooth"
+    summary = "median and/or Gaussian filter on unwrapped Euler angle curves (animators' filters)"
+    params = (
+        Param("median", "int", 0, "median filter width in frames (0: none; odd)", low=0, high=1001),
+        Param("sigma", "time", "2 frames", "Gaussian sigma (0: none)", unit="s", low=0.0),
+        Param("translations", "bool", False, "also filter translation channels"),
+    )
+
+    def _validate(self):
+        if self["median"] and self["median"] % 2 == 0:
+            raise ConfigError(f"{self.step}: parameter 'median' must be odd (or 0), got {self['median']}")
+
+    def _apply(self, motion: Motion):
+        rig = motion.rig
+        if rig is None or motion.channels is None or motion.n_frames < 3:
+            return motion.copy(), {"skipped": "no rotation channels"}
+        ch = _channels_from_positions(motion)
+        cols = _rotation_columns(rig)
+        if self["translations"]:
+            cols += [int(c) for c in rig.trans_columns.ravel() if c >= 0]
+        rot = set(_rotation_columns(rig))
+        period = 360.0 if rig.degrees else 2 * np.pi
+        x = ch[:, cols].copy()
+        for n, c in enumerate(cols):
+            ok = ~np.isnan(x[:, n])
+            if c in rot and ok.any():
+                x[ok, n] = np.unwrap(x[ok, n], period=period)
+        if self["median"] > 1:
+            from scipy import ndimage
+
+            filled, _ = segments.interpolate_gaps(x, "linear")
+            med = ndimage.median_filter(np.where(np.isnan(filled), 0.0, filled),
+                                        size=(self["median"], 1), mode="nearest")
+            x = np.where(np.isnan(x), np.nan, med)
+        sigma = self.frames("sigma", motion)
+        if sigma > 0:
+            x = segments.gaussian(x, sigma)
+        for n, c in enumerate(cols):
+            ch[:, c] = nearest_branch(x[:, n], ch[:, c], rig.degrees) if c in rot else x[:, n]
+        return motion.replace(channels=ch, positions=rig.positions(ch)), {
+            "channels": len(cols), "median_frames": self["median"], "sigma_frames": round(sigma, 3)}
