@@ -42,7 +42,7 @@ from mocapfix.cleaners import register
 from mocapfix.cleaners.base import FittedCleaner, Param
 from mocapfix.errors import MocapfixError
 from mocapfix.motion import Motion
-from mocapfix.solvers import rotchannels, ssa
+from mocapfix.solvers import glitches, rotchannels, ssa
 
 #: shipped model per rotation layout signature (first joints' names), used with no ``model``
 AUTO_MODELS = ("mssa-cmu",)
@@ -71,7 +71,7 @@ def _features(motion: Motion, space: str):
     P = motion.positions * motion.metres_per_unit
     T, J, _ = P.shape
     flat = P.reshape(T, -1)
-    anchor = ssa._prefill(flat).reshape(T, J, 3).mean(axis=1)
+    anchor = glitches.prefill(flat).reshape(T, J, 3).mean(axis=1)
     return (P - anchor[:, None]).reshape(T, -1), anchor
 
 

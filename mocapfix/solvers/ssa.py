@@ -27,7 +27,8 @@ from __future__ import annotations
 
 import numpy as np
 from numpy.lib.stride_tricks import as_strided
-from scipy import ndimage
+
+from mocapfix.solvers.glitches import despike, prefill as _prefill
 
 
 def windows(X: np.ndarray, m: int, *, step: int = 1) -> np.ndarray:
@@ -111,17 +112,6 @@ def unexplained_fraction(eigenvalues: np.ndarray, k: int) -> float:
     return float(np.sum(eigenvalues[k:]) / total) if total > 0 else 0.0
 
 
-def _prefill(Y: np.ndarray) -> np.ndarray:
-    """Missing samples linearly interpolated per channel (held constant beyond the ends);
-    channels with no sample at all are zero."""
-    Z = Y.copy()
-    t = np.arange(len(Y))
-    for c in np.flatnonzero(np.isnan(Y).any(axis=0)):
-        ok = ~np.isnan(Y[:, c])
-        Z[:, c] = np.interp(t, t[ok], Y[ok, c]) if ok.any() else 0.0
-    return Z
-
-
 def robust_reconstruct(Y: np.ndarray, E: np.ndarray, m: int, *, lam: float = 0.1, p: float = 3.0,
                        iterations: int = 15, tol: float = 1e-4, dtype=np.float32):
     """Robust M-SSA reconstruction (Lou 2012 eq. 2.16, §2.2.4–2.2.5).
@@ -175,19 +165,6 @@ def noise_level(X: np.ndarray) -> float:
         per = np.nanmedian(d2, axis=0) / 0.6745 / np.sqrt(6.0)
     per = per[np.isfinite(per) & (per > 0)]
     return float(np.median(per)) if per.size else 0.0
-
-
-def despike(X: np.ndarray, *, width: int = 7, k: float = 6.0, floor: float = 0.0):
-    """(X with spikes replaced, mask of the spikes): a sample farther than
-    max(k · 1.4826 · MAD of its channel's residuals, floor) from a running median of
-    ``width`` frames is replaced by that median. Gaps are bridged linearly first."""
-    X = np.asarray(X, dtype=np.float64)
-    filled = _prefill(X)
-    med = ndimage.median_filter(filled, size=(width, 1), mode="nearest")
-    r = np.abs(filled - med)
-    scale = 1.4826 * np.median(r, axis=0)
-    mask = r > np.maximum(k * scale, floor)[None, :]
-    return np.where(mask, med, filled), mask & ~np.isnan(X)
 
 
 def robust_bases(X: np.ndarray, m: int, *, energy: float = 0.99, k: int | None = None,
