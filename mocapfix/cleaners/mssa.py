@@ -114,7 +114,7 @@ class MSSA(FittedCleaner):
               low=1, high=100000, nullable=True),
         Param("noise_floor", "float", 8.0, "bases learned from the file itself: keep the eigenvalues "
               "above this × the file's noise variance", low=0.0, high=1e6),
-        Param("step", "int", 4, "training: take every step-th window", low=1, high=1000),
+        Param("window_step", "int", 4, "training: take every window_step-th window", low=1, high=1000),
     )
     fitted_attributes = ("bases_", "mean_", "layout_", "window_", "fps_", "space_")
 
@@ -167,7 +167,7 @@ class MSSA(FittedCleaner):
         mean = np.where(np.isnan(mean), 0.0, mean)
         acc = ssa.LagCovariance(m, allf.shape[1])
         for n, F in enumerate(feats):
-            acc.add(F - mean, step=self.values["step"])
+            acc.add(F - mean, step=self.values["window_step"])
             if progress:
                 progress(n + 1, len(feats))
         if acc.count == 0:
@@ -221,13 +221,15 @@ class MSSA(FittedCleaner):
 
     # -- apply ------------------------------------------------------------------------------
     def _matching_model(self, motion: Motion, space: str, layout: list):
-        """(E, mean, unexplained, source) of a model made for this layout and rate, or None."""
+        """(E, mean, unexplained, source, window) of a model made for this layout and rate,
+        or None."""
         def fits(lay, fps, sp):
             return sp == space and lay == layout and abs(fps - motion.fps) <= 0.01 * motion.fps
 
         if self.is_fitted:
             if fits(self.layout_, self.fps_, self.space_):
-                return self.bases_, self.mean_, self.unexplained_, self.values["model"] or "fitted"
+                return (self.bases_, self.mean_, self.unexplained_, self.values["model"] or "fitted",
+                        self.window_)
             return None
         if self.values["model"] is None:
             from mocapfix import models
@@ -240,7 +242,7 @@ class MSSA(FittedCleaner):
                     if fits([list(x) for x in st["layout"]], float(st["fps"]), st["space"]):
                         other = type(self)(step=self.step, **self.config())
                         other.load_state(header, arrays)
-                        return other.bases_, other.mean_, other.unexplained_, name
+                        return other.bases_, other.mean_, other.unexplained_, name, other.window_
         return None
 
     def _apply(self, motion: Motion):
@@ -250,12 +252,12 @@ class MSSA(FittedCleaner):
         F, anchor = _features(motion, space)
         info: dict = {"space": space}
         found = self._matching_model(motion, space, layout)
-        m = self.window_ if found is not None else self.values["window"]
+        m = found[4] if found is not None else self.values["window"]
         if T < max(2 * m, 4) or F.shape[1] == 0:
             info["skipped"] = f"{T} frames are too few for windows of {m}"
             return motion.copy(), info
         if found is not None:
-            E, mean, trained, source = found
+            E, mean, trained, source, _ = found
             info["bases"] = source
         else:
             mean = np.nanmedian(F, axis=0)

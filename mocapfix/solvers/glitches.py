@@ -28,7 +28,7 @@ def despike(X: np.ndarray, *, width: int = 7, k: float = 6.0, floor: float = 0.0
     max(k · 1.4826 · MAD of its channel's residuals, floor) from a running median of
     ``width`` frames is replaced by that median. Gaps are bridged linearly first."""
     X = np.asarray(X, dtype=np.float64)
-    filled = _prefill(X)
+    filled = prefill(X)
     med = ndimage.median_filter(filled, size=(width, 1), mode="nearest")
     r = np.abs(filled - med)
     scale = 1.4826 * np.median(r, axis=0)
