@@ -286,8 +286,8 @@ class MSSA(FittedCleaner):
         Y = F - mean
         Z, w, it = ssa.robust_reconstruct(Y, E, m, lam=self.values["lam"], p=p,
                                           iterations=self.values["iterations"])
-        # unexplained energy of the input, outliers and gaps replaced by the result
-        Yc = np.where(w > 0.5, Y, Z)
+        # unexplained energy of the input (gaps filled with the result)
+        Yc = np.where(np.isnan(Y), Z, Y)
         Wm = ssa.windows(Yc, m, step=max(1, m // 2))
         R = Wm - (Wm @ E) @ E.T
         frac = float(np.vdot(R, R) / max(np.vdot(Wm, Wm), 1e-300))
@@ -296,7 +296,9 @@ class MSSA(FittedCleaner):
                      "unexplained": round(frac, 5), "unexplained_training": round(float(trained), 5),
                      "outlier_samples": int((observed & (w < 0.5)).sum()),
                      "welsch_p": p / scale if space == "positions" else p})
-        if frac > self.values["out_of_sample"] * max(trained, 1e-4) and frac > 0.01:
+        outliers = float((observed & (w < 0.5)).sum() / max(observed.sum(), 1))
+        if (frac > self.values["out_of_sample"] * max(trained, 1e-4) and frac > 0.01) or outliers > 0.1:
             info["warning"] = (f"motion unlike the training set: the bases leave {100 * frac:.1f} % of "
-                               f"its energy unexplained (training {100 * trained:.2f} %)")
+                               f"its energy unexplained (training {100 * trained:.2f} %) and treat "
+                               f"{100 * outliers:.1f} % of the samples as outliers")
         return _undo(motion, space, Z + mean, anchor), info

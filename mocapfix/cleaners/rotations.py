@@ -243,6 +243,8 @@ class RotationDenoise(Cleaner):
         Param("noise", "float", None, "noise level in degrees (default: estimated from the file)",
               low=0.0, high=90.0, nullable=True),
         Param("max_sigma", "time", None, "largest Gaussian sigma", unit="s", low=0.0, nullable=True),
+        Param("local", "time", None, "choose the width per frame from the risk over this span "
+              "(default: one width per channel)", unit="s", low=0.0, low_open=True, nullable=True),
     )
 
     def _apply(self, motion: Motion):
@@ -254,7 +256,8 @@ class RotationDenoise(Cleaner):
         X = glitches.prefill(F)
         noise = self["noise"] if self["noise"] is not None else ssa.noise_level(X)
         cap = None if self["max_sigma"] is None else self.frames("max_sigma", motion)
-        Z, widths = sure.sure_gaussian(X, noise, max_width=cap)
+        span = None if self["local"] is None else self.frames("local", motion)
+        Z, widths = sure.sure_gaussian(X, noise, max_width=cap, span=span)
         Z[missing] = np.nan
         out = rotchannels.from_features(rig, Z, ch)
         return motion.replace(channels=out, positions=rig.positions(out)), {

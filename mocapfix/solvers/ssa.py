@@ -113,7 +113,8 @@ def unexplained_fraction(eigenvalues: np.ndarray, k: int) -> float:
 
 
 def robust_reconstruct(Y: np.ndarray, E: np.ndarray, m: int, *, lam: float = 0.1, p: float = 3.0,
-                       iterations: int = 15, tol: float = 1e-4, dtype=np.float32):
+                       iterations: int = 15, tol: float = 1e-4, relax: float = 1.8,
+                       dtype=np.float32):
     """Robust M-SSA reconstruction (Lou 2012 eq. 2.16, §2.2.4–2.2.5).
 
     Parameters
@@ -124,6 +125,7 @@ def robust_reconstruct(Y: np.ndarray, E: np.ndarray, m: int, *, lam: float = 0.1
     p : Welsch scale in the units of Y (thesis: 3, degrees).
     iterations : at most this many alternations (thesis: 10–20); stops earlier when the
         largest change of z falls below ``tol`` · p.
+    relax : over-relaxation of the update of missing samples (1 = the thesis' update).
 
     Returns (Z (T, L) filled and filtered, w (T, L) final Welsch weights — 0 on missing
     samples, ≈ 0 on outliers —, iterations run).
@@ -149,6 +151,9 @@ def robust_reconstruct(Y: np.ndarray, E: np.ndarray, m: int, *, lam: float = 0.1
         r = Z - y0
         w = np.where(alpha, np.exp(-(r * r) / (p * p)), 0.0)
         Znew = (lam * acc + w * y0) / (lam * count + w)
+        # missing samples: over-relaxed projection (the plain one, acc/count, converges
+        # slowly across long gaps)
+        Znew = np.where(alpha, Znew, Z + relax * (Znew - Z))
         change = float(np.max(np.abs(Znew - Z)))
         Z = Znew
         if change < tol * p:

@@ -25,22 +25,34 @@ def centre_weight(sigma: float) -> float:
     return float(ndimage.gaussian_filter1d(impulse, sigma)[n])
 
 
-def sure_gaussian(X: np.ndarray, noise: float, *, widths=WIDTHS, max_width: float | None = None):
+def sure_gaussian(X: np.ndarray, noise: float, *, widths=WIDTHS, max_width: float | None = None,
+                  span: float | None = None):
     """Each column of X (T, C, no NaN) Gaussian-smoothed with the width of least SURE
-    (σ = ``noise``). ``max_width`` caps the widths (samples). Returns (Z, widths (C,))."""
+    (σ = ``noise``). ``max_width`` caps the widths (samples). ``span`` (samples): choose
+    per sample instead, by the risk summed over a Gaussian neighbourhood of that width
+    (the width then varies along the motion: short in a fast turn, long in a hold).
+    Returns (Z, widths (C,) — with ``span``, the median width per column)."""
     X = np.asarray(X, dtype=np.float64)
     T = X.shape[0]
     best = X.copy()
-    chosen = np.zeros(X.shape[1])
-    risk = np.full(X.shape[1], T * noise ** 2)     # the identity: SURE = −Tσ² + 2Tσ²
     s2 = noise ** 2
+    shape = X.shape if span else X.shape[1:]
+    chosen = np.zeros(shape)
+    risk = np.full(shape, (1 if span else T) * s2)     # the identity: SURE = −σ² + 2σ² per sample
     for w in widths:
         if max_width is not None and w > max_width:
             break
         Z = ndimage.gaussian_filter1d(X, w, axis=0, mode="nearest")
-        r = np.sum((X - Z) ** 2, axis=0) - T * s2 + 2 * s2 * T * centre_weight(w)
+        if span:
+            r = ndimage.gaussian_filter1d((X - Z) ** 2 - s2 + 2 * s2 * centre_weight(w), span, axis=0,
+                                          mode="nearest")
+        else:
+            r = np.sum((X - Z) ** 2, axis=0) - T * s2 + 2 * s2 * T * centre_weight(w)
         better = r < risk
-        best[:, better] = Z[:, better]
+        if span:
+            best[better] = Z[better]
+        else:
+            best[:, better] = Z[:, better]
         chosen[better] = w
         risk[better] = r[better]
-    return best, chosen
+    return best, (np.median(chosen, axis=0) if span else chosen)
