@@ -33,6 +33,15 @@ def test_windows_and_overlap_add_are_inverse():
     assert list(ssa.window_counts(10, 3)) == [1, 2, 3, 3, 3, 3, 3, 3, 2, 1]
 
 
+@pytest.mark.parametrize("T,m,L,K", [(50, 5, 3, 4), (200, 12, 7, 20), (30, 12, 4, 10), (23, 12, 2, 3)])
+def test_fir_projector_equals_the_window_by_window_projection(T, m, L, K):
+    rng = np.random.default_rng(T)
+    E = np.linalg.qr(rng.normal(size=(m * L, K)))[0]
+    Z = rng.normal(size=(T, L))
+    direct = ssa.overlap_add((ssa.windows(Z, m) @ E) @ E.T, T, m, L)
+    assert np.allclose(ssa.projector(E, m, dtype=np.float64)(Z), direct, atol=1e-12)
+
+
 def test_bases_of_three_sines_need_six_dimensions():
     """A mix of 3 sinusoids on 5 channels spans 6 dimensions of any window (sin and cos per
     frequency): 6 bases hold all the energy, 5 do not."""

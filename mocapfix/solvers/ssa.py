@@ -112,6 +112,47 @@ def unexplained_fraction(eigenvalues: np.ndarray, k: int) -> float:
     return float(np.sum(eigenvalues[k:]) / total) if total > 0 else 0.0
 
 
+def projector(E: np.ndarray, m: int, *, dtype=np.float32):
+    """The overlap-added projection of every window onto the bases, as a function of Z
+    (T, L): ``Z ↦ Σ_s (E Eᵀ z_s)`` placed back at the window's frames (the sum over windows
+    of eq. 2.14, before dividing by the count).
+
+    Computed as a multichannel FIR filter: frame t receives Σ_τ H_τ z(t + τ) with
+    H_τ = Σ_k E_k E_{k+τ}ᵀ (E_k: the L rows of frame k of a window; |τ| < m), one matrix
+    product per lag on a shifted slice of Z (no copy) — (2m − 1)·L² per frame instead of
+    2·m·L·K for coefficients and reconstructions. The first and last
+    m − 1 frames, covered by fewer windows, are computed from their windows directly.
+    """
+    E = np.asarray(E, dtype=np.float64)
+    d, K = E.shape
+    L = d // m
+    Ek = E.reshape(m, L, K)
+    H = np.zeros((2 * m - 1, L, L))
+    for k in range(m):
+        # H[τ + m − 1] += E_k E_{k+τ}ᵀ for every k' = k + τ in the window
+        H[m - 1 - k: 2 * m - 1 - k] += np.einsum("ij,kcj->kic", Ek[k], Ek)
+    Ht = np.ascontiguousarray(np.transpose(H, (0, 2, 1)), dtype=dtype)     # H_τᵀ, τ = −(m−1) …
+    Ed = np.asarray(E, dtype=dtype)
+
+    def project(Z: np.ndarray) -> np.ndarray:
+        T = Z.shape[0]
+        Zp = np.zeros((T + 2 * (m - 1), L), dtype=dtype)
+        Zp[m - 1:m - 1 + T] = Z
+        out = np.zeros((T, L), dtype=dtype)
+        for k in range(2 * m - 1):
+            out += Zp[k:k + T] @ Ht[k]
+        out = out.astype(np.float64)
+        edge = min(m - 1, T)
+        if edge:
+            head = windows(np.asarray(Z[:2 * m - 2], dtype=dtype), m)       # windows 0 … m − 2
+            tail = windows(np.asarray(Z[-(2 * m - 2):], dtype=dtype), m)
+            out[:edge] = overlap_add((head @ Ed) @ Ed.T, len(head) + m - 1, m, L)[:edge]
+            out[T - edge:] = overlap_add((tail @ Ed) @ Ed.T, len(tail) + m - 1, m, L)[-edge:]
+        return out
+
+    return project
+
+
 def robust_reconstruct(Y: np.ndarray, E: np.ndarray, m: int, *, lam: float = 0.1, p: float = 3.0,
                        iterations: int = 15, tol: float = 1e-4, relax: float = 1.8,
                        dtype=np.float32):
@@ -141,13 +182,12 @@ def robust_reconstruct(Y: np.ndarray, E: np.ndarray, m: int, *, lam: float = 0.1
     alpha = ~np.isnan(Y)
     y0 = np.where(alpha, Y, 0.0)
     Z = _prefill(Y)
-    Ed = np.asarray(E, dtype=dtype)
     count = window_counts(T, m)[:, None]
     w = alpha.astype(np.float64)
     it = 0
+    project = projector(E, m, dtype=dtype)
     for it in range(1, iterations + 1):
-        W = windows(Z.astype(dtype, copy=False), m)
-        acc = overlap_add((W @ Ed) @ Ed.T, T, m, L).astype(np.float64)
+        acc = project(Z)
         r = Z - y0
         w = np.where(alpha, np.exp(-(r * r) / (p * p)), 0.0)
         Znew = (lam * acc + w * y0) / (lam * count + w)
