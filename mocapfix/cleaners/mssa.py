@@ -25,7 +25,8 @@ the bases.
 
 Cleaning: a model is used when its layout and frame rate are the file's (a ``model``
 named in the config, else a shipped model made for that layout). Otherwise the bases are
-learned from the file itself (:func:`mocapfix.solvers.ssa.robust_bases`: spikes flagged
+learned from the file itself (always with ``model: self``;
+:func:`mocapfix.solvers.ssa.robust_bases`: spikes flagged
 by a running median never enter the covariance, and the worst-explained windows are
 trimmed), and the report says so (``bases: "self"``). The report also gives
 ``unexplained``: the fraction of the input's (centred, outliers and gaps replaced by the
@@ -91,8 +92,8 @@ class MSSA(FittedCleaner):
                "(Lou 2012, example-based denoising)")
     single_thread_blas = True
     params = (
-        Param("model", "model", None, "model file or shipped name (default: a shipped model for the "
-              "file's channel layout, else bases learned from the file)", nullable=True),
+        Param("model", "model", None, "model file or shipped name, or 'self' (default: a shipped model "
+              "for the file's channel layout, else bases learned from the file)", nullable=True),
         Param("space", "choice", "auto", "rotation channels (BVH/AMC) or joint positions; auto = "
               "rotations when the file has them", choices=("auto", "rotations", "positions")),
         Param("lam", "float", 1.0, "λ of eq. 2.16: weight of the filter term", low=0.0, low_open=True,
@@ -219,6 +220,13 @@ class MSSA(FittedCleaner):
         self.training_ = header.get("training")
         return self
 
+    def resolve_models(self, base_dir=None) -> None:
+        """``model: self`` forces bases learned from each file; anything else is resolved
+        as for every fitted cleaner."""
+        if self.values.get("model") == "self":
+            return
+        super().resolve_models(base_dir)
+
     # -- apply ------------------------------------------------------------------------------
     def _matching_model(self, motion: Motion, space: str, layout: list):
         """(E, mean, unexplained, source, window) of a model made for this layout and rate,
@@ -231,7 +239,7 @@ class MSSA(FittedCleaner):
                 return (self.bases_, self.mean_, self.unexplained_, self.values["model"] or "fitted",
                         self.window_)
             return None
-        if self.values["model"] is None:
+        if self.values["model"] is None:   # "self": no model
             from mocapfix import models
 
             ships = models.shipped()
@@ -277,8 +285,8 @@ class MSSA(FittedCleaner):
             trained = ssa.unexplained_fraction(vals, k)
             info["bases"] = "self"
             info["note"] = ("no model for this channel layout and frame rate: filter bases learned "
-                            "from the file itself (robustly)" if self.values["model"] is None and not
-                            self.is_fitted else "the model does not match this file's channel layout "
+                            "from the file itself (robustly)" if self.values["model"] in (None, "self")
+                            and not self.is_fitted else "the model does not match this file's channel layout "
                             "or frame rate: filter bases learned from the file itself (robustly)")
             info["windows_used"] = used
         scale = self._scale(space)
