@@ -33,7 +33,8 @@ def test_windows_and_overlap_add_are_inverse():
     assert list(ssa.window_counts(10, 3)) == [1, 2, 3, 3, 3, 3, 3, 3, 2, 1]
 
 
-@pytest.mark.parametrize("T,m,L,K", [(50, 5, 3, 4), (200, 12, 7, 20), (30, 12, 4, 10), (23, 12, 2, 3)])
+@pytest.mark.parametrize("T,m,L,K", [(50, 5, 3, 4), (200, 12, 7, 20), (30, 12, 4, 10), (23, 12, 2, 3),
+                                     (1000, 12, 9, 30), (777, 5, 4, 6)])
 def test_fir_projector_equals_the_window_by_window_projection(T, m, L, K):
     rng = np.random.default_rng(T)
     E = np.linalg.qr(rng.normal(size=(m * L, K)))[0]

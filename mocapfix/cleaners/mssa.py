@@ -27,10 +27,11 @@ Cleaning: a model is used when its layout and frame rate are the file's (a ``mod
 named in the config, else a shipped model made for that layout). Otherwise the bases are
 learned from the file itself (always with ``model: self``;
 :func:`mocapfix.solvers.ssa.robust_bases`: spikes flagged
-by a running median never enter the covariance, and the worst-explained windows are
-trimmed), and the report says so (``bases: "self"``). The report also gives
-``unexplained``: the fraction of the input's (centred, outliers and gaps replaced by the
-result) window energy the bases cannot explain, with a warning when it is above
+by a running median are replaced by it before the covariance, and the worst-explained
+windows are trimmed; K keeps the eigenvalues above ``noise_floor`` × the file's noise
+variance), and the report says so (``bases: "self"``). The report also gives
+``unexplained``: the fraction of the input's (centred, gaps filled with the result)
+window energy the bases cannot explain, with a warning when it is above
 ``out_of_sample`` × the training figure — motion unlike the training set.
 """
 from __future__ import annotations

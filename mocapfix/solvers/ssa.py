@@ -119,29 +119,48 @@ def projector(E: np.ndarray, m: int, *, dtype=np.float32):
 
     Computed as a multichannel FIR filter: frame t receives Σ_τ H_τ z(t + τ) with
     H_τ = Σ_k E_k E_{k+τ}ᵀ (E_k: the L rows of frame k of a window; |τ| < m), one matrix
-    product per lag on a shifted slice of Z (no copy) — (2m − 1)·L² per frame instead of
-    2·m·L·K for coefficients and reconstructions. The first and last
+    product per lag on a shifted slice of Z for short motions; for long ones by overlap-save
+    FFT blocks (one L × L product per frequency) — instead of 2·m·L·K per frame for
+    coefficients and reconstructions. The first and last
     m − 1 frames, covered by fewer windows, are computed from their windows directly.
     """
     E = np.asarray(E, dtype=np.float64)
-    d, K = E.shape
-    L = d // m
-    Ek = E.reshape(m, L, K)
+    L = E.shape[0] // m
+    G = (E @ E.T).reshape(m, L, m, L)              # G[k, :, k', :] = E_k E_k'ᵀ
     H = np.zeros((2 * m - 1, L, L))
     for k in range(m):
         # H[τ + m − 1] += E_k E_{k+τ}ᵀ for every k' = k + τ in the window
-        H[m - 1 - k: 2 * m - 1 - k] += np.einsum("ij,kcj->kic", Ek[k], Ek)
+        H[m - 1 - k: 2 * m - 1 - k] += G[k].transpose(1, 0, 2)
     Ht = np.ascontiguousarray(np.transpose(H, (0, 2, 1)), dtype=dtype)     # H_τᵀ, τ = −(m−1) …
     Ed = np.asarray(E, dtype=dtype)
+    lags = 2 * m - 1
+    # long motions: overlap-save FFT blocks, one L × L product per frequency and block
+    n_fft = 1 << int(np.ceil(np.log2(8 * lags)))
+    ctype = np.complex64 if np.dtype(dtype) == np.float32 else np.complex128
+    Gf = np.fft.rfft(Ht[::-1], n=n_fft, axis=0).astype(ctype)              # (F, L, L)
+
+    def fir(Zp: np.ndarray, T: int) -> np.ndarray:
+        """out(t) = Σ_j Zp[t + j] H_jᵀ, t < T (Zp holds T + lags − 1 frames)."""
+        if T < 4 * lags:
+            out = np.zeros((T, L), dtype=dtype)
+            for k in range(lags):
+                out += Zp[k:k + T] @ Ht[k]
+            return out
+        step = n_fft - (lags - 1)
+        nb = -(-T // step)
+        padded = np.zeros((nb * step + lags - 1, L), dtype=dtype)
+        padded[:len(Zp)] = Zp
+        blocks = as_strided(padded, shape=(nb, n_fft, L),
+                            strides=(step * padded.strides[0],) + padded.strides, writeable=False)
+        Xf = np.fft.rfft(blocks, axis=1).astype(ctype).transpose(1, 0, 2)   # (F, nb, L)
+        Y = np.fft.irfft(np.matmul(Xf, Gf).transpose(1, 0, 2), n=n_fft, axis=1)
+        return Y[:, lags - 1:].reshape(nb * step, L)[:T]
 
     def project(Z: np.ndarray) -> np.ndarray:
         T = Z.shape[0]
         Zp = np.zeros((T + 2 * (m - 1), L), dtype=dtype)
         Zp[m - 1:m - 1 + T] = Z
-        out = np.zeros((T, L), dtype=dtype)
-        for k in range(2 * m - 1):
-            out += Zp[k:k + T] @ Ht[k]
-        out = out.astype(np.float64)
+        out = np.array(fir(Zp, T), dtype=np.float64)
         edge = min(m - 1, T)
         if edge:
             head = windows(np.asarray(Z[:2 * m - 2], dtype=dtype), m)       # windows 0 … m − 2
