@@ -183,7 +183,9 @@ class MSSA(FittedCleaner):
         return self
 
     def _set(self, E, vals, mean, layout, m, fps, space):
-        self.bases_ = np.asarray(E, dtype=np.float64)
+        # stored as float32 in model files: hold the same values in memory, so a fitted
+        # cleaner and its saved-and-loaded copy give identical results
+        self.bases_ = np.asarray(E, dtype=np.float32).astype(np.float64)
         self.eigenvalues_ = np.asarray(vals, dtype=np.float64)
         self.mean_ = np.asarray(mean, dtype=np.float64)
         self.layout_ = [list(x) for x in layout]
