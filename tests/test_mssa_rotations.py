@@ -89,6 +89,16 @@ def test_sure_smooths_a_slow_channel_more_than_a_fast_one():
     assert err[0] < 0.2 * 0.5 and err[1] < 0.8 * 0.5
 
 
+@pytest.mark.parametrize("axes", ["ZYX", "XYZ", "ZXY", "YZX"])
+def test_euler_quaternions_match_scipy(axes):
+    from scipy.spatial.transform import Rotation
+
+    d = np.random.default_rng(0).uniform(-180, 180, (200, 3))
+    ours = rotchannels.euler_quaternions(axes, d)
+    ref = Rotation.from_euler(axes, d, degrees=True).as_quat()[:, [3, 0, 1, 2]]
+    assert np.allclose(np.abs(np.sum(ours * ref, axis=1)), 1.0, atol=1e-12)
+
+
 def test_rotation_features_round_trip_and_are_continuous():
     m = formats.read(shared("asfamc/90_31.amc"))
     F = rotchannels.to_features(m.rig, m.channels)

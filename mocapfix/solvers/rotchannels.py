@@ -39,6 +39,29 @@ def continuous_quaternions(q: np.ndarray) -> np.ndarray:
     return q
 
 
+def _qmul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Hamilton product of (T, 4) quaternions, w first."""
+    aw, ax, ay, az = a.T
+    bw, bx, by, bz = b.T
+    return np.stack([aw * bw - ax * bx - ay * by - az * bz,
+                     aw * bx + ax * bw + ay * bz - az * by,
+                     aw * by - ax * bz + ay * bw + az * bx,
+                     aw * bz + ax * by - ay * bx + az * bw], axis=1)
+
+
+def euler_quaternions(axes: str, degrees: np.ndarray) -> np.ndarray:
+    """(T, 4) unit quaternions (w first) of ``R_axes[0](a) · R_axes[1](b) · R_axes[2](c)``
+    (intrinsic order, the rig's convention) for angles (T, 3) in degrees."""
+    half = np.deg2rad(degrees) / 2.0
+    out = None
+    for n, axis in enumerate(axes.upper()):
+        q = np.zeros((len(degrees), 4))
+        q[:, 0] = np.cos(half[:, n])
+        q[:, 1 + "XYZ".index(axis)] = np.sin(half[:, n])
+        out = q if out is None else _qmul(out, q)
+    return out
+
+
 def layout(rig) -> list[dict]:
     """The feature layout of a rig: per joint with rotation DOFs its name, axes, kind
     ("quat" or "angle") and number of features. Models are matched on this."""
@@ -69,8 +92,7 @@ def to_features(rig, channels: np.ndarray) -> np.ndarray:
             q = np.full((T, 4), np.nan)
             ok = ~np.isnan(deg).any(axis=1)
             if ok.any():
-                xyzw = Rotation.from_euler(axes.upper(), deg[ok], degrees=True).as_quat()
-                q[ok] = xyzw[:, [3, 0, 1, 2]]            # w first
+                q[ok] = euler_quaternions(axes, deg[ok])
             q = continuous_quaternions(q)
             if np.nanmean(q[:, 0]) < 0:
                 q = -q
