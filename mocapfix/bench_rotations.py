@@ -68,6 +68,7 @@ def corrupt(motion: Motion, setting: str, seed: int = 0):
             size = rng.uniform(*SPIKE_DEG) * rng.choice([-1.0, 1.0]) * unit
             ch[s:s + length, c] += size
             mask[s:s + length, joint_of[c]] = True
+    mask &= ~np.isnan(motion.positions).any(axis=2)       # samples missing already stay so
     return motion.replace(channels=ch, positions=rig.positions(ch)), mask
 
 
