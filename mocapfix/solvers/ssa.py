@@ -225,8 +225,10 @@ def noise_level(X: np.ndarray) -> float:
     each channel's median absolute second difference / 0.6745 / √6 (a second difference
     of white noise has variance 6σ²). Channels that never move are left out."""
     d2 = np.abs(X[2:] - 2 * X[1:-1] + X[:-2])
-    with np.errstate(all="ignore"):
-        per = np.nanmedian(d2, axis=0) / 0.6745 / np.sqrt(6.0)
+    ok = ~np.isnan(d2).all(axis=0)
+    per = np.full(X.shape[1], np.nan)
+    if ok.any():
+        per[ok] = np.nanmedian(d2[:, ok], axis=0) / 0.6745 / np.sqrt(6.0)
     per = per[np.isfinite(per) & (per > 0)]
     return float(np.median(per)) if per.size else 0.0
 
