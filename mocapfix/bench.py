@@ -86,6 +86,11 @@ NAMED: dict[str, dict] = {
     # issue 16's peer: model averaging of five fillers with soft distance constraints
     # (Tits et al. 2018, our implementation; fills gaps only, no denoising)
     "pma": {"version": 1, "pipeline": [{"cleaner": "pma"}]},
+    # the animator's filters on Euler curves (rotations protocol; σ and width chosen as the
+    # best of a sweep on the shared BVH/AMC files, benchmarks/RESULTS.md)
+    "euler-gaussian": {"version": 1, "pipeline": [{"cleaner": "euler_smooth", "sigma": "2 frames"}]},
+    "euler-median+gaussian": {"version": 1, "pipeline": [
+        {"cleaner": "euler_smooth", "median": 5, "sigma": "1 frames"}]},
 }
 
 #: per protocol: (metric key, header, decimals); the first one is the headline metric.
@@ -95,6 +100,8 @@ METRICS: dict[str, list[tuple[str, str, int]]] = {
     "feng2014": [("rmse_corrupted_cm", "RMSE corrupted cm", 2), ("rmse_cm", "RMSE all cm", 2)],
     "occlusion": [("rmse_mm", "RMSE mm", 2), ("rmse_corrupted_mm", "RMSE corrupted mm", 2),
                   ("max_mm", "max mm", 1)],
+    "rotations": [("pos_err_pct", "joint error % height", 3), ("pos_err_mm", "joint error mm", 2),
+                  ("deg_err", "deg/channel", 3), ("writeback_mm", "write-back max mm", 2)],
 }
 _UNFILLED = ("unfilled_pct", "unfilled %", 1)
 
@@ -105,6 +112,7 @@ PRIORITY = {
     "yang2019": ["10%", "20%"],
     "feng2014": ["mixed"],
     "occlusion": ["mixed"],
+    "rotations": ["mixed"],
 }
 
 PROTOCOL_NOTES = {
@@ -125,6 +133,11 @@ PROTOCOL_NOTES = {
                 "(eq. 27, per marker).",
     "occlusion": "Realistic optical capture: gaps of 0.1–1.5 s on a quarter of the markers; "
                  "2 mm jitter with 2 % spikes of 20–100 mm; both; one marker swap. mm.",
+    "rotations": "Rotation channels of BVH/AMC (mocapfix.bench_rotations): clean; 0.7° jitter on "
+                 "every rotation channel; ±10–40° spikes on one axis of a random joint for 1–3 "
+                 "frames from 2 % of the frames; mixed. Scored on what `mocapfix clean` writes "
+                 "(after write-back): joint error in % of skeleton height and mm, mean degrees "
+                 "per rotation channel, write-back residual.",
 }
 
 
@@ -447,7 +460,8 @@ def run(files, protocol: str, methods: list[Method], seeds: int | list[int] = 3,
                 base = {"file": label, "setting": setting, "seed": seed,
                         "corrupted_pct": 100.0 * float(mask.mean())}
                 for method in active:
-                    inp = cleaner_input(motion, corrupted)
+                    # rotations: the methods get the corrupted channels (bench_rotations)
+                    inp = corrupted.copy() if protocol == "rotations" else cleaner_input(motion, corrupted)
                     started, cpu_started = time.perf_counter(), time.process_time()
                     try:
                         # only the oracle-tuned baselines (bench_oracle) see the truth
@@ -464,8 +478,14 @@ def run(files, protocol: str, methods: list[Method], seeds: int | list[int] = 3,
                     seconds = time.perf_counter() - started
                     cpu = time.process_time() - cpu_started
                     used[method.name] += cpu
+                    if protocol == "rotations":
+                        from mocapfix import bench_rotations
+
+                        scores = bench_rotations.evaluate(motion, out)
+                    else:
+                        scores = evaluate(protocol, motion, out.positions, mask)
                     rec = {**base, "method": method.name, "seconds": seconds, "cpu_seconds": cpu,
-                           "metrics": _finite(evaluate(protocol, motion, out.positions, mask))}
+                           "metrics": _finite(scores)}
                     if noop:
                         rec["skipped"] = noop
                     if getattr(method, "last_choice", None):

@@ -28,7 +28,7 @@ def _debug(ctx) -> bool:
 @click.command("bench")
 @click.argument("clean_files", nargs=-1, required=True, type=click.Path(dir_okay=False))
 @click.option("--protocol", required=True,
-              type=click.Choice(["feng2015", "yang2019", "feng2014", "occlusion", "kinect"]),
+              type=click.Choice(["feng2015", "yang2019", "feng2014", "occlusion", "kinect", "rotations"]),
               help="Corruption protocol (see the README, 'Benchmarks').")
 @click.option("--methods", default=None,
               help="Comma-separated registered cleaners and/or baselines (none, "

@@ -461,8 +461,9 @@ def check(inputs, rules_path, junit_path, as_json, fail_on, exit_zero, would_cle
 @click.option("-o", "--output", required=True, type=click.Path(dir_okay=False),
               help="Model file to write (.npz).")
 @click.option("--method", default="partlet", show_default=True,
-              type=click.Choice(["partlet", "ksvd"]),
-              help="partlet: robust dictionary learning (Feng 2015); ksvd: K-SVD (Xiao 2015).")
+              type=click.Choice(["partlet", "ksvd", "mssa"]),
+              help="partlet: robust dictionary learning (Feng 2015); ksvd: K-SVD (Xiao 2015); "
+                   "mssa: M-SSA filter bases (Lou 2012).")
 @click.option("--atoms", type=click.IntRange(2, 4096), default=None, help="Atoms per partlet (default 128).")
 @click.option("--window", type=click.IntRange(1, 200), default=None, help="Window length m in samples (default 16).")
 @click.option("--sample-rate", default=None, help="Rate of the window samples (default '120 Hz'; '30 Hz' for Kinect).")
@@ -472,13 +473,16 @@ def check(inputs, rules_path, junit_path, as_json, fail_on, exit_zero, would_cle
 @click.option("--max-windows", type=click.IntRange(10, 10_000_000), default=None,
               help="Training windows per partlet (random subset).")
 @click.option("--seed", type=click.IntRange(0), default=None)
+@click.option("--bases", type=click.IntRange(1), default=None, help="mssa: number of bases K (default: by energy).")
+@click.option("--energy", type=click.FloatRange(0, 1, min_open=True), default=None,
+              help="mssa: energy the bases keep (default 0.99).")
 @click.option("-j", "--jobs", default=1, show_default=True, type=click.IntRange(1, 256),
               help="Files read in parallel.")
 @click.option("--fps", type=float, default=None, help="Frame rate for files that store none (AMC).")
 @executors
 @common
 def train_dictionary(training, output, method, atoms, window, sample_rate, lam, beta,
-                     iterations, max_windows, seed, jobs, fps, scheduler, dask_workers):
+                     iterations, max_windows, seed, bases, energy, jobs, fps, scheduler, dask_workers):
     """Train a model for a trained cleaner from TRAINING files or folders (any format;
     BVH/AMC by forward kinematics) and write it to OUTPUT. Name it in a config with
     `model: PATH` (relative to the config file)."""
@@ -506,7 +510,8 @@ def train_dictionary(training, output, method, atoms, window, sample_rate, lam, 
     else:
         progress = None
     params = {"atoms": atoms, "window": window, "sample_rate": sample_rate, "train_lambda": lam,
-              "beta": beta, "train_iterations": iterations, "max_windows": max_windows, "seed": seed}
+              "beta": beta, "train_iterations": iterations, "max_windows": max_windows, "seed": seed,
+              "bases": bases, "energy": energy}
     try:
         summary = train(training, output, method, params, jobs, fps, progress,
                         spec=_executor_spec(jobs, scheduler, dask_workers))
@@ -517,6 +522,12 @@ def train_dictionary(training, output, method, atoms, window, sample_rate, lam, 
             bar.close()
     t = summary["training"]
     st = summary["state"]
+    if method == "mssa":
+        out.line(f"wrote {output}: mssa, {st['bases']} bases of window {st['window']} over "
+                 f"{len(st['layout'])} {st['space']} channels at {st['fps']:g} Hz; trained on "
+                 f"{len(t['files'])} files, {t['frames']} frames in {t['seconds']:.1f} s; "
+                 f"unexplained energy {100 * st['unexplained']:.3f} %", level=-1)
+        return
     out.line(f"wrote {output}: {summary['cleaner']} ({st['method']}), {len(st['joints'])} joints in "
                f"{len(st['partlets'])} partlets, window {st['window']} at {st['sample_rate']:g} Hz; "
                f"trained on {len(t['files'])} files, {t['frames']} frames in {t['seconds']:.1f} s; "

@@ -360,6 +360,8 @@ PROTOCOLS: dict[str, dict[str, dict]] = {
     "feng2014": {k: {"kind": k} for k in ("random-missing", "regular-gaps", "noise", "mixed")},
     # Realistic optical occlusions (this module's ``occlusion``).
     "occlusion": {s: {"scenario": s} for s in OCCLUSION_SCENARIOS},
+    # Rotation channels of BVH/AMC (mocapfix.bench_rotations).
+    "rotations": {s: {"setting": s} for s in ("clean", "jitter", "spikes", "mixed")},
 }
 
 
@@ -375,6 +377,10 @@ def apply_protocol(motion: Motion, protocol: str, setting: str, seed: int = 0):
     kw = settings[setting]
     if protocol == "occlusion":
         return occlusion(motion, kw["scenario"], seed)
+    if protocol == "rotations":
+        from mocapfix import bench_rotations
+
+        return bench_rotations.corrupt(motion, kw["setting"], seed)
     rng = np.random.default_rng(seed)
     if protocol == "feng2015":
         return _feng2015(motion, rng, **kw)

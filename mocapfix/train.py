@@ -20,6 +20,7 @@ from mocapfix.errors import MocapfixError
 METHODS: dict[str, tuple[str, dict]] = {
     "partlet": ("partlet_dictionary", {"method": "partlet"}),
     "ksvd": ("partlet_dictionary", {"method": "ksvd"}),
+    "mssa": ("mssa", {}),
 }
 
 

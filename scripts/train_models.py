@@ -9,6 +9,8 @@ them). Anyone can re-run it::
   ``partlet_dictionary`` with no ``model`` on CMU ASF/AMC and CMU BVH skeletons.
 - ``partlet-kinect.npz``: the same method on Kinect v2 joints made from the CMU joints
   (:data:`mocapfix.bodyparts.ASF_TO_KINECT_V2`), for Kinect v1/v2/Azure skeletons.
+- ``mssa-cmu.npz``: M-SSA filter bases (Lou 2012) on the rotation channels of the CMU ASF
+  skeleton at 120 Hz; used by ``mssa`` with no ``model`` on files with that channel layout.
 """
 from __future__ import annotations
 
@@ -35,17 +37,20 @@ def as_kinect(motion: Motion) -> Motion:
                   metres_per_unit=motion.metres_per_unit, format="kinect", path=motion.path)
 
 
-def fit_and_save(motions, paths, out: Path, **params):
+def fit_and_save(motions, paths, out: Path, method: str = "partlet", **params):
     started = time.perf_counter()
-    cleaner = build(*METHODS["partlet"][:1], **{**METHODS["partlet"][1], **params})
+    cleaner = build(METHODS[method][0], **{**METHODS[method][1], **params})
     cleaner.fit(motions)
     header, arrays = cleaner.state()
     header.update(cleaner.model_header_fields())
     header["training"] = models.provenance(paths, [m.n_frames for m in motions],
                                            time.perf_counter() - started)
     models.save(out, header, arrays)
+    unexplained = header["state"]["unexplained"]
+    if not isinstance(unexplained, dict):
+        unexplained = {"all": unexplained}
     print(f"{out}: {time.perf_counter() - started:.1f} s, unexplained "
-          + ", ".join(f"{p} {100 * f:.2f} %" for p, f in header["state"]["unexplained"].items()))
+          + ", ".join(f"{p} {100 * f:.3f} %" for p, f in unexplained.items()))
 
 
 def main():
@@ -60,6 +65,7 @@ def main():
     # Kinect skeletons come at 30 Hz: windows of 8 samples at 30 Hz (0.27 s)
     fit_and_save([as_kinect(m) for m in motions], paths, out / "partlet-kinect.npz",
                  sample_rate="30 Hz", window=8)
+    fit_and_save(motions, paths, out / "mssa-cmu.npz", method="mssa")
 
 
 if __name__ == "__main__":

@@ -20,7 +20,8 @@ from mocapfix.pipeline import loads_config
 
 FITTED = sorted(n for n, c in registry().items() if issubclass(c, FittedCleaner))
 # small, fast training settings per fitted cleaner (the contract, not the accuracy)
-FAST = {"partlet_dictionary": {"atoms": 16, "window": 4, "train_iterations": 3, "max_windows": 400}}
+FAST = {"partlet_dictionary": {"atoms": 16, "window": 4, "train_iterations": 3, "max_windows": 400},
+        "mssa": {"window": 8, "window_step": 2}}
 
 _NAMES = ["root", "lhipjoint", "lfemur", "ltibia", "lfoot", "rhipjoint", "rfemur", "rtibia", "rfoot",
           "lowerback", "thorax", "upperneck", "head", "lclavicle", "lhumerus", "lradius", "lhand",

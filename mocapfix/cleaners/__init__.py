@@ -27,6 +27,7 @@ _MODULES = (
     "mocapfix.cleaners.partlet",
     "mocapfix.cleaners.depth_skeleton",
     "mocapfix.cleaners.pma",
+    "mocapfix.cleaners.mssa",
 )
 _loaded = False
 
@@ -48,6 +49,10 @@ _WHERE = {
     "fill_ensemble": "mocapfix.cleaners.pma",
     "partlet_dictionary": "mocapfix.cleaners.partlet",
     "kinect_skeleton": "mocapfix.cleaners.depth_skeleton",
+    "mssa": "mocapfix.cleaners.mssa",
+    "euler_smooth": "mocapfix.cleaners.rotations",
+    "rotation_outliers": "mocapfix.cleaners.rotations",
+    "rotation_denoise": "mocapfix.cleaners.rotations",
 }
 
 

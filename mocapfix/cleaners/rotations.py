@@ -27,16 +27,22 @@ from mocapfix.cleaners.base import Cleaner, Param
 from mocapfix.errors import ConfigError
 from mocapfix.kinematics import nearest_branch
 from mocapfix.motion import Motion
-from mocapfix.solvers import segments
+from mocapfix.solvers import glitches, rotchannels, segments, ssa, sure
+from mocapfix.solvers.rotchannels import continuous_quaternions
 from mocapfix.writeback import solve_channels
 
 
-def continuous_quaternions(q: np.ndarray) -> np.ndarray:
-    """Flip signs of a (T, 4) quaternion track so consecutive samples have a positive dot
-    product (the shortest path between equal rotations)."""
-    dots = np.einsum("ti,ti->t", q[1:], q[:-1])
-    flips = np.concatenate([[1.0], np.cumprod(np.where(dots < 0, -1.0, 1.0))])
-    return q * flips[:, None]
+def _channels_from_positions(motion: Motion) -> np.ndarray:
+    """The motion's channels; when an earlier step cleaned the positions, they are first
+    written back into the channels, so position and channel cleaning compose."""
+    ch = motion.channels.copy()
+    if not np.allclose(motion.rig.positions(ch), motion.positions, rtol=0, atol=1e-9, equal_nan=False):
+        ch = solve_channels(motion.rig, ch, motion.positions)
+    return ch
+
+
+def _rotation_columns(rig) -> list[int]:
+    return [c for cols in rig.rot_columns for c in cols]
 
 
 @register
@@ -68,10 +74,7 @@ class RotationSmooth(Cleaner):
         rig = motion.rig
         if rig is None or motion.channels is None or motion.n_frames < 3:
             return motion.copy(), {"skipped": "no rotation channels"}
-        ch = motion.channels.copy()
-        if not np.allclose(rig.positions(ch), motion.positions, rtol=0, atol=1e-9, equal_nan=False):
-            # an earlier step cleaned positions: take them into the channels first
-            ch = solve_channels(rig, ch, motion.positions)
+        ch = _channels_from_positions(motion)
         full = [j for j in range(rig.n_joints) if len(rig.rot_axes[j]) == 3]
         partial = [c for j in range(rig.n_joints) if 0 < len(rig.rot_axes[j]) < 3
                    for c in rig.rot_columns[j]]
@@ -100,3 +103,164 @@ class RotationSmooth(Cleaner):
         return motion.replace(channels=ch, positions=positions), {
             "joints_as_quaternions": len(full), "angle_channels": len(partial),
             "translation_channels": int(trans.size) if self["translations"] else 0}
+
+
+@register
+class EulerSmooth(Cleaner):
+    """The curve editor's filters on the Euler angle curves themselves: each rotation
+    channel is unwrapped (±180° jumps removed), optionally median-filtered, then
+    Gaussian-smoothed, and put back on the file's branch. The animator's baselines of the
+    ``rotations`` bench protocol (a Gaussian; a median then a Gaussian); unlike
+    ``rotation_smooth`` they filter each Euler angle independently, so near gimbal lock
+    they mix axes."""
+
+    name = "euler_smooth"
+    summary = "median and/or Gaussian filter on unwrapped Euler angle curves (animators' filters)"
+    params = (
+        Param("median", "int", 0, "median filter width in frames (0: none; odd)", low=0, high=1001),
+        Param("sigma", "time", "2 frames", "Gaussian sigma (0: none)", unit="s", low=0.0),
+        Param("translations", "bool", False, "also filter translation channels"),
+    )
+
+    def _validate(self):
+        if self["median"] and self["median"] % 2 == 0:
+            raise ConfigError(f"{self.step}: parameter 'median' must be odd (or 0), got {self['median']}")
+
+    def _apply(self, motion: Motion):
+        rig = motion.rig
+        if rig is None or motion.channels is None or motion.n_frames < 3:
+            return motion.copy(), {"skipped": "no rotation channels"}
+        ch = _channels_from_positions(motion)
+        cols = _rotation_columns(rig)
+        if self["translations"]:
+            cols += [int(c) for c in rig.trans_columns.ravel() if c >= 0]
+        rot = set(_rotation_columns(rig))
+        period = 360.0 if rig.degrees else 2 * np.pi
+        x = ch[:, cols].copy()
+        for n, c in enumerate(cols):
+            ok = ~np.isnan(x[:, n])
+            if c in rot and ok.any():
+                x[ok, n] = np.unwrap(x[ok, n], period=period)
+        if self["median"] > 1:
+            from scipy import ndimage
+
+            filled, _ = segments.interpolate_gaps(x, "linear")
+            med = ndimage.median_filter(np.where(np.isnan(filled), 0.0, filled),
+                                        size=(self["median"], 1), mode="nearest")
+            x = np.where(np.isnan(x), np.nan, med)
+        sigma = self.frames("sigma", motion)
+        if sigma > 0:
+            x = segments.gaussian(x, sigma)
+        for n, c in enumerate(cols):
+            ch[:, c] = nearest_branch(x[:, n], ch[:, c], rig.degrees) if c in rot else x[:, n]
+        return motion.replace(channels=ch, positions=rig.positions(ch)), {
+            "channels": len(cols), "median_frames": self["median"], "sigma_frames": round(sigma, 3)}
+
+
+def _features_of(motion: Motion):
+    """(channels, features) of a BVH/AMC motion (positions cleaned by an earlier step are
+    written back first)."""
+    ch = _channels_from_positions(motion)
+    return ch, rotchannels.to_features(motion.rig, ch)
+
+
+@register
+class RotationOutliers(Cleaner):
+    """Remove glitches from the rotation channels of BVH/AMC without touching real motion.
+
+    Works on the continuous features of :mod:`mocapfix.solvers.rotchannels` (quaternions
+    of 3-DOF joints, unwrapped angles otherwise; degrees). A sample is a spike when it is
+    farther from the running median of ``width`` frames than ``threshold`` × the robust
+    spread (1.4826 · MAD) of its channel's median residuals, and at least ``min_angle``
+    (Hampel identifier) and stands off the cubic through the frames around it
+    (:func:`mocapfix.solvers.glitches.glitches`). A running median follows
+    monotonic motion exactly, however fast, and only clips turning points, so fast real
+    motion (acrobatics, toes) leaves residuals far below a 10° glitch; a glitch of up to
+    (width − 1) / 2 frames is removed entirely by the median. A joint with any spiking
+    feature at a frame is marked for that frame, and its channels there are re-made by
+    PCHIP interpolation of its features from the frames around; every other channel value
+    is kept bit for bit.
+    """
+
+    name = "rotation_outliers"
+    summary = "remove spikes from BVH/AMC rotation channels (Hampel on continuous rotations)"
+    params = (
+        Param("width", "int", 7, "running median width in frames (odd)", low=3, high=101),
+        Param("threshold", "float", 6.0, "spike threshold in robust spreads of the channel", low=1.0,
+              high=100.0),
+        Param("min_angle", "float", 5.0, "smallest deviation (degrees) that can be a spike", low=0.0,
+              high=180.0),
+    )
+
+    def _validate(self):
+        if self["width"] % 2 == 0:
+            raise ConfigError(f"{self.step}: parameter 'width' must be odd, got {self['width']}")
+
+    def _apply(self, motion: Motion):
+        rig = motion.rig
+        if rig is None or motion.channels is None or motion.n_frames < self["width"]:
+            return motion.copy(), {"skipped": "no rotation channels (or too few frames)"}
+        ch, F = _features_of(motion)
+        spikes = glitches.glitches(F, width=self["width"], k=self["threshold"], floor=self["min_angle"])
+        layout = rotchannels.layout(rig)
+        sizes = [e["size"] for e in layout]
+        edges = np.cumsum([0] + sizes)
+        joint_bad = np.stack([spikes[:, a:b].any(axis=1) for a, b in zip(edges[:-1], edges[1:])], axis=1)
+        if not joint_bad.any():
+            return motion.replace(channels=ch, positions=rig.positions(ch)), {"spike_frames": 0}
+        G = F.copy()
+        for n, (a, b) in enumerate(zip(edges[:-1], edges[1:])):
+            G[joint_bad[:, n], a:b] = np.nan
+        G, _ = segments.interpolate_gaps(G, "pchip")
+        G = np.where(np.isnan(G), F, G)           # spikes at the very ends: hold the input
+        new = rotchannels.from_features(rig, G, ch)
+        out = ch.copy()
+        joints = [j for j, axes in enumerate(rig.rot_axes) if axes]
+        for n, j in enumerate(joints):
+            rows = joint_bad[:, n]
+            if rows.any():
+                out[np.ix_(rows, rig.rot_columns[j])] = new[np.ix_(rows, rig.rot_columns[j])]
+        hit = {layout[n]["joint"]: int(joint_bad[:, n].sum()) for n in np.flatnonzero(joint_bad.any(axis=0))}
+        return motion.replace(channels=out, positions=rig.positions(out)), {
+            "spike_frames": int(joint_bad.any(axis=1).sum()), "joint_frames_replaced": int(joint_bad.sum()),
+            "joints": hit}
+
+
+@register
+class RotationDenoise(Cleaner):
+    """Denoise the rotation channels of BVH/AMC, each at the smoothing its motion allows.
+
+    On the continuous features of :mod:`mocapfix.solvers.rotchannels`, every feature is
+    Gaussian-smoothed with the width (0.7–48 frames, capped by ``max_sigma``) that
+    minimises Stein's unbiased risk estimate for the noise level measured on the file
+    (:mod:`mocapfix.solvers.sure`): slow channels (root, spine) get long kernels, fast ones
+    (wrists, toes) short ones, and clean data — whose noise estimate is near zero — is
+    barely changed. ``noise`` gives the level in degrees instead of estimating it."""
+
+    name = "rotation_denoise"
+    summary = "per-channel SURE-tuned Gaussian on continuous BVH/AMC rotations"
+    params = (
+        Param("noise", "float", None, "noise level in degrees (default: estimated from the file)",
+              low=0.0, high=90.0, nullable=True),
+        Param("max_sigma", "time", None, "largest Gaussian sigma", unit="s", low=0.0, nullable=True),
+        Param("local", "time", None, "choose the width per frame from the risk over this span "
+              "(default: one width per channel)", unit="s", low=0.0, low_open=True, nullable=True),
+    )
+
+    def _apply(self, motion: Motion):
+        rig = motion.rig
+        if rig is None or motion.channels is None or motion.n_frames < 8:
+            return motion.copy(), {"skipped": "no rotation channels (or too few frames)"}
+        ch, F = _features_of(motion)
+        missing = np.isnan(F)
+        X = glitches.prefill(F)
+        noise = self["noise"] if self["noise"] is not None else ssa.noise_level(X)
+        cap = None if self["max_sigma"] is None else self.frames("max_sigma", motion)
+        span = None if self["local"] is None else self.frames("local", motion)
+        Z, widths = sure.sure_gaussian(X, noise, max_width=cap, span=span)
+        Z[missing] = np.nan
+        out = rotchannels.from_features(rig, Z, ch)
+        return motion.replace(channels=out, positions=rig.positions(out)), {
+            "noise_deg": round(float(noise), 4),
+            "median_sigma_frames": float(np.median(widths)) if widths.size else 0.0,
+            "unsmoothed_features": int((widths == 0).sum())}

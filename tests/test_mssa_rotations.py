@@ -1,0 +1,210 @@
+"""M-SSA filter bases (Lou 2012 ch. 2), continuous rotation features, rotation-space
+glitch removal and SURE denoising, and the ``rotations`` bench protocol: known-answer
+cases on synthetic signals, and corrupt → clean → bound on real BVH/AMC files."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from mocapfix import bench_rotations as br
+from mocapfix import formats, models
+from mocapfix.cleaners import build
+from mocapfix.errors import ConfigError
+from mocapfix.solvers import rotchannels, ssa, sure
+from conftest import shared
+
+
+# -- solvers: known answers ---------------------------------------------------------------
+
+def _sines(T=600, seed=0):
+    rng = np.random.default_rng(seed)
+    t = np.arange(T)
+    freqs = rng.uniform(0.005, 0.03, 3)
+    mix = rng.normal(size=(3, 5))
+    return np.sin(2 * np.pi * freqs[None] * t[:, None] + rng.uniform(0, 6, 3)) @ mix * 10
+
+
+def test_windows_and_overlap_add_are_inverse():
+    X = np.arange(40.0).reshape(10, 4)
+    W = ssa.windows(X, 3)
+    assert W.shape == (8, 12) and np.array_equal(W[2], X[2:5].ravel())
+    back = ssa.overlap_add(W, 10, 3, 4) / ssa.window_counts(10, 3)[:, None]
+    assert np.allclose(back, X)
+    assert list(ssa.window_counts(10, 3)) == [1, 2, 3, 3, 3, 3, 3, 3, 2, 1]
+
+
+@pytest.mark.parametrize("T,m,L,K", [(50, 5, 3, 4), (200, 12, 7, 20), (30, 12, 4, 10), (23, 12, 2, 3),
+                                     (1000, 12, 9, 30), (777, 5, 4, 6)])
+def test_fir_projector_equals_the_window_by_window_projection(T, m, L, K):
+    rng = np.random.default_rng(T)
+    E = np.linalg.qr(rng.normal(size=(m * L, K)))[0]
+    Z = rng.normal(size=(T, L))
+    direct = ssa.overlap_add((ssa.windows(Z, m) @ E) @ E.T, T, m, L)
+    assert np.allclose(ssa.projector(E, m, dtype=np.float64)(Z), direct, atol=1e-12)
+
+
+def test_bases_of_three_sines_need_six_dimensions():
+    """A mix of 3 sinusoids on 5 channels spans 6 dimensions of any window (sin and cos per
+    frequency): 6 bases hold all the energy, 5 do not."""
+    acc = ssa.LagCovariance(10, 5)
+    acc.add(_sines())
+    _, vals = acc.bases(k=1)
+    assert ssa.unexplained_fraction(vals, 6) < 1e-10 < ssa.unexplained_fraction(vals, 5)
+    E, _ = acc.bases(energy=0.999999)
+    assert E.shape[1] == 6
+    assert np.allclose(E.T @ E, np.eye(6), atol=1e-8)
+
+
+def test_robust_reconstruction_removes_spikes_and_fills_a_gap():
+    X = _sines()
+    acc = ssa.LagCovariance(10, 5)
+    acc.add(X)
+    E, _ = acc.bases(k=6)
+    Y = X + np.random.default_rng(1).normal(0, 0.3, X.shape)
+    Y[100, 2] += 40.0
+    Y[300:303, 0] -= 25.0
+    Y[400:412, 4] = np.nan
+    Z, w, _ = ssa.robust_reconstruct(Y, E, 10, lam=1.0, p=3.0, iterations=20)
+    assert not np.isnan(Z).any()
+    assert w[100, 2] < 0.01 and (w[300:303, 0] < 0.01).all() and (w[400:412, 4] == 0).all()
+    assert abs(Z[100, 2] - X[100, 2]) < 1.0 and np.abs(Z[300:303, 0] - X[300:303, 0]).max() < 1.0
+    # the 12-frame gap: better than a straight line across it (convergence across gaps is
+    # slow: 20 iterations, over-relaxed)
+    from mocapfix.solvers.glitches import prefill
+
+    line = np.abs(prefill(Y)[400:412, 4] - X[400:412, 4]).max()
+    assert np.abs(Z[400:412, 4] - X[400:412, 4]).max() < 0.7 * line
+    # the noise is reduced too (projection on 6 of 50 dimensions)
+    assert np.sqrt(np.mean((Z - X) ** 2)) < 0.5 * 0.3
+
+
+def test_sure_smooths_a_slow_channel_more_than_a_fast_one():
+    T = 2000
+    t = np.arange(T)
+    clean = np.stack([np.sin(2 * np.pi * t / 1000), np.sin(2 * np.pi * t / 25)], axis=1) * 10
+    noisy = clean + np.random.default_rng(2).normal(0, 0.5, clean.shape)
+    Z, widths = sure.sure_gaussian(noisy, 0.5)
+    assert widths[0] > 3 * widths[1]
+    err = np.sqrt(np.mean((Z - clean) ** 2, axis=0))
+    assert err[0] < 0.2 * 0.5 and err[1] < 0.8 * 0.5
+
+
+@pytest.mark.parametrize("axes", ["ZYX", "XYZ", "ZXY", "YZX"])
+def test_euler_quaternions_match_scipy(axes):
+    from scipy.spatial.transform import Rotation
+
+    d = np.random.default_rng(0).uniform(-180, 180, (200, 3))
+    ours = rotchannels.euler_quaternions(axes, d)
+    ref = Rotation.from_euler(axes, d, degrees=True).as_quat()[:, [3, 0, 1, 2]]
+    assert np.allclose(np.abs(np.sum(ours * ref, axis=1)), 1.0, atol=1e-12)
+
+
+def test_rotation_features_round_trip_and_are_continuous():
+    m = formats.read(shared("asfamc/90_31.amc"))
+    F = rotchannels.to_features(m.rig, m.channels)
+    assert F.shape[1] == sum(e["size"] for e in rotchannels.layout(m.rig))
+    # acrobatics: the root turns over, yet no quaternion feature jumps between frames
+    nq = 4 * sum(e["kind"] == "quat" for e in rotchannels.layout(m.rig))
+    assert rotchannels.layout(m.rig)[0]["kind"] == "quat"
+    quat_cols = [c for c, e in enumerate(e for e in rotchannels.layout(m.rig) for _ in range(e["size"]))
+                 if e["kind"] == "quat"]
+    assert len(quat_cols) == nq
+    assert np.abs(np.diff(F[:, quat_cols], axis=0)).max() < 60.0
+    back = rotchannels.from_features(m.rig, F, m.channels)
+    assert np.abs(back - m.channels).max() < 1e-9
+
+
+# -- the rotations bench protocol ---------------------------------------------------------
+
+def test_rotations_protocol_is_seeded_and_leaves_translations_alone():
+    m = formats.read(shared("asfamc/13_39.amc"))
+    a, mask = br.corrupt(m, "mixed", 3)
+    b, _ = br.corrupt(m, "mixed", 3)
+    assert np.array_equal(a.channels, b.channels) and mask.any()
+    trans = m.rig.trans_columns[m.rig.trans_columns >= 0]
+    assert np.array_equal(a.channels[:, trans], m.channels[:, trans])
+    d = (a.channels - m.channels)[:, br.rotation_columns(m.rig)]
+    assert 0.6 < np.std(d[np.abs(d) < 5]) < 0.8                 # the 0.7° jitter
+    assert 9.9 < np.abs(d).max() < 45                            # 10–40° spikes on top
+    clean, _ = br.corrupt(m, "clean", 0)
+    scores = br.evaluate(m, clean)
+    assert scores["pos_err_pct"] == 0 and scores["deg_err"] == 0
+
+
+def test_equivalent_euler_solutions_are_not_errors():
+    m = formats.read(shared("asfamc/13_39.amc"))
+    ch = m.channels.copy()
+    j = next(j for j, a in enumerate(m.rig.rot_axes) if len(a) == 3 and m.rig.parents[j] >= 0)
+    a, b, c = (ch[:, k].copy() for k in m.rig.rot_columns[j])
+    ch[:, m.rig.rot_columns[j]] = np.stack([a + 180, 180 - b, c + 180], axis=1)
+    assert np.allclose(m.rig.positions(ch), m.positions, atol=1e-9)
+    assert br.channel_errors(m.rig, ch, m.channels).max() < 1e-9
+
+
+# -- cleaners on real files ---------------------------------------------------------------
+
+def test_euler_smooth_wants_an_odd_median():
+    with pytest.raises(ConfigError, match="odd"):
+        build("euler_smooth", median=4)
+
+
+@pytest.mark.parametrize("name", ["asfamc/90_31.amc", "bvh/cmu_cgspeed_131_01.bvh"])
+def test_rotation_outliers_remove_spikes_and_keep_fast_real_motion(name):
+    m = formats.read(shared(name))
+    out, info = build("rotation_outliers").apply(m)
+    # clean acrobatics and toes: almost nothing replaced, joints move < 0.03 % of height
+    assert info["joint_frames_replaced"] < 0.006 * m.n_frames * len(rotchannels.layout(m.rig))
+    assert br.evaluate(m, out)["pos_err_pct"] < 0.03
+    spiked, _ = br.corrupt(m, "spikes", 1)
+    cleaned, _ = build("rotation_outliers").apply(spiked)
+    assert br.evaluate(m, cleaned)["pos_err_pct"] < 0.3 * br.evaluate(m, spiked)["pos_err_pct"]
+    # only the re-made joint-frames change: every other channel value is kept bit for bit
+    assert (cleaned.channels != spiked.channels).mean() < 0.01
+
+
+@pytest.mark.parametrize("name", ["asfamc/13_39.amc", "bvh/cmu_cgspeed_131_01.bvh",
+                                  "bvh/bandai_dataset-1_walk_normal_001.bvh"])
+def test_rotation_denoise_beats_the_gaussian_on_euler_curves(name):
+    m = formats.read(shared(name))
+    noisy, _ = br.corrupt(m, "jitter", 1)
+    ours = br.evaluate(m, build("rotation_denoise").apply(noisy)[0])["pos_err_pct"]
+    euler = br.evaluate(m, build("euler_smooth", sigma="2 frames").apply(noisy)[0])["pos_err_pct"]
+    none = br.evaluate(m, noisy)["pos_err_pct"]
+    assert ours < 0.95 * euler and ours < 0.5 * none
+
+
+def test_mssa_uses_the_shipped_model_on_cmu_skeletons_and_learns_otherwise():
+    assert "mssa-cmu" in models.shipped()
+    m = formats.read(shared("asfamc/13_39.amc"))          # not in the training corpus
+    noisy, _ = br.corrupt(m, "mixed", 2)
+    out, info = build("mssa").apply(noisy)
+    assert info["bases"] == "mssa-cmu" and "warning" not in info
+    assert br.evaluate(m, out)["pos_err_pct"] < 0.5 * br.evaluate(m, noisy)["pos_err_pct"]
+    b = formats.read(shared("bvh/cmu_cgspeed_131_01.bvh"))
+    noisy, _ = br.corrupt(b, "jitter", 2)
+    out, info = build("mssa").apply(noisy)
+    assert info["bases"] == "self" and "learned from the file itself" in info["note"]
+    assert br.evaluate(b, out)["pos_err_pct"] < 0.5 * br.evaluate(b, noisy)["pos_err_pct"]
+
+
+def test_mssa_fills_missing_rotation_channels():
+    m = formats.read(shared("asfamc/13_39.amc"))
+    ch = m.channels.copy()
+    j = m.rig.names.index("lfemur")
+    ch[100:140, m.rig.rot_columns[j]] = np.nan
+    gappy = m.replace(channels=ch, positions=m.rig.positions(ch))
+    out, info = build("mssa").apply(gappy)
+    assert not np.isnan(out.channels).any()
+    err = br.channel_errors(m.rig, out.channels, m.channels)
+    assert err.max() < 8.0 and err[100:140].mean() < 2.0, (err.max(), err[100:140].mean())
+
+
+def test_mssa_warns_on_motion_unlike_its_training():
+    """Bases trained on a slow sway cannot explain an acrobatic take: the report says so."""
+    m = formats.read(shared("asfamc/90_31.amc"))
+    slow = m.replace(channels=np.repeat(m.channels[:1], m.n_frames, axis=0)
+                     + np.sin(np.arange(m.n_frames) / 60.0)[:, None] * 5.0)
+    slow = slow.replace(positions=m.rig.positions(slow.channels))
+    c = build("mssa", window=8, window_step=2).fit([slow])
+    _, info = c.apply(m)
+    assert info["unexplained"] > 0.05 and "unlike the training set" in info["warning"], info
