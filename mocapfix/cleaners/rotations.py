@@ -19,7 +19,6 @@ two kinds of cleaning compose.
 from __future__ import annotations
 
 import numpy as np
-from scipy import signal
 from scipy.spatial.transform import Rotation
 
 from mocapfix.cleaners import register
@@ -66,6 +65,8 @@ class RotationSmooth(Cleaner):
         if not cutoff < motion.fps / 2.0:
             raise ConfigError(f"{self.step}: cutoff {cutoff:g} Hz must be below the Nyquist "
                               f"frequency {motion.fps / 2.0:g} Hz of this motion")
+        from scipy import signal   # only this cleaner needs it: not loaded with the default config
+
         sos = signal.butter(self["order"], cutoff, fs=motion.fps, output="sos")
         pad = max(segments.default_padlen(sos), int(np.ceil(motion.fps / cutoff)))
         return segments.filtfilt(x, sos, padlen=pad)
