@@ -302,7 +302,7 @@ class CleanTask:
         from mocapfix.clean import clean_file
 
         try:
-            from mocapfix.manifest import file_sha256
+            from mocapfix.fileio import file_sha256
 
             pipeline = _pipeline(self.config, self.source)
             result = clean_file(job.source, job.output, pipeline, self.reports, self.read_options)

@@ -5,6 +5,7 @@ A crash or an error half-way leaves either the old file or no file, never a trun
 from __future__ import annotations
 
 import contextlib
+import hashlib
 import os
 import tempfile
 from pathlib import Path
@@ -63,3 +64,12 @@ def read_input_bytes(path) -> bytes:
     if not data.strip():
         raise UnreadableFileError(path, "file is empty")
     return data
+
+
+def file_sha256(path) -> str:
+    """SHA-256 of a file's bytes (read in 1 MiB blocks), as hex."""
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()

@@ -25,18 +25,10 @@ import time
 from pathlib import Path
 
 from mocapfix import __version__
-from mocapfix.fileio import atomic_write_text
+from mocapfix.fileio import atomic_write_text, file_sha256
 
 MANIFEST_NAME = "mocapfix-manifest.jsonl"
 _KEY_FIELDS = ("config_sha256", "reports", "read_options", "version")
-
-
-def file_sha256(path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for block in iter(lambda: fh.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
 
 
 def run_key(config_text: str, reports, read_options: dict | None) -> dict:

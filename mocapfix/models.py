@@ -19,7 +19,6 @@ and modification time): a worker reads each model once.
 """
 from __future__ import annotations
 
-import hashlib
 import io
 import json
 import zipfile
@@ -29,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from mocapfix.errors import ConfigError
-from mocapfix.fileio import atomic_write_bytes
+from mocapfix.fileio import atomic_write_bytes, file_sha256
 
 SCHEMA = "mocapfix.model/1"
 HEADER_KEY = "__header__"
@@ -41,14 +40,6 @@ def shipped() -> dict[str, Path]:
     if not SHIPPED_DIR.is_dir():
         return {}
     return {p.stem: p for p in sorted(SHIPPED_DIR.glob("*.npz"))}
-
-
-def sha256(path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for block in iter(lambda: fh.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
 
 
 def save(path, header: dict, arrays: dict) -> Path:
@@ -142,5 +133,5 @@ def resolve(ref: str, base_dir=None, where: str = "") -> Path:
 
 def provenance(paths, frames, seconds: float) -> dict:
     """The ``training`` block of a header: files with their sha256 and frame counts."""
-    files = [{"path": str(p), "sha256": sha256(p), "frames": int(n)} for p, n in zip(paths, frames)]
+    files = [{"path": str(p), "sha256": file_sha256(p), "frames": int(n)} for p, n in zip(paths, frames)]
     return {"files": files, "frames": int(sum(frames)), "seconds": round(float(seconds), 3)}

@@ -111,3 +111,25 @@ def hang_guard(seconds: int = 10):
     finally:
         signal.alarm(0)
         signal.signal(signal.SIGALRM, previous)
+
+
+def output_tree(folder) -> dict:
+    """Every file under an output ``folder`` but the batch manifest (it holds times of
+    day): motion files as bytes, reports as JSON without their timing fields (the only thing
+    that differs between two runs of the same config). For comparing two batches."""
+    import json
+
+    def drop_seconds(x):
+        if isinstance(x, dict):
+            return {k: drop_seconds(v) for k, v in x.items() if k != "seconds"}
+        if isinstance(x, list):
+            return [drop_seconds(v) for v in x]
+        return x
+
+    out = {}
+    for p in sorted(Path(folder).rglob("*")):
+        if p.is_file() and p.name != "mocapfix-manifest.jsonl":
+            rel = p.relative_to(folder).as_posix()
+            out[rel] = drop_seconds(json.loads(p.read_text())) if p.name.endswith(".report.json") \
+                else p.read_bytes()
+    return out

@@ -14,7 +14,7 @@ import scipy.linalg
 from click.testing import CliRunner
 from threadpoolctl import threadpool_info, threadpool_limits
 
-from conftest import SAMPLE_DATA
+from conftest import SAMPLE_DATA, output_tree
 from mocapfix import batch, threads
 from mocapfix.batch import CleanTask, discover_inputs, plan_outputs, run_batch, run_tasks
 from mocapfix.cli import main
@@ -32,23 +32,7 @@ def _jobs(outdir):
 
 
 def _tree(folder: Path) -> dict:
-    """Every file under ``folder`` but the manifest (times of day): motion files as bytes,
-    reports as JSON without the timing fields (the only thing that differs between two
-    runs of the same config)."""
-    def drop_seconds(x):
-        if isinstance(x, dict):
-            return {k: drop_seconds(v) for k, v in x.items() if k != "seconds"}
-        if isinstance(x, list):
-            return [drop_seconds(v) for v in x]
-        return x
-
-    out = {}
-    for p in sorted(folder.rglob("*")):
-        if p.is_file() and p.name != "mocapfix-manifest.jsonl":
-            rel = p.relative_to(folder).as_posix()
-            out[rel] = drop_seconds(json.loads(p.read_text())) if p.name.endswith(".report.json") \
-                else p.read_bytes()
-    return out
+    return output_tree(folder)
 
 
 def test_dask_local_cluster_gives_byte_identical_outputs(tmp_path):

@@ -14,7 +14,7 @@ from pathlib import Path
 
 from click.testing import CliRunner
 
-from conftest import SAMPLE_DATA
+from conftest import SAMPLE_DATA, output_tree
 from mocapfix.cli import main
 from mocapfix.manifest import MANIFEST_NAME
 
@@ -52,20 +52,7 @@ def _done(outdir: Path) -> set:
 
 
 def _outputs(folder: Path) -> dict:
-    def drop_seconds(x):
-        if isinstance(x, dict):
-            return {k: drop_seconds(v) for k, v in x.items() if k != "seconds"}
-        if isinstance(x, list):
-            return [drop_seconds(v) for v in x]
-        return x
-
-    out = {}
-    for p in sorted(folder.rglob("*")):
-        if p.is_file() and p.name != MANIFEST_NAME:
-            rel = p.relative_to(folder).as_posix()
-            out[rel] = drop_seconds(json.loads(p.read_text())) if p.name.endswith(".report.json") \
-                else p.read_bytes()
-    return out
+    return output_tree(folder)
 
 
 def _run(*args):
