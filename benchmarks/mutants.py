@@ -29,6 +29,7 @@ MUTANTS = {
     "one_iteration": "tsmc stopped after one ALM iteration",
     "no_swaps": "default config without the swaps step",
     "previous_default": "previous default (swaps, spikes, fill_pca, PCHIP, wavelet)",
+    "no_ensemble": "default without fill_ensemble (swaps, trust, tsmc: the default before issue 16)",
 }
 
 
@@ -58,6 +59,10 @@ def _without_swaps(text: str) -> str:
     return text.replace("  - cleaner: swaps\n    formats: [c3d]\n", "")
 
 
+def _without_ensemble(text: str) -> str:
+    return text.replace("  - cleaner: fill_ensemble\n    formats: [c3d]\n", "")
+
+
 def apply(mutant: str) -> None:
     from mocapfix.cleaners import tsmc
     from mocapfix.solvers import dct
@@ -83,6 +88,8 @@ def apply(mutant: str) -> None:
         _override("max_iter", 1)
     elif mutant == "no_swaps":
         _config_text(_without_swaps)
+    elif mutant == "no_ensemble":
+        _config_text(_without_ensemble)
     elif mutant == "previous_default":
         _config_text(lambda text: PREVIOUS_DEFAULT)
     else:
