@@ -520,6 +520,8 @@ def train_dictionary(training, output, method, atoms, window, sample_rate, lam, 
     finally:
         if bar:
             bar.close()
+    for path, why in summary["skipped"]:
+        out.line(f"skipped {path}: {why}", level=0)
     t = summary["training"]
     st = summary["state"]
     if method == "mssa":

@@ -24,18 +24,17 @@ METHODS: dict[str, tuple[str, dict]] = {
 }
 
 
-def discover_training(inputs) -> list[Path]:
-    """Motion files among ``inputs`` (files, or folders searched recursively)."""
-    files: list[Path] = []
-    for raw in inputs:
-        path = Path(raw)
-        if not path.exists():
-            raise MocapfixError(f"{path}: no such file or folder")
-        if path.is_dir():
-            files += sorted(p for p in path.rglob("*") if p.is_file() and not p.name.startswith(".")
-                            and p.suffix.lower() in formats.MOTION_SUFFIXES)
-        else:
-            files.append(path)
+def discover_training(inputs, skipped: list | None = None) -> list[Path]:
+    """Motion files among ``inputs`` (files, or folders searched recursively), found as
+    ``clean`` and ``check`` find them (:func:`mocapfix.batch.discover_inputs`): in folders,
+    text files that are not motion data (notes, exports), special files and symlink loops
+    are passed over, each with its reason appended to ``skipped``."""
+    from mocapfix.batch import discover_inputs
+
+    found = discover_inputs(inputs)
+    if skipped is not None:
+        skipped.extend(found.skipped)
+    files = [f.path for f in found.files]
     if not files:
         raise MocapfixError("no training files found in " + ", ".join(map(str, inputs)))
     return files
@@ -83,7 +82,8 @@ def train(inputs, output, method: str = "partlet", params: dict | None = None, j
                     **{k: v for k, v in (params or {}).items() if v is not None}, **fixed)
     if not isinstance(cleaner, FittedCleaner):
         raise MocapfixError(f"{cleaner_name} is not a trained cleaner")
-    paths = discover_training(inputs)
+    skipped: list = []
+    paths = discover_training(inputs, skipped)
     motions = read_all(paths, jobs, fps, progress=(lambda n, t: progress("read", n, t)) if progress else None,
                        spec=spec)
     cleaner.fit(motions, progress=(lambda n, t: progress("fit", n, t)) if progress else None)
@@ -92,4 +92,4 @@ def train(inputs, output, method: str = "partlet", params: dict | None = None, j
     header["training"] = models.provenance(paths, [m.n_frames for m in motions],
                                            time.perf_counter() - started)
     models.save(output, header, arrays)
-    return {"output": str(output), **header}
+    return {"output": str(output), "skipped": skipped, **header}

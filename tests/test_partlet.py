@@ -173,3 +173,19 @@ def test_kinect_v1_v2_azure_and_msr_names_map_to_the_kinect_model_joints():
         hits = [c for c in canon if c in v2]
         assert len(hits) >= 20, (layout[:3], hits)
         assert len(set(hits)) == len(hits), "two joints mapped to one model joint"
+
+
+def test_train_dictionary_passes_over_notes_in_a_training_folder(tmp_path):
+    """A lab folder holds notes beside the takes: training skips them, says so, and trains."""
+    import shutil
+
+    takes = tmp_path / "takes"
+    takes.mkdir()
+    for name in ("05.asf", "05_01.amc", "05_02.amc"):
+        shutil.copy(shared(f"asfamc/{name}"), takes / name)
+    (takes / "notes.txt").write_text("session notes: subject 5, good takes\n")
+    res = CliRunner().invoke(main, ["train-dictionary", str(takes), "-o", str(tmp_path / "m.npz"),
+                                    "--atoms", "16", "--iterations", "2", "--max-windows", "400"])
+    assert res.exit_code == 0, res.output
+    assert "skipped" in res.output and "notes.txt" in res.output
+    assert "trained on 2 files" in res.output
