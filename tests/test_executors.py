@@ -3,7 +3,6 @@ run, the pipeline is parsed once per worker, Dask is optional, and no BLAS call 
 worker runs with more threads than the policy gives it (mocapfix.threads)."""
 from __future__ import annotations
 
-import json
 import sys
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
