@@ -26,7 +26,7 @@ import numpy as np  # noqa: E402
 from mocapfix import bench_rotations as br  # noqa: E402
 from mocapfix import formats  # noqa: E402
 from mocapfix.cleaners import build  # noqa: E402
-from mocapfix.solvers.glitches import prefill  # noqa: E402
+from mocapfix.solvers.segments import linear_bridge  # noqa: E402
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "asfamc"
 
@@ -82,7 +82,7 @@ def run(name, k, corrupt, methods):
 
 
 def linear(inp):
-    return prefill(inp.channels)
+    return linear_bridge(inp.channels)
 
 
 def main():

@@ -65,7 +65,7 @@ def _without_ensemble(text: str) -> str:
 
 def apply(mutant: str) -> None:
     from mocapfix.cleaners import tsmc
-    from mocapfix.solvers import dct
+    from mocapfix.solvers.segments import linear_bridge
 
     if mutant == "none":
         return
@@ -75,7 +75,7 @@ def apply(mutant: str) -> None:
             cols = np.repeat(rows, 3)
             omega = np.repeat(trusted, 3, axis=1)[:, cols]
             x = motion.positions.reshape(T, 3 * J)[:, cols]
-            return dct.prefill(np.where(omega, x, np.nan)), \
+            return linear_bridge(np.where(omega, x, np.nan)), \
                 {"iterations": 0, "residual": 0.0, "converged": True, "rank": None}
         tsmc.TSMC._complete = _complete
     elif mutant == "no_pca_prior":

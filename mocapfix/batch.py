@@ -27,10 +27,10 @@ from pathlib import Path
 from typing import Callable, Iterator
 
 from mocapfix.errors import ConfigError, MocapfixError
-from mocapfix.formats import MOTION_SUFFIXES
+from mocapfix.formats import MOTION_SUFFIXES, suffixes
 
 _SKIP_SUFFIXES = (".report.json", ".report.md", ".report.html")
-_TEXT_SUFFIXES = (".csv", ".txt", ".tsv")
+_TEXT_SUFFIXES = suffixes("kinect")
 
 
 @dataclass(frozen=True)
@@ -83,14 +83,14 @@ def regular_file_problem(path: Path) -> str | None:
 
 def _looks_like_motion(path: Path) -> bool:
     """Content sniff of a text file found in a folder: any format claims it."""
-    from mocapfix.formats import _MODULES, module
+    from mocapfix.formats import NAMES, module
 
     try:
         with open(path, "rb") as fh:
             head = fh.read(4096)
     except OSError:
         return True          # let the reader report the problem
-    return any(module(name).sniff(head) for name in _MODULES)
+    return any(module(name).sniff(head) for name in NAMES)
 
 
 def _matches(rel: str, patterns) -> bool:

@@ -1,7 +1,7 @@
 """Seeded corruption of clean motions, for tests and ``mocapfix bench``.
 
-The ``occlusion`` scenarios model an optical capture (ALGORITHMS.md, "Corruption
-protocols", and issue 3): occlusion gaps of 0.1–1.5 s on a quarter of the markers,
+The ``occlusion`` scenarios model an optical capture (the README's
+"Benchmarks" section): occlusion gaps of 0.1–1.5 s on a quarter of the markers,
 2 mm jitter with 2 % spikes of 20–100 mm, both together, and a marker swap. Physical
 sizes are converted to the motion's units. Every function returns the corrupted motion
 and a (T, J) mask of the samples it touched; the input is never modified.
@@ -98,7 +98,7 @@ def occlusion(motion: Motion, scenario: str, seed: int = 0):
 
 
 # ---------------------------------------------------------------------------------------
-# The research papers' protocols (ALGORITHMS.md, "Corruption protocols"), used by
+# The research papers' protocols (Feng 2014, Feng 2015, Yang 2019), used by
 # ``mocapfix bench``. Every detail a paper leaves open is fixed here and named in the
 # docstring that uses it; the README's bench section repeats the list.
 #

@@ -30,3 +30,28 @@ def gap_table(mask: np.ndarray) -> list[dict]:
 def interior(start: np.ndarray, length: np.ndarray, n_frames: int) -> np.ndarray:
     """True for runs that touch neither end of the sequence."""
     return (start > 0) & (start + length < n_frames)
+
+
+def gap_report(missing: np.ndarray, still_missing: np.ndarray, fps: float) -> dict:
+    """Counts of the marker gaps (runs in a (T, J) mask) that were filled, left because they
+    touch an end of the capture, or left for another reason (too long); shared by every
+    cleaner that fills."""
+    T = missing.shape[0]
+    col, start, length = runs(missing)
+    edge = (start == 0) | (start + length == T)
+    # a gap counts as filled when none of its samples is still missing
+    left = np.zeros(len(col), dtype=bool)
+    if len(col):
+        miss_cum = np.concatenate([np.zeros((1, missing.shape[1]), dtype=np.int64),
+                                   np.cumsum(still_missing, axis=0)])
+        left = (miss_cum[start + length, col] - miss_cum[start, col]) > 0
+    long_left = left & ~edge
+    return {
+        "gaps": int(len(col)),
+        "gaps_filled": int(np.sum(~left)),
+        "gaps_left_long": int(np.sum(long_left)),
+        "gaps_left_edge": int(np.sum(left & edge)),
+        "samples_filled": int(np.sum(missing & ~still_missing)),
+        "longest_left_s": (round(float(length[long_left].max()) / fps, 4)
+                           if long_left.any() else 0.0),
+    }

@@ -1,5 +1,5 @@
-"""Error metrics against ground truth and quality metrics without it (ALGORITHMS.md,
-"Metrics"). All take (T, J, 3) arrays in the same unit and ignore samples where the truth
+"""Error metrics against ground truth and quality metrics without it (the papers'
+definitions, cited per function). All take (T, J, 3) arrays in the same unit and ignore samples where the truth
 is missing."""
 from __future__ import annotations
 

@@ -33,6 +33,7 @@ import yaml
 from mocapfix.cleaners import build
 from mocapfix.cleaners.base import Cleaner, FittedCleaner
 from mocapfix.errors import ConfigError
+from mocapfix.formats import NAMES
 from mocapfix.motion import Motion
 from mocapfix.selection import Selection, cleanable, put, take
 from mocapfix.yamlsafe import load_yaml as safe_load_yaml
@@ -40,7 +41,6 @@ from mocapfix.yamlsafe import load_yaml as safe_load_yaml
 CONFIG_VERSION = 1
 _STEP_KEYS = {"cleaner", "formats", "name", "markers", "exclude"}
 _TOP_KEYS = {"version", "pipeline", "report", "markers", "exclude"}
-_FORMATS = {"c3d", "bvh", "asfamc", "kinect"}
 
 
 class _LineLoader(yaml.SafeLoader):
@@ -208,8 +208,8 @@ def parse_config(data, source: str = "<config>") -> Pipeline:
         if formats is not None:
             if isinstance(formats, str):
                 formats = [formats]
-            if not isinstance(formats, list) or not all(isinstance(f, str) and f in _FORMATS for f in formats):
-                raise ConfigError(f"{where}: 'formats' must list some of {', '.join(sorted(_FORMATS))}, "
+            if not isinstance(formats, list) or not all(isinstance(f, str) and f in NAMES for f in formats):
+                raise ConfigError(f"{where}: 'formats' must list some of {', '.join(sorted(NAMES))}, "
                                   f"got {_strip_lines(formats)!r}")
             formats = tuple(formats)
         label = f"step {n} ({raw.get('name') or name}){_line_of(raw)}"

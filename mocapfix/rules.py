@@ -38,9 +38,9 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from mocapfix.errors import ConfigError
+from mocapfix.formats import NAMES
 
 STATUS_ORDER = {"OK": 0, "WARN": 1, "FAIL": 2}
-FORMATS = ("c3d", "bvh", "asfamc", "kinect")
 RULES_VERSION = 1
 _RULE_KEYS = {"metric", "scope", "warn", "fail", "formats", "include", "exclude", "name"}
 _TOP_KEYS = {"version", "extends", "formats", "include", "exclude", "rules"}
@@ -303,8 +303,8 @@ def _formats(value, where):
         return None
     if isinstance(value, str):
         value = [value]
-    if not isinstance(value, list) or not value or not all(isinstance(v, str) and v in FORMATS for v in value):
-        raise ConfigError(f"{where}: 'formats' must list some of {', '.join(FORMATS)}, got {value!r}")
+    if not isinstance(value, list) or not value or not all(isinstance(v, str) and v in NAMES for v in value):
+        raise ConfigError(f"{where}: 'formats' must list some of {', '.join(NAMES)}, got {value!r}")
     return tuple(value)
 
 

@@ -1,5 +1,5 @@
 """Rotation write-back: turn cleaned joint positions of a BVH or ASF/AMC motion back into
-the channel values its file stores (ALGORITHMS.md, "Rotations").
+the channel values its file stores.
 
 Bone offsets stay fixed. Walking the hierarchy from the root, each joint's frame is
 rotated by the smallest world rotation that maps the bone vectors it carries onto the

@@ -43,6 +43,8 @@ CLASSICAL = {
 }
 WITH_PCA = [("spikes", {}), ("fill_pca", {}), ("fill", {"method": "pchip", "max_gap": None}),
             ("butterworth", {"cutoff": "12 Hz"})]
+#: tsmc as its own filler (the default before fill_ensemble): what pins its PCA prior
+TSMC_ALONE = [("swaps", {}), ("trust", {}), ("tsmc", {})]
 
 
 @lru_cache(maxsize=None)
@@ -115,13 +117,13 @@ def run(pipeline: str, motion):
 def rmse_mm(pipeline: str, capture: str, scenario: str, seed: int) -> float:
     """RMSE in mm over every sample of the capture. ``pipeline``: 'default' (the shipped
     configs/default.yaml), 'scipy_linear_gaussian', 'scipy_spline', 'classical' (best of
-    CLASSICAL), 'pca' (WITH_PCA).
+    CLASSICAL), 'pca' (WITH_PCA), 'tsmc' (TSMC_ALONE).
 
     With MOCAPFIX_BASELINE_CACHE set to a folder, the baselines' values (not the
-    default's) are kept there across processes — for benchmarks/mutation_check.py, whose
+    default's or tsmc's) are kept there across processes — for benchmarks/mutation_check.py, whose
     mutants never touch the baselines; the tests do not set it."""
     cache = os.environ.get("MOCAPFIX_BASELINE_CACHE")
-    if not cache or pipeline == "default":
+    if not cache or pipeline in ("default", "tsmc"):
         return _rmse_mm(pipeline, capture, scenario, seed)
     path = Path(cache) / f"{pipeline}-{capture}-{scenario}-{seed}.txt"
     if path.exists():
@@ -144,6 +146,8 @@ def _rmse_mm(pipeline: str, capture: str, scenario: str, seed: int) -> float:
         return min(rmse(_steps(s, bad).positions, ref.positions) for s in CLASSICAL.values()) * mm
     if pipeline == "pca":
         return rmse(_steps(WITH_PCA, bad).positions, ref.positions) * mm
+    if pipeline == "tsmc":
+        return rmse(_steps(TSMC_ALONE, bad).positions, ref.positions) * mm
     out = run(pipeline, bad)
     if np.isnan(out).any():
         return float("inf")                          # unfilled samples fail every bound

@@ -70,9 +70,9 @@ def test_robust_reconstruction_removes_spikes_and_fills_a_gap():
     assert abs(Z[100, 2] - X[100, 2]) < 1.0 and np.abs(Z[300:303, 0] - X[300:303, 0]).max() < 1.0
     # the 12-frame gap: better than a straight line across it (convergence across gaps is
     # slow: 20 iterations, over-relaxed)
-    from mocapfix.solvers.glitches import prefill
+    from mocapfix.solvers.segments import linear_bridge
 
-    line = np.abs(prefill(Y)[400:412, 4] - X[400:412, 4]).max()
+    line = np.abs(linear_bridge(Y)[400:412, 4] - X[400:412, 4]).max()
     assert np.abs(Z[400:412, 4] - X[400:412, 4]).max() < 0.7 * line
     # the noise is reduced too (projection on 6 of 50 dimensions)
     assert np.sqrt(np.mean((Z - X) ** 2)) < 0.5 * 0.3

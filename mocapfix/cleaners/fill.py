@@ -1,5 +1,5 @@
 """Classic gap filling per channel: linear, cubic spline or PCHIP interpolation
-(ALGORITHMS.md §0). Gaps longer than ``max_gap`` are left for a stronger method, and gaps
+(Fritsch & Carlson 1980 for PCHIP). Gaps longer than ``max_gap`` are left for a stronger method, and gaps
 touching the start or end of the capture are never extrapolated; both are reported."""
 from __future__ import annotations
 
@@ -7,34 +7,9 @@ import numpy as np
 
 from mocapfix.cleaners import register
 from mocapfix.cleaners.base import Cleaner, Param
-from mocapfix.gaps import runs
+from mocapfix.gaps import gap_report
 from mocapfix.motion import Motion
 from mocapfix.solvers.segments import INTERPOLATORS, interpolate_gaps
-
-
-def gap_report(missing: np.ndarray, still_missing: np.ndarray, fps: float) -> dict:
-    """Counts of the marker gaps (runs in a (T, J) mask) that were filled, left because they
-    touch an end of the capture, or left for another reason (too long); shared by every
-    cleaner that fills."""
-    T = missing.shape[0]
-    col, start, length = runs(missing)
-    edge = (start == 0) | (start + length == T)
-    # a gap counts as filled when none of its samples is still missing
-    left = np.zeros(len(col), dtype=bool)
-    if len(col):
-        miss_cum = np.concatenate([np.zeros((1, missing.shape[1]), dtype=np.int64),
-                                   np.cumsum(still_missing, axis=0)])
-        left = (miss_cum[start + length, col] - miss_cum[start, col]) > 0
-    long_left = left & ~edge
-    return {
-        "gaps": int(len(col)),
-        "gaps_filled": int(np.sum(~left)),
-        "gaps_left_long": int(np.sum(long_left)),
-        "gaps_left_edge": int(np.sum(left & edge)),
-        "samples_filled": int(np.sum(missing & ~still_missing)),
-        "longest_left_s": (round(float(length[long_left].max()) / fps, 4)
-                           if long_left.any() else 0.0),
-    }
 
 
 @register

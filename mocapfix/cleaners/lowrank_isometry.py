@@ -1,6 +1,6 @@
 """Spatio-temporal recovery of skeleton motion: low rank + sparse errors + wavelet
 sparsity + bone-length isometry (Yang, Guo, Li, Wang, Lai & Wu 2019, "Spatio-temporal
-reconstruction for 3D motion recovery", IEEE TIP; ALGORITHMS.md §3).
+reconstruction for 3D motion recovery", IEEE TIP).
 
 The motion is the 3T × S matrix D (each block of three rows one frame, each column one
 joint's trajectory) and is split as D = A + E, A the clean motion, by::
@@ -68,6 +68,7 @@ from mocapfix.motion import Motion
 from mocapfix.solvers import wavelet_ops
 from mocapfix.solvers.isometry import IsometrySystem, energy
 from mocapfix.solvers.lowrank import blas_single_thread, shrink, svt
+from mocapfix.solvers.segments import linear_bridge
 
 
 # --------------------------------------------------------------------------------------
@@ -93,8 +94,7 @@ def estimate_lengths(X: np.ndarray, bones: np.ndarray, trusted: np.ndarray,
     The length of a bone is the :func:`window_mode` of its per-frame lengths: gross errors
     at either end spread the length distribution widely (and shift its bulk upwards)
     while the true length stays a sharp peak, so the mode survives a majority of
-    corrupted frames where the median (ALGORITHMS.md §3: "median over frames where both
-    ends are trusted") is pulled away by 10–20 cm. NaN for a bone never observed.
+    corrupted frames where the median (over frames where both ends are trusted) is pulled away by 10–20 cm. NaN for a bone never observed.
 
     Parameters
     ----------
@@ -190,7 +190,7 @@ def recover(X: np.ndarray, bones: np.ndarray, lengths: np.ndarray, lam: float | 
                                              "+ wavelet only")
                 _report_isometry(info, X, A, bones, lengths)
                 return A, E, info
-        A = _bridge(np.asarray(X, dtype=np.float64))
+        A = linear_bridge(X.reshape(len(X), -1)).reshape(X.shape)
         E = np.where(np.isfinite(X).all(axis=2)[..., None], 0.0, np.nan)
         info = dict(failed, fallback="data returned (gaps bridged linearly)", iterations=0,
                     residual=float("nan"), steps_limited=0,
@@ -220,7 +220,7 @@ def _diverged(A: np.ndarray, centre: np.ndarray, limit: float) -> bool:
 
 def _report_isometry(info: dict, X, A, bones, lengths) -> None:
     """Isometry energy of the input (gaps bridged) and of the result ``A`` (T, S, 3)."""
-    info["iso_energy_before"] = energy(_bridge(np.asarray(X, dtype=np.float64)).transpose(1, 2, 0),
+    info["iso_energy_before"] = energy(linear_bridge(X.reshape(len(X), -1)).reshape(X.shape).transpose(1, 2, 0),
                                        bones, lengths)
     info["iso_energy_after"] = energy(A.transpose(1, 2, 0), bones, lengths)
 
@@ -239,7 +239,7 @@ def _recover(X, bones, lengths, gamma, lam, mu, rho, eta, wavelet, level, max_it
     # 3T × S matrix up to a row permutation, which leaves singular values and SVT as
     # they are.
     obs = np.isfinite(Xp).all(axis=2).T[:, None, :]                          # (S, 1, Tp)
-    D = np.ascontiguousarray(_bridge(Xp).transpose(1, 2, 0))
+    D = np.ascontiguousarray(linear_bridge(Xp.reshape(len(Xp), -1)).reshape(Xp.shape).transpose(1, 2, 0))
     scale = float(np.linalg.norm(D * obs)) or 1.0
     centre, limit = _divergence_ball(D, obs)
 
@@ -344,26 +344,6 @@ def _divergence_ball(D: np.ndarray, obs: np.ndarray) -> tuple[np.ndarray, float]
     off = (D - centre) * obs
     reach = math.sqrt(float(np.einsum("sxt,sxt->st", off, off).max()))
     return centre, DIVERGENCE_REACH * max(reach, 1.0)
-
-
-def _bridge(X: np.ndarray) -> np.ndarray:
-    """Gaps of every channel bridged linearly, ends held at the nearest observed value;
-    channels never observed are zero. Only a starting point for the solver."""
-    from mocapfix.solvers.segments import interpolate_gaps
-
-    T = X.shape[0]
-    flat = X.reshape(T, -1)
-    out, _ = interpolate_gaps(flat, "linear")
-    obs = np.isfinite(out)
-    idx = np.where(obs, np.arange(T)[:, None], -1)
-    first = np.maximum.accumulate(idx, axis=0)                      # last observed at or before
-    rev = np.where(obs, np.arange(T)[:, None], T)
-    nxt = np.minimum.accumulate(rev[::-1], axis=0)[::-1]             # first observed at or after
-    src = np.where(first >= 0, first, np.where(nxt < T, nxt, 0))
-    cols = np.broadcast_to(np.arange(flat.shape[1]), flat.shape)
-    out = np.where(obs, out, out[src, cols])
-    out[~np.isfinite(out)] = 0.0
-    return out.reshape(X.shape)
 
 
 # --------------------------------------------------------------------------------------

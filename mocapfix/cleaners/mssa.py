@@ -1,4 +1,4 @@
-"""Example-based M-SSA filter bases (Lou 2012, PhD thesis ch. 2; ALGORITHMS.md §5):
+"""Example-based M-SSA filter bases (Lou 2012, PhD thesis ch. 2):
 denoise, remove outliers and fill gaps with spatio-temporal filter bases learned from clean
 motions, by the robust reconstruction of eq. 2.16 (:mod:`mocapfix.solvers.ssa`).
 
@@ -44,7 +44,8 @@ from mocapfix.cleaners import register
 from mocapfix.cleaners.base import FittedCleaner, Param
 from mocapfix.errors import MocapfixError
 from mocapfix.motion import Motion
-from mocapfix.solvers import glitches, rotchannels, ssa
+from mocapfix.solvers import rotchannels, ssa
+from mocapfix.solvers.segments import linear_bridge
 
 #: shipped model per rotation layout signature (first joints' names), used with no ``model``
 AUTO_MODELS = ("mssa-cmu",)
@@ -73,7 +74,7 @@ def _features(motion: Motion, space: str):
     P = motion.positions * motion.metres_per_unit
     T, J, _ = P.shape
     flat = P.reshape(T, -1)
-    anchor = glitches.prefill(flat).reshape(T, J, 3).mean(axis=1)
+    anchor = linear_bridge(flat).reshape(T, J, 3).mean(axis=1)
     return (P - anchor[:, None]).reshape(T, -1), anchor
 
 

@@ -65,7 +65,8 @@ from mocapfix.cleaners.base import FittedCleaner, Param
 from mocapfix.errors import ConfigError, MocapfixError
 from mocapfix.motion import Motion
 from mocapfix.solvers import sparse
-from mocapfix.solvers.dct import gcv_smooth, prefill
+from mocapfix.solvers.dct import gcv_smooth
+from mocapfix.solvers.segments import linear_bridge
 from mocapfix.solvers.lowrank import blas_single_thread
 from mocapfix.solvers.rigid import from_frame, kabsch, to_frame, torso_frames
 
@@ -205,7 +206,7 @@ class PartletDictionary(FittedCleaner):
             T = len(P)
             flat = frame_pts.reshape(T, -1)
             miss = np.isnan(flat)
-            filled = prefill(flat)
+            filled = linear_bridge(flat)
             ok = ~np.isnan(filled).any(axis=0)
             if ok.any():
                 sm, _ = gcv_smooth(filled[:, ok], n_pad=min(T // 2, int(round(0.1 * fps))))
@@ -472,7 +473,7 @@ class PartletDictionary(FittedCleaner):
         m = self.window_
         flat = Xp.reshape(T, -1)
         missing = np.isnan(Xp).any(axis=2)
-        Z = prefill(flat)
+        Z = linear_bridge(flat)
         Z[np.isnan(Z)] = 0.0
         pad = min(T // 2, int(round(0.1 * fps)))
         presmooth = self.values["presmooth"]

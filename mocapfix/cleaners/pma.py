@@ -27,6 +27,7 @@ from mocapfix.cleaners.base import Cleaner, Param
 from mocapfix.errors import ConfigError
 from mocapfix.motion import Motion
 from mocapfix.solvers import pma
+from mocapfix.solvers.pca_gapfill import fill_gaps_pca
 
 _EXTERNAL = ("pca", "tsmc")
 
@@ -84,8 +85,8 @@ class PMA(Cleaner):
     def _external(self, motion: Motion) -> dict[str, np.ndarray]:
         out = {}
         if "pca" in self["members"]:
-            pca = build("fill_pca", fill_ends=True, min_observed=0.0)
-            out["pca"] = pca.apply(motion)[0].positions
+            out["pca"] = fill_gaps_pca(motion.positions, metres_per_unit=motion.metres_per_unit,
+                                       fill_ends=True, min_observed=0.0)[0]
         if "tsmc" in self["members"]:
             out["tsmc"] = build("tsmc", observed="keep").apply(motion)[0].positions
         return out

@@ -2,7 +2,7 @@
 
 Position-space cleaners work on forward-kinematics joint positions and are written back
 as rotations (:mod:`mocapfix.writeback`). This cleaner instead low-passes the channels
-themselves, in a continuous representation (ALGORITHMS.md, "Rotations"): each joint with
+themselves, in a continuous representation (never raw, wrapped Euler angles): each joint with
 three rotation DOFs is turned into unit quaternions (scipy ``Rotation``, intrinsic order
 of the file), signs are made continuous (q and −q are the same rotation; a flip would be
 a jump for the filter), the four components are filtered, renormalised and turned back
@@ -28,6 +28,7 @@ from mocapfix.kinematics import nearest_branch
 from mocapfix.motion import Motion
 from mocapfix.solvers import glitches, rotchannels, segments, ssa, sure
 from mocapfix.solvers.rotchannels import continuous_quaternions
+from mocapfix.solvers.segments import linear_bridge
 from mocapfix.writeback import solve_channels
 
 
@@ -254,7 +255,7 @@ class RotationDenoise(Cleaner):
             return motion.copy(), {"skipped": "no rotation channels (or too few frames)"}
         ch, F = _features_of(motion)
         missing = np.isnan(F)
-        X = glitches.prefill(F)
+        X = linear_bridge(F)
         noise = self["noise"] if self["noise"] is not None else ssa.noise_level(X)
         cap = None if self["max_sigma"] is None else self.frames("max_sigma", motion)
         span = None if self["local"] is None else self.frames("local", motion)

@@ -1,4 +1,4 @@
-"""Classic smoothers per channel (ALGORITHMS.md §0): Gaussian, zero-phase Butterworth,
+"""Classic smoothers per channel: Gaussian, zero-phase Butterworth,
 wavelet shrinkage and a constant-velocity Kalman/RTS smoother.
 
 All are NaN-safe: missing samples stay missing (except ``kalman`` with ``fill: true``),
@@ -12,7 +12,7 @@ import numpy as np
 
 from mocapfix.cleaners import register
 from mocapfix.cleaners.base import Cleaner, Param
-from mocapfix.cleaners.fill import gap_report
+from mocapfix.gaps import gap_report
 from mocapfix.errors import ConfigError
 from mocapfix.motion import Motion
 from mocapfix.solvers import segments

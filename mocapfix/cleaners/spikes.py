@@ -1,5 +1,4 @@
-"""Spike (outlier) detection: marks implausible samples missing so a gap filler takes over
-(ALGORITHMS.md §0).
+"""Spike (outlier) detection: marks implausible samples missing so a gap filler takes over.
 
 A Hampel identifier (Hampel 1974; Pearson et al. 2016, "Generalized Hampel filters") per
 marker on the 3-D residual to a robust local fit. The robust smooth is a leave-one-out

@@ -1,6 +1,6 @@
 """Trust-data detection and temporal-stable robust matrix completion (Feng et al. 2014,
 "Exploiting temporal stability and low-rank structure for motion capture data refinement",
-Information Sciences 277; ALGORITHMS.md §1–2).
+Information Sciences 277).
 
 ``trust`` (Algorithm 1): every channel is smoothed by robust penalised least squares
 (Welsch weights, smoothing parameter by GCV; :func:`mocapfix.solvers.dct.robust_smooth`)
@@ -61,7 +61,7 @@ Other changes to the paper, each measured with the ``occlusion`` scenarios:
 - γ = 1.5, tol = 1e-2: 23 iterations instead of ~95 at γ = 1.1, tol = 1e-3, within ±7 %
   on every occlusion case with ``prior: none`` (85_02 gaps +7 %, HDM05 gaps −11 %), and
   the same to 3 decimals as tol = 3e-3 with ``prior: pca``;
-- fills outside the capture volume are rejected (:func:`pca_fill.implausible_runs`) and
+- fills outside the capture volume are rejected (:func:`mocapfix.solvers.segments.implausible_runs`) and
   frames with fewer than ``min_observed`` (0.2) of the markers trusted are not filled, as
   in ``fill_pca`` (0.5 there: 0.5 left 23 % of ``feng2014`` mixed unfilled).
 """
@@ -72,9 +72,11 @@ import numpy as np
 from mocapfix.cleaners import register
 from mocapfix.cleaners.base import Cleaner, Param
 from mocapfix.motion import Motion
-from mocapfix.cleaners.pca_fill import body_frame, implausible_runs, to_global, to_local
-from mocapfix.solvers import dct
+from mocapfix.solvers import dct, segments
 from mocapfix.solvers.lowrank import leave_block_out_residual, ppca_fit, svt
+from mocapfix.solvers.pca_gapfill import fill_gaps_pca
+from mocapfix.solvers.rigid import body_frame, to_global, to_local
+from mocapfix.solvers.segments import implausible_runs, linear_bridge
 
 _CM = 100.0  # cm per metre
 
@@ -114,7 +116,7 @@ def trust_mask(pos: np.ndarray, weights: np.ndarray, k: float, lo: float, hi: fl
         pad = dct.fast_pad(T, pad)
     xp, p = dct.pad_missing(np.where(w > 0, x, np.nan), pad)
     wp = np.pad(w, ((p, p), (0, 0)))
-    init, _ = dct.pad_reflect(dct.prefill(np.where(w > 0, x, np.nan)), pad)
+    init, _ = dct.pad_reflect(linear_bridge(np.where(w > 0, x, np.nan)), pad)
     scale = np.full(3 * J, hi if welsch is None else welsch)
     theta = np.full(J, hi)
     xhat, mu = init, None
@@ -297,7 +299,7 @@ def tsmc_solve(x: np.ndarray, omega: np.ndarray, alpha: float = 1.0, beta: float
 def moving_reference(pos: np.ndarray, observed: np.ndarray, hold: float = 0.0):
     """Body-frame coordinates of (T, J, 3) ``pos`` and a function mapping local positions
     back to global. The per-frame rigid transform is the generalised Procrustes fit
-    (:func:`mocapfix.cleaners.pca_fill.body_frame`) of the *gap-bridged* marker set
+    (:func:`mocapfix.solvers.rigid.body_frame`) of the *gap-bridged* marker set
     (linear interpolation; a marker's leading/trailing gap is held for ``hold`` frames and
     left out beyond), so every frame is fitted on nearly the same markers: fitting
     each frame on its own observed subset made the frame jitter (CMU 05_01 with 40 %
@@ -310,11 +312,11 @@ def moving_reference(pos: np.ndarray, observed: np.ndarray, hold: float = 0.0):
         return pos, None
     flat = np.where(observed[..., None], pos, np.nan).reshape(T, 3 * J)
     missing = np.isnan(flat)
-    prev, nxt = dct.neighbours(missing)
+    prev, nxt = segments.neighbours(missing)
     bracketed = (prev >= 0) & (nxt < T)                       # observed or an interior gap
     near_end = _distance_to_observed(missing, (prev, nxt)) <= hold
     use = (bracketed | near_end).reshape(T, J, 3).all(axis=2)[:, seen]
-    bridged = dct.prefill(flat).reshape(T, J, 3)[:, seen]
+    bridged = linear_bridge(flat).reshape(T, J, 3)[:, seen]
     if (use.sum(axis=1) < 3).any():
         return pos, None
     _, transform = body_frame(bridged, use, rtol=1e-6)
@@ -398,7 +400,7 @@ class TSMC(Cleaner):
             smoothed, _ = _gcv_denoise(est, p)
             # the noise is judged on the trusted samples with linear bridges, not on the
             # model's fills (a poor fill distorts the smooth around it)
-            _, noise = _gcv_denoise(dct.prefill(np.where(omega, x, np.nan)), p, omega)
+            _, noise = _gcv_denoise(linear_bridge(np.where(omega, x, np.nan)), p, omega)
             noisy = noise > self.length("noise_floor", motion) if mode == "auto" \
                 else np.ones(noise.shape, bool)
             est = np.where(noisy[None, :], smoothed, est)
@@ -448,7 +450,7 @@ class TSMC(Cleaner):
                 work, back = moving_reference(np.where(trusted[..., None], pos, np.nan),
                                               trusted, hold)
                 x = work.reshape(T, 3 * J)[:, cols]
-            centre = dct.prefill(np.where(omega, x, np.nan)).mean(axis=0)
+            centre = linear_bridge(np.where(omega, x, np.nan)).mean(axis=0)
         s = _cm_per_unit(motion)
         xc = np.where(omega, (x - centre) * s, 0.0)
         xp, p = dct.pad_missing(xc, p)
@@ -471,13 +473,11 @@ class TSMC(Cleaner):
         missing samples pre-filled by ``fill_pca`` (ends too; what it leaves, by linear
         interpolation / holding), the rigid body frame fitted on all of them.
         Returns ``(x (T, 3 × rows), back)``."""
-        from mocapfix.cleaners import build
-
         pos = np.where(trusted[..., None], motion.positions, np.nan)
-        filled, _ = build("fill_pca", fill_ends=True).apply(motion.replace(positions=pos))
+        filled, _ = fill_gaps_pca(pos, metres_per_unit=motion.metres_per_unit, fill_ends=True)
         T, J, _ = pos.shape
-        flat = filled.positions[:, rows].reshape(T, -1)
-        complete = dct.prefill(flat).reshape(T, -1, 3)
+        flat = filled[:, rows].reshape(T, -1)
+        complete = linear_bridge(flat).reshape(T, -1, 3)
         if complete.shape[1] < 3:                       # no rigid fit: global frame
             return complete.reshape(T, -1), None
         # fitted on every marker, fills included: a fit on each frame's own trusted subset
@@ -498,9 +498,9 @@ class TSMC(Cleaner):
 def _distance_to_observed(missing: np.ndarray, neighbours=None) -> np.ndarray:
     """Frames from each sample of a (T, C) mask to the nearest non-missing one in its
     column (0 where observed, inf in an all-missing column); ``neighbours`` is
-    :func:`dct.neighbours` of the mask when the caller has it already."""
+    :func:`mocapfix.solvers.segments.neighbours` of the mask when the caller has it already."""
     T = missing.shape[0]
-    prev, nxt = dct.neighbours(missing) if neighbours is None else neighbours
+    prev, nxt = segments.neighbours(missing) if neighbours is None else neighbours
     t = np.arange(T)[:, None]
     dist = np.minimum(np.where(prev >= 0, t - prev, T), np.where(nxt < T, nxt - t, T))
     return np.where(dist >= T, np.inf, dist.astype(np.float64))
@@ -513,7 +513,7 @@ def bridge_residual(d: np.ndarray, tau: float) -> np.ndarray:
     filled continuously with the data (like an interpolant riding on the model), long gaps
     follow the model. 0 where ``d`` is observed."""
     missing = np.isnan(d)
-    lin = dct.prefill(d)
+    lin = linear_bridge(d)
     dist = _distance_to_observed(missing)
     with np.errstate(invalid="ignore"):
         taper = np.exp(-dist / tau) if np.isfinite(tau) else np.ones_like(dist)

@@ -13,31 +13,32 @@ from pathlib import Path
 from mocapfix.errors import MocapfixError, UnreadableFileError, WriteError
 from mocapfix.motion import Motion
 
-_MODULES = {
-    "c3d": "mocapfix.formats.c3d",
-    "bvh": "mocapfix.formats.bvh",
-    "asfamc": "mocapfix.formats.asfamc",
-    "kinect": "mocapfix.formats.kinect",
+#: The one format table: name -> (module, suffixes). Each format module takes its ``NAME``
+#: and ``SUFFIXES`` from here; configs, rule files and folder discovery use it too.
+FORMATS = {
+    "c3d": ("mocapfix.formats.c3d", (".c3d",)),
+    "bvh": ("mocapfix.formats.bvh", (".bvh",)),
+    "asfamc": ("mocapfix.formats.asfamc", (".amc", ".asf")),
+    "kinect": ("mocapfix.formats.kinect", (".csv", ".txt", ".tsv")),
 }
-_SUFFIXES = {
-    ".c3d": "c3d",
-    ".bvh": "bvh",
-    ".amc": "asfamc",
-    ".asf": "asfamc",
-    ".csv": "kinect",
-    ".txt": "kinect",
-    ".tsv": "kinect",
-}
+#: format names, as configs and rule files spell them in ``formats:``
+NAMES = tuple(FORMATS)
+_SUFFIXES = {suffix: name for name, (_, suffixes) in FORMATS.items() for suffix in suffixes}
 #: suffixes of files that hold motions (``.asf`` alone is a skeleton, read as a rest pose)
-MOTION_SUFFIXES = (".c3d", ".bvh", ".amc", ".csv", ".txt", ".tsv")
+MOTION_SUFFIXES = tuple(suffix for suffix in _SUFFIXES if suffix != ".asf")
+
+
+def suffixes(name: str) -> tuple[str, ...]:
+    """The file suffixes of format ``name``."""
+    return FORMATS[name][1]
 
 
 def module(name: str):
     try:
-        return importlib.import_module(_MODULES[name])
+        return importlib.import_module(FORMATS[name][0])
     except KeyError:
         raise MocapfixError(
-            f"unknown format {name!r}; known: {', '.join(sorted(_MODULES))}") from None
+            f"unknown format {name!r}; known: {', '.join(sorted(FORMATS))}") from None
 
 
 def detect(path) -> str:
@@ -53,7 +54,7 @@ def detect(path) -> str:
         raise UnreadableFileError(path, "file is empty")
     if by_suffix is not None and module(by_suffix).sniff(head):
         return by_suffix
-    for name in _MODULES:
+    for name in FORMATS:
         if name != by_suffix and module(name).sniff(head):
             return name
     if by_suffix is not None:
@@ -94,6 +95,6 @@ def write(motion: Motion, path, format: str | None = None, **options) -> list[Pa
     written (ASF/AMC writes the skeleton beside the motion)."""
     path = Path(path)
     name = format or _SUFFIXES.get(path.suffix.lower()) or motion.format
-    if name not in _MODULES:
+    if name not in FORMATS:
         raise WriteError(path, f"cannot tell the output format from suffix {path.suffix!r}")
     return module(name).write(motion, path, **options)

@@ -66,13 +66,14 @@ import numpy as np
 
 from mocapfix.errors import UnreadableFileError, UnsupportedFeatureError, WriteError
 from mocapfix.fileio import atomic_write_bytes, read_input_bytes
+from mocapfix.formats import suffixes
 from mocapfix.formats.textenc import UTF8_BOM, refuse_wide_text
 from mocapfix.kinematics import Rig, euler_to_matrix
 from mocapfix.motion import Motion, Skeleton
 from mocapfix.units import asf_length_unit
 
 NAME = "asfamc"
-SUFFIXES = (".amc", ".asf")
+SUFFIXES = suffixes(NAME)
 DEFAULT_FPS = 120.0
 
 _AXES = "XYZ"

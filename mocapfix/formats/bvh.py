@@ -72,13 +72,14 @@ import numpy as np
 
 from mocapfix.errors import UnreadableFileError, WriteError
 from mocapfix.fileio import atomic_write_bytes, read_input_bytes
+from mocapfix.formats import suffixes
 from mocapfix.formats.textenc import refuse_wide_text
 from mocapfix.kinematics import Rig
 from mocapfix.motion import Motion, Skeleton
 from mocapfix.quantity import MAX_FRAME_RATE_HZ, MIN_FRAME_RATE_HZ
 
 NAME = "bvh"
-SUFFIXES = (".bvh",)
+SUFFIXES = suffixes(NAME)
 
 _BOM = b"\xef\xbb\xbf"
 _TOKEN = re.compile(rb"\S+")

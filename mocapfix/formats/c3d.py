@@ -71,12 +71,13 @@ import numpy as np
 
 from mocapfix.errors import UnreadableFileError, WriteError
 from mocapfix.fileio import atomic_open, read_input_bytes
+from mocapfix.formats import suffixes
 from mocapfix.motion import Motion
 from mocapfix.quantity import MAX_FRAME_RATE_HZ, MIN_FRAME_RATE_HZ
 from mocapfix.units import METRES_PER_UNIT, normalise_unit_name
 
 NAME = "c3d"
-SUFFIXES = (".c3d",)
+SUFFIXES = suffixes(NAME)
 
 PROCESSOR_INTEL, PROCESSOR_DEC, PROCESSOR_MIPS = 84, 85, 86
 PROCESSOR_NAMES = {PROCESSOR_INTEL: "Intel", PROCESSOR_DEC: "DEC", PROCESSOR_MIPS: "SGI/MIPS"}

@@ -85,12 +85,13 @@ import numpy as np
 
 from mocapfix.errors import UnreadableFileError, UnsupportedFeatureError, WriteError
 from mocapfix.fileio import atomic_write_bytes, read_input_bytes
+from mocapfix.formats import suffixes
 from mocapfix.formats import kinect_layouts as kl
 from mocapfix.motion import Motion, Skeleton
 from mocapfix.units import METRES_PER_UNIT, normalise_unit_name
 
 NAME = "kinect"
-SUFFIXES = (".csv", ".txt", ".tsv")
+SUFFIXES = suffixes(NAME)
 
 STATE_CONFIDENCE = {0: 0.0, 1: 0.5, 2: 1.0}
 UTKINECT_FPS = 30.0
@@ -1058,7 +1059,7 @@ def _new_long_row(source: KinectSource, motion: Motion, t: int, j: int) -> str:
 
 def _wide_csv_text(motion: Motion) -> str:
     """Headed wide CSV: time, <Joint>_X, _Y, _Z [, _State] per joint."""
-    T, J = motion.n_frames, motion.n_joints
+    T = motion.n_frames
     tag = "" if motion.units == "m" else f" ({motion.units})"
     with_state = motion.confidence is not None
     header = ["time"]

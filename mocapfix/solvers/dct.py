@@ -28,7 +28,7 @@ from __future__ import annotations
 import numpy as np
 from scipy import fft
 
-from mocapfix.solvers.segments import extend
+from mocapfix.solvers.segments import extend, linear_bridge
 
 WORKERS = 1  # scipy.fft threads (2 was slower with other work on a 2-core machine)
 
@@ -175,7 +175,7 @@ def robust_smooth(x: np.ndarray, weights: np.ndarray, scale: np.ndarray,
     x = np.asarray(x, dtype=np.float64)
     w = np.where(np.isnan(x), 0.0, np.asarray(weights, dtype=np.float64))
     x0 = np.where(w > 0, x, 0.0)
-    xhat = prefill(np.where(w > 0, x, np.nan)) if init is None else np.array(init, dtype=np.float64)
+    xhat = linear_bridge(np.where(w > 0, x, np.nan)) if init is None else np.array(init, dtype=np.float64)
     n_obs = (w > 0).sum(axis=0)
     p2 = np.maximum(np.asarray(scale, dtype=np.float64), 1e-300) ** 2
     fixed = mu is not None
@@ -193,37 +193,6 @@ def robust_smooth(x: np.ndarray, weights: np.ndarray, scale: np.ndarray,
 
 
 # -- padding and initial fills -------------------------------------------------------------
-
-def neighbours(missing: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """For a (T, C) mask: the index of the last non-missing sample at or before each
-    sample (−1 if none) and of the next one at or after it (T if none), per column."""
-    T = missing.shape[0]
-    t = np.arange(T)[:, None]
-    prev = np.where(missing, -1, t)
-    np.maximum.accumulate(prev, axis=0, out=prev)
-    nxt = np.where(missing, T, t)[::-1]
-    nxt = np.minimum.accumulate(nxt, axis=0)[::-1]
-    return prev, nxt
-
-
-def prefill(x: np.ndarray) -> np.ndarray:
-    """Complete copy of ``x`` (T, C): interior gaps by linear interpolation, leading and
-    trailing gaps hold the nearest observed value; all-missing columns become 0.
-    Vectorised over every column (no per-gap loop)."""
-    x = np.asarray(x, dtype=np.float64)
-    missing = np.isnan(x)
-    if not missing.any():
-        return x.copy()
-    T = x.shape[0]
-    prev, nxt = neighbours(missing)
-    before = np.take_along_axis(x, np.maximum(prev, 0), axis=0)
-    after = np.take_along_axis(x, np.minimum(nxt, T - 1), axis=0)
-    span = np.maximum(nxt - prev, 1)
-    frac = (np.arange(T)[:, None] - prev) / span
-    inside = (prev >= 0) & (nxt < T)
-    out = np.where(inside, before + frac * (after - before), np.where(prev >= 0, before, after))
-    return np.nan_to_num(np.where(missing, out, x), nan=0.0)
-
 
 def pad_reflect(x: np.ndarray, n_pad: int) -> tuple[np.ndarray, int]:
     """Point-reflect a complete (T, C) array by up to ``n_pad`` samples at each end

@@ -10,17 +10,7 @@ import numpy as np
 from scipy import ndimage
 
 from mocapfix.gaps import runs
-
-
-def prefill(Y: np.ndarray) -> np.ndarray:
-    """Missing samples linearly interpolated per channel (held constant beyond the ends);
-    channels with no sample at all are zero."""
-    Z = np.array(Y, dtype=np.float64)
-    t = np.arange(len(Z))
-    for c in np.flatnonzero(np.isnan(Z).any(axis=0)):
-        ok = ~np.isnan(Z[:, c])
-        Z[:, c] = np.interp(t, t[ok], Z[ok, c]) if ok.any() else 0.0
-    return Z
+from mocapfix.solvers.segments import linear_bridge
 
 
 def despike(X: np.ndarray, *, width: int = 7, k: float = 6.0, floor: float = 0.0):
@@ -28,7 +18,7 @@ def despike(X: np.ndarray, *, width: int = 7, k: float = 6.0, floor: float = 0.0
     max(k · 1.4826 · MAD of its channel's residuals, floor) from a running median of
     ``width`` frames is replaced by that median. Gaps are bridged linearly first."""
     X = np.asarray(X, dtype=np.float64)
-    filled = prefill(X)
+    filled = linear_bridge(X)
     med = ndimage.median_filter(filled, size=(width, 1), mode="nearest")
     r = np.abs(filled - med)
     scale = 1.4826 * np.median(r, axis=0)
@@ -42,7 +32,7 @@ def glitches(X: np.ndarray, *, width: int = 7, k: float = 6.0, floor: float = 0.
     most (width − 1) / 2 samples long, off the cubic through their neighbours by more than
     the same threshold)."""
     X = np.asarray(X, dtype=np.float64)
-    filled = prefill(X)
+    filled = linear_bridge(X)
     med = ndimage.median_filter(filled, size=(width, 1), mode="nearest")
     r = np.abs(filled - med)
     limit = np.maximum(k * 1.4826 * np.median(r, axis=0), floor)
@@ -73,7 +63,7 @@ def confirm(X: np.ndarray, mask: np.ndarray, *, threshold: np.ndarray, side: int
     side of the run: a glitch stands off the curve through its neighbours, a fast turning
     point of real motion does not. Runs too near the ends to be checked are kept; longer
     runs are dropped (not a glitch of this kind)."""
-    X = prefill(X)
+    X = linear_bridge(X)
     T = X.shape[0]
     out = np.zeros_like(mask)
     col, start, length = runs(mask)

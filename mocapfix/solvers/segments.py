@@ -100,6 +100,40 @@ def run_rows(start: np.ndarray, length: np.ndarray) -> np.ndarray:
     return np.repeat(start, length) + (np.arange(total) - offsets)
 
 
+def neighbours(missing: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """For a (T, C) mask: the index of the last non-missing sample at or before each
+    sample (−1 if none) and of the next one at or after it (T if none), per column."""
+    T = missing.shape[0]
+    t = np.arange(T)[:, None]
+    prev = np.where(missing, -1, t)
+    np.maximum.accumulate(prev, axis=0, out=prev)
+    nxt = np.where(missing, T, t)[::-1]
+    nxt = np.minimum.accumulate(nxt, axis=0)[::-1]
+    return prev, nxt
+
+
+def linear_bridge(x: np.ndarray) -> np.ndarray:
+    """Complete copy of ``x`` (T, C): interior gaps by linear interpolation, leading and
+    trailing gaps hold the nearest observed value; all-missing columns become 0.
+
+    The starting point every iterative solver here uses (DCT smoothing, PCA imputation,
+    the low-rank + isometry ADMM, glitch search). Vectorised over every column (no per-gap
+    loop)."""
+    x = np.asarray(x, dtype=np.float64)
+    missing = np.isnan(x)
+    if not missing.any():
+        return x.copy()
+    T = x.shape[0]
+    prev, nxt = neighbours(missing)
+    before = np.take_along_axis(x, np.maximum(prev, 0), axis=0)
+    after = np.take_along_axis(x, np.minimum(nxt, T - 1), axis=0)
+    span = np.maximum(nxt - prev, 1)
+    frac = (np.arange(T)[:, None] - prev) / span
+    inside = (prev >= 0) & (nxt < T)
+    out = np.where(inside, before + frac * (after - before), np.where(prev >= 0, before, after))
+    return np.nan_to_num(np.where(missing, out, x), nan=0.0)
+
+
 def fillable(missing: np.ndarray, max_gap: float | None = None) -> np.ndarray:
     """(T, C) mask of the samples in interior gaps (runs of True in ``missing`` that touch
     neither end) of at most ``max_gap`` samples (None: any length)."""
@@ -325,3 +359,22 @@ def wavelet_denoise(x: np.ndarray, wavelet: str = "sym8", level: int | None = No
         return rec[:n]
 
     return _by_gaps(x, func, gaps, min_length=2)
+
+
+def implausible_runs(filled, write, observed_points, margin: float = 0.1) -> np.ndarray:
+    """(T, J) mask of filled gap runs to reject: runs with a sample outside the capture
+    volume (the bounding box of every observed sample, grown by ``margin`` of its size on
+    each side). A PCA fill fails this way when the markers do not move as one body (two
+    subjects in one file, a marker seen too briefly to be learned): such a gap is better
+    left missing and reported than filled metres away."""
+    lo, hi = observed_points.min(axis=0), observed_points.max(axis=0)
+    pad = margin * (hi - lo)
+    outside = write & ((filled < lo - pad) | (filled > hi + pad)).any(axis=-1)
+    rejected = np.zeros_like(write)
+    if not outside.any():
+        return rejected
+    col, start, length = runs(write)
+    for c, s, n in zip(col, start, length):
+        if outside[s:s + n, c].any():
+            rejected[s:s + n, c] = True
+    return rejected

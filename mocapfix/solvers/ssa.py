@@ -1,5 +1,5 @@
 """Multichannel singular spectrum analysis (M-SSA) filter bases and their robust use for
-denoising and gap filling (Lou 2012, PhD thesis, ch. 2; ALGORITHMS.md §5).
+denoising and gap filling (Lou 2012, PhD thesis, ch. 2).
 
 Layout: a motion is a (T, L) array of channels (time along axis 0), NaN where a sample is
 missing. A *window* of ``m`` frames starting at frame s is the frame-major vector
@@ -28,7 +28,8 @@ from __future__ import annotations
 import numpy as np
 from numpy.lib.stride_tricks import as_strided
 
-from mocapfix.solvers.glitches import despike, prefill as _prefill
+from mocapfix.solvers.glitches import despike
+from mocapfix.solvers.segments import linear_bridge
 
 
 def windows(X: np.ndarray, m: int, *, step: int = 1) -> np.ndarray:
@@ -200,7 +201,7 @@ def robust_reconstruct(Y: np.ndarray, E: np.ndarray, m: int, *, lam: float = 0.1
         raise ValueError(f"{T} frames is shorter than the window of {m}")
     alpha = ~np.isnan(Y)
     y0 = np.where(alpha, Y, 0.0)
-    Z = _prefill(Y)
+    Z = linear_bridge(Y)
     count = window_counts(T, m)[:, None]
     w = alpha.astype(np.float64)
     it = 0
