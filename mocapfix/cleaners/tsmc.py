@@ -51,7 +51,9 @@ Other changes to the paper, each measured with the ``occlusion`` scenarios:
 
 - β = 3 instead of 100 (less smoothing: HDM05 gaps 1.9 vs 6.3 mm with ``prior: none``);
 - missing samples take the model plus its offset from the samples bounding the gap,
-  fading with ``bridge`` (0.2 s): no jump at the seams (spike holes: 17.9 → 2.7 mm);
+  fading with ``bridge`` (0.2 s): no jump at the seams (with ``prior: none`` on 40 %
+  random missing samples of CMU 05_01: 1.39 mm against 1.67 mm without it, seeds 0/1;
+  with the PCA prior it changes the occlusion results by < 1.5 %);
 - observed samples are kept, or (``observed: auto``) smoothed per channel with a
   GCV-chosen strength when the channel's noise estimate exceeds ``noise_floor``; when
   every sample is trusted the completion is skipped (it would return the data);
