@@ -16,6 +16,7 @@ budgets are updated when all of them are back: the same blocks run as in one pro
 """
 from __future__ import annotations
 
+import copy
 import json
 import math
 import threading
@@ -37,6 +38,10 @@ class Block:
     setting: str
     seed: int
     active: tuple
+
+    @property
+    def path(self) -> str:          # what batch.error_result names
+        return self.label
 
 
 @dataclass
@@ -60,6 +65,10 @@ class BlockTask:
         runs = []
         for i in block.active:
             method = self.methods[i]
+            if method.kind == "oracle":
+                # its own copy: it keeps its last choice, and a Dask worker's threads
+                # may share this task object
+                method = copy.copy(method)
             # rotations: the methods get the corrupted channels (bench_rotations)
             inp = corrupted.copy() if protocol == "rotations" else cleaner_input(motion, corrupted)
             started, cpu_started = time.perf_counter(), time.process_time()

@@ -49,6 +49,18 @@ class Raises(bench.Method):
         return motion.copy(), None
 
 
+PARENT = os.getpid()
+
+
+class Dies(bench.Method):
+    """Kills its worker process (as the OOM killer would)."""
+
+    def run(self, motion):
+        if os.getpid() == PARENT:
+            raise RuntimeError("expected to run in a worker process")
+        os._exit(3)
+
+
 class Busy(bench.Method):
     def run(self, motion):
         end = time.process_time() + 0.01          # burn 10 ms of CPU
@@ -119,6 +131,17 @@ def test_a_method_that_raises_in_a_worker_is_a_row():
     row = [r for r in res.summary() if r["method"] == "raises"][0]
     assert row["runs"] == 2 and row["failed"] == 1
     assert "kaboom" in res.to_markdown()
+
+
+def test_a_killed_worker_gives_error_rows_and_the_bench_ends():
+    """More blocks than the pool keeps in flight: the pool breaks at the first kill, and
+    every block (in flight or not yet submitted) becomes error rows, not a traceback."""
+    m = formats.read(C3D)
+    res = bench.run([m], "occlusion", [Dies("dies", "cleaner", None), cleaner("gaussian")],
+                    seeds=6, settings=["noise"], jobs=2)
+    assert len(res.runs) == 12
+    assert all(r["error"].startswith("worker failed: ") for r in res.runs)
+    assert "ERR" in res.headline_table()
 
 
 def test_budget_is_checked_per_seed_and_setting_block_with_jobs():
