@@ -50,7 +50,7 @@ def _debug(ctx) -> bool:
 @click.option("--per-file", is_flag=True, help="Also tabulate each file separately.")
 @click.option("--quiet", "-q", is_flag=True, help="Do not print the tables or progress.")
 @click.option("-j", "--jobs", default=1, show_default=True, type=click.IntRange(1, 256),
-              help="Corrupted files benchmarked in parallel (one task per seed, setting and "
+              help="Corrupted motions benchmarked in parallel (one task per seed, setting and "
                    "file; not the kinect protocol).")
 @executors
 @click.pass_context
