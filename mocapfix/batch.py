@@ -266,7 +266,10 @@ def _run_on(pool: Executor, task, items: list, window: int) -> Iterator[tuple[in
                 nxt = next(it, None)
                 if nxt is None:
                     break
-                pending[pool.submit(work, nxt[1])] = nxt[0]
+                try:
+                    pending[pool.submit(work, nxt[1])] = nxt[0]
+                except Exception as exc:  # noqa: BLE001 — a pool broken by a killed worker
+                    yield nxt[0], error_result(nxt[1], f"worker failed: {exc}")
             if not pending:
                 return
             done, _ = wait(pending, return_when=FIRST_COMPLETED)

@@ -46,14 +46,15 @@ from __future__ import annotations
 
 import json
 import math
-import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from mocapfix import corrupt, metrics
+from mocapfix.bench_tasks import method_in_worker, run_blocks
 from mocapfix.errors import ConfigError, MocapfixError
+from mocapfix.executors import ExecutorSpec
 from mocapfix.motion import Motion
 from mocapfix.pipeline import Pipeline, load_config, parse_config
 
@@ -162,6 +163,14 @@ class Method:
     def describe(self) -> dict:
         return {"name": self.name, "kind": self.kind,
                 "config": None if self.pipeline is None else self.pipeline.config()}
+
+    def __reduce__(self):
+        """Pickled as its config (small; no loaded model travels), parsed once per worker
+        process (:func:`mocapfix.bench_tasks.method_in_worker`)."""
+        pipe = self.pipeline
+        return (method_in_worker, (type(self), self.name, self.kind,
+                                   None if pipe is None else pipe.config(),
+                                   None if pipe is None else pipe.source))
 
 
 def resolve_methods(names=None, configs=None) -> tuple[list[Method], list[str]]:
@@ -396,14 +405,10 @@ def _json_default(obj):
     raise TypeError(type(obj))
 
 
-def _finite(d: dict) -> dict:
-    return {k: (v if math.isfinite(v) else None) for k, v in d.items()}
-
-
 def run(files, protocol: str, methods: list[Method], seeds: int | list[int] = 3,
         settings: list[str] | None = None, notes: list[str] | None = None,
         progress=None, read_options: dict | None = None,
-        method_budget_s: float | None = None) -> BenchResult:
+        method_budget_s: float | None = None, jobs: int = 1, spec=None) -> BenchResult:
     """Benchmark ``methods`` on ``files`` (paths or Motions) under ``protocol``.
 
     ``seeds``: a count (seeds 0 … N−1) or a list of seeds. ``settings``: a subset of the
@@ -413,7 +418,12 @@ def run(files, protocol: str, methods: list[Method], seeds: int | list[int] = 3,
     ``method_budget_s`` — a method that has used that many seconds of cleaning is not
     started on the next (seed, setting) block — a slow method still gets whole blocks:
     its cells average fewer seeds (the JSON counts them, the Markdown marks them), or are
-    empty for the settings it never reached."""
+    empty for the settings it never reached.
+
+    Where: ``spec`` (:class:`mocapfix.executors.ExecutorSpec`: local processes or Dask),
+    else ``jobs`` local processes, one task per (seed, setting, file) block
+    (:mod:`mocapfix.bench_tasks`); the runs come back in the order above whatever ran
+    them, so only the timing fields depend on the executor."""
     from mocapfix import formats
 
     if protocol not in corrupt.PROTOCOLS:
@@ -436,61 +446,11 @@ def run(files, protocol: str, methods: list[Method], seeds: int | list[int] = 3,
             raise MocapfixError(f"{label}: no sample present, nothing to benchmark")
         result.files.append(label)
         motions.append((label, motion))
-    used = {m.name: 0.0 for m in methods}
-    stopped: dict[str, int] = {}
     order = sorted(settings, key=lambda s: (PRIORITY.get(protocol, []).index(s)
                                             if s in PRIORITY.get(protocol, []) else 99,
                                             settings.index(s)))
-    for seed in seed_list:
-        for setting in order:
-            # the budget is checked per block (one seed and setting, every file), so that
-            # every cell a method has averages the same files as the other methods'
-            active = [m for m in methods
-                      if method_budget_s is None or used[m.name] < method_budget_s]
-            for m in methods:
-                if m not in active:
-                    stopped[m.name] = stopped.get(m.name, 0) + len(motions)
-            for label, motion in motions:
-                try:
-                    corrupted, mask = corrupt.apply_protocol(motion, protocol, setting, seed)
-                except ValueError as exc:
-                    raise MocapfixError(f"{label}: {protocol}/{setting}: {exc}") from None
-                if progress:
-                    progress(f"{Path(label).name} {protocol}/{setting} seed {seed}")
-                base = {"file": label, "setting": setting, "seed": seed,
-                        "corrupted_pct": 100.0 * float(mask.mean())}
-                for method in active:
-                    # rotations: the methods get the corrupted channels (bench_rotations)
-                    inp = corrupted.copy() if protocol == "rotations" else cleaner_input(motion, corrupted)
-                    started, cpu_started = time.perf_counter(), time.process_time()
-                    try:
-                        # only the oracle-tuned baselines (bench_oracle) see the truth
-                        out, noop = (method.run(inp, truth=motion) if method.kind == "oracle"
-                                     else method.run(inp))
-                    except Exception as exc:  # noqa: BLE001 — a failing method is a result
-                        cpu = time.process_time() - cpu_started
-                        used[method.name] += cpu
-                        result.runs.append({**base, "method": method.name,
-                                            "seconds": time.perf_counter() - started,
-                                            "cpu_seconds": cpu,
-                                            "error": f"{type(exc).__name__}: {exc}"})
-                        continue
-                    seconds = time.perf_counter() - started
-                    cpu = time.process_time() - cpu_started
-                    used[method.name] += cpu
-                    if protocol == "rotations":
-                        from mocapfix import bench_rotations
-
-                        scores = bench_rotations.evaluate(motion, out)
-                    else:
-                        scores = evaluate(protocol, motion, out.positions, mask)
-                    rec = {**base, "method": method.name, "seconds": seconds, "cpu_seconds": cpu,
-                           "metrics": _finite(scores)}
-                    if noop:
-                        rec["skipped"] = noop
-                    if getattr(method, "last_choice", None):
-                        rec["tuned"] = method.last_choice
-                    result.runs.append(rec)
+    result.runs, stopped = run_blocks(protocol, motions, methods, seed_list, order,
+                                      method_budget_s, progress, spec or ExecutorSpec(jobs))
     total = len(seed_list) * len(motions) * len(settings)
     for name, n in stopped.items():
         result.notes.append(f"{name}: CPU budget of {method_budget_s:g} s used up; ran "

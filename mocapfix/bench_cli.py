@@ -6,6 +6,7 @@ import sys
 
 import click
 
+from mocapfix.cli_options import executor_spec, executors
 from mocapfix.errors import MocapfixError
 
 EXIT_USAGE = 2
@@ -48,9 +49,13 @@ def _debug(ctx) -> bool:
               help="Write the Markdown tables to this file.")
 @click.option("--per-file", is_flag=True, help="Also tabulate each file separately.")
 @click.option("--quiet", "-q", is_flag=True, help="Do not print the tables or progress.")
+@click.option("-j", "--jobs", default=1, show_default=True, type=click.IntRange(1, 256),
+              help="Corrupted motions benchmarked in parallel (one task per seed, setting and "
+                   "file; not the kinect protocol).")
+@executors
 @click.pass_context
 def bench(ctx, clean_files, protocol, methods, configs, seeds, settings, json_out, md_out,
-          per_file, quiet):
+          per_file, quiet, jobs, scheduler, dask_workers):
     """Corrupt each CLEAN_FILE with a seeded PROTOCOL, clean it with each method and
     print error tables against the clean data (mean ± std over seeds, seconds per file)."""
     from mocapfix import bench as bench_lib
@@ -59,15 +64,20 @@ def bench(ctx, clean_files, protocol, methods, configs, seeds, settings, json_ou
     if protocol == "kinect":  # CMU captures made into Kinect v2 CSVs: its own runner
         from mocapfix.bench_kinect import main as kinect_main
 
+        if (jobs > 1 or scheduler or dask_workers) and not quiet:
+            click.echo("bench: note: the kinect protocol runs in this process (-j, "
+                       "--dask-workers and --scheduler are ignored)", err=True)
         sys.exit(kinect_main(ctx, clean_files, configs, seeds, settings, json_out, md_out, quiet))
     try:
+        spec = executor_spec(jobs, scheduler, dask_workers)
         method_list, notes = bench_lib.resolve_methods(_split(methods), _split(configs))
         progress = None if quiet else (lambda msg: click.echo(f"bench: {msg}", err=True))
         for n in notes:
             if not quiet:
                 click.echo(f"bench: note: {n}", err=True)
         result = bench_lib.run(list(clean_files), protocol, method_list, seeds=seeds,
-                               settings=_split(settings), notes=notes, progress=progress)
+                               settings=_split(settings), notes=notes, progress=progress,
+                               spec=spec)
         markdown = result.to_markdown(per_file=per_file)
         if json_out:
             atomic_write_text(json_out, result.to_json(per_file=per_file) + "\n")

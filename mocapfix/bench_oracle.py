@@ -57,7 +57,7 @@ class OracleMethod:
     kind = "oracle"
 
     def __init__(self, name: str, cleaner: str, grid: list[tuple[str, dict]]):
-        self.name, self.cleaner = name, cleaner
+        self.name, self.cleaner, self.grid_params = name, cleaner, list(grid)
         self.grid = [(label, parse_config({"version": 1, "pipeline": [{"cleaner": cleaner, **p}]},
                                           f"method {name} ({label})")) for label, p in grid]
         self.pipeline = None
@@ -80,6 +80,10 @@ class OracleMethod:
             raise ValueError(f"{self.name}: no grid value gave a finite error")
         self.last_choice = best[1]
         return best[2], None
+
+    def __reduce__(self):
+        """Pickled as its grid (for bench workers); the choice state stays behind."""
+        return (OracleMethod, (self.name, self.cleaner, self.grid_params))
 
     def describe(self) -> dict:
         return {"name": self.name, "kind": self.kind, "cleaner": self.cleaner,

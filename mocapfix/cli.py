@@ -109,26 +109,8 @@ def patterns(fn):
     return fn
 
 
-_executor_options = [
-    click.option("--scheduler", metavar="tcp://HOST:PORT", default=None,
-                 help="Run the files on this Dask cluster (extra: pip install 'mocapfix[dask]'; "
-                      "workers need the inputs and outputs at the same paths)."),
-    click.option("--dask-workers", type=click.IntRange(1, 1024), default=None, metavar="N",
-                 help="Run the files on a local Dask cluster of N worker processes (extra: dask)."),
-]
-
-
-def executors(fn):
-    """--scheduler / --dask-workers (Dask) beside a command's -j (local processes)."""
-    for opt in reversed(_executor_options):
-        fn = opt(fn)
-    return fn
-
-
-def _executor_spec(jobs, scheduler, dask_workers):
-    from mocapfix.executors import ExecutorSpec
-
-    return ExecutorSpec(jobs, scheduler, dask_workers).check()
+from mocapfix.cli_options import executor_spec as _executor_spec  # noqa: E402
+from mocapfix.cli_options import executors  # noqa: E402,F401
 
 
 # -- info --------------------------------------------------------------------------------------
