@@ -220,6 +220,20 @@ def who_filled(records, T: int, J: int) -> np.ndarray:
     return who
 
 
+#: a fill spanning more than this is a *long fill*: listed as such in the report (its
+#: samples rest on the model, not on a nearby measurement; the C3D marks every filled
+#: sample alike, residual 0 and camera mask 0)
+LONG_FILL_S = 0.5
+
+
+def _mean_confidence(after: Motion, start: int, length: int, joint: int) -> float | None:
+    """Mean per-sample fill confidence over one filled gap (None: the filler gives none)."""
+    conf = after.confidence
+    if conf is None or conf.shape != after.positions.shape[:2]:
+        return None
+    return finite(np.nanmean(conf[start:start + length, joint]))
+
+
 def uncertainty(before: Motion, after: Motion) -> np.ndarray:
     """(J,) fraction of each joint's frames that rest on no measurement: samples missing in
     the input (filled or not), each counted as ``1 − confidence`` of the cleaned motion
@@ -262,6 +276,9 @@ def measure_cleaning(result: CleanResult) -> dict:
             if (span_who >= 0).all():
                 steps = np.unique(span_who)
                 gaps_filled.append({"start": int(s), "length": int(n),
+                                    "seconds": finite(n / before.fps),
+                                    "long": bool(n / before.fps > LONG_FILL_S),
+                                    "confidence": _mean_confidence(after, s, n, j),
                                     "filled_by": ", ".join(labels[k] for k in steps)})
             else:
                 gaps_left.append({"start": int(s), "length": int(n),
@@ -305,6 +322,7 @@ def measure_cleaning(result: CleanResult) -> dict:
         "samples_flagged": int(flagged.sum()),
         "gaps_before": int(len(length)),
         "gaps_unfilled": int(sum(len(j["gaps"]["unfilled"]) for j in joints)),
+        "long_fills": int(sum(g["long"] for j in joints for g in j["gaps"]["filled"])),
         "seconds": finite(result.seconds),
         "notes": list(before.notes) + [n for n in after.notes if n not in before.notes],
     }

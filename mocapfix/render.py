@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from mocapfix.gaps import runs
+from mocapfix.measure import LONG_FILL_S
 from mocapfix.rules import STATUS_ORDER
 
 
@@ -57,6 +58,20 @@ def _steps_run(report: dict):
     return run, other
 
 
+def _long_fills(report: dict) -> list[str]:
+    """Markdown section listing every fill longer than LONG_FILL_S (none: no section)."""
+    rows = [(j["name"], g) for j in report["joints"] for g in j["gaps"]["filled"] if g.get("long")]
+    if not rows:
+        return []
+    out = ["", f"## Long fills (> {LONG_FILL_S:g} s: rebuilt from the model, not measured)", "",
+           "| joint | frames | s | confidence | filled by |", "|---|---|---:|---:|---|"]
+    for name, g in sorted(rows, key=lambda r: -r[1]["length"]):
+        conf = "–" if g.get("confidence") is None else f"{g['confidence']:.2f}"
+        out.append(f"| {name} | {g['start']}–{g['start'] + g['length'] - 1} "
+                   f"| {g['seconds']:.2f} | {conf} | {g['filled_by']} |")
+    return out
+
+
 def to_markdown(report: dict) -> str:
     f = report["file"]
     name = Path(f["path"]).name if f.get("path") else "motion"
@@ -66,7 +81,8 @@ def to_markdown(report: dict) -> str:
            f"- file: {f['path']}",
            f"- missing before: {_pct(f['missing_before'])}, after: {_pct(f['missing_after'])}",
            f"- samples filled: {f['samples_filled']}, flagged as outliers: {f['samples_flagged']}",
-           f"- gaps before: {f['gaps_before']}, still unfilled: {f['gaps_unfilled']}",
+           f"- gaps before: {f['gaps_before']}, still unfilled: {f['gaps_unfilled']}, "
+           f"long fills (> {LONG_FILL_S:g} s): {f.get('long_fills', 0)}",
            f"- joints OK / WARN / FAIL: {f['joints_by_status']['OK']} / "
            f"{f['joints_by_status']['WARN']} / {f['joints_by_status']['FAIL']}"]
     if "writeback_residual_mm" in f:
@@ -97,6 +113,7 @@ def to_markdown(report: dict) -> str:
             f"| {_num(j['correction_mm']['mean'], '{:.2f}')} / {_num(j['correction_mm']['max'], '{:.1f}')} "
             f"| {_num(j['jitter_before'], '{:.2f}')} → {_num(j['jitter_after'], '{:.2f}')} "
             f"| {'; '.join(j['reasons']) or '–'} |")
+    out += _long_fills(report)
     rules = report.get("rules") or []
     if rules:
         out += ["", "Rules: " + "; ".join(

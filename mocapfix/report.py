@@ -6,11 +6,15 @@ JSON schema ``mocapfix.report/1``::
     {"schema": "mocapfix.report/1", "file": {...summary, "status"...}, "steps": [...],
      "thresholds": {...}, "rules": [...], "joints": [{"name", "status", "reasons",
      "missing_before", "missing_after", "uncertain", "gaps": {"count", "longest_frames",
-     "filled": [{"start", "length", "filled_by"}], "unfilled": [...]}, "outliers_flagged",
+     "filled": [{"start", "length", "seconds", "long", "confidence", "filled_by"}],
+     "unfilled": [...]}, "outliers_flagged",
      "correction_mm": {"mean", "max"}, "jitter_before", "jitter_after" (RMS acceleration,
      m/s²), "bone_variation_before", "bone_variation_after",
      "writeback_residual_mm": {"mean", "max"} }], "bones": [...]}
 
+A filled gap is ``long`` when it spans more than ``measure.LONG_FILL_S`` (0.5 s); its
+``confidence`` is the mean per-sample fill confidence (``None`` when the filler gives
+none); the file summary counts ``long_fills``, and the Markdown/HTML report lists them.
 ``uncertain`` is the fraction of a joint's frames that rest on no measurement (missing in
 the input; weighted by the cleaned motion's per-sample confidence where it has one).
 Lengths are in mm whatever the file's unit.

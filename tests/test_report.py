@@ -31,7 +31,9 @@ def test_report_names_the_filler_and_counts():
     a, b = report["joints"]
     assert b["missing_before"] == 0.05 and b["missing_after"] == 0.0
     assert b["gaps"]["count"] == 1 and b["gaps"]["longest_frames"] == 10
-    assert b["gaps"]["filled"] == [{"start": 50, "length": 10, "filled_by": "step 1 (fill)"}]
+    assert b["gaps"]["filled"] == [{"start": 50, "length": 10, "seconds": 0.1, "long": False,
+                                    "confidence": None, "filled_by": "step 1 (fill)"}]
+    assert report["file"]["long_fills"] == 0
     assert a["status"] == "OK" and b["status"] == "OK"
     # the straight line is filled exactly, so the bone keeps its length
     assert b["bone_variation_after"] < 1e-12
@@ -71,3 +73,32 @@ def test_html_plots_the_joints_that_changed_most_not_never_seen_ones():
     assert "<title>" in page and "mocapfix report</title>" in page and "`" not in page
     md = to_markdown(report)
     assert "| step 2 (spikes)" not in md and "Not run for c3d" in md
+
+
+def test_long_fills_are_listed_with_their_confidence():
+    """A 0.8 s gap (longer than the 0.5 s long-fill limit) and a 0.1 s one on a 100 fps
+    capture: the ensemble fills both; only the long one is marked long, listed in the
+    Markdown, and its confidence is the mean of the filler's per-sample confidence."""
+    T, fps = 600, 100.0
+    t = np.arange(T) / fps
+    rng = np.random.default_rng(3)
+    base = np.stack([400 * np.sin(t), 300 * np.cos(0.7 * t), 900 + 50 * np.sin(2 * t)], axis=1)
+    offsets = rng.normal(0, 150, size=(6, 3))
+    pos = base[:, None, :] + offsets[None]
+    pos[100:180, 2] = np.nan                   # 80 frames = 0.8 s
+    pos[300:310, 4] = np.nan                   # 10 frames = 0.1 s
+    motion = Motion(pos, [f"M{k}" for k in range(6)], fps, units="mm", metres_per_unit=0.001,
+                    format="c3d")
+    result = clean_motion(motion, loads_config("pipeline:\n  - cleaner: fill_ensemble\n"))
+    report = build_report(result)
+    json.loads(to_json(report))
+    long_gap = report["joints"][2]["gaps"]["filled"]
+    short_gap = report["joints"][4]["gaps"]["filled"]
+    assert [g["long"] for g in long_gap] == [True] and [g["long"] for g in short_gap] == [False]
+    assert long_gap[0]["seconds"] == 0.8 and short_gap[0]["seconds"] == 0.1
+    expected = float(np.mean(result.cleaned.confidence[100:180, 2]))
+    assert 0.0 < long_gap[0]["confidence"] < 1.0
+    assert abs(long_gap[0]["confidence"] - expected) < 1e-6          # rounded to 6 decimals
+    assert report["file"]["long_fills"] == 1
+    md = to_markdown(report)
+    assert "## Long fills" in md and "| M2 | 100–179 | 0.80 |" in md and "| M4 | 300" not in md
