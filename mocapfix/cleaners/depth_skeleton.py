@@ -59,7 +59,7 @@ from mocapfix.cleaners import register
 from mocapfix.cleaners.base import Cleaner, Param
 from mocapfix.formats.kinect_layouts import normalise_name
 from mocapfix.motion import Motion
-from mocapfix.solvers import svshrink, whittaker
+from mocapfix.solvers import run_offsets, svshrink, whittaker
 from mocapfix.solvers.bone_projection import project_lengths
 from mocapfix.solvers.localfit import moving_median
 from mocapfix.solvers.segments import fillable, runs
@@ -197,6 +197,10 @@ class KinectSkeleton(Cleaner):
               unit="mm", low=1e-4, high=2.0),
         Param("inferred_debias", "bool", True, "remove the offset of Inferred runs measured "
               "at their ends against the Tracked samples"),
+        Param("debias_window", "int", 3, "samples on each side of an Inferred run's end "
+              "that measure its offset (the jump there)", low=1, high=30),
+        Param("debias_degree", "int", 1, "degree of the polynomial fitted on each side of "
+              "the jump (1: unbiased for constant velocity)", low=0, high=3),
         Param("debiased_factor", "float", 0.5, "error of a debiased Inferred sample, as a "
               "share of inferred_noise", low=0.01, high=1.0),
         Param("swap_threshold", "length", "30 mm", "evidence (shorter leg paths and hip-knee "
@@ -214,6 +218,13 @@ class KinectSkeleton(Cleaner):
         Param("depth_model", "bool", True, "let the jitter grow with camera depth"),
         Param("spatial_shrink", "bool", True, "denoise across joints by optimal singular-"
               "value shrinkage before the final smooth"),
+        Param("local_steps", "int", 5, "strengths (cut-offs 0.5-2x the file's GCV choice) "
+              "among which each stretch of the final smooth picks by its local Stein risk "
+              "(1: one strength per joint)", low=1, high=15),
+        Param("local_half", "int", 15, "half-width in frames of the window of the local risk",
+              low=2, high=300),
+        Param("fill_order", "int", 3, "derivative penalised when the offsets to the parent "
+              "are smoothed through untrusted stretches", low=1, high=4),
         Param("limb_frame", "bool", True, "estimate untrusted samples (inferred, missing, "
               "outliers) from the parent joint and the smoothed offset to it"),
     )
@@ -255,7 +266,6 @@ class KinectSkeleton(Cleaner):
         sig_inf = self.length("inferred_noise", motion) * mpu
         h = float(np.median(np.diff(t)))
         order = self["order"]
-        bands = whittaker.penalty_bands(t, order)
         depth = P[..., 2]
         use_depth = self["depth_model"] and np.nanmin(depth) > 0.2 if observed.any() else False
 
@@ -263,16 +273,22 @@ class KinectSkeleton(Cleaner):
 
         sub_cache = {}
 
-        def bands_for(win):
-            key = (win.start, win.stop)
+        def bands_for(win, order):
+            key = (win.start, win.stop, order)
             if key not in sub_cache:
                 sub_cache[key] = whittaker.penalty_bands(t[win], order)
             return sub_cache[key]
 
-        def fit(weights, data=None, cut=None, prev=None, joints=None):
+        local_steps = self["local_steps"]
+        spread = np.geomspace(0.5, 2.0, local_steps) if local_steps > 1 else None
+
+        def fit(weights, data=None, cut=None, prev=None, joints=None, local=False,
+                fit_order=None):
             """Per joint GCV smooth (``cut``: reuse these cut-offs, one solve per joint);
             only ``joints`` are refitted, the others are taken from ``prev``."""
             data = P if data is None else data
+            order = self["order"] if fit_order is None else fit_order
+            bands = bands_for(slice(0, T), order)
             Z = np.full_like(P, np.nan) if prev is None else prev.copy()
             new_cut = np.full(J, np.nan) if cut is None else cut.copy()
             for j in (range(J) if joints is None else joints):
@@ -284,8 +300,13 @@ class KinectSkeleton(Cleaner):
                 wbar = float(w[w > 0].mean())
                 if fixed is not None or (cut is not None and np.isfinite(cut[j])):
                     c = fixed if fixed is not None else cut[j]
-                    lam = float(whittaker.lambda_for_cutoff(c, wbar, h, order))
-                    Z[:, j] = whittaker.smooth(y, w, t, lam, order=order, bands=bands)
+                    if local and spread is not None:
+                        lams = whittaker.lambda_for_cutoff(c * spread, wbar, h, order)
+                        Z[:, j], _ = whittaker.smooth_local_sure(
+                            y, w, t, lams, order=order, bands=bands, half=self["local_half"])
+                    else:
+                        lam = float(whittaker.lambda_for_cutoff(c, wbar, h, order))
+                        Z[:, j] = whittaker.smooth(y, w, t, lam, order=order, bands=bands)
                     new_cut[j] = c
                     continue
                 # GCV on the middle _GCV_FRAMES frames of a long file, then one solve
@@ -296,13 +317,17 @@ class KinectSkeleton(Cleaner):
                     win, ww = slice(0, T), w
                 wb = float(ww[ww > 0].mean())
                 grid = whittaker.lambda_for_cutoff(_CUTOFFS, wb, h, order)[::-1]
-                sub_bands = bands if win == slice(0, T) else bands_for(win)
+                sub_bands = bands_for(win, order)
                 zs, lam, _ = whittaker.smooth_gcv(y[win], ww, t[win], grid, order=order,
                                                   bands=sub_bands, refine=True)
                 # the cut-off of the chosen λ (inverse of lambda_for_cutoff)
                 c = (wb / (h * lam)) ** (1.0 / (2 * order)) / (2.0 * np.pi)
                 new_cut[j] = c
-                if win == slice(0, T):
+                if local and spread is not None:
+                    lams = whittaker.lambda_for_cutoff(c * spread, wbar, h, order)
+                    Z[:, j], _ = whittaker.smooth_local_sure(
+                        y, w, t, lams, order=order, bands=bands, half=self["local_half"])
+                elif win == slice(0, T):
                     Z[:, j] = zs
                 else:
                     lam = float(whittaker.lambda_for_cutoff(c, wbar, h, order))
@@ -337,15 +362,26 @@ class KinectSkeleton(Cleaner):
             # an Inferred run is the joint plus a slowly changing offset: the offset is
             # read at the run's ends against the smooth of the Tracked samples alone
             # and removed, linearly in between; what is left is trusted more
-            need = np.flatnonzero(inferred.any(axis=0))
-            Zt, _ = fit(np.where(tracked, 1.0 / sigma ** 2, 0.0), cut=cut0, joints=need)
             col, start, length = runs(inferred)
-            for j, s0, n in zip(col, start, length):
+            kk, deg = self["debias_window"], self["debias_degree"]
+            first, last, ok0, ok1 = run_offsets.run_end_offsets(
+                t, P, inferred, tracked, col, start, length, k=kk, degree=deg)
+            Zt = None
+            if not (ok0.all() and ok1.all()):
+                # an end without enough Tracked samples next to it: its offset against the
+                # smooth of the Tracked samples alone (two frames)
+                need = np.unique(col[~(ok0 & ok1)])
+                Zt, _ = fit(np.where(tracked, 1.0 / sigma ** 2, 0.0), cut=cut0, joints=need)
+            for r, (j, s0, n) in enumerate(zip(col, start, length)):
                 e = s0 + n
                 ends = []
-                if s0 > 0 and tracked[s0 - 1, j]:
+                if ok0[r]:
+                    ends.append((0.0, first[r]))
+                elif s0 > 0 and tracked[s0 - 1, j]:
                     ends.append((0.0, np.mean(P[s0:min(e, s0 + 2), j] - Zt[s0:min(e, s0 + 2), j], axis=0)))
-                if e < T and tracked[e, j]:
+                if ok1[r]:
+                    ends.append((1.0, last[r]))
+                elif e < T and tracked[e, j]:
                     ends.append((1.0, np.mean(P[max(s0, e - 2):e, j] - Zt[max(s0, e - 2):e, j], axis=0)))
                 ends = [(u, b) for u, b in ends if np.isfinite(b).all()]
                 if not ends:
@@ -353,7 +389,7 @@ class KinectSkeleton(Cleaner):
                 if len(ends) == 1:
                     offset = np.broadcast_to(ends[0][1], (n, 3))
                 else:
-                    u = np.linspace(0.0, 1.0, n)[:, None]
+                    u = ((t[s0:e] - t[s0]) / max(t[e - 1] - t[s0], 1e-9))[:, None]
                     offset = ends[0][1] * (1.0 - u) + ends[1][1] * u
                 P[s0:e, j] = P[s0:e, j] - offset
                 debiased += n
@@ -393,7 +429,7 @@ class KinectSkeleton(Cleaner):
                 Y2 = np.full_like(Y, np.nan)
                 Y2[okrow] = ((Xs + mean) * sd).reshape(-1, J, 3)
                 w2 = np.where(trusted & okrow[:, None], weights, 0.0)
-                Z2, _ = fit(w2, np.where(np.isnan(Y2), 0.0, Y2))
+                Z2, _ = fit(w2, np.where(np.isnan(Y2), 0.0, Y2), local=True)
                 Z = np.where(trusted[..., None] & okrow[:, None, None], Z2, Z)
                 info["spatial_rank"] = rank
         if self["limb_frame"] and parents is not None:
@@ -407,7 +443,7 @@ class KinectSkeleton(Cleaner):
             pidx = np.where(has_parent, parents, 0)
             wrel = np.where(has_parent[None, :], 1.0 / (var + var[:, pidx]), 0.0)
             need = np.flatnonzero((~trusted).any(axis=0) & has_parent)
-            Zr, _ = fit(wrel, P - P[:, pidx], joints=need)
+            Zr, _ = fit(wrel, P - P[:, pidx], joints=need, fit_order=self["fill_order"])
             for j in _topological(parents):
                 pj = parents[j]
                 if pj < 0:
