@@ -201,7 +201,7 @@ class KinectSkeleton(Cleaner):
               "that measure its offset (the jump there)", low=1, high=30),
         Param("debias_degree", "int", 1, "degree of the polynomial fitted on each side of "
               "the jump (1: unbiased for constant velocity)", low=0, high=3),
-        Param("debiased_factor", "float", 0.5, "error of a debiased Inferred sample, as a "
+        Param("debiased_factor", "float", 0.3, "error of a debiased Inferred sample, as a "
               "share of inferred_noise", low=0.01, high=1.0),
         Param("swap_threshold", "length", "30 mm", "evidence (shorter leg paths and hip-knee "
               "bones closer to their lengths) a frame needs to be called leg-swapped; 0 "
@@ -223,7 +223,7 @@ class KinectSkeleton(Cleaner):
               "(1: one strength per joint)", low=1, high=15),
         Param("local_half", "int", 15, "half-width in frames of the window of the local risk",
               low=2, high=300),
-        Param("fill_order", "int", 3, "derivative penalised when the offsets to the parent "
+        Param("fill_order", "int", 1, "derivative penalised when the offsets to the parent "
               "are smoothed through untrusted stretches", low=1, high=4),
         Param("limb_frame", "bool", True, "estimate untrusted samples (inferred, missing, "
               "outliers) from the parent joint and the smoothed offset to it"),
