@@ -291,6 +291,7 @@ class KinectSkeleton(Cleaner):
             bands = bands_for(slice(0, T), order)
             Z = np.full_like(P, np.nan) if prev is None else prev.copy()
             new_cut = np.full(J, np.nan) if cut is None else cut.copy()
+            cands = {}
             for j in (range(J) if joints is None else joints):
                 w = weights[:, j]
                 if (w > 0).sum() <= order + 1:
@@ -302,8 +303,8 @@ class KinectSkeleton(Cleaner):
                     c = fixed if fixed is not None else cut[j]
                     if local and spread is not None:
                         lams = whittaker.lambda_for_cutoff(c * spread, wbar, h, order)
-                        Z[:, j], _ = whittaker.smooth_local_sure(
-                            y, w, t, lams, order=order, bands=bands, half=self["local_half"])
+                        cands[j] = whittaker.local_sure_candidates(y, w, t, lams, order=order,
+                                                                   bands=bands)
                     else:
                         lam = float(whittaker.lambda_for_cutoff(c, wbar, h, order))
                         Z[:, j] = whittaker.smooth(y, w, t, lam, order=order, bands=bands)
@@ -325,13 +326,15 @@ class KinectSkeleton(Cleaner):
                 new_cut[j] = c
                 if local and spread is not None:
                     lams = whittaker.lambda_for_cutoff(c * spread, wbar, h, order)
-                    Z[:, j], _ = whittaker.smooth_local_sure(
-                        y, w, t, lams, order=order, bands=bands, half=self["local_half"])
+                    cands[j] = whittaker.local_sure_candidates(y, w, t, lams, order=order,
+                                                               bands=bands)
                 elif win == slice(0, T):
                     Z[:, j] = zs
                 else:
                     lam = float(whittaker.lambda_for_cutoff(c, wbar, h, order))
                     Z[:, j] = whittaker.smooth(y, w, t, lam, order=order, bands=bands)
+            for j, (Zs, risk) in cands.items():
+                Z[:, j], _ = whittaker.pick_local(Zs, risk, self["local_half"])
             cut = new_cut
             return Z, cut
 
@@ -429,7 +432,7 @@ class KinectSkeleton(Cleaner):
                 Y2 = np.full_like(Y, np.nan)
                 Y2[okrow] = ((Xs + mean) * sd).reshape(-1, J, 3)
                 w2 = np.where(trusted & okrow[:, None], weights, 0.0)
-                Z2, _ = fit(w2, np.where(np.isnan(Y2), 0.0, Y2), local=True)
+                Z2, _ = fit(w2, np.where(np.isnan(Y2), 0.0, Y2), cut=cut, local=True)
                 Z = np.where(trusted[..., None] & okrow[:, None, None], Z2, Z)
                 info["spatial_rank"] = rank
         if self["limb_frame"] and parents is not None:
