@@ -10,7 +10,7 @@ from mocapfix import formats
 from mocapfix.cleaners import build
 from mocapfix.cleaners.depth_skeleton import leg_swap_frames
 from mocapfix.formats import kinect as kf
-from mocapfix.solvers import whittaker
+from mocapfix.solvers import run_offsets, svshrink, whittaker
 from mocapfix.solvers.bone_projection import project_lengths
 from tests.conftest import shared, shared_files
 
@@ -55,6 +55,63 @@ def test_bone_projection_does_not_spread_missing_samples():
     np.testing.assert_allclose(np.linalg.norm(out[0, 1] - out[0, 0]), 1.0, atol=1e-6)
 
 
+def test_local_sure_smooths_a_still_pose_harder_than_a_fast_swing():
+    """A foot: still, a 3 Hz swing for 1 s, still again (slow drift throughout), 1 cm
+    noise, dropped frames. Measured over seeds 0-5: local 0.0040-0.0044 m against
+    0.0057-0.0061 for the best single strength of the same five."""
+    for seed in range(6):
+        rng = np.random.default_rng(seed)
+        t = np.cumsum(np.r_[0.0, rng.choice([1 / 30, 2 / 30], size=599, p=[0.97, 0.03])])
+        fast = (t > 8) & (t < 9)
+        clean = np.where(fast, 0.15 * np.sin(2 * np.pi * 3 * (t - 8)), 0.0)[:, None] \
+            * np.array([[1.0, 0.5, 0.2]]) + 0.05 * np.sin(2 * np.pi * 0.2 * t)[:, None]
+        y = clean + rng.normal(0, 0.01, clean.shape)
+        w = np.full(len(t), 1e4)
+        lams = whittaker.lambda_for_cutoff(np.geomspace(1.0, 4.0, 5), 1e4, 1 / 30, 3)[::-1]
+        z, pick = whittaker.smooth_local_sure(y, w, t, lams, order=3, half=15)
+        single = [np.sqrt(np.mean((whittaker.smooth(y, w, t, lam, order=3) - clean) ** 2))
+                  for lam in lams]
+        assert np.sqrt(np.mean((z - clean) ** 2)) < 0.8 * min(single)
+        assert np.median(pick[fast]) == 0                        # the weakest smoothing
+        assert np.median(pick[(t > 2) & (t < 7)]) == len(lams) - 1   # the strongest
+
+
+def test_run_end_offsets_read_a_gliding_offset_exactly_on_linear_motion():
+    t = np.cumsum(np.r_[0.0, np.full(30, 1 / 30), [3 / 30], np.full(30, 1 / 30)])
+    T = len(t)
+    x = np.stack([0.2 + 1.5 * t, -0.3 * t, np.full(T, 2.5)], axis=1)[:, None, :]
+    o1, o2 = np.array([0.05, -0.1, 0.02]), np.array([-0.08, 0.0, 0.12])
+    s0, n = 25, 12                                   # spans the 3-frame drop at 31
+    u = ((t[s0:s0 + n] - t[s0]) / (t[s0 + n - 1] - t[s0]))[:, None]
+    y = x.copy()
+    y[s0:s0 + n, 0] += o1 * (1 - u) + o2 * u
+    inside = np.zeros((T, 1), bool)
+    inside[s0:s0 + n] = True
+    first, last, ok0, ok1 = run_offsets.run_end_offsets(
+        t, y, inside, ~inside, [0], [s0], [n], k=3, degree=1)
+    assert ok0.all() and ok1.all()
+    np.testing.assert_allclose(first[0], o1, atol=1e-5)      # the fits' 1e-6 ridge
+    np.testing.assert_allclose(last[0], o2, atol=1e-5)
+    # no unbiased sample before the run: that end is not read
+    first, _, ok0, ok1 = run_offsets.run_end_offsets(
+        t, y, inside, ~inside & (np.arange(T) > s0)[:, None], [0], [s0], [n], k=3)
+    assert not ok0[0] and np.isnan(first).all() and ok1[0]
+
+
+def test_svshrink_from_the_gram_matrix_equals_the_svd_formula():
+    rng = np.random.default_rng(0)
+    X = rng.normal(size=(2000, 5)) @ rng.normal(size=(5, 60)) * 3 + rng.normal(size=(2000, 60))
+    U, s, Vt = np.linalg.svd(X, full_matrices=False)        # Gavish & Donoho eq. 7
+    beta, y = 60 / 2000, s / np.sqrt(2000)
+    keep = y >= 1 + np.sqrt(beta)
+    eta = np.where(keep, np.sqrt(np.maximum((y ** 2 - beta - 1) ** 2 - 4 * beta, 0)) / y, 0)
+    ref = (U * (eta * np.sqrt(2000))) @ Vt
+    for A, R in ((X, ref), (X.T, ref.T)):
+        out, rank = svshrink.shrink_frobenius(A, 1.0)
+        assert rank == 5
+        np.testing.assert_allclose(out, R, atol=1e-9)
+
+
 # -- leg confusion ------------------------------------------------------------------------
 def _bench_file(tmp_path, scenario, seed=0, name="asfamc/60_10.amc"):
     truth = bk.kinect_truth(formats.read(shared(name)), np.random.default_rng(seed))
@@ -79,10 +136,12 @@ def test_leg_swaps_are_found_exactly(tmp_path):
 
 
 # -- the kinect protocol: better than the best Kinect filter -------------------------------
-@pytest.mark.parametrize("scenario, bound", [("jitter", 0.85), ("inferred+occlusion", 0.9),
-                                             ("mixed", 0.6)])
+@pytest.mark.parametrize("scenario, bound", [("jitter", 0.8), ("inferred+occlusion", 0.85),
+                                             ("mixed", 0.55)])
 def test_beats_the_best_kinect_baseline(scenario, bound):
-    """Measured (05_02 + 60_10, seed 0): 0.77 / 0.80 / 0.52 of the best baseline."""
+    """Measured (05_02 + 60_10, seed 0): 0.74 / 0.76 / 0.49 of the best baseline (seeds
+    1-2: 0.75-0.76 / 0.53-0.63 / 0.32-0.43; before the jump-read Inferred offsets, the
+    linear fill and the local strengths: 0.77 / 0.80 / 0.52)."""
     from mocapfix.pipeline import parse_config
 
     pipe = parse_config({"version": 1, "pipeline": [{"cleaner": "kinect_skeleton"}]})

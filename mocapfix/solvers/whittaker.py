@@ -111,3 +111,68 @@ def lambda_for_cutoff(cutoff_hz, mean_weight: float, h: float, order: int) -> np
     λ h (2π f)^{2d} = w̄ (low-frequency approximation of the spectrum above)."""
     f = np.asarray(cutoff_hz, dtype=np.float64)
     return mean_weight / (h * (2.0 * np.pi * f) ** (2 * order))
+
+
+def local_sure_candidates(y: np.ndarray, w: np.ndarray, t: np.ndarray, lams, *, order: int = 2,
+                          bands: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """The smooths of ``y`` (T, C) at every λ of ``lams`` and the estimated risk of each
+    sample under each: Stein's unbiased risk (Stein 1981, "Estimation of the mean of a
+    multivariate normal distribution", Ann. Stat. 9(6), eq. 8, with the linear smoother's
+    divergence = the trace of its hat matrix) in units of the noise,
+    ``w_i |y_i − z_i|² / s² − C + 2 C h_i``, the hat diagonal ``h_i`` taken as
+    ``(w_i / w̄) edf(λ) / n`` from the even-grid spectrum (:func:`effective_dof`) and the
+    noise scale ``s²`` of the weights estimated at the middle λ (``RSS / (C (n − edf))``),
+    so only relative weights matter. Returns (Zs (K, T, C), risk (K, T); risk 0 where
+    the weight is 0)."""
+    y = np.asarray(y, dtype=np.float64)
+    t = np.asarray(t, dtype=np.float64)
+    bands = penalty_bands(t, order) if bands is None else bands
+    lams = np.atleast_1d(np.asarray(lams, dtype=np.float64))
+    seen = w > 0
+    n = int(seen.sum())
+    T, C = y.shape
+    Zs = np.empty((len(lams), T, C))
+    Q = np.empty((len(lams), T))
+    yz = np.where(seen[:, None], y, 0.0)
+    rhs = yz * w[:, None]
+    diag = w + 1e-12
+    for k, lam in enumerate(lams):
+        ab = bands * lam                     # as smooth(), with the right-hand side shared
+        ab[0] += diag
+        Zs[k] = solveh_banded(ab, rhs, lower=True, check_finite=False, overwrite_ab=True)
+        r = yz - Zs[k]
+        Q[k] = w * np.einsum("tc,tc->t", r, r)
+    if n <= order + 1:
+        return Zs, np.zeros((len(lams), T))
+    h = float(np.median(np.diff(t))) if T > 1 else 1.0
+    wbar = float(w[seen].mean())
+    edf = effective_dof(n, h, lams / wbar, order)
+    mid = len(lams) // 2
+    s2 = max(float(Q[mid][seen].sum()) / (C * max(n - edf[mid], 1.0)), 1e-300)
+    hat = np.minimum((w / wbar)[None, :] * (edf / n)[:, None], 1.0)
+    risk = np.where(seen[None, :], Q / s2 - C + 2.0 * C * hat, 0.0)
+    return Zs, risk
+
+
+def pick_local(Zs: np.ndarray, risk: np.ndarray, half: int) -> tuple[np.ndarray, np.ndarray]:
+    """Each sample from the candidate smooth (``Zs`` (K, T, C)) of least ``risk`` (K, T)
+    summed over the samples within ±``half``: a smoothing strength that changes along time
+    by local risk (varying-bandwidth selection, e.g. Katkovnik 1999, "A new method for
+    varying adaptive bandwidth selection", IEEE Trans. Signal Process. 47(9)). Returns
+    (z (T, C), chosen index (T,))."""
+    from scipy.ndimage import uniform_filter1d
+
+    local = uniform_filter1d(risk, 2 * half + 1, axis=1, mode="nearest")
+    pick = np.argmin(local, axis=0)
+    return Zs[pick, np.arange(Zs.shape[1])], pick
+
+
+def smooth_local_sure(y: np.ndarray, w: np.ndarray, t: np.ndarray, lams, *, order: int = 2,
+                      bands: np.ndarray | None = None, half: int = 15) -> tuple[np.ndarray, np.ndarray]:
+    """The smooth of ``y`` (T, C) with a strength that changes along time: each sample
+    takes, among the smooths at the λ of ``lams``, the one of least estimated risk
+    (:func:`local_sure_candidates`) over the samples within ±``half`` frames
+    (:func:`pick_local`). Slow parts keep the strong smoothing, fast ones (a foot's
+    swing) the weak one. Returns (z, index of the chosen λ per sample)."""
+    Zs, risk = local_sure_candidates(y, w, t, lams, order=order, bands=bands)
+    return pick_local(Zs, risk, half)
