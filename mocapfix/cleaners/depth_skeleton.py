@@ -279,7 +279,6 @@ class KinectSkeleton(Cleaner):
         tracked = observed & ~inferred
         sig_inf = self.length("inferred_noise", motion) * mpu
         h = float(np.median(np.diff(t)))
-        order = self["order"]
         depth = P[..., 2]
         use_depth = self["depth_model"] and np.nanmin(depth) > 0.2 if observed.any() else False
 
