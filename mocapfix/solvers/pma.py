@@ -44,23 +44,40 @@ from mocapfix.solvers.rigid import kabsch
 LOCAL_FILLERS = ("interp", "poly", "grnn", "linear")
 
 
-def distance_stats(pos: np.ndarray, observed: np.ndarray, min_frames: int = 3):
+def distance_stats(pos: np.ndarray, observed: np.ndarray, min_frames: int = 3,
+                   chunk: int = 512):
     """Mean and standard deviation (J, J) of every inter-marker distance over the frames
-    where both markers are observed (NaN with fewer than ``min_frames`` such frames)."""
+    where both markers are observed (NaN with fewer than ``min_frames`` such frames).
+    Two passes over blocks of ``chunk`` frames (mean, then squared deviations), the
+    distances from per-frame Gram matrices of the centred markers: O(T J²) time,
+    O(chunk J²) memory."""
     T, J, _ = pos.shape
+    ob = observed.astype(np.float64)
+    n = ob.T @ ob                                           # frames where both are seen
     filled = np.where(observed[..., None], pos, 0.0)
-    mu = np.full((J, J), np.nan)
-    sd = np.full((J, J), np.nan)
-    for j in range(J):
-        both = observed & observed[:, j:j + 1]
-        n = both.sum(axis=0)
-        d = np.linalg.norm(filled - filled[:, j:j + 1], axis=2)
-        d = np.where(both, d, 0.0)
-        ok = n >= min_frames
-        m = d.sum(axis=0) / np.maximum(n, 1)
-        v = (np.where(both, (d - m) ** 2, 0.0)).sum(axis=0) / np.maximum(n - 1, 1)
-        mu[j, ok] = m[ok]
-        sd[j, ok] = np.sqrt(v[ok])
+    seen = np.maximum(ob.sum(axis=1), 1.0)
+    filled = filled - (filled.sum(axis=1) / seen[:, None])[:, None]   # centred per frame
+
+    def blocks():
+        for lo in range(0, T, chunk):
+            x, w = filled[lo:lo + chunk], ob[lo:lo + chunk]
+            sq = (x * x).sum(axis=2)
+            d2 = sq[:, :, None] + sq[:, None, :] - 2.0 * (x @ np.swapaxes(x, 1, 2))
+            both = w[:, :, None] * w[:, None, :]
+            yield np.sqrt(np.maximum(d2, 0.0)), both
+
+    total = np.zeros((J, J))
+    for d, both in blocks():
+        total += (d * both).sum(axis=0)
+    m = total / np.maximum(n, 1)
+    sumsq = np.zeros((J, J))
+    for d, both in blocks():
+        sumsq += (((d - m) ** 2) * both).sum(axis=0)
+    ok = n >= min_frames
+    mu = np.where(ok, m, np.nan)
+    sd = np.where(ok, np.sqrt(sumsq / np.maximum(n - 1, 1)), np.nan)
+    np.fill_diagonal(mu, np.where(np.diag(ok), 0.0, np.nan))
+    np.fill_diagonal(sd, np.where(np.diag(ok), 0.0, np.nan))
     return mu, sd
 
 
@@ -298,20 +315,26 @@ def hermite_short_gaps(pos: np.ndarray, observed: np.ndarray, gaps) -> list:
     Hermite curve through the bounding samples, with one-sided difference slopes where the
     samples beyond are observed (the chord's slope otherwise). Meant for holes of a few
     frames (spike holes, dropouts), where it matches PCHIP without loading SciPy.
-    Returns the gaps it filled."""
+    Vectorised over all gaps at once (one row per filled sample). Returns the gaps it filled."""
     T = pos.shape[0]
-    done = []
-    for j, s, e in gaps:
-        if s == 0 or e >= T:
-            continue
-        n = e - s
-        p0, p1 = pos[s - 1, j], pos[e, j]
-        chord = (p1 - p0) / (n + 1)
-        m0 = pos[s - 1, j] - pos[s - 2, j] if s >= 2 and observed[s - 2, j] else chord
-        m1 = pos[e + 1, j] - pos[e, j] if e + 1 < T and observed[e + 1, j] else chord
-        u = (np.arange(1, n + 1) / (n + 1))[:, None]
-        h00, h10 = 2 * u ** 3 - 3 * u ** 2 + 1, u ** 3 - 2 * u ** 2 + u
-        h01, h11 = -2 * u ** 3 + 3 * u ** 2, u ** 3 - u ** 2
-        pos[s:e, j] = h00 * p0 + h10 * (n + 1) * m0 + h01 * p1 + h11 * (n + 1) * m1
-        done.append((j, s, e))
+    done = [(j, s, e) for j, s, e in gaps if s > 0 and e < T]
+    if not done:
+        return done
+    g = np.array(done, dtype=np.intp).reshape(-1, 3)
+    j, s, e = g[:, 0], g[:, 1], g[:, 2]
+    n = e - s
+    p0, p1 = pos[s - 1, j], pos[e, j]                                     # (G, 3)
+    chord = (p1 - p0) / (n + 1)[:, None]
+    has0 = (s >= 2) & observed[np.maximum(s - 2, 0), j]
+    has1 = (e + 1 < T) & observed[np.minimum(e + 1, T - 1), j]
+    m0 = np.where(has0[:, None], p0 - pos[np.maximum(s - 2, 0), j], chord)
+    m1 = np.where(has1[:, None], pos[np.minimum(e + 1, T - 1), j] - p1, chord)
+    gi = np.repeat(np.arange(len(g)), n)                                  # one row per sample
+    k = np.arange(len(gi)) - np.repeat(np.cumsum(n) - n, n) + 1           # 1 .. n in each gap
+    u = (k / (n + 1)[gi])[:, None]
+    h00, h10 = 2 * u ** 3 - 3 * u ** 2 + 1, u ** 3 - 2 * u ** 2 + u
+    h01, h11 = -2 * u ** 3 + 3 * u ** 2, u ** 3 - u ** 2
+    L = (n + 1)[gi][:, None]
+    pos[s[gi] + k - 1, j[gi]] = (h00 * p0[gi] + h10 * L * m0[gi] + h01 * p1[gi]
+                                 + h11 * L * m1[gi])
     return done
