@@ -13,7 +13,6 @@ undone.
 from __future__ import annotations
 
 import numpy as np
-from scipy.ndimage import gaussian_filter1d
 
 
 def kabsch(source, target, weights):
@@ -82,6 +81,7 @@ def torso_frames(points: np.ndarray, template: np.ndarray, *, smoothing: float =
         for b in range(3):
             R_all[:, a, b] = np.interp(t, idx, R[:, a, b])
     if smoothing > 0:
+        from scipy.ndimage import gaussian_filter1d  # imported here: not loaded unless needed
         c_all = gaussian_filter1d(c_all, smoothing, axis=0, mode="nearest")
         R_all = gaussian_filter1d(R_all, smoothing, axis=0, mode="nearest")
     if smoothing > 0 or not valid.all():
