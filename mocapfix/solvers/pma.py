@@ -48,34 +48,34 @@ def distance_stats(pos: np.ndarray, observed: np.ndarray, min_frames: int = 3,
                    chunk: int = 512):
     """Mean and standard deviation (J, J) of every inter-marker distance over the frames
     where both markers are observed (NaN with fewer than ``min_frames`` such frames).
-    Two passes over blocks of ``chunk`` frames (mean, then squared deviations), the
-    distances from per-frame Gram matrices of the centred markers: O(T J²) time,
-    O(chunk J²) memory."""
+    One pass over blocks of ``chunk`` frames: the distances from per-frame Gram matrices of
+    the centred markers, their sums and squared sums shifted by the first block's mean
+    (no cancellation): O(T J²) time, O(chunk J²) memory."""
     T, J, _ = pos.shape
     ob = observed.astype(np.float64)
     n = ob.T @ ob                                           # frames where both are seen
     filled = np.where(observed[..., None], pos, 0.0)
     seen = np.maximum(ob.sum(axis=1), 1.0)
     filled = filled - (filled.sum(axis=1) / seen[:, None])[:, None]   # centred per frame
-
-    def blocks():
-        for lo in range(0, T, chunk):
-            x, w = filled[lo:lo + chunk], ob[lo:lo + chunk]
-            sq = (x * x).sum(axis=2)
-            d2 = sq[:, :, None] + sq[:, None, :] - 2.0 * (x @ np.swapaxes(x, 1, 2))
-            both = w[:, :, None] * w[:, None, :]
-            yield np.sqrt(np.maximum(d2, 0.0)), both
-
-    total = np.zeros((J, J))
-    for d, both in blocks():
-        total += (d * both).sum(axis=0)
-    m = total / np.maximum(n, 1)
-    sumsq = np.zeros((J, J))
-    for d, both in blocks():
-        sumsq += (((d - m) ** 2) * both).sum(axis=0)
+    shift = s1 = s2 = None
+    for lo in range(0, T, chunk):
+        x, w = filled[lo:lo + chunk], ob[lo:lo + chunk]
+        sq = (x * x).sum(axis=2)
+        d = np.sqrt(np.maximum(sq[:, :, None] + sq[:, None, :]
+                               - 2.0 * (x @ np.swapaxes(x, 1, 2)), 0.0))
+        both = w[:, :, None] * w[:, None, :]
+        if shift is None:
+            shift = (d * both).sum(axis=0) / np.maximum(both.sum(axis=0), 1.0)
+            s1, s2 = np.zeros((J, J)), np.zeros((J, J))
+        d -= shift
+        d *= both
+        s1 += d.sum(axis=0)
+        s2 += (d * d).sum(axis=0)
+    m = s1 / np.maximum(n, 1)                               # mean − shift
+    var = np.maximum(s2 - n * m * m, 0.0) / np.maximum(n - 1, 1)
     ok = n >= min_frames
-    mu = np.where(ok, m, np.nan)
-    sd = np.where(ok, np.sqrt(sumsq / np.maximum(n - 1, 1)), np.nan)
+    mu = np.where(ok, m + shift, np.nan)
+    sd = np.where(ok, np.sqrt(var), np.nan)
     np.fill_diagonal(mu, np.where(np.diag(ok), 0.0, np.nan))
     np.fill_diagonal(sd, np.where(np.diag(ok), 0.0, np.nan))
     return mu, sd
@@ -166,7 +166,8 @@ def gap_fills(pos, observed, j, s, e, neighbours, train, body, *, fillers=LOCAL_
     if K:
         tr_local = train[observed[np.ix_(train, neighbours)].all(axis=1)]
         nb = pos[np.ix_(frames, neighbours)]
-        ref = _reference(pos[np.ix_(tr_local, neighbours)] if len(tr_local) else nb)
+        nb_train = pos[np.ix_(tr_local, neighbours)]
+        ref = _reference(nb_train if len(tr_local) else nb)
         loc, glob = _frames(nb, ref)
         if "interp" in fillers:
             lj = loc(np.nan_to_num(pos[frames, j])[:, None])[:, 0]
@@ -177,8 +178,8 @@ def gap_fills(pos, observed, j, s, e, neighbours, train, body, *, fillers=LOCAL_
             f = (np.arange(n) / max(n - 1, 1))[:, None]
             out["interp"] = glob(((1 - f) * a + f * b)[:, None])[:, 0]
         if len(tr_local) >= max(10, 2 * K):
-            tl, _ = _frames(pos[np.ix_(tr_local, neighbours)], ref)
-            Xt = tl(pos[np.ix_(tr_local, neighbours)]).reshape(len(tr_local), -1)
+            tl, _ = _frames(nb_train, ref)
+            Xt = tl(nb_train).reshape(len(tr_local), -1)
             Yt = tl(pos[tr_local, j][:, None])[:, 0]
             Xg = loc(nb).reshape(len(frames), -1)
             if "poly" in fillers and K >= 3:
@@ -188,14 +189,15 @@ def gap_fills(pos, observed, j, s, e, neighbours, train, body, *, fillers=LOCAL_
     if "linear" in fillers and len(body) >= 3:
         tr = train[observed[np.ix_(train, body)].all(axis=1)]
         if len(tr) >= max(10, len(body)):
-            ref = _reference(pos[np.ix_(tr, body)])
-            tl, _ = _frames(pos[np.ix_(tr, body)], ref)
-            loc, glob = _frames(pos[np.ix_(frames, body)], ref)
+            body_train, body_gap = pos[np.ix_(tr, body)], pos[np.ix_(frames, body)]
+            ref = _reference(body_train)
+            tl, _ = _frames(body_train, ref)
+            loc, glob = _frames(body_gap, ref)
             d = mu[j, body] if mu is not None else np.zeros(len(body))
             w = np.repeat(np.exp(-0.5 * (np.nan_to_num(d, nan=1e9) / weight_scale) ** 2), 3)
-            Xt = tl(pos[np.ix_(tr, body)]).reshape(len(tr), -1) * w
+            Xt = tl(body_train).reshape(len(tr), -1) * w
             Yt = tl(pos[tr, j][:, None])[:, 0]
-            Xg = loc(pos[np.ix_(frames, body)]).reshape(len(frames), -1) * w
+            Xg = loc(body_gap).reshape(len(frames), -1) * w
             keep = w > 1e-6
             if keep.sum() >= 3:
                 out["linear"] = glob(_ridge(Xt[:, keep], Yt)(Xg[:, keep])[:, None])[:, 0]
