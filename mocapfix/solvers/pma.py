@@ -257,15 +257,13 @@ def gap_list(observed: np.ndarray, max_gap: float | None = None, fill_ends: bool
     from mocapfix.gaps import runs
 
     T = observed.shape[0]
-    out = []
-    for j, s, n in zip(*runs(~observed)):
-        e = s + n
-        if n == T or (max_gap is not None and n > max_gap):
-            continue
-        if (s == 0 or e == T) and not fill_ends:
-            continue
-        out.append((int(j), int(s), int(e)))
-    return out
+    j, s, n = runs(~observed)
+    keep = n < T
+    if max_gap is not None:
+        keep &= n <= max_gap
+    if not fill_ends:
+        keep &= (s > 0) & (s + n < T)
+    return list(zip(j[keep].tolist(), s[keep].tolist(), (s + n)[keep].tolist()))
 
 
 def member_fills(pos, observed, gaps, external, *, local=LOCAL_FILLERS, neighbours=3,
