@@ -89,8 +89,20 @@ def _frames(points: np.ndarray, ref: np.ndarray | None):
     centre = points.mean(axis=1)
     if K < 3:
         return (lambda x: x - centre[:, None]), (lambda x: x + centre[:, None])
-    R, cs, ct = kabsch(points, np.broadcast_to(ref, points.shape), np.ones((n, K)))
+    return _transforms(*kabsch(points, np.broadcast_to(ref, points.shape), np.ones((n, K))))
 
+
+def _frames_two(first: np.ndarray, second: np.ndarray, ref: np.ndarray):
+    """:func:`_frames` of two point sets (n1, K, 3) and (n2, K, 3), K ≥ 3, with one
+    batched Kabsch fit (the same values as two calls)."""
+    both = np.concatenate([first, second])
+    R, cs, ct = kabsch(both, np.broadcast_to(ref, both.shape), np.ones(both.shape[:2]))
+    n1 = len(first)
+    return (_transforms(R[:n1], cs[:n1], ct[:n1]), _transforms(R[n1:], cs[n1:], ct[n1:]))
+
+
+def _transforms(R, cs, ct):
+    """``(to_local, to_global)`` of per-frame rigid fits ``R (p − cs) + ct``."""
     def to_local(x):
         return (x - cs[:, None]) @ np.swapaxes(R, 1, 2) + ct[:, None]
 
@@ -168,7 +180,10 @@ def gap_fills(pos, observed, j, s, e, neighbours, train, body, *, fillers=LOCAL_
         nb = pos[np.ix_(frames, neighbours)]
         nb_train = pos[np.ix_(tr_local, neighbours)]
         ref = _reference(nb_train if len(tr_local) else nb)
-        loc, glob = _frames(nb, ref)
+        if K >= 3 and len(tr_local) >= max(10, 2 * K):
+            (loc, glob), (tl, _) = _frames_two(nb, nb_train, ref)
+        else:
+            (loc, glob), tl = _frames(nb, ref), None
         if "interp" in fillers:
             lj = loc(np.nan_to_num(pos[frames, j])[:, None])[:, 0]
             n = len(frames)
@@ -178,7 +193,8 @@ def gap_fills(pos, observed, j, s, e, neighbours, train, body, *, fillers=LOCAL_
             f = (np.arange(n) / max(n - 1, 1))[:, None]
             out["interp"] = glob(((1 - f) * a + f * b)[:, None])[:, 0]
         if len(tr_local) >= max(10, 2 * K):
-            tl, _ = _frames(nb_train, ref)
+            if tl is None:
+                tl, _ = _frames(nb_train, ref)
             Xt = tl(nb_train).reshape(len(tr_local), -1)
             Yt = tl(pos[tr_local, j][:, None])[:, 0]
             Xg = loc(nb).reshape(len(frames), -1)
@@ -191,8 +207,7 @@ def gap_fills(pos, observed, j, s, e, neighbours, train, body, *, fillers=LOCAL_
         if len(tr) >= max(10, len(body)):
             body_train, body_gap = pos[np.ix_(tr, body)], pos[np.ix_(frames, body)]
             ref = _reference(body_train)
-            tl, _ = _frames(body_train, ref)
-            loc, glob = _frames(body_gap, ref)
+            (tl, _), (loc, glob) = _frames_two(body_train, body_gap, ref)
             d = mu[j, body] if mu is not None else np.zeros(len(body))
             w = np.repeat(np.exp(-0.5 * (np.nan_to_num(d, nan=1e9) / weight_scale) ** 2), 3)
             Xt = tl(body_train).reshape(len(tr), -1) * w
