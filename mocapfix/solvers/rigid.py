@@ -52,8 +52,8 @@ def _best_rotation(H):
     singular vector of the smallest singular value, is the eigenvector of ``HᵀH`` for its
     smallest eigenvalue (trigonometric eigenvalues of a symmetric 3 × 3 matrix, Smith 1961;
     the vector as the largest cross product of two rows of ``HᵀH − λ₃ I``); on the plane
-    ``(a, b)`` orthogonal to it the polar factor is ``H [a b] M^(-1/2)`` with ``M = [a b]ᵀ
-    HᵀH [a b]`` (2 × 2, closed-form square root); the third axis is the cross product, so
+    ``(a, b)`` orthogonal to it the polar factor of ``H [a b]`` is a plane rotation in
+    the Gram–Schmidt basis of its columns; the third axis is the cross product, so
     ``det R = 1``. Each result is checked against Kabsch's optimum ``tr(R H) = s₁ + s₂ +
     sign(det H) s₃``; matrices that fail (degenerate point sets, near-equal small singular
     values) go through the SVD."""
@@ -101,15 +101,21 @@ def _best_rotation(H):
         b = _cross(v, a)
         Ha = [_dot(h[i], a) for i in range(3)]
         Hb = [_dot(h[i], b) for i in range(3)]
-        m00, m01, m11 = _dot(Ha, Ha), _dot(Ha, Hb), _dot(Hb, Hb)
-        det = m00 * m11 - m01 ** 2
-        sdet = np.sqrt(np.maximum(det, 0.0))
-        t = np.sqrt(m00 + m11 + 2.0 * sdet)
-        s00, s01, s11 = (m00 + sdet) / t, m01 / t, (m11 + sdet) / t   # M^(1/2)
-        sd = s00 * s11 - s01 ** 2
-        i00, i01, i11 = s11 / sd, -s01 / sd, s00 / sd                  # M^(-1/2)
-        qa = [Ha[i] * i00 + Hb[i] * i01 for i in range(3)]
-        qb = [Ha[i] * i01 + Hb[i] * i11 for i in range(3)]
+        # polar factor of the 3 × 2 matrix [Ha Hb]: an orthonormal basis (e1, e2) of its
+        # columns (Gram–Schmidt), in which it is the upper-triangular 2 × 2 B = [[|Ha|,
+        # Hb·e1], [0, |Hb⊥|]] (det > 0) whose nearest rotation is the angle
+        # atan2(−Hb·e1, |Ha| + |Hb⊥|)
+        la = np.sqrt(_dot(Ha, Ha))
+        e1 = [x / la for x in Ha]
+        b01 = _dot(Hb, e1)
+        perp = [Hb[i] - b01 * e1[i] for i in range(3)]
+        lp = np.sqrt(_dot(perp, perp))
+        e2 = [x / lp for x in perp]
+        cos_, sin_ = la + lp, -b01
+        rr = np.sqrt(cos_ * cos_ + sin_ * sin_)
+        cos_, sin_ = cos_ / rr, sin_ / rr
+        qa = [cos_ * e1[i] + sin_ * e2[i] for i in range(3)]
+        qb = [-sin_ * e1[i] + cos_ * e2[i] for i in range(3)]
         qc = _cross(qa, qb)
         R = np.empty((n, 3, 3))
         for i in range(3):                     # R = Pᵀ, P = qa aᵀ + qb bᵀ + qc v3ᵀ
@@ -123,7 +129,7 @@ def _best_rotation(H):
         asym = np.abs(RH[0][1] - RH[1][0]) + np.abs(RH[0][2] - RH[2][0]) + np.abs(RH[1][2] - RH[2][1])
         scale = s[0] + s[1] + s[2]
         ok = (np.isfinite(R).all(axis=(1, 2)) & (p > 1e-12 * np.abs(q))
-              & (det > 1e-10 * (m00 + m11) ** 2) & (asym <= 1e-11 * scale)
+              & (lp > 1e-6 * la) & (asym <= 1e-11 * scale)
               & (RH[0][0] + RH[1][1] + RH[2][2] >= best - 1e-6 * scale))
     if not ok.all():
         bad = ~ok
