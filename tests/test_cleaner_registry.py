@@ -18,6 +18,7 @@ def test_default_pipeline_loads_no_unused_heavy_module():
             "from mocapfix.pipeline import load_config, default_config_path\n"
             "load_config(default_config_path())\n"
             "print(' '.join(m for m in ('scipy.signal', 'scipy.interpolate', 'pywt', "
+            "'scipy.ndimage', 'scipy.linalg', 'scipy.spatial', "
             "'mocapfix.cleaners.lowrank_isometry', 'mocapfix.cleaners.partlet') "
             "if m in sys.modules))\n")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)

@@ -186,10 +186,14 @@ class PMA(Cleaner):
         for the members."""
         observed = ~np.isnan(out).any(axis=2)
         small = [g for g in gaps if g[2] - g[1] <= short]
-        done = set(pma.hermite_short_gaps(out, observed, small))
-        for j, s, e in done:
-            t = np.arange(s, e)
-            conf[s:e, j] = np.exp(-np.minimum(t - s + 1, e - t) / horizon)
+        done = pma.hermite_short_gaps(out, observed, small)
+        if done:
+            g = np.array(done, dtype=np.intp)
+            n = g[:, 2] - g[:, 1]
+            gi = np.repeat(np.arange(len(g)), n)
+            t = g[gi, 1] + np.arange(len(gi)) - np.repeat(np.cumsum(n) - n, n)
+            conf[t, g[gi, 0]] = np.exp(-np.minimum(t - g[gi, 1] + 1, g[gi, 2] - t) / horizon)
+        done = set(done)
         return [g for g in gaps if g not in done]
 
     def _validation_errors(self, motion, observed, gaps, local, mu, sd):

@@ -19,7 +19,6 @@ two kinds of cleaning compose.
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from mocapfix.cleaners import register
 from mocapfix.cleaners.base import Cleaner, Param
@@ -82,6 +81,7 @@ class RotationSmooth(Cleaner):
                    for c in rig.rot_columns[j]]
         unit = 360.0 if rig.degrees else 2 * np.pi
         if full:
+            from scipy.spatial.transform import Rotation  # imported here: not loaded unless needed
             quats = []
             for j in full:
                 rot = Rotation.from_euler(rig.rot_axes[j].upper(), ch[:, rig.rot_columns[j]],

@@ -45,14 +45,25 @@ def _shape(lam: np.ndarray, ndim: int, axis: int) -> np.ndarray:
     return lam.reshape(shape)
 
 
+def _along_rows(transform, x, axis):
+    """``transform`` along ``axis`` of ``x``; a (T, C) array transformed along axis 0 is
+    transformed as its transpose along contiguous rows (pocketfft is ~2x faster there,
+    same values) and returned as a (T, C) view of the result."""
+    x = np.asarray(x)
+    if x.ndim == 2 and axis % 2 == 0 and x.shape[1] > 1:
+        return transform(np.ascontiguousarray(x.T), type=2, norm="ortho", axis=1,
+                         workers=WORKERS).T
+    return transform(x, type=2, norm="ortho", axis=axis, workers=WORKERS)
+
+
 def dct(x: np.ndarray, axis: int = 0) -> np.ndarray:
     """Orthonormal DCT-II along ``axis``."""
-    return fft.dct(x, type=2, norm="ortho", axis=axis, workers=WORKERS)
+    return _along_rows(fft.dct, x, axis)
 
 
 def idct(x: np.ndarray, axis: int = 0) -> np.ndarray:
     """Inverse of :func:`dct`."""
-    return fft.idct(x, type=2, norm="ortho", axis=axis, workers=WORKERS)
+    return _along_rows(fft.idct, x, axis)
 
 
 def smoother(y: np.ndarray, mu, axis: int = 0) -> np.ndarray:
@@ -177,19 +188,23 @@ def robust_smooth(x: np.ndarray, weights: np.ndarray, scale: np.ndarray,
     x0 = np.where(w > 0, x, 0.0)
     xhat = linear_bridge(np.where(w > 0, x, np.nan)) if init is None else np.array(init, dtype=np.float64)
     n_obs = (w > 0).sum(axis=0)
-    p2 = np.maximum(np.asarray(scale, dtype=np.float64), 1e-300) ** 2
+    p2 = np.maximum(np.asarray(scale, dtype=np.float64), 1e-300)[:, None] ** 2
     fixed = mu is not None
-    g = w.copy()
-    lam2 = eigenvalues(x.shape[0])[:, None] ** 2
+    # the iteration runs on the transposes (C, n): every channel a contiguous row, where
+    # the DCT is ~2x faster and no array changes memory order
+    wT, x0T, xhat = (np.ascontiguousarray(a.T) for a in (w, x0, xhat))
+    g = wT.copy()
+    lam2 = eigenvalues(x.shape[0])[None, :] ** 2
     for _ in range(max(1, iterations)):
-        r = x0 - xhat
-        g = w * np.exp(-(r * r) / p2)
+        r = x0T - xhat
+        g = wT * np.exp(-(r * r) / p2)
         pseudo = g * r + xhat
-        spectrum = dct(pseudo)              # shared by GCV and the smoother
+        spectrum = dct(pseudo, axis=1)      # shared by GCV and the smoother
         if not fixed:
-            mu, _ = gcv_mu(None, n_obs, spectrum=spectrum)
-        xhat = idct(spectrum / (1.0 + np.asarray(mu) * lam2))
-    return xhat, np.asarray(mu, dtype=np.float64) * np.ones(x.shape[1]), g
+            mu, _ = gcv_mu(None, n_obs, spectrum=spectrum.T)
+        xhat = idct(spectrum / (1.0 + np.asarray(mu)[..., None] * lam2), axis=1)
+    return (np.ascontiguousarray(xhat.T), np.asarray(mu, dtype=np.float64) * np.ones(x.shape[1]),
+            np.ascontiguousarray(g.T))
 
 
 # -- padding and initial fills -------------------------------------------------------------

@@ -7,7 +7,6 @@ Layout: (T, C) arrays, time along axis 0, NaN = missing.
 from __future__ import annotations
 
 import numpy as np
-from scipy import ndimage
 
 from mocapfix.gaps import runs
 from mocapfix.solvers.segments import linear_bridge
@@ -19,6 +18,7 @@ def despike(X: np.ndarray, *, width: int = 7, k: float = 6.0, floor: float = 0.0
     ``width`` frames is replaced by that median. Gaps are bridged linearly first."""
     X = np.asarray(X, dtype=np.float64)
     filled = linear_bridge(X)
+    from scipy import ndimage  # imported here: not loaded unless needed
     med = ndimage.median_filter(filled, size=(width, 1), mode="nearest")
     r = np.abs(filled - med)
     scale = 1.4826 * np.median(r, axis=0)
@@ -33,6 +33,7 @@ def glitches(X: np.ndarray, *, width: int = 7, k: float = 6.0, floor: float = 0.
     the same threshold)."""
     X = np.asarray(X, dtype=np.float64)
     filled = linear_bridge(X)
+    from scipy import ndimage  # imported here: not loaded unless needed
     med = ndimage.median_filter(filled, size=(width, 1), mode="nearest")
     r = np.abs(filled - med)
     limit = np.maximum(k * 1.4826 * np.median(r, axis=0), floor)

@@ -11,7 +11,6 @@ batched (d+1)×(d+1) solve per sample — no loop over frames or channels.
 from __future__ import annotations
 
 import numpy as np
-from scipy import ndimage
 
 
 def local_polyfit(x: np.ndarray, w: np.ndarray, half: int, degree: int = 2,
@@ -52,6 +51,7 @@ def local_polyfit(x: np.ndarray, w: np.ndarray, half: int, degree: int = 2,
     if leave_out:
         kernel[reach] = 0.0
     n = degree + 1
+    from scipy import ndimage  # imported here: not loaded unless needed
     S = np.stack([ndimage.correlate1d(w, kernel * u ** k, axis=0, mode="constant")
                   for k in range(2 * degree + 1)], axis=-1)                    # (T, J, 2d+1)
     R = np.stack([ndimage.correlate1d(xw, kernel * u ** k, axis=0, mode="constant")

@@ -44,23 +44,40 @@ from mocapfix.solvers.rigid import kabsch
 LOCAL_FILLERS = ("interp", "poly", "grnn", "linear")
 
 
-def distance_stats(pos: np.ndarray, observed: np.ndarray, min_frames: int = 3):
+def distance_stats(pos: np.ndarray, observed: np.ndarray, min_frames: int = 3,
+                   chunk: int = 512):
     """Mean and standard deviation (J, J) of every inter-marker distance over the frames
-    where both markers are observed (NaN with fewer than ``min_frames`` such frames)."""
+    where both markers are observed (NaN with fewer than ``min_frames`` such frames).
+    One pass over blocks of ``chunk`` frames: the distances from per-frame Gram matrices of
+    the centred markers, their sums and squared sums shifted by the first block's mean
+    (no cancellation): O(T J²) time, O(chunk J²) memory."""
     T, J, _ = pos.shape
+    ob = observed.astype(np.float64)
+    n = ob.T @ ob                                           # frames where both are seen
     filled = np.where(observed[..., None], pos, 0.0)
-    mu = np.full((J, J), np.nan)
-    sd = np.full((J, J), np.nan)
-    for j in range(J):
-        both = observed & observed[:, j:j + 1]
-        n = both.sum(axis=0)
-        d = np.linalg.norm(filled - filled[:, j:j + 1], axis=2)
-        d = np.where(both, d, 0.0)
-        ok = n >= min_frames
-        m = d.sum(axis=0) / np.maximum(n, 1)
-        v = (np.where(both, (d - m) ** 2, 0.0)).sum(axis=0) / np.maximum(n - 1, 1)
-        mu[j, ok] = m[ok]
-        sd[j, ok] = np.sqrt(v[ok])
+    seen = np.maximum(ob.sum(axis=1), 1.0)
+    filled = filled - (filled.sum(axis=1) / seen[:, None])[:, None]   # centred per frame
+    shift = s1 = s2 = None
+    for lo in range(0, T, chunk):
+        x, w = filled[lo:lo + chunk], ob[lo:lo + chunk]
+        sq = (x * x).sum(axis=2)
+        d = np.sqrt(np.maximum(sq[:, :, None] + sq[:, None, :]
+                               - 2.0 * (x @ np.swapaxes(x, 1, 2)), 0.0))
+        both = w[:, :, None] * w[:, None, :]
+        if shift is None:
+            shift = (d * both).sum(axis=0) / np.maximum(both.sum(axis=0), 1.0)
+            s1, s2 = np.zeros((J, J)), np.zeros((J, J))
+        d -= shift
+        d *= both
+        s1 += d.sum(axis=0)
+        s2 += (d * d).sum(axis=0)
+    m = s1 / np.maximum(n, 1)                               # mean − shift
+    var = np.maximum(s2 - n * m * m, 0.0) / np.maximum(n - 1, 1)
+    ok = n >= min_frames
+    mu = np.where(ok, m + shift, np.nan)
+    sd = np.where(ok, np.sqrt(var), np.nan)
+    np.fill_diagonal(mu, np.where(np.diag(ok), 0.0, np.nan))
+    np.fill_diagonal(sd, np.where(np.diag(ok), 0.0, np.nan))
     return mu, sd
 
 
@@ -72,8 +89,20 @@ def _frames(points: np.ndarray, ref: np.ndarray | None):
     centre = points.mean(axis=1)
     if K < 3:
         return (lambda x: x - centre[:, None]), (lambda x: x + centre[:, None])
-    R, cs, ct = kabsch(points, np.broadcast_to(ref, points.shape), np.ones((n, K)))
+    return _transforms(*kabsch(points, np.broadcast_to(ref, points.shape), np.ones((n, K))))
 
+
+def _frames_two(first: np.ndarray, second: np.ndarray, ref: np.ndarray):
+    """:func:`_frames` of two point sets (n1, K, 3) and (n2, K, 3), K ≥ 3, with one
+    batched Kabsch fit (the same values as two calls)."""
+    both = np.concatenate([first, second])
+    R, cs, ct = kabsch(both, np.broadcast_to(ref, both.shape), np.ones(both.shape[:2]))
+    n1 = len(first)
+    return (_transforms(R[:n1], cs[:n1], ct[:n1]), _transforms(R[n1:], cs[n1:], ct[n1:]))
+
+
+def _transforms(R, cs, ct):
+    """``(to_local, to_global)`` of per-frame rigid fits ``R (p − cs) + ct``."""
     def to_local(x):
         return (x - cs[:, None]) @ np.swapaxes(R, 1, 2) + ct[:, None]
 
@@ -149,8 +178,12 @@ def gap_fills(pos, observed, j, s, e, neighbours, train, body, *, fillers=LOCAL_
     if K:
         tr_local = train[observed[np.ix_(train, neighbours)].all(axis=1)]
         nb = pos[np.ix_(frames, neighbours)]
-        ref = _reference(pos[np.ix_(tr_local, neighbours)] if len(tr_local) else nb)
-        loc, glob = _frames(nb, ref)
+        nb_train = pos[np.ix_(tr_local, neighbours)]
+        ref = _reference(nb_train if len(tr_local) else nb)
+        if K >= 3 and len(tr_local) >= max(10, 2 * K):
+            (loc, glob), (tl, _) = _frames_two(nb, nb_train, ref)
+        else:
+            (loc, glob), tl = _frames(nb, ref), None
         if "interp" in fillers:
             lj = loc(np.nan_to_num(pos[frames, j])[:, None])[:, 0]
             n = len(frames)
@@ -160,8 +193,9 @@ def gap_fills(pos, observed, j, s, e, neighbours, train, body, *, fillers=LOCAL_
             f = (np.arange(n) / max(n - 1, 1))[:, None]
             out["interp"] = glob(((1 - f) * a + f * b)[:, None])[:, 0]
         if len(tr_local) >= max(10, 2 * K):
-            tl, _ = _frames(pos[np.ix_(tr_local, neighbours)], ref)
-            Xt = tl(pos[np.ix_(tr_local, neighbours)]).reshape(len(tr_local), -1)
+            if tl is None:
+                tl, _ = _frames(nb_train, ref)
+            Xt = tl(nb_train).reshape(len(tr_local), -1)
             Yt = tl(pos[tr_local, j][:, None])[:, 0]
             Xg = loc(nb).reshape(len(frames), -1)
             if "poly" in fillers and K >= 3:
@@ -171,14 +205,14 @@ def gap_fills(pos, observed, j, s, e, neighbours, train, body, *, fillers=LOCAL_
     if "linear" in fillers and len(body) >= 3:
         tr = train[observed[np.ix_(train, body)].all(axis=1)]
         if len(tr) >= max(10, len(body)):
-            ref = _reference(pos[np.ix_(tr, body)])
-            tl, _ = _frames(pos[np.ix_(tr, body)], ref)
-            loc, glob = _frames(pos[np.ix_(frames, body)], ref)
+            body_train, body_gap = pos[np.ix_(tr, body)], pos[np.ix_(frames, body)]
+            ref = _reference(body_train)
+            (tl, _), (loc, glob) = _frames_two(body_train, body_gap, ref)
             d = mu[j, body] if mu is not None else np.zeros(len(body))
             w = np.repeat(np.exp(-0.5 * (np.nan_to_num(d, nan=1e9) / weight_scale) ** 2), 3)
-            Xt = tl(pos[np.ix_(tr, body)]).reshape(len(tr), -1) * w
+            Xt = tl(body_train).reshape(len(tr), -1) * w
             Yt = tl(pos[tr, j][:, None])[:, 0]
-            Xg = loc(pos[np.ix_(frames, body)]).reshape(len(frames), -1) * w
+            Xg = loc(body_gap).reshape(len(frames), -1) * w
             keep = w > 1e-6
             if keep.sum() >= 3:
                 out["linear"] = glob(_ridge(Xt[:, keep], Yt)(Xg[:, keep])[:, None])[:, 0]
@@ -238,15 +272,13 @@ def gap_list(observed: np.ndarray, max_gap: float | None = None, fill_ends: bool
     from mocapfix.gaps import runs
 
     T = observed.shape[0]
-    out = []
-    for j, s, n in zip(*runs(~observed)):
-        e = s + n
-        if n == T or (max_gap is not None and n > max_gap):
-            continue
-        if (s == 0 or e == T) and not fill_ends:
-            continue
-        out.append((int(j), int(s), int(e)))
-    return out
+    j, s, n = runs(~observed)
+    keep = n < T
+    if max_gap is not None:
+        keep &= n <= max_gap
+    if not fill_ends:
+        keep &= (s > 0) & (s + n < T)
+    return list(zip(j[keep].tolist(), s[keep].tolist(), (s + n)[keep].tolist()))
 
 
 def member_fills(pos, observed, gaps, external, *, local=LOCAL_FILLERS, neighbours=3,
@@ -298,20 +330,26 @@ def hermite_short_gaps(pos: np.ndarray, observed: np.ndarray, gaps) -> list:
     Hermite curve through the bounding samples, with one-sided difference slopes where the
     samples beyond are observed (the chord's slope otherwise). Meant for holes of a few
     frames (spike holes, dropouts), where it matches PCHIP without loading SciPy.
-    Returns the gaps it filled."""
+    Vectorised over all gaps at once (one row per filled sample). Returns the gaps it filled."""
     T = pos.shape[0]
-    done = []
-    for j, s, e in gaps:
-        if s == 0 or e >= T:
-            continue
-        n = e - s
-        p0, p1 = pos[s - 1, j], pos[e, j]
-        chord = (p1 - p0) / (n + 1)
-        m0 = pos[s - 1, j] - pos[s - 2, j] if s >= 2 and observed[s - 2, j] else chord
-        m1 = pos[e + 1, j] - pos[e, j] if e + 1 < T and observed[e + 1, j] else chord
-        u = (np.arange(1, n + 1) / (n + 1))[:, None]
-        h00, h10 = 2 * u ** 3 - 3 * u ** 2 + 1, u ** 3 - 2 * u ** 2 + u
-        h01, h11 = -2 * u ** 3 + 3 * u ** 2, u ** 3 - u ** 2
-        pos[s:e, j] = h00 * p0 + h10 * (n + 1) * m0 + h01 * p1 + h11 * (n + 1) * m1
-        done.append((j, s, e))
+    done = [(j, s, e) for j, s, e in gaps if s > 0 and e < T]
+    if not done:
+        return done
+    g = np.array(done, dtype=np.intp).reshape(-1, 3)
+    j, s, e = g[:, 0], g[:, 1], g[:, 2]
+    n = e - s
+    p0, p1 = pos[s - 1, j], pos[e, j]                                     # (G, 3)
+    chord = (p1 - p0) / (n + 1)[:, None]
+    has0 = (s >= 2) & observed[np.maximum(s - 2, 0), j]
+    has1 = (e + 1 < T) & observed[np.minimum(e + 1, T - 1), j]
+    m0 = np.where(has0[:, None], p0 - pos[np.maximum(s - 2, 0), j], chord)
+    m1 = np.where(has1[:, None], pos[np.minimum(e + 1, T - 1), j] - p1, chord)
+    gi = np.repeat(np.arange(len(g)), n)                                  # one row per sample
+    k = np.arange(len(gi)) - np.repeat(np.cumsum(n) - n, n) + 1           # 1 .. n in each gap
+    u = (k / (n + 1)[gi])[:, None]
+    h00, h10 = 2 * u ** 3 - 3 * u ** 2 + 1, u ** 3 - 2 * u ** 2 + u
+    h01, h11 = -2 * u ** 3 + 3 * u ** 2, u ** 3 - u ** 2
+    L = (n + 1)[gi][:, None]
+    pos[s[gi] + k - 1, j[gi]] = (h00 * p0[gi] + h10 * L * m0[gi] + h01 * p1[gi]
+                                 + h11 * L * m1[gi])
     return done

@@ -18,7 +18,6 @@ keeps its Euler branches. Translation channels are not features.
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from mocapfix.kinematics import nearest_branch
 
@@ -124,6 +123,7 @@ def from_features(rig, F: np.ndarray, reference: np.ndarray) -> np.ndarray:
             deg = np.full((len(F), 3), np.nan)
             if ok.any():
                 qn = q[ok] / norm[ok]
+                from scipy.spatial.transform import Rotation  # imported here: not loaded unless needed
                 deg[ok] = Rotation.from_quat(qn[:, [1, 2, 3, 0]]).as_euler(axes.upper(), degrees=True)
         else:
             deg = F[:, n:n + len(axes)]

@@ -11,7 +11,6 @@ to the noise, without a cut-off to tune.
 from __future__ import annotations
 
 import numpy as np
-from scipy import ndimage
 
 #: Gaussian widths tried, in samples (0.7 … 48)
 WIDTHS = (0.7, 1.0, 1.5, 2.0, 3.0, 4.0, 6.0, 8.0, 12.0, 16.0, 24.0, 32.0, 48.0)
@@ -22,6 +21,7 @@ def centre_weight(sigma: float) -> float:
     n = int(4 * sigma + 2)
     impulse = np.zeros(2 * n + 1)
     impulse[n] = 1.0
+    from scipy import ndimage  # imported here: not loaded unless needed
     return float(ndimage.gaussian_filter1d(impulse, sigma)[n])
 
 
@@ -42,6 +42,7 @@ def sure_gaussian(X: np.ndarray, noise: float, *, widths=WIDTHS, max_width: floa
     for w in widths:
         if max_width is not None and w > max_width:
             break
+        from scipy import ndimage  # imported here: not loaded unless needed
         Z = ndimage.gaussian_filter1d(X, w, axis=0, mode="nearest")
         if span:
             r = ndimage.gaussian_filter1d((X - Z) ** 2 - s2 + 2 * s2 * centre_weight(w), span, axis=0,

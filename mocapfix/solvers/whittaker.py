@@ -25,7 +25,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.linalg import solveh_banded
 
 
 def penalty_bands(t: np.ndarray, order: int) -> np.ndarray:
@@ -58,6 +57,7 @@ def smooth(y: np.ndarray, w: np.ndarray, t: np.ndarray, lam: float, *, order: in
     ab = (penalty_bands(t, order) if bands is None else bands) * lam
     ab[0] = ab[0] + w + 1e-12
     rhs = np.where(w[:, None] > 0, y, 0.0) * w[:, None]
+    from scipy.linalg import solveh_banded  # imported here: not loaded unless needed
     return solveh_banded(ab, rhs, lower=True, check_finite=False)
 
 
