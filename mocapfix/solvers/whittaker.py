@@ -136,6 +136,8 @@ def local_sure_candidates(y: np.ndarray, w: np.ndarray, t: np.ndarray, lams, *, 
     yz = np.where(seen[:, None], y, 0.0)
     rhs = yz * w[:, None]
     diag = w + 1e-12
+    from scipy.linalg import solveh_banded
+
     for k, lam in enumerate(lams):
         ab = bands * lam                     # as smooth(), with the right-hand side shared
         ab[0] += diag
