@@ -57,6 +57,7 @@ import time
 import warnings
 
 import numpy as np
+from scipy import ndimage
 from numpy.lib.stride_tricks import sliding_window_view
 
 from mocapfix import bodyparts
@@ -66,6 +67,7 @@ from mocapfix.errors import ConfigError, MocapfixError
 from mocapfix.motion import Motion
 from mocapfix.solvers import sparse
 from mocapfix.solvers.dct import gcv_smooth, prefill
+from mocapfix.solvers.bone_projection import project_lengths
 from mocapfix.solvers.lowrank import blas_single_thread
 from mocapfix.solvers.rigid import from_frame, kabsch, to_frame, torso_frames
 
@@ -107,6 +109,44 @@ def _starts(T: int, m: int, dilation: int, stride: int) -> np.ndarray:
     return np.unique(np.concatenate(parts))
 
 
+def suspect_samples(P: np.ndarray, k: float, floor: float = 0.0, width: int = 7) -> np.ndarray:
+    """(T, J) mask of joint samples of P (T, J, 3) that stand off a running median of
+    ``width`` frames by more than ``k`` noise σ (the 3-D distance; σ the MAD of the
+    per-coordinate residuals, robust to a minority of outliers): the samples the
+    presmoothing and the frame fit must not see, before the ℓ2,p term decides on them."""
+    T = P.shape[0]
+    flat = P.reshape(T, -1)
+    ok = ~np.isnan(flat).all(axis=0)
+    if T < width or not ok.any():
+        return np.zeros(P.shape[:2], dtype=bool)
+    filled = prefill(flat[:, ok])
+    med = ndimage.median_filter(filled, size=(width, 1), mode="nearest")
+    r = np.full(flat.shape, np.nan)
+    r[:, ok] = filled - med
+    r[np.isnan(flat)] = np.nan
+    scale = 1.4826 * np.nanmedian(np.abs(r))
+    dist = np.sqrt(np.nansum(r.reshape(P.shape) ** 2, axis=2))
+    return (dist > max(k * scale, floor)) & ~np.isnan(P).any(axis=2)
+
+
+def rigid_bone(a: np.ndarray, b: np.ndarray, sigma: float, *, factor: float = 2.0) -> bool:
+    """Whether the input is consistent with a bone of constant length between joint
+    tracks ``a`` and ``b`` (T, 3) carrying white noise of σ per coordinate: the robust
+    spread (1.4826 MAD) of the squared length ℓ² is at most ``factor`` × what the noise
+    alone gives (Var ℓ² = 8L²σ² + 24σ⁴ for ℓ² = |d + n|², n ~ N(0, 2σ²I)), plus 1 % of L²
+    for rounding. Clean data from a rigid skeleton: ℓ² constant; a marker pair or a
+    sensor's joints that move apart: spread far above the noise's."""
+    l2 = np.sum((a - b) ** 2, axis=1)
+    l2 = l2[np.isfinite(l2)]
+    if l2.size < 3:
+        return False
+    med = float(np.median(l2))
+    L2 = max(med - 6.0 * sigma ** 2, 0.0)
+    spread = 1.4826 * float(np.median(np.abs(l2 - med)))
+    expected = np.sqrt(8.0 * L2 * sigma ** 2 + 24.0 * sigma ** 4)
+    return spread <= factor * expected + 0.01 * L2
+
+
 def noise_level(X: np.ndarray) -> float:
     """σ̂ of white noise on the channels of X (T, c), NaN-aware: the median absolute second
     difference / 0.6745 / √6 (Var of a second difference of white noise is 6σ²)."""
@@ -139,10 +179,15 @@ class PartletDictionary(FittedCleaner):
         Param("fista_iterations", "int", 20, "FISTA iterations per Ψ-step", low=1, high=2000),
         Param("neighbours", "int", 5, "k of the k-NN graph", low=0, high=50),
         Param("stride", "int", 4, "window samples between windows of one phase", low=1, high=64),
+        Param("despike", "float", 5.0, "samples farther than this many noise σ from a running median are "
+              "kept from the presmoothing and the frame fit (0: off)", low=0.0, high=100.0),
         Param("presmooth", "bool", True, "code windows of the input smoothed as GCV finds noise in it"),
         Param("frame_gcv", "bool", True, "fit the torso frame to GCV-smoothed torso joints"),
         Param("frame_smoothing", "time", "0.05 s", "Gaussian smoothing of the torso frame", unit="s",
               low=0.0, high=2.0),
+        Param("frame_noise", "length", "20 mm", "noise level above which the frame smoothing grows in "
+              "proportion (up to 6×; 0: fixed)", unit="mm", low=0.0, high=10.0),
+        Param("bones", "bool", True, "project the cleaned bones to their median lengths (files with a skeleton)"),
         Param("detail", "bool", True, "add back the residual detail the dictionary misses, "
               "Wiener-weighted against the noise level", ),
         Param("out_of_sample", "float", 0.005, "warn when a partlet's dictionary leaves more than this "
@@ -212,8 +257,14 @@ class PartletDictionary(FittedCleaner):
                 filled[:, ok] = sm
             filled[miss] = np.nan
             frame_pts = filled.reshape(frame_pts.shape)
+        # heavier noise, smoother frame: the smoothing grows with the torso joints' noise
+        # level above ``frame_noise`` (up to 6×); clean input keeps its quick turns
+        ref = self.values["frame_noise"].si
+        fac = 1.0
+        if ref > 0:
+            fac = float(np.clip(noise_level(P[:, self.frame_].reshape(len(P), -1)) / ref, 1.0, 6.0))
         R, c, valid = torso_frames(frame_pts, self.template_,
-                                   smoothing=self.values["frame_smoothing"].si * fps)
+                                   smoothing=self.values["frame_smoothing"].si * fps * fac)
         local = to_frame(P, R, c)
         with warnings.catch_warnings():   # model joints the file lacks are all NaN
             warnings.simplefilter("ignore", RuntimeWarning)
@@ -427,13 +478,20 @@ class PartletDictionary(FittedCleaner):
         P = np.full((T, len(self.joints_), 3), np.nan)
         ok = idx >= 0
         P[:, ok] = motion.positions[:, idx[ok]] * motion.metres_per_unit
+        suspect = np.zeros(P.shape[:2], dtype=bool)
+        if self.values["despike"] > 0:
+            suspect = suspect_samples(P, self.values["despike"], self.values["min_outlier"].si)
         try:
-            local, R, c, centre, valid = self._normalise(P, motion.fps)
+            local, R, c, centre, valid = self._normalise(np.where(suspect[..., None], np.nan, P), motion.fps)
         except ValueError as exc:
             info["skipped"] = str(exc)
             return motion.copy(), info
         centre = np.where(np.isnan(centre), 0.0, centre)
+        if suspect.any():
+            local = to_frame(P, R, c)
         X = local - centre
+        info["suspect"] = int(suspect.sum())
+        raw_sigma = noise_level(np.where(suspect[..., None], np.nan, P).reshape(T, -1))
         sigma = noise_level(X[:, self.frame_].reshape(T, -1))
         total = np.zeros_like(X)
         count = np.zeros(X.shape[:2])
@@ -443,7 +501,8 @@ class PartletDictionary(FittedCleaner):
             Xp = X[:, joints]
             if np.isnan(Xp).all():
                 continue
-            rec, frac, it = self._code_partlet(Xp, self.dictionary_[p], starts, dil, sigma, coding, motion.fps)
+            rec, frac, it = self._code_partlet(Xp, self.dictionary_[p], starts, dil, sigma, coding, motion.fps,
+                                               suspect[:, joints])
             total[:, joints] += rec
             count[:, joints] += 1
             unexplained[p] = round(frac, 5)
@@ -453,6 +512,13 @@ class PartletDictionary(FittedCleaner):
         pos = motion.positions.copy()
         file_j, model_j = self._written_joints(motion.names)
         pos[:, file_j] = out[:, model_j]
+        if self.values["bones"] and motion.skeleton is not None:
+            seen = np.where(suspect[..., None], np.nan, P)
+            to_model = dict(zip(file_j.tolist(), model_j.tolist()))
+            bones = [(a, b) for a, b in motion.skeleton.bone_array.tolist()
+                     if a in to_model and b in to_model
+                     and rigid_bone(seen[:, to_model[a]], seen[:, to_model[b]], raw_sigma)]
+            pos, info["bones"] = self._project_bones(pos, np.array(bones, dtype=np.intp))
         info["unmodelled_joints"] = [n for i, n in enumerate(motion.names) if i not in set(file_j)]
         info.update({"noise_mm": round(sigma * 1e3, 3), "iterations": iters,
                      "unexplained": unexplained,
@@ -465,13 +531,15 @@ class PartletDictionary(FittedCleaner):
                                + ", ".join(high) + ": the dictionary explains little of it")
         return motion.replace(positions=pos), info
 
-    def _code_partlet(self, Xp, D, starts, dil, sigma, coding, fps):
+    def _code_partlet(self, Xp, D, starts, dil, sigma, coding, fps, suspect=None):
         """Robust structured sparse coding of one partlet (eq. 11), or OMP (Xiao 2015).
         Returns (reconstruction (T, n, 3), unexplained energy fraction, iterations)."""
         T, n, _ = Xp.shape
         m = self.window_
         flat = Xp.reshape(T, -1)
         missing = np.isnan(Xp).any(axis=2)
+        if suspect is not None and suspect.any():
+            flat = np.where(np.repeat(suspect, 3, axis=1), np.nan, flat)
         Z = prefill(flat)
         Z[np.isnan(Z)] = 0.0
         pad = min(T // 2, int(round(0.1 * fps)))
@@ -533,6 +601,25 @@ class PartletDictionary(FittedCleaner):
             clean = obs & (np.linalg.norm(E, axis=2) == 0.0)
             rec3 = rec3 + self._residual_detail(resid, clean, fps)
         return rec3, frac, it
+
+    @staticmethod
+    def _project_bones(pos: np.ndarray, bones: np.ndarray):
+        """``bones`` projected to their median length over the cleaned frames
+        (:func:`mocapfix.solvers.bone_projection.project_lengths`, equal weights): the
+        skeleton is rigid, the dictionary's reconstruction only nearly so. Bones of zero
+        length (joints a conversion put at one place) are left alone."""
+        bones = np.asarray(bones, dtype=np.intp).reshape(-1, 2)
+        if not len(bones):
+            return pos, 0
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            lengths = np.nanmedian(np.linalg.norm(pos[:, bones[:, 0]] - pos[:, bones[:, 1]], axis=2), axis=0)
+        scale = np.nanmedian(lengths) if np.isfinite(lengths).any() else 0.0
+        ok = np.isfinite(lengths) & (lengths > 1e-3 * max(scale, 1e-300))
+        if not ok.any():
+            return pos, 0
+        w = np.ones(pos.shape[:2])
+        return project_lengths(pos, bones[ok], lengths[ok], w), int(ok.sum())
 
     @staticmethod
     def _residual_detail(resid: np.ndarray, keep: np.ndarray, fps: float) -> np.ndarray:
