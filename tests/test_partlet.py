@@ -93,7 +93,10 @@ def test_suspect_samples_find_spikes_and_leave_fast_clean_motion_alone():
 def test_rigid_bone_test_tells_a_bone_from_a_pair_that_moves_apart():
     """Known answer: a 30 cm bone under 2 cm noise is rigid, two joints whose distance
     swings by ±10 cm are not, under the same noise; clean data: exact."""
-    from mocapfix.cleaners.partlet import rigid_bone
+    from mocapfix.cleaners.partlet import rigid_bones
+
+    def rigid_bone(a, b, sigma):
+        return bool(rigid_bones(a[:, None], b[:, None], sigma)[0])
 
     rng = np.random.default_rng(1)
     T = 1000

@@ -52,7 +52,7 @@ the paper tunes λ1, λ2, λ3 per noise setting from a grid, we ship one setting
   (6.54 → 5.99 cm) but hurt clean input (a filled 60-frame gap 5.0 → 7.5 cm).
 - The cleaned bones are projected to their median length (``bones``), for every skeleton
   bone whose input is consistent with a rigid bone under the file's noise
-  (:func:`rigid_bone`; a marker pair or sensor joints that move apart are left alone):
+  (:func:`rigid_bones`; a marker pair or sensor joints that move apart are left alone):
   10 dB 5.99 → 5.31, 30 dB 1.07 → 0.93, 20 dB + 10 % 2.41 → 2.19, that filled gap
   5.0 → 3.7 cm. Not in the paper (its Fig. 7 only shows bone lengths as a symptom).
 
@@ -156,22 +156,23 @@ def suspect_samples(P: np.ndarray, k: float, floor: float = 0.0, width: int = 7)
     return (dist > max(k * scale, floor)) & ~np.isnan(P).any(axis=2)
 
 
-def rigid_bone(a: np.ndarray, b: np.ndarray, sigma: float, *, factor: float = 2.0) -> bool:
-    """Whether the input is consistent with a bone of constant length between joint
-    tracks ``a`` and ``b`` (T, 3) carrying white noise of σ per coordinate: the robust
-    spread (1.4826 MAD) of the squared length ℓ² is at most ``factor`` × what the noise
-    alone gives (Var ℓ² = 8L²σ² + 24σ⁴ for ℓ² = |d + n|², n ~ N(0, 2σ²I)), plus 1 % of L²
-    for rounding. Clean data from a rigid skeleton: ℓ² constant; a marker pair or a
-    sensor's joints that move apart: spread far above the noise's."""
-    l2 = np.sum((a - b) ** 2, axis=1)
-    l2 = l2[np.isfinite(l2)]
-    if l2.size < 3:
-        return False
-    med = float(np.median(l2))
-    L2 = max(med - 6.0 * sigma ** 2, 0.0)
-    spread = 1.4826 * float(np.median(np.abs(l2 - med)))
+def rigid_bones(a: np.ndarray, b: np.ndarray, sigma: float, *, factor: float = 2.0) -> np.ndarray:
+    """Per bone, whether the input is consistent with a bone of constant length between
+    joint tracks ``a`` and ``b`` (T, B, 3) carrying white noise of σ per coordinate: the
+    robust spread (1.4826 MAD) of the squared length ℓ² is at most ``factor`` × what the
+    noise alone gives (Var ℓ² = 8L²σ² + 24σ⁴ for ℓ² = |d + n|², n ~ N(0, 2σ²I)), plus 1 %
+    of L² for rounding. Clean data from a rigid skeleton: ℓ² constant; a marker pair or a
+    sensor's joints that move apart: spread far above the noise's. NaN samples are
+    ignored; a bone with fewer than 3 samples is not taken as rigid."""
+    l2 = np.sum((a - b) ** 2, axis=2)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        med = np.nanmedian(l2, axis=0)
+        spread = 1.4826 * np.nanmedian(np.abs(l2 - med), axis=0)
+    L2 = np.maximum(med - 6.0 * sigma ** 2, 0.0)
     expected = np.sqrt(8.0 * L2 * sigma ** 2 + 24.0 * sigma ** 4)
-    return spread <= factor * expected + 0.01 * L2
+    enough = np.isfinite(l2).sum(axis=0) >= 3
+    return enough & (spread <= factor * expected + 0.01 * L2)
 
 
 def noise_level(X: np.ndarray) -> float:
@@ -542,10 +543,11 @@ class PartletDictionary(FittedCleaner):
         if self.values["bones"] and motion.skeleton is not None:
             seen = np.where(suspect[..., None], np.nan, P)
             to_model = dict(zip(file_j.tolist(), model_j.tolist()))
-            bones = [(a, b) for a, b in motion.skeleton.bone_array.tolist()
-                     if a in to_model and b in to_model
-                     and rigid_bone(seen[:, to_model[a]], seen[:, to_model[b]], raw_sigma)]
-            pos, info["bones"] = self._project_bones(pos, np.array(bones, dtype=np.intp))
+            bones = np.array([(a, b) for a, b in motion.skeleton.bone_array.tolist()
+                              if a in to_model and b in to_model], dtype=np.intp).reshape(-1, 2)
+            ends = np.vectorize(to_model.get, otypes=[np.intp])(bones) if len(bones) else bones
+            rigid = rigid_bones(seen[:, ends[:, 0]], seen[:, ends[:, 1]], raw_sigma)
+            pos, info["bones"] = self._project_bones(pos, bones[rigid])
         info["unmodelled_joints"] = [n for i, n in enumerate(motion.names) if i not in set(file_j)]
         info.update({"noise_mm": round(sigma * 1e3, 3), "iterations": iters,
                      "unexplained": unexplained,
