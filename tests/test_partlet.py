@@ -51,13 +51,13 @@ def test_shipped_models_exist_and_load():
     assert sum(p.stat().st_size for p in ships.values()) < 8e6, "shipped models must stay small"
 
 
-@pytest.mark.parametrize("setting,ratio", [("snr30", 1.0), ("snr10", 0.92), ("out20", 0.55),
-                                           ("snr20+out10", 0.85)])
+@pytest.mark.parametrize("setting,ratio", [("snr30", 0.92), ("snr20", 0.8), ("snr10", 0.75),
+                                           ("out20", 0.3), ("snr20+out10", 0.6)])
 def test_against_the_best_classical_filter_on_held_out_dance(setting, ratio):
     """05_02 and 05_10 are not in the training corpus. Bound: on every seed, below
     ``ratio`` × the best oracle-tuned classical filter of that very case. Measured (480
-    frames, seeds 0–2, worst of 6): 30 dB 0.95, 20 dB 0.94, 10 dB 0.84, 20 % outliers 0.45,
-    20 dB + 10 % 0.75."""
+    frames, seeds 0–2, worst of 6): 30 dB 0.87, 20 dB 0.73, 10 dB 0.69, 20 % outliers 0.25,
+    20 dB + 10 % 0.54."""
     cleaner = build("partlet_dictionary")
     for name in ("05_02.amc", "05_10.amc"):
         truth = _clean(name)
@@ -67,6 +67,48 @@ def test_against_the_best_classical_filter_on_held_out_dance(setting, ratio):
             out, info = cleaner.apply(noisy)
             ours, classic = _rmse_cm(out, truth), _best_classic(noisy, truth)
             assert ours < ratio * classic, (name, seed, ours, classic)
+
+
+def test_suspect_samples_find_spikes_and_leave_fast_clean_motion_alone():
+    """Known answer: on the clean dance takes almost no sample stands 40 mm off its running
+    median (measured: 3 of 34,813 samples of 05_02, at a foot strike; none in 05_10); 30
+    spikes of 30 cm are all found, and nothing else but those few."""
+    from mocapfix.cleaners.partlet import suspect_samples
+
+    for name in ("05_02.amc", "05_10.amc"):
+        truth = _clean(name, 100_000)
+        P = truth.positions * truth.metres_per_unit
+        clean_flags = suspect_samples(P, 5.0, 0.04)
+        assert clean_flags.mean() < 2e-4
+        rng = np.random.default_rng(0)
+        t, j = rng.choice(len(P), 30, replace=False), rng.integers(0, P.shape[1], 30)
+        spiked = P.copy()
+        spiked[t, j] += rng.choice([-1, 1], size=(30, 3)) * 0.3 / np.sqrt(3)
+        found = suspect_samples(spiked, 5.0, 0.04)
+        assert found[t, j].all()
+        found[t, j] = False
+        assert (found & ~clean_flags).sum() == 0
+
+
+def test_rigid_bone_test_tells_a_bone_from_a_pair_that_moves_apart():
+    """Known answer: a 30 cm bone under 2 cm noise is rigid, two joints whose distance
+    swings by ±10 cm are not, under the same noise; clean data: exact."""
+    from mocapfix.cleaners.partlet import rigid_bones
+
+    def rigid_bone(a, b, sigma):
+        return bool(rigid_bones(a[:, None], b[:, None], sigma)[0])
+
+    rng = np.random.default_rng(1)
+    T = 1000
+    ang = np.linspace(0, 20, T)
+    a = np.zeros((T, 3))
+    b = 0.3 * np.stack([np.cos(ang), np.sin(ang), 0 * ang], axis=1)
+    noise = lambda: rng.normal(0, 0.02, (T, 3))  # noqa: E731
+    assert rigid_bone(a, b, 0.0)
+    assert rigid_bone(a + noise(), b + noise(), 0.02)
+    stretch = b * (1 + 0.33 * np.sin(3 * ang))[:, None]
+    assert not rigid_bone(a, stretch, 0.0)
+    assert not rigid_bone(a + noise(), stretch + noise(), 0.02)
 
 
 def test_clean_input_stays_close():
