@@ -24,7 +24,7 @@ from scipy.spatial.transform import Rotation
 from mocapfix.cleaners import register
 from mocapfix.cleaners.base import Cleaner, Param
 from mocapfix.errors import ConfigError
-from mocapfix.kinematics import nearest_branch
+from mocapfix.kinematics import nearest_branch, nearest_euler
 from mocapfix.motion import Motion
 from mocapfix.solvers import glitches, rotchannels, segments, ssa, sure
 from mocapfix.solvers.rotchannels import continuous_quaternions
@@ -92,7 +92,7 @@ class RotationSmooth(Cleaner):
                 q = q / np.linalg.norm(q, axis=1, keepdims=True)
                 cols = rig.rot_columns[j]
                 ang = Rotation.from_quat(q).as_euler(rig.rot_axes[j].upper(), degrees=rig.degrees)
-                ch[:, cols] = nearest_branch(ang, ch[:, cols], rig.degrees)
+                ch[:, cols] = nearest_euler(ang, ch[:, cols], rig.degrees)
         if partial:
             unwrapped = np.unwrap(ch[:, partial], period=unit, axis=0)
             smooth = self._filter(unwrapped, motion)

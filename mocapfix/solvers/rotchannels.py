@@ -11,15 +11,16 @@ DOFs, in rig order:
 - a joint with one or two DOFs → its angles in degrees, unwrapped in time.
 
 :func:`from_features` turns features back into channel values, each angle shifted by
-whole turns to the branch nearest a reference (the input channels), so a cleaned file
-keeps its Euler branches. Translation channels are not features.
+whole turns — and, for three-axis joints, as whichever of the two equivalent Euler
+triplets is nearer — to the branch nearest a reference (the input channels), so a cleaned
+file keeps its Euler branches. Translation channels are not features.
 """
 from __future__ import annotations
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from mocapfix.kinematics import nearest_branch
+from mocapfix.kinematics import nearest_branch, nearest_euler
 
 QUAT_SCALE = 360.0 / np.pi   # feature units per quaternion unit (≈ degrees for small angles)
 
@@ -129,6 +130,7 @@ def from_features(rig, F: np.ndarray, reference: np.ndarray) -> np.ndarray:
             n += len(axes)
         ang = deg if rig.degrees else np.deg2rad(deg)
         ref = out[:, cols]
-        new = nearest_branch(ang, np.where(np.isnan(ref), ang, ref), rig.degrees)
+        near = nearest_euler if len(axes) == 3 else nearest_branch
+        new = near(ang, np.where(np.isnan(ref), ang, ref), rig.degrees)
         out[:, cols] = np.where(np.isnan(new), ref, new)
     return out
