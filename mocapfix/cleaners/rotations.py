@@ -232,20 +232,26 @@ class RotationDenoise(Cleaner):
     """Denoise the rotation channels of BVH/AMC, each at the smoothing its motion allows.
 
     On the continuous features of :mod:`mocapfix.solvers.rotchannels`, every feature is
-    Gaussian-smoothed with the width (0.7–48 frames, capped by ``max_sigma``) that
-    minimises Stein's unbiased risk estimate for the noise level measured on the file
-    (:mod:`mocapfix.solvers.sure`): slow channels (root, spine) get long kernels, fast ones
-    (wrists, toes) short ones, and clean data — whose noise estimate is near zero — is
-    barely changed. ``noise`` gives the level in degrees instead of estimating it."""
+    smoothed by the member of least Stein's unbiased risk (:mod:`mocapfix.solvers.sure`)
+    of a family of Gaussian kernels (0.7–48 frames, capped by ``max_sigma``) and, with
+    ``quadratic``, Gaussian-weighted local quadratic fits (2–24 frames): slow channels
+    (root, spine) get long kernels, fast ones (wrists, toes) short ones or quadratic fits,
+    and clean data — whose noise estimate is near zero — is barely changed. The noise is
+    modelled as isotropic rotation noise of one level for the file: a quaternion
+    component q_i carries it scaled by √(1 − q_i²)
+    (:func:`mocapfix.solvers.rotchannels.noise_shape`), an angle channel as it is. The
+    level is measured on the file (median absolute second difference, each divided by its
+    scale); ``noise`` gives it in degrees instead."""
 
     name = "rotation_denoise"
-    summary = "per-channel SURE-tuned Gaussian on continuous BVH/AMC rotations"
+    summary = "per-channel SURE-tuned smoothing of continuous BVH/AMC rotations"
     params = (
         Param("noise", "float", None, "noise level in degrees (default: estimated from the file)",
               low=0.0, high=90.0, nullable=True),
         Param("max_sigma", "time", None, "largest Gaussian sigma", unit="s", low=0.0, nullable=True),
         Param("local", "time", None, "choose the width per frame from the risk over this span "
               "(default: one width per channel)", unit="s", low=0.0, low_open=True, nullable=True),
+        Param("quadratic", "bool", True, "also try Gaussian-weighted local quadratic fits"),
     )
 
     def _apply(self, motion: Motion):
@@ -255,10 +261,12 @@ class RotationDenoise(Cleaner):
         ch, F = _features_of(motion)
         missing = np.isnan(F)
         X = glitches.prefill(F)
-        noise = self["noise"] if self["noise"] is not None else ssa.noise_level(X)
+        shape = rotchannels.noise_shape(rig, X)
+        noise = self["noise"] if self["noise"] is not None else ssa.noise_level(X, shape=shape)
         cap = None if self["max_sigma"] is None else self.frames("max_sigma", motion)
         span = None if self["local"] is None else self.frames("local", motion)
-        Z, widths = sure.sure_gaussian(X, noise, max_width=cap, span=span)
+        Z, widths = sure.sure_gaussian(X, noise * shape, max_width=cap, span=span,
+                                       quadratic_widths=sure.QUADRATIC_WIDTHS if self["quadratic"] else ())
         Z[missing] = np.nan
         out = rotchannels.from_features(rig, Z, ch)
         return motion.replace(channels=out, positions=rig.positions(out)), {

@@ -76,6 +76,27 @@ def layout(rig) -> list[dict]:
     return out
 
 
+def noise_shape(rig, F: np.ndarray) -> np.ndarray:
+    """(T, L) standard deviation of each feature's noise per unit of rotation noise.
+
+    Rotation noise of δ degrees about an axis (isotropic: jitter on every Euler channel)
+    moves a unit quaternion q by ½ q ⊗ (0, ω) — in the tangent space, orthogonal to q —
+    so in feature units (360/π per quaternion unit) component i has variance
+    δ² (1 − q_i²): the w of a joint near its rest pose barely moves at all. Angle features
+    (one- and two-DOF joints) carry the noise as it is (1). NaN rows give 1."""
+    F = np.asarray(F, dtype=np.float64)
+    out = np.ones_like(F)
+    n = 0
+    for e in layout(rig):
+        if e["kind"] == "quat":
+            q = F[:, n:n + 4]
+            with np.errstate(invalid="ignore", divide="ignore"):
+                q = q / np.linalg.norm(q, axis=1, keepdims=True)
+            out[:, n:n + 4] = np.where(np.isnan(q), 1.0, np.sqrt(np.clip(1.0 - q ** 2, 1e-4, 1.0)))
+        n += e["size"]
+    return out
+
+
 def _joint_rows(rig):
     return [j for j, axes in enumerate(rig.rot_axes) if axes]
 
