@@ -234,9 +234,10 @@ class RotationDenoise(Cleaner):
     On the continuous features of :mod:`mocapfix.solvers.rotchannels`, every feature is
     smoothed by the member of least Stein's unbiased risk (:mod:`mocapfix.solvers.sure`)
     of a family of Gaussian kernels (0.7–48 frames, capped by ``max_sigma``) and, with
-    ``quadratic``, Gaussian-weighted local quadratic fits (2–24 frames): slow channels
-    (root, spine) get long kernels, fast ones (wrists, toes) short ones or quadratic fits,
-    and clean data — whose noise estimate is near zero — is barely changed. The noise is
+    ``quadratic``, Gaussian-weighted local quadratic fits (2–24 frames), one choice per
+    joint (``per_joint``: its features' risks summed) at every frame (``local``) or for
+    the whole take: slow joints (root, spine) get long kernels, fast ones (wrists, toes)
+    short ones or quadratic fits, and clean data — whose noise estimate is near zero — is barely changed. The noise is
     modelled as isotropic rotation noise of one level for the file: a quaternion
     component q_i carries it scaled by √(1 − q_i²)
     (:func:`mocapfix.solvers.rotchannels.noise_shape`), an angle channel as it is. The
@@ -252,6 +253,8 @@ class RotationDenoise(Cleaner):
         Param("local", "time", None, "choose the width per frame from the risk over this span "
               "(default: one width per channel)", unit="s", low=0.0, low_open=True, nullable=True),
         Param("quadratic", "bool", True, "also try Gaussian-weighted local quadratic fits"),
+        Param("per_joint", "bool", True, "one smoother for all the features of a joint (chosen by "
+              "their summed risk) rather than one per feature"),
     )
 
     def _apply(self, motion: Motion):
@@ -265,8 +268,10 @@ class RotationDenoise(Cleaner):
         noise = self["noise"] if self["noise"] is not None else ssa.noise_level(X, shape=shape)
         cap = None if self["max_sigma"] is None else self.frames("max_sigma", motion)
         span = None if self["local"] is None else self.frames("local", motion)
+        joint_of = np.concatenate([np.full(e["size"], n) for n, e in enumerate(rotchannels.layout(rig))])
         Z, widths = sure.sure_gaussian(X, noise * shape, max_width=cap, span=span,
-                                       quadratic_widths=sure.QUADRATIC_WIDTHS if self["quadratic"] else ())
+                                       quadratic_widths=sure.QUADRATIC_WIDTHS if self["quadratic"] else (),
+                                       groups=joint_of if self["per_joint"] else None)
         Z[missing] = np.nan
         out = rotchannels.from_features(rig, Z, ch)
         return motion.replace(channels=out, positions=rig.positions(out)), {

@@ -67,32 +67,39 @@ def _family(X, widths, quadratic_widths, max_width):
 
 
 def sure_gaussian(X: np.ndarray, noise, *, widths=WIDTHS, quadratic_widths=(),
-                  max_width: float | None = None, span: float | None = None):
+                  max_width: float | None = None, span: float | None = None,
+                  groups: np.ndarray | None = None):
     """Each column of X (T, C, no NaN) smoothed by the member of least SURE of a family of
     Gaussian kernels (``widths``, samples) and Gaussian-weighted local quadratic fits
     (``quadratic_widths``). ``noise``: the noise standard deviation, a scalar or a (T, C)
     array. ``max_width`` caps the widths (samples). ``span`` (samples): choose per sample
     instead, by the risk summed over a Gaussian neighbourhood of that width (the smoother
-    then varies along the motion: short in a fast turn, long in a hold).
+    then varies along the motion: short in a fast turn, long in a hold). ``groups`` (C,
+    integer labels): columns with one label take one smoother, chosen by their summed risk
+    (the four components of a joint's quaternion: one estimate of one rotation, and a
+    choice made from four times the data).
     Returns (Z, widths (C,) — with ``span``, the median width per column)."""
     X = np.asarray(X, dtype=np.float64)
-    T = X.shape[0]
+    C = X.shape[1]
     V = np.broadcast_to(np.asarray(noise, dtype=np.float64) ** 2, X.shape)
+    labels = np.arange(C) if groups is None else np.unique(np.asarray(groups), return_inverse=True)[1]
+    G = int(labels.max()) + 1 if C else 0
+    M = np.zeros((C, G))
+    M[np.arange(C), labels] = 1.0                 # column → group sums
     best = X.copy()
-    shape = X.shape if span else X.shape[1:]
-    chosen = np.zeros(shape)
+    chosen = np.zeros(X.shape if span else C)
     # the identity: SURE = −v + 2v per sample
-    risk = ndimage.gaussian_filter1d(V, span, axis=0, mode="nearest") if span else V.sum(axis=0)
+    risk = (ndimage.gaussian_filter1d(V, span, axis=0, mode="nearest") if span else V.sum(axis=0)) @ M
     for Z, centre, w in _family(X, widths, quadratic_widths, max_width):
         per_sample = (X - Z) ** 2 - V + 2 * V * centre
-        if span:
-            r = ndimage.gaussian_filter1d(per_sample, span, axis=0, mode="nearest")
-            better = r < risk
-            best[better] = Z[better]
-        else:
-            r = per_sample.sum(axis=0)
-            better = r < risk
-            best[:, better] = Z[:, better]
-        chosen[better] = w
+        r = (ndimage.gaussian_filter1d(per_sample, span, axis=0, mode="nearest") if span
+             else per_sample.sum(axis=0)) @ M
+        better = r < risk
         risk[better] = r[better]
+        cols = better[..., labels]
+        if span:
+            best[cols] = Z[cols]
+        else:
+            best[:, cols] = Z[:, cols]
+        chosen[cols] = w
     return best, (np.median(chosen, axis=0) if span else chosen)
