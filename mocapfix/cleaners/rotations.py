@@ -245,7 +245,7 @@ class RotationDenoise(Cleaner):
     scale); ``noise`` gives it in degrees instead."""
 
     name = "rotation_denoise"
-    summary = "per-channel SURE-tuned smoothing of continuous BVH/AMC rotations"
+    summary = "SURE-tuned smoothing (Gaussian or local quadratic, per joint) of continuous BVH/AMC rotations"
     params = (
         Param("noise", "float", None, "noise level in degrees (default: estimated from the file)",
               low=0.0, high=90.0, nullable=True),
