@@ -234,7 +234,7 @@ class RotationDenoise(Cleaner):
     On the continuous features of :mod:`mocapfix.solvers.rotchannels`, every feature is
     smoothed by the member of least Stein's unbiased risk (:mod:`mocapfix.solvers.sure`)
     of a family of Gaussian kernels (0.7–48 frames, capped by ``max_sigma``) and, with
-    ``quadratic``, Gaussian-weighted local quadratic fits (2–24 frames), one choice per
+    ``quadratic``, Gaussian-weighted local quadratic fits (1–24 frames), one choice per
     joint (``per_joint``: its features' risks summed) at every frame (``local``) or for
     the whole take: slow joints (root, spine) get long kernels, fast ones (wrists, toes)
     short ones or quadratic fits, and clean data — whose noise estimate is near zero — is barely changed. The noise is

@@ -21,7 +21,7 @@ from scipy import ndimage
 #: Gaussian widths tried, in samples (0.7 … 48)
 WIDTHS = (0.7, 1.0, 1.5, 2.0, 3.0, 4.0, 6.0, 8.0, 12.0, 16.0, 24.0, 32.0, 48.0)
 #: widths (samples) of the Gaussian-weighted local quadratic fits tried
-QUADRATIC_WIDTHS = (2.0, 3.0, 4.0, 6.0, 8.0, 12.0, 16.0, 24.0)
+QUADRATIC_WIDTHS = (1.0, 1.5, 2.0, 3.0, 4.0, 6.0, 8.0, 12.0, 16.0, 24.0)
 
 
 def centre_weight(sigma: float) -> float:
