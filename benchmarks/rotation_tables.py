@@ -7,8 +7,9 @@
     python benchmarks/rotation_tables.py rot.json
 
 Prints: joint error (% of skeleton height) per method and setting, each config's ratio to
-the better of the two animator's baselines, and mssa per file (CMU ASF files, none in the
-training corpus: shipped model; BVH files: bases learned from the file).
+the better of the two animator's baselines, animation-bvh.yaml per file (ratio to the
+better baseline on that file; the worst file per setting), and mssa per file (CMU ASF
+files, none in the training corpus: shipped model; BVH files: bases learned from the file).
 """
 from __future__ import annotations
 
@@ -48,6 +49,26 @@ def main(path):
     files = list(dict.fromkeys(r["file"] for r in per))
     pcell = {(r["file"], r["setting"], r["method"]): r["metrics"].get("pos_err_pct", {}).get("mean")
              for r in per}
+    config = next((m for m in methods if m.startswith("config:animation-bvh")), None)
+    if config:
+        print(f"| file ({config}) | " + " | ".join(settings) + " |")
+        print("|---" * (len(settings) + 1) + "|")
+        worst = {}
+        for f in files:
+            cells = []
+            for s in settings:
+                ours = pcell.get((f, s, config), float("nan"))
+                if s == "clean":
+                    cells.append(f"{ours:.3f}")
+                    continue
+                ratio = ours / min(pcell.get((f, s, b), float("nan")) for b in BASELINES)
+                cells.append(f"{ours:.3f} ({ratio:.2f}×)")
+                if ratio > worst.get(s, ("", 0.0))[1]:
+                    worst[s] = (Path(f).name, ratio)
+            print(f"| {Path(f).name} | " + " | ".join(cells) + " |")
+        print()
+        print("Worst file: " + "; ".join(f"{s} {n} {r:.2f}×" for s, (n, r) in worst.items()))
+        print()
     print("| file | bases | " + " | ".join(f"{s}: mssa / none / euler-gaussian" for s in settings) + " |")
     print("|---" * (len(settings) + 2) + "|")
     for f in files:

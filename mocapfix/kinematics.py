@@ -72,6 +72,26 @@ def nearest_branch(angles: np.ndarray, reference: np.ndarray, degrees: bool = Tr
     return angles - turn * np.round((angles - reference) / turn)
 
 
+def nearest_euler(angles: np.ndarray, reference: np.ndarray, degrees: bool = True) -> np.ndarray:
+    """Three Tait–Bryan angles (..., 3) written as the equivalent triplet nearest
+    ``reference``: of the two solutions of one rotation, (a, b, c) and
+    (a + 180°, 180° − b, c + 180°), each shifted by whole turns (:func:`nearest_branch`),
+    the one with the smaller summed distance to the reference. A decomposition returns
+    the middle angle in [−90°, 90°]; a file whose channels sit on the other solution (CMU
+    05_10 ``rfemur``, 60_10 ``root``) thus keeps its values when the rotation is unchanged.
+    Where the reference is NaN the principal solution is kept."""
+    half = 180.0 if degrees else np.pi
+    angles = np.asarray(angles, dtype=np.float64)
+    reference = np.asarray(reference, dtype=np.float64)
+    ref = np.where(np.isnan(reference), angles, reference)
+    first = nearest_branch(angles, ref, degrees)
+    alt = angles + np.array([half, 0.0, half])
+    alt[..., 1] = half - angles[..., 1]
+    second = nearest_branch(alt, ref, degrees)
+    use = np.abs(second - ref).sum(axis=-1) < np.abs(first - ref).sum(axis=-1)
+    return np.where(use[..., None], second, first)
+
+
 def matrix_to_euler(axes: str, matrices: np.ndarray) -> np.ndarray:
     """Inverse of :func:`euler_to_matrix` for three distinct axes (Tait–Bryan).
 

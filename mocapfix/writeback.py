@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from mocapfix.kinematics import Rig, euler_to_matrix, matrix_to_euler, nearest_branch
+from mocapfix.kinematics import Rig, euler_to_matrix, matrix_to_euler, nearest_branch, nearest_euler
 
 _AXES = "XYZ"
 
@@ -195,7 +195,9 @@ def solve_channels(rig: Rig, channels: np.ndarray, target: np.ndarray,
                 if len(axes) < 3:
                     ang = _refine_restricted(axes, ang, base[valid], rest[valid], w[valid], lengths)
                 old = ang_old[valid]
-                ang = nearest_branch(np.rad2deg(ang) if rig.degrees else ang, old, rig.degrees)
+                ang = np.rad2deg(ang) if rig.degrees else ang
+                # of the equivalent Euler triplets, the one nearest the input values
+                ang = (nearest_euler if len(axes) == 3 else nearest_branch)(ang, old, rig.degrees)
                 ang = np.where(np.abs(ang - old) < keep_tol, old, ang)
                 out[np.flatnonzero(valid)[:, None], cols] = ang
             current = base @ euler_to_matrix(axes, to_rad(out[:, cols]))

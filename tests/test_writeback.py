@@ -96,3 +96,47 @@ def test_real_amc_perturbed_positions_write_back():
     # noise of 0.035 units per sample; joints with one or two DOFs (tibia, radius, toes)
     # cannot follow it, so the fit stays a little above (measured 0.041)
     assert np.sqrt(np.mean(res ** 2)) < 0.05
+
+
+@pytest.mark.parametrize("name", ["05_10.amc", "60_10.amc", "61_10.amc"])
+def test_other_euler_solution_kept_when_nothing_changes(name, tmp_path):
+    """CMU 05_10 (rfemur), 60_10 and 61_10 (root) store some frames on the second
+    Tait–Bryan solution (middle angle beyond ±90°). A re-decomposition returns the first
+    one; write-back and the rotation features must keep the file's triplet, so a clean
+    that changes nothing leaves the channels as read (it used to rewrite them by 180°)."""
+    from click.testing import CliRunner
+
+    from mocapfix.cli import main
+    from mocapfix.formats import read
+    from mocapfix.solvers import rotchannels
+
+    src = shared(f"asfamc/{name}")
+    motion = read(src, fps=120.0)
+    ch = motion.channels
+    # positions moved by 1e-6 units (a micron-scale change): channels follow by as little
+    nudged = solve_channels(motion.rig, ch, motion.positions + 1e-6)
+    assert np.abs(nudged - ch).max() < 1e-3
+    back = rotchannels.from_features(motion.rig, rotchannels.to_features(motion.rig, ch), ch)
+    assert np.abs(back - ch).max() < 1e-9
+    config = tmp_path / "nothing.yaml"
+    config.write_text("version: 1\npipeline:\n  - cleaner: fill\n    method: pchip\n")
+    res = CliRunner().invoke(main, ["clean", str(src), "-o", str(tmp_path / "out"), "-c", str(config),
+                                    "--fps", "120", "--report", "none"])
+    assert res.exit_code == 0, res.output
+    written = read(next((tmp_path / "out").rglob(name)), fps=120.0).channels
+    # AMC text keeps 6 decimals
+    assert np.abs(written - ch).max() < 1e-5
+
+
+@pytest.mark.parametrize("axes", ["ZXY", "XYZ", "ZYX"])
+def test_nearest_euler_picks_the_equivalent_triplet_of_the_reference(axes):
+    from mocapfix.kinematics import matrix_to_euler, nearest_euler
+
+    rng = np.random.default_rng(7)
+    ref = rng.uniform(-170, 170, (200, 3))
+    ref[:100, 1] = rng.uniform(95, 175, 100) * rng.choice([-1, 1], 100)   # second solution
+    principal = np.rad2deg(matrix_to_euler(axes, euler_to_matrix(axes, np.deg2rad(ref))))
+    assert (np.abs(principal[:100] - ref[:100]).max(axis=1) > 1).all()
+    np.testing.assert_allclose(nearest_euler(principal, ref), ref, atol=1e-9)
+    np.testing.assert_allclose(np.deg2rad(nearest_euler(principal, ref)),
+                               nearest_euler(np.deg2rad(principal), np.deg2rad(ref), degrees=False), atol=1e-12)

@@ -23,7 +23,7 @@ import numpy as np
 from mocapfix.cleaners import register
 from mocapfix.cleaners.base import Cleaner, Param
 from mocapfix.errors import ConfigError
-from mocapfix.kinematics import nearest_branch
+from mocapfix.kinematics import nearest_branch, nearest_euler
 from mocapfix.motion import Motion
 from mocapfix.solvers import glitches, rotchannels, segments, ssa, sure
 from mocapfix.solvers.rotchannels import continuous_quaternions
@@ -93,7 +93,7 @@ class RotationSmooth(Cleaner):
                 q = q / np.linalg.norm(q, axis=1, keepdims=True)
                 cols = rig.rot_columns[j]
                 ang = Rotation.from_quat(q).as_euler(rig.rot_axes[j].upper(), degrees=rig.degrees)
-                ch[:, cols] = nearest_branch(ang, ch[:, cols], rig.degrees)
+                ch[:, cols] = nearest_euler(ang, ch[:, cols], rig.degrees)
         if partial:
             unwrapped = np.unwrap(ch[:, partial], period=unit, axis=0)
             smooth = self._filter(unwrapped, motion)
@@ -233,20 +233,29 @@ class RotationDenoise(Cleaner):
     """Denoise the rotation channels of BVH/AMC, each at the smoothing its motion allows.
 
     On the continuous features of :mod:`mocapfix.solvers.rotchannels`, every feature is
-    Gaussian-smoothed with the width (0.7–48 frames, capped by ``max_sigma``) that
-    minimises Stein's unbiased risk estimate for the noise level measured on the file
-    (:mod:`mocapfix.solvers.sure`): slow channels (root, spine) get long kernels, fast ones
-    (wrists, toes) short ones, and clean data — whose noise estimate is near zero — is
-    barely changed. ``noise`` gives the level in degrees instead of estimating it."""
+    smoothed by the member of least Stein's unbiased risk (:mod:`mocapfix.solvers.sure`)
+    of a family of Gaussian kernels (0.7–48 frames, capped by ``max_sigma``) and, with
+    ``quadratic``, Gaussian-weighted local quadratic fits (1–24 frames), one choice per
+    joint (``per_joint``: its features' risks summed) at every frame (``local``) or for
+    the whole take: slow joints (root, spine) get long kernels, fast ones (wrists, toes)
+    short ones or quadratic fits, and clean data — whose noise estimate is near zero — is barely changed. The noise is
+    modelled as isotropic rotation noise of one level for the file: a quaternion
+    component q_i carries it scaled by √(1 − q_i²)
+    (:func:`mocapfix.solvers.rotchannels.noise_shape`), an angle channel as it is. The
+    level is measured on the file (median absolute second difference, each divided by its
+    scale); ``noise`` gives it in degrees instead."""
 
     name = "rotation_denoise"
-    summary = "per-channel SURE-tuned Gaussian on continuous BVH/AMC rotations"
+    summary = "SURE-tuned smoothing (Gaussian or local quadratic, per joint) of continuous BVH/AMC rotations"
     params = (
         Param("noise", "float", None, "noise level in degrees (default: estimated from the file)",
               low=0.0, high=90.0, nullable=True),
         Param("max_sigma", "time", None, "largest Gaussian sigma", unit="s", low=0.0, nullable=True),
         Param("local", "time", None, "choose the width per frame from the risk over this span "
               "(default: one width per channel)", unit="s", low=0.0, low_open=True, nullable=True),
+        Param("quadratic", "bool", True, "also try Gaussian-weighted local quadratic fits"),
+        Param("per_joint", "bool", True, "one smoother for all the features of a joint (chosen by "
+              "their summed risk) rather than one per feature"),
     )
 
     def _apply(self, motion: Motion):
@@ -256,10 +265,14 @@ class RotationDenoise(Cleaner):
         ch, F = _features_of(motion)
         missing = np.isnan(F)
         X = linear_bridge(F)
-        noise = self["noise"] if self["noise"] is not None else ssa.noise_level(X)
+        shape = rotchannels.noise_shape(rig, X)
+        noise = self["noise"] if self["noise"] is not None else ssa.noise_level(X, shape=shape)
         cap = None if self["max_sigma"] is None else self.frames("max_sigma", motion)
         span = None if self["local"] is None else self.frames("local", motion)
-        Z, widths = sure.sure_gaussian(X, noise, max_width=cap, span=span)
+        joint_of = np.concatenate([np.full(e["size"], n) for n, e in enumerate(rotchannels.layout(rig))])
+        Z, widths = sure.sure_gaussian(X, noise * shape, max_width=cap, span=span,
+                                       quadratic_widths=sure.QUADRATIC_WIDTHS if self["quadratic"] else (),
+                                       groups=joint_of if self["per_joint"] else None)
         Z[missing] = np.nan
         out = rotchannels.from_features(rig, Z, ch)
         return motion.replace(channels=out, positions=rig.positions(out)), {

@@ -12,14 +12,15 @@ DOFs, in rig order:
 - a joint with one or two DOFs → its angles in degrees, unwrapped in time.
 
 :func:`from_features` turns features back into channel values, each angle shifted by
-whole turns to the branch nearest a reference (the input channels), so a cleaned file
-keeps its Euler branches. Translation channels are not features.
+whole turns — and, for three-axis joints, as whichever of the two equivalent Euler
+triplets is nearer — to the branch nearest a reference (the input channels), so a cleaned
+file keeps its Euler branches. Translation channels are not features.
 """
 from __future__ import annotations
 
 import numpy as np
 
-from mocapfix.kinematics import nearest_branch
+from mocapfix.kinematics import nearest_branch, nearest_euler
 
 QUAT_SCALE = 360.0 / np.pi   # feature units per quaternion unit (≈ degrees for small angles)
 
@@ -72,6 +73,27 @@ def layout(rig) -> list[dict]:
         kind = "quat" if len(axes) == 3 else "angle"
         out.append({"joint": rig.names[j], "axes": axes, "kind": kind,
                     "size": 4 if kind == "quat" else len(axes)})
+    return out
+
+
+def noise_shape(rig, F: np.ndarray) -> np.ndarray:
+    """(T, L) standard deviation of each feature's noise per unit of rotation noise.
+
+    Rotation noise of δ degrees about an axis (isotropic: jitter on every Euler channel)
+    moves a unit quaternion q by ½ q ⊗ (0, ω) — in the tangent space, orthogonal to q —
+    so in feature units (360/π per quaternion unit) component i has variance
+    δ² (1 − q_i²): the w of a joint near its rest pose barely moves at all. Angle features
+    (one- and two-DOF joints) carry the noise as it is (1). NaN rows give 1."""
+    F = np.asarray(F, dtype=np.float64)
+    out = np.ones_like(F)
+    n = 0
+    for e in layout(rig):
+        if e["kind"] == "quat":
+            q = F[:, n:n + 4]
+            with np.errstate(invalid="ignore", divide="ignore"):
+                q = q / np.linalg.norm(q, axis=1, keepdims=True)
+            out[:, n:n + 4] = np.where(np.isnan(q), 1.0, np.sqrt(np.clip(1.0 - q ** 2, 1e-4, 1.0)))
+        n += e["size"]
     return out
 
 
@@ -130,6 +152,7 @@ def from_features(rig, F: np.ndarray, reference: np.ndarray) -> np.ndarray:
             n += len(axes)
         ang = deg if rig.degrees else np.deg2rad(deg)
         ref = out[:, cols]
-        new = nearest_branch(ang, np.where(np.isnan(ref), ang, ref), rig.degrees)
+        near = nearest_euler if len(axes) == 3 else nearest_branch
+        new = near(ang, np.where(np.isnan(ref), ang, ref), rig.degrees)
         out[:, cols] = np.where(np.isnan(new), ref, new)
     return out

@@ -221,11 +221,17 @@ def robust_reconstruct(Y: np.ndarray, E: np.ndarray, m: int, *, lam: float = 0.1
     return Z, w, it
 
 
-def noise_level(X: np.ndarray) -> float:
+def noise_level(X: np.ndarray, *, shape: np.ndarray | None = None) -> float:
     """σ̂ of white noise on the channels of X (T, L), NaN-aware: the median over channels of
     each channel's median absolute second difference / 0.6745 / √6 (a second difference
-    of white noise has variance 6σ²). Channels that never move are left out."""
+    of white noise has variance 6σ²). Channels that never move are left out. ``shape``
+    (T, L): noise whose standard deviation is σ · shape (e.g. quaternion components,
+    :func:`mocapfix.solvers.rotchannels.noise_shape`); each second difference is divided
+    by the shape at its centre, and samples where it is below 0.3 are left out."""
     d2 = np.abs(X[2:] - 2 * X[1:-1] + X[:-2])
+    if shape is not None:
+        mid = np.asarray(shape, dtype=np.float64)[1:-1]
+        d2 = np.where(mid >= 0.3, d2 / np.maximum(mid, 1e-12), np.nan)
     ok = ~np.isnan(d2).all(axis=0)
     per = np.full(X.shape[1], np.nan)
     if ok.any():

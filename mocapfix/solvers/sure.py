@@ -1,12 +1,17 @@
 """Per-channel smoothing chosen by Stein's unbiased risk estimate (SURE; Stein 1981).
 
-For a linear smoother z = S y of a channel y = x + e with white noise e ~ N(0, σ²),
-``SURE = ||y − S y||² − T σ² + 2 σ² tr(S)`` is an unbiased estimate of ||z − x||². For a
-Gaussian kernel of width s (samples), tr(S) ≈ T · g_s(0) (the kernel's centre weight), so
-the risk of every width in a family costs one filtering pass; each channel takes the width
-of least risk. σ is estimated from the data (:func:`mocapfix.solvers.ssa.noise_level`:
-median absolute second difference), so the choice adapts to each channel's motion and
-to the noise, without a cut-off to tune.
+For a linear smoother z = S y of a channel y = x + e with independent noise
+e_t ~ N(0, v_t), ``SURE = ||y − S y||² − Σ v_t + 2 Σ v_t S_tt`` is an unbiased estimate
+of ||z − x||² (Stein 1981, eq. for the divergence of a linear estimator). For a
+shift-invariant kernel, S_tt is its centre tap, so the risk of every smoother in a
+family costs one filtering pass; each channel (or, with ``span``, each sample) takes
+the smoother of least risk. The family holds Gaussian kernels (local constant fits)
+and Gaussian-weighted local quadratic fits (the equivalent kernel of local polynomial
+regression, Fan & Gijbels 1996, eq. 3.5 — a Savitzky–Golay filter with Gaussian
+weights): less bias in turns and accelerations, so in fast motion it can average more
+samples. The noise may differ per sample (``noise`` as a (T, C) array of standard
+deviations), e.g. for unit quaternions, whose components carry rotation noise in
+proportion to √(1 − q_i²) (:func:`mocapfix.solvers.rotchannels.noise_shape`).
 """
 from __future__ import annotations
 
@@ -14,6 +19,8 @@ import numpy as np
 
 #: Gaussian widths tried, in samples (0.7 … 48)
 WIDTHS = (0.7, 1.0, 1.5, 2.0, 3.0, 4.0, 6.0, 8.0, 12.0, 16.0, 24.0, 32.0, 48.0)
+#: widths (samples) of the Gaussian-weighted local quadratic fits tried
+QUADRATIC_WIDTHS = (1.0, 1.5, 2.0, 3.0, 4.0, 6.0, 8.0, 12.0, 16.0, 24.0)
 
 
 def centre_weight(sigma: float) -> float:
@@ -25,35 +32,80 @@ def centre_weight(sigma: float) -> float:
     return float(ndimage.gaussian_filter1d(impulse, sigma)[n])
 
 
-def sure_gaussian(X: np.ndarray, noise: float, *, widths=WIDTHS, max_width: float | None = None,
-                  span: float | None = None):
-    """Each column of X (T, C, no NaN) Gaussian-smoothed with the width of least SURE
-    (σ = ``noise``). ``max_width`` caps the widths (samples). ``span`` (samples): choose
-    per sample instead, by the risk summed over a Gaussian neighbourhood of that width
-    (the width then varies along the motion: short in a fast turn, long in a hold).
-    Returns (Z, widths (C,) — with ``span``, the median width per column)."""
-    X = np.asarray(X, dtype=np.float64)
-    T = X.shape[0]
-    best = X.copy()
-    s2 = noise ** 2
-    shape = X.shape if span else X.shape[1:]
-    chosen = np.zeros(shape)
-    risk = np.full(shape, (1 if span else T) * s2)     # the identity: SURE = −σ² + 2σ² per sample
+def local_quadratic_kernel(sigma: float) -> np.ndarray:
+    """Taps (2n + 1) of the Gaussian-weighted local quadratic fit evaluated at the centre:
+    ``e₀ᵀ (Uᵀ K U)⁻¹ Uᵀ K`` with U = [1, u, u²] and K = exp(−u²/2σ²) (Fan & Gijbels
+    1996, eq. 3.5). It reproduces quadratics exactly; its taps sum to 1."""
+    n = int(np.ceil(4 * sigma)) + 1
+    u = np.arange(-n, n + 1, dtype=np.float64)
+    k = np.exp(-0.5 * (u / sigma) ** 2)
+    U = np.stack([np.ones_like(u), u / sigma, (u / sigma) ** 2], axis=1)
+    M = U.T @ (k[:, None] * U)
+    return np.linalg.solve(M, np.eye(3)[0]) @ (U * k[:, None]).T
+
+
+def _filter_trend_padded(X: np.ndarray, taps: np.ndarray) -> np.ndarray:
+    """Correlate the columns of X with ``taps``, the ends padded by odd reflection about
+    the end sample (2 x₀ − x_k), which keeps a linear trend, so a polynomial kernel is
+    not bent at the ends."""
+    from scipy import ndimage  # imported here: not loaded unless needed
+
+    T, n = len(X), len(taps) // 2
+    m = min(n, T - 1)
+    P = np.concatenate([2 * X[:1] - X[1:m + 1][::-1], X, 2 * X[-1:] - X[-m - 1:-1][::-1]])
+    if n > m:
+        P = np.pad(P, ((n - m, n - m), (0, 0)), mode="edge")
+    return ndimage.correlate1d(P, taps, axis=0, mode="nearest")[n:n + T]
+
+
+def _family(X, widths, quadratic_widths, max_width):
+    from scipy import ndimage  # imported here: not loaded unless needed
+
     for w in widths:
-        if max_width is not None and w > max_width:
-            break
-        from scipy import ndimage  # imported here: not loaded unless needed
-        Z = ndimage.gaussian_filter1d(X, w, axis=0, mode="nearest")
-        if span:
-            r = ndimage.gaussian_filter1d((X - Z) ** 2 - s2 + 2 * s2 * centre_weight(w), span, axis=0,
-                                          mode="nearest")
-        else:
-            r = np.sum((X - Z) ** 2, axis=0) - T * s2 + 2 * s2 * T * centre_weight(w)
+        if max_width is None or w <= max_width:
+            yield ndimage.gaussian_filter1d(X, w, axis=0, mode="nearest"), centre_weight(w), w
+    for w in quadratic_widths:
+        if max_width is None or w <= max_width:
+            taps = local_quadratic_kernel(w)
+            yield _filter_trend_padded(X, taps), float(taps[len(taps) // 2]), w
+
+
+def sure_gaussian(X: np.ndarray, noise, *, widths=WIDTHS, quadratic_widths=(),
+                  max_width: float | None = None, span: float | None = None,
+                  groups: np.ndarray | None = None):
+    """Each column of X (T, C, no NaN) smoothed by the member of least SURE of a family of
+    Gaussian kernels (``widths``, samples) and Gaussian-weighted local quadratic fits
+    (``quadratic_widths``). ``noise``: the noise standard deviation, a scalar or a (T, C)
+    array. ``max_width`` caps the widths (samples). ``span`` (samples): choose per sample
+    instead, by the risk summed over a Gaussian neighbourhood of that width (the smoother
+    then varies along the motion: short in a fast turn, long in a hold). ``groups`` (C,
+    integer labels): columns with one label take one smoother, chosen by their summed risk
+    (the four components of a joint's quaternion: one estimate of one rotation, and a
+    choice made from four times the data).
+    Returns (Z, widths (C,) — with ``span``, the median width per column)."""
+    from scipy import ndimage  # imported here: not loaded unless needed
+
+    X = np.asarray(X, dtype=np.float64)
+    C = X.shape[1]
+    V = np.broadcast_to(np.asarray(noise, dtype=np.float64) ** 2, X.shape)
+    labels = np.arange(C) if groups is None else np.unique(np.asarray(groups), return_inverse=True)[1]
+    G = int(labels.max()) + 1 if C else 0
+    M = np.zeros((C, G))
+    M[np.arange(C), labels] = 1.0                 # column → group sums
+    best = X.copy()
+    chosen = np.zeros(X.shape if span else C)
+    # the identity: SURE = −v + 2v per sample
+    risk = (ndimage.gaussian_filter1d(V, span, axis=0, mode="nearest") if span else V.sum(axis=0)) @ M
+    for Z, centre, w in _family(X, widths, quadratic_widths, max_width):
+        per_sample = (X - Z) ** 2 - V + 2 * V * centre
+        r = (ndimage.gaussian_filter1d(per_sample, span, axis=0, mode="nearest") if span
+             else per_sample.sum(axis=0)) @ M
         better = r < risk
-        if span:
-            best[better] = Z[better]
-        else:
-            best[:, better] = Z[:, better]
-        chosen[better] = w
         risk[better] = r[better]
+        cols = better[..., labels]
+        if span:
+            best[cols] = Z[cols]
+        else:
+            best[:, cols] = Z[:, cols]
+        chosen[cols] = w
     return best, (np.median(chosen, axis=0) if span else chosen)
