@@ -358,6 +358,9 @@ def test_linear_bridge_and_fast_padding_known_answers():
                          [8.0, 4.0, 0.0],
                          [8.0, 4.0, 0.0]])     # trailing gap held
     assert np.array_equal(linear_bridge(x), expected)
+    # (T, J, 3) positions: every coordinate is a channel
+    assert np.array_equal(linear_bridge(np.stack([x, x[:, ::-1]], axis=2)),
+                          np.stack([expected, expected[:, ::-1]], axis=2))
     for n, pad in ((4500, 60), (4600, 0), (241, 50), (7, 3)):
         p = dct.fast_pad(n, pad)
         m = n + 2 * p

@@ -190,7 +190,7 @@ def recover(X: np.ndarray, bones: np.ndarray, lengths: np.ndarray, lam: float | 
                                              "+ wavelet only")
                 _report_isometry(info, X, A, bones, lengths)
                 return A, E, info
-        A = linear_bridge(X.reshape(len(X), -1)).reshape(X.shape)
+        A = linear_bridge(X)
         E = np.where(np.isfinite(X).all(axis=2)[..., None], 0.0, np.nan)
         info = dict(failed, fallback="data returned (gaps bridged linearly)", iterations=0,
                     residual=float("nan"), steps_limited=0,
@@ -220,7 +220,7 @@ def _diverged(A: np.ndarray, centre: np.ndarray, limit: float) -> bool:
 
 def _report_isometry(info: dict, X, A, bones, lengths) -> None:
     """Isometry energy of the input (gaps bridged) and of the result ``A`` (T, S, 3)."""
-    info["iso_energy_before"] = energy(linear_bridge(X.reshape(len(X), -1)).reshape(X.shape).transpose(1, 2, 0),
+    info["iso_energy_before"] = energy(linear_bridge(X).transpose(1, 2, 0),
                                        bones, lengths)
     info["iso_energy_after"] = energy(A.transpose(1, 2, 0), bones, lengths)
 
@@ -239,7 +239,7 @@ def _recover(X, bones, lengths, gamma, lam, mu, rho, eta, wavelet, level, max_it
     # 3T × S matrix up to a row permutation, which leaves singular values and SVT as
     # they are.
     obs = np.isfinite(Xp).all(axis=2).T[:, None, :]                          # (S, 1, Tp)
-    D = np.ascontiguousarray(linear_bridge(Xp.reshape(len(Xp), -1)).reshape(Xp.shape).transpose(1, 2, 0))
+    D = np.ascontiguousarray(linear_bridge(Xp).transpose(1, 2, 0))
     scale = float(np.linalg.norm(D * obs)) or 1.0
     centre, limit = _divergence_ball(D, obs)
 

@@ -113,16 +113,19 @@ def neighbours(missing: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def linear_bridge(x: np.ndarray) -> np.ndarray:
-    """Complete copy of ``x`` (T, C): interior gaps by linear interpolation, leading and
-    trailing gaps hold the nearest observed value; all-missing columns become 0.
+    """Complete copy of ``x`` (T, …; each trailing index a channel): interior gaps by
+    linear interpolation, leading and trailing gaps hold the nearest observed value;
+    all-missing channels become 0.
 
     The starting point every iterative solver here uses (DCT smoothing, PCA imputation,
-    the low-rank + isometry ADMM, glitch search). Vectorised over every column (no per-gap
+    the low-rank + isometry ADMM, glitch search). Vectorised over every channel (no per-gap
     loop)."""
     x = np.asarray(x, dtype=np.float64)
     missing = np.isnan(x)
     if not missing.any():
         return x.copy()
+    if x.ndim != 2:
+        return linear_bridge(x.reshape(x.shape[0], -1)).reshape(x.shape)
     T = x.shape[0]
     prev, nxt = neighbours(missing)
     before = np.take_along_axis(x, np.maximum(prev, 0), axis=0)
