@@ -88,3 +88,40 @@ def confirm(X: np.ndarray, mask: np.ndarray, *, threshold: np.ndarray, side: int
         for cc, ss in zip(c[keep], s[keep]):
             out[ss:ss + L, cc] = True
     return out
+
+
+def steps(X: np.ndarray, noise, *, groups: np.ndarray | None = None,
+          threshold: float = 6.0) -> np.ndarray:
+    """(T − 1, G) mask of steps: a frame-to-frame change t → t + 1 of a group of columns
+    (a joint's features) that stands off the cubic through the two changes on each side
+    of it (weights −1/6, 2/3, 2/3, −1/6) and off the median of those four changes, both
+    by more than ``threshold`` times the noise of a change (RMS over the group's columns,
+    in noise units). A discontinuity — a cut, a
+    flip, a glitch that stays — is such a step; in fast smooth motion each change follows
+    from its neighbours and is not. A smoother should not average across a step (see
+    :func:`mocapfix.solvers.sure.sure_piecewise`).
+
+    ``X``: (T, C), no NaN; ``noise``: standard deviation per sample, scalar or (T, C);
+    ``groups``: (C,) labels (default: each column its own group), G groups in label order."""
+    X = np.asarray(X, dtype=np.float64)
+    T, C = X.shape
+    sd = np.broadcast_to(np.asarray(noise, dtype=np.float64), X.shape)
+    labels = np.arange(C) if groups is None else np.unique(np.asarray(groups), return_inverse=True)[1]
+    G = int(labels.max()) + 1 if C else 0
+    if T < 6 or not C:
+        return np.zeros((max(T - 1, 0), G), dtype=bool)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        D = np.diff(X, axis=0) / np.sqrt(sd[1:] ** 2 + sd[:-1] ** 2)
+    D = np.nan_to_num(D, nan=0.0, posinf=0.0, neginf=0.0)
+    P = np.pad(D, ((2, 2), (0, 0)), mode="reflect")
+    n = T - 1
+    around = np.stack([P[:n], P[1:n + 1], P[3:n + 3], P[4:n + 4]])
+    M = np.zeros((C, G))
+    M[np.arange(C), labels] = 1.0
+
+    def off(predicted):
+        return np.sqrt(((D - predicted) ** 2 @ M) / M.sum(axis=0))
+
+    # the cubic follows fast smooth motion; the median ignores a step next door
+    cubic = (4 * (around[1] + around[2]) - (around[0] + around[3])) / 6.0
+    return np.minimum(off(cubic), off(np.median(around, axis=0))) > threshold

@@ -12,6 +12,9 @@ weights): less bias in turns and accelerations, so in fast motion it can average
 samples. The noise may differ per sample (``noise`` as a (T, C) array of standard
 deviations), e.g. for unit quaternions, whose components carry rotation noise in
 proportion to √(1 − q_i²) (:func:`mocapfix.solvers.rotchannels.noise_shape`).
+:func:`sure_piecewise` does the same between the steps (discontinuities) of each group of
+columns, so no smoother averages across a cut and a step's large risk does not make the
+frames around it go unsmoothed.
 """
 from __future__ import annotations
 
@@ -109,3 +112,34 @@ def sure_gaussian(X: np.ndarray, noise, *, widths=WIDTHS, quadratic_widths=(),
             best[:, cols] = Z[:, cols]
         chosen[cols] = w
     return best, (np.median(chosen, axis=0) if span else chosen)
+
+
+def sure_piecewise(X: np.ndarray, noise, *, breaks: np.ndarray, groups: np.ndarray | None = None,
+                   **options):
+    """:func:`sure_gaussian` run separately on the pieces of each group of columns between
+    its ``breaks`` ((T − 1, G) mask: no smoothing across t → t + 1 for group g; e.g.
+    :func:`mocapfix.solvers.glitches.steps`). Groups with no break go through one call;
+    pieces shorter than 3 samples are left as they are. ``options``: those of
+    :func:`sure_gaussian`. Returns (Z, widths (C,): the median width per column)."""
+    X = np.asarray(X, dtype=np.float64)
+    T, C = X.shape
+    sd = np.broadcast_to(np.asarray(noise, dtype=np.float64), X.shape)
+    labels = np.arange(C) if groups is None else np.unique(np.asarray(groups), return_inverse=True)[1]
+    broken = np.asarray(breaks, dtype=bool).any(axis=0)
+    Z = X.copy()
+    widths = np.zeros(C)
+    whole = ~broken[labels]
+    if whole.any():
+        Z[:, whole], widths[whole] = sure_gaussian(X[:, whole], sd[:, whole], groups=labels[whole],
+                                                   **options)
+    for g in np.flatnonzero(broken):
+        cols = labels == g
+        cuts = np.r_[0, np.flatnonzero(breaks[:, g]) + 1, T]
+        chosen = []
+        for a, b in zip(cuts[:-1], cuts[1:]):
+            if b - a >= 3:
+                Z[a:b, cols], w = sure_gaussian(X[a:b][:, cols], sd[a:b][:, cols],
+                                                groups=np.zeros(int(cols.sum()), int), **options)
+                chosen.append(np.repeat(w[:1], b - a))
+        widths[cols] = np.median(np.concatenate(chosen)) if chosen else 0.0
+    return Z, widths
