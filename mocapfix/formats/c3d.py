@@ -48,14 +48,18 @@ Writing
 -------
 When the motion still has this reader's :class:`C3DSource` and the same frames and
 markers, the output is the input file (converted to Intel if needed) with only the point
-records of changed samples re-encoded: header, every parameter byte, analog data, events
-and trailing bytes are copied. Unchanged motion from an Intel file gives a byte-identical
+records of changed samples re-encoded: header, every parameter byte (but the fill list
+below), analog data, events and trailing bytes are copied. Unchanged motion from an Intel file gives a byte-identical
 file (unless ``mark_missing`` has to flag vendor-style (0,0,0)/NaN gaps, see ``write``).
 Sample rules: unchanged samples keep their record bytes (residual and camera mask);
 samples filled by a cleaner get residual 0 and camera mask 0 (c3d.org: modelled, valid);
 samples still missing get residual -1 with the source coordinates; samples a cleaner
 modified keep their residual and camera mask; samples a cleaner deleted get (0,0,0) and
-residual -1. Int16 files are rounded to the POINT:SCALE grid. The file's POINT:RATE is
+residual -1. When samples were filled, a ``MOCAPFIX`` parameter group lists every run of
+them (label, first/last frame, mean confidence, long or not; :func:`_fill_params`) — the
+only parameter bytes that change, besides POINT:DATA_START and the header's data pointer
+when the section has to grow by whole blocks to hold it (:mod:`.c3d_params`). Int16 files
+are rounded to the POINT:SCALE grid. The file's POINT:RATE is
 kept even when the user overrode the rate on reading (the data were not resampled). Any other motion (no C3D
 source, or a different number of frames/markers) is written as a fresh float file with
 only the POINT/ANALOG/TRIAL parameters (logged).
@@ -72,6 +76,9 @@ import numpy as np
 from mocapfix.errors import UnreadableFileError, WriteError
 from mocapfix.fileio import atomic_open, read_input_bytes
 from mocapfix.formats import suffixes
+from mocapfix.formats.c3d_params import (MAX_DIM, group_record as _group_record, param_data_offset,
+                                         param_record as _param_record, string_param as _string_param,
+                                         with_group)
 from mocapfix.motion import Motion
 from mocapfix.quantity import MAX_FRAME_RATE_HZ, MIN_FRAME_RATE_HZ
 from mocapfix.units import METRES_PER_UNIT, normalise_unit_name
@@ -877,7 +884,111 @@ def _splice(motion: Motion, source: C3DSource, path, mark_missing: bool) -> byte
     frames = np.empty(points.shape[0], dtype=record)
     frames["p"] = points
     frames["a"] = source.analog
-    return source.header + source.prefix + frames.tobytes() + source.tail
+    header, prefix = source.header, source.prefix
+    if filled.any():
+        header, prefix = _with_fill_group(source, _fill_params(motion, source, filled), path)
+    return header + prefix + frames.tobytes() + source.tail
+
+
+#: the parameter group listing mocapfix's fills (see :func:`_fill_params`)
+FILL_GROUP = "MOCAPFIX"
+
+
+def _chunked(name: str, values: list, make) -> list[tuple]:
+    """Parameters ``name``, ``name2``, ``name3``… of at most 255 values each (the C3D
+    LABELS/LABELS2 convention: one dimension holds at most 255 elements)."""
+    out = []
+    for n, lo in enumerate(range(0, max(len(values), 1), MAX_DIM)):
+        out.append(make(name if n == 0 else f"{name}{n + 1}", values[lo:lo + MAX_DIM]))
+    return out
+
+
+def _old_fills(source: C3DSource) -> list[tuple]:
+    """The fills listed by an earlier mocapfix run in the source's MOCAPFIX group."""
+    group = source.groups.get(FILL_GROUP)
+    if group is None:
+        return []
+
+    def joined(key, cast):
+        out, n = [], 1
+        while (p := group.params.get(key if n == 1 else f"{key}{n}")) is not None:
+            value = p.value
+            out += [cast(v) for v in (value if isinstance(value, list) else np.ravel(value))]
+            n += 1
+        return out
+
+    cols = [joined("FILL_POINTS", str.strip), joined("FILL_FIRST", float), joined("FILL_LAST", float),
+            joined("FILL_CONFIDENCE", float), joined("FILL_LONG", int)]
+    n = min(len(c) for c in cols)
+    return [tuple(c[i] for c in cols) for i in range(n)]
+
+
+def _fill_params(motion: Motion, source: C3DSource, filled: np.ndarray) -> list[tuple]:
+    """MOCAPFIX group parameters listing every run of filled samples per point: FILL_POINTS
+    (label), FILL_FIRST / FILL_LAST (C3D frame numbers, first and last filled frame),
+    FILL_CONFIDENCE (mean ``Motion.confidence`` over the run, 0–1), FILL_LONG (1 when the
+    run spans more than LONG_FILL_S seconds: rebuilt from a model, not bridged), plus
+    FILL_COUNT and LONG_FILL_S. Fills listed by an earlier run are kept."""
+    from mocapfix.gaps import runs
+    from mocapfix.measure import LONG_FILL_S
+
+    col, start, length = runs(filled)
+    conf = motion.confidence if motion.confidence is not None else np.zeros(filled.shape)
+    first = source.first_frame
+    rows = _old_fills(source)
+    for c, s, n in sorted(zip(col.tolist(), start.tolist(), length.tolist()), key=lambda r: (r[1], r[0])):
+        mean = float(np.nanmean(conf[s:s + n, c])) if np.isfinite(conf[s:s + n, c]).any() else 0.0
+        rows.append((source.names[c], float(first + s), float(first + s + n - 1), mean,
+                     int(n / motion.fps > LONG_FILL_S)))
+    f32 = lambda name, v: (name, 4, (len(v),), np.asarray(v, "<f4").tobytes(), "")  # noqa: E731
+    params = _chunked("FILL_POINTS", [r[0] for r in rows],
+                      lambda name, v: (name, -1, (max([len(x) for x in v] + [1]), len(v)),
+                                       "".join(x.ljust(max([len(y) for y in v] + [1])) for x in v).encode("latin-1", "replace"),
+                                       "label of each filled run"))
+    params += _chunked("FILL_FIRST", [r[1] for r in rows], f32)
+    params += _chunked("FILL_LAST", [r[2] for r in rows], f32)
+    params += _chunked("FILL_CONFIDENCE", [r[3] for r in rows], f32)
+    params += _chunked("FILL_LONG", [r[4] for r in rows],
+                       lambda name, v: (name, 1, (len(v),), np.asarray(v, "<i1").tobytes(), ""))
+    params += [("FILL_COUNT", 4, (), struct.pack("<f", float(len(rows))), "filled runs listed"),
+               ("LONG_FILL_S", 4, (), struct.pack("<f", LONG_FILL_S), "a fill longer than this (s) is long")]
+    return params
+
+
+def _with_fill_group(source: C3DSource, params: list[tuple], path) -> tuple[bytes, bytes]:
+    """(header, prefix) of the source with the MOCAPFIX group in its parameter section.
+    The section grows by whole blocks when it must: the data then start that many blocks
+    later (header word 9 and POINT:DATA_START moved). A section that cannot be edited
+    safely is left as it was (logged): the fills are then marked only by residual 0."""
+    header, prefix = source.header, source.prefix
+    lo = (header[0] - 2) * BLOCK
+    if source.parameters is None or lo < 0 or lo + 4 > len(prefix):
+        log.warning("%s: no parameter section to list the fills in", path)
+        return header, prefix
+    old_len = min(prefix[lo + 2] * BLOCK, len(prefix) - lo)   # some files count blocks they lack
+    section = with_group(prefix[lo:lo + old_len], FILL_GROUP, params,
+                         "mocapfix: runs of samples filled by cleaning (residual 0, camera mask 0)")
+    if section is None:
+        log.warning("%s: parameter section not editable; fills marked by residual 0 only", path)
+        return header, prefix
+    if len(section) <= len(prefix) - lo:
+        section = section.ljust(max(old_len, len(section)), b"\0")
+        blocks = len(section) // BLOCK
+        section = section[:2] + bytes([blocks]) + section[3:]
+        tail = prefix[lo + len(section):]
+        return header, prefix[:lo] + section + tail
+    extra = (len(section) - old_len) // BLOCK
+    at = param_data_offset(section, "POINT", "DATA_START")
+    start_block = struct.unpack_from("<H", header, 16)[0] + extra
+    if start_block > 65535:
+        log.warning("%s: parameter section cannot grow; fills marked by residual 0 only", path)
+        return header, prefix
+    section = bytearray(section)
+    if at is not None:      # without POINT:DATA_START readers take the header's pointer
+        struct.pack_into("<H", section, at, start_block)
+    header = bytearray(header)
+    struct.pack_into("<H", header, 16, start_block)
+    return bytes(header), prefix[:lo] + bytes(section) + prefix[lo + old_len:]
 
 
 def _encode_xyz(values: np.ndarray, source: C3DSource, path) -> np.ndarray:
@@ -902,24 +1013,6 @@ def _encode_xyz(values: np.ndarray, source: C3DSource, path) -> np.ndarray:
 
 
 # -- fresh file (no C3D source, or frames/markers changed) -------------------------------
-def _param_record(name: str, group_id: int, bpe: int, dims, data: bytes, desc: str = "") -> bytes:
-    name_b, desc_b = name.encode("latin-1"), desc.encode("latin-1")
-    body = struct.pack("<bB", bpe, len(dims)) + bytes(dims) + data + struct.pack("<B", len(desc_b)) + desc_b
-    return struct.pack("<bb", len(name_b), group_id) + name_b + struct.pack("<h", 2 + len(body)) + body
-
-
-def _group_record(name: str, group_id: int, desc: str) -> bytes:
-    name_b, desc_b = name.encode("latin-1"), desc.encode("latin-1")
-    body = struct.pack("<B", len(desc_b)) + desc_b
-    return struct.pack("<bb", len(name_b), -group_id) + name_b + struct.pack("<h", 2 + len(body)) + body
-
-
-def _string_param(name, group_id, strings: list[str], desc="") -> bytes:
-    width = max([len(s) for s in strings] + [1])
-    data = "".join(s.ljust(width) for s in strings).encode("latin-1")
-    return _param_record(name, group_id, -1, (width, len(strings)), data, desc)
-
-
 def _fresh_file(motion: Motion, path) -> bytes:
     positions = np.asarray(motion.positions, dtype=np.float64)
     n_frames, n_points = positions.shape[:2]
