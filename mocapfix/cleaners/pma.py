@@ -40,7 +40,7 @@ class PMA(Cleaner):
                "distance constraints (Tits et al. 2018 'PMA')")
     params = (
         Param("members", "list", ["interp", "poly", "grnn", "linear", "pca"],
-              "fillers averaged: interp, poly, grnn, linear, pca, tsmc"),
+              "fillers averaged: interp, poly, grnn, linear, pose, pca, tsmc"),
         Param("neighbours", "list", [3], "rigid neighbours of the local fillers: one or more "
               "counts (each count gives its own set of local members)"),
         Param("constraint_neighbours", "int", 3, "most rigid neighbours of the soft "
@@ -121,7 +121,8 @@ class PMA(Cleaner):
                                    neighbours=self["neighbours"], mu=mu, sd=sd,
                                    weight_scale=self.length("weight_scale", motion))
         ks = self["neighbours"]
-        expected = (len([f for f in local if f != "linear"]) * len(ks) + ("linear" in local)
+        expected = (len([f for f in local if f in pma.PER_NEIGHBOUR_COUNT]) * len(ks)
+                    + ("linear" in local) + ("pose" in local) * len(pma.POSE_SIZES)
                     + len(external))
         seen_points = motion.positions[~motion.missing]
         lo, hi = seen_points.min(axis=0), seen_points.max(axis=0)
@@ -253,4 +254,4 @@ class FillEnsemble(PMA):
     summary = ("fill gaps by averaging seven fillers weighted by their error on synthetic "
                "gaps, with soft distance constraints (PMA-style ensemble)")
     params = _defaults(PMA.params, neighbours=[3, 5], weights="validation",
-                       members=["interp", "poly", "grnn", "linear"], short_gap="0.05 s")
+                       members=["interp", "poly", "grnn", "linear", "pose"], short_gap="0.05 s")

@@ -20,6 +20,9 @@ and ``e`` when they exist):
    - ``linear`` — global weighted linear regression (ridge) of ``j`` on every marker
      observed through the gap, in their common body frame, the columns weighted by
      ``exp(-d² / 2s²)`` of their mean distance ``d`` to ``j``;
+   - ``pose`` (ours, not in the paper) — linear regression (ridge) of ``j`` on its 6 and
+     on its 12 next most rigid neighbours, all in the rigid frame of its 3 most rigid
+     ones (:func:`pose_fills`);
    - any fills passed in by the caller (the cleaner passes ``fill_pca``: Gløersen &
      Federolf's weighted PCA).
 3. *Borders*: every fill gets the linear ramp ``(1-f)(x(s-1) - F(s-1)) + f(x(e) - F(e))``
@@ -41,7 +44,11 @@ import numpy as np
 from mocapfix.solvers.rigid import kabsch
 
 #: the fillers computed here (the caller may add its own, e.g. weighted PCA)
-LOCAL_FILLERS = ("interp", "poly", "grnn", "linear")
+LOCAL_FILLERS = ("interp", "poly", "grnn", "linear", "pose")
+#: the fillers run once per neighbour count (the others once per gap)
+PER_NEIGHBOUR_COUNT = ("interp", "poly", "grnn")
+#: ``pose``: its members regress on the frame markers and this many more neighbours each
+POSE_SIZES = (6, 12)
 
 
 def distance_stats(pos: np.ndarray, observed: np.ndarray, min_frames: int = 3,
@@ -216,7 +223,44 @@ def gap_fills(pos, observed, j, s, e, neighbours, train, body, *, fillers=LOCAL_
             keep = w > 1e-6
             if keep.sum() >= 3:
                 out["linear"] = glob(_ridge(Xt[:, keep], Yt)(Xg[:, keep])[:, None])[:, 0]
+    if "pose" in fillers:
+        out.update(pose_fills(pos, observed, j, frames, body, train))
     return frames, out
+
+
+def pose_fills(pos, observed, j, frames, cand, train, *, sizes=POSE_SIZES, frame_markers=3,
+               lam: float = 1e-3):
+    """The ``pose`` members: marker ``j`` in the rigid frame (Kabsch 1976) of its
+    ``frame_markers`` most rigid neighbours, predicted by a linear ridge regression on the
+    coordinates, in that same frame, of its ``frame_markers + M`` most rigid neighbours
+    (one member ``poseM`` per ``M`` in ``sizes``; ``cand``: the neighbours observed on
+    ``frames``, most rigid first; ``train``: frames where ``j`` is seen). The rigid frame
+    removes the motion of the body part; the neighbours beyond it carry the pose of the
+    adjacent parts (a joint's angle), on which the marker's place in that frame depends
+    — what ``poly``/``grnn`` (whose inputs are only the frame markers, nearly constant
+    in their own frame) and ``linear`` (one frame for the whole body) do not model.
+    Returns name → (len(frames), 3), not yet ramped to the borders."""
+    out = {}
+    K = frame_markers
+    if K < 3 or len(cand) <= K:
+        return out
+    used = set()
+    for M in sizes:
+        feats = cand[:K + M]
+        if len(feats) in used:                  # fewer neighbours than M: same member
+            continue
+        used.add(len(feats))
+        tr = train[observed[np.ix_(train, feats)].all(axis=1)]
+        if len(tr) < max(10, 2 * len(feats)):
+            continue
+        body = cand[:K]
+        ref = _reference(pos[np.ix_(tr, body)])
+        (tl, _), (loc, glob) = _frames_two(pos[np.ix_(tr, body)], pos[np.ix_(frames, body)], ref)
+        Xt = tl(pos[np.ix_(tr, feats)]).reshape(len(tr), -1)
+        Yt = tl(pos[tr, j][:, None])[:, 0]
+        Xg = loc(pos[np.ix_(frames, feats)]).reshape(len(frames), -1)
+        out[f"pose{M}"] = glob(_ridge(Xt, Yt, lam)(Xg)[:, None])[:, 0]
+    return out
 
 
 def meet_borders(fill: np.ndarray, data: np.ndarray, has_start: bool, has_end: bool):
@@ -307,11 +351,11 @@ def member_fills(pos, observed, gaps, external, *, local=LOCAL_FILLERS, neighbou
         fills = {}
         sizes = (neighbours,) if np.isscalar(neighbours) else tuple(neighbours)
         for n, K in enumerate(sizes):
-            # the global regression does not depend on K: computed once
-            names = local if n == 0 else tuple(f for f in local if f != "linear")
+            # the global regression and the pose members do not depend on K: computed once
+            names = local if n == 0 else tuple(f for f in local if f in PER_NEIGHBOUR_COUNT)
             _, part = gap_fills(pos, observed, j, s, e, cand[:K], train, cand, fillers=names,
                                 mu=mu, weight_scale=weight_scale)
-            fills.update({f + ("" if len(sizes) == 1 or f == "linear" else str(K)): v
+            fills.update({f + (str(K) if len(sizes) > 1 and f in PER_NEIGHBOUR_COUNT else ""): v
                           for f, v in part.items()})
         data = np.where(observed[frames, j][:, None], pos[frames, j], np.nan)
         gap_rows = (frames >= s) & (frames < e)
