@@ -242,7 +242,11 @@ def _defaults(params, **new):
 class FillEnsemble(PMA):
     """The PMA engine with what measurably beats the paper's choices: the three local
     fillers run with 3 and with 5 rigid neighbours (seven members with the global
-    regression), and each gap's members are weighted by their inverse squared error on
+    regression), two ``pose`` members (the marker in the rigid frame of its 3 most rigid
+    neighbours regressed on its next 6 / 12 neighbours in that frame:
+    :func:`mocapfix.solvers.pma.pose_fills`; with them the default's gap RMSE fell on all
+    nine captures of benchmarks/versus_peers.py at 0.1–1.5 s, geometric mean 0.67× →
+    0.61× pma), and each gap's members are weighted by their inverse squared error on
     synthetic gaps of the same length cut where the marker was seen (``weights:
     validation``), not by the plausibility of their neighbour distances. Measured with the
     ``occlusion`` gaps (gap RMSE, seeds 0 / 1): HDM05 (first 1,500 frames) 2.63 / 4.24 mm
@@ -251,7 +255,7 @@ class FillEnsemble(PMA):
     is left out). benchmarks/versus_peers.py has the table over eleven captures."""
 
     name = "fill_ensemble"
-    summary = ("fill gaps by averaging seven fillers weighted by their error on synthetic "
+    summary = ("fill gaps by averaging nine fillers weighted by their error on synthetic "
                "gaps, with soft distance constraints (PMA-style ensemble)")
     params = _defaults(PMA.params, neighbours=[3, 5], weights="validation",
                        members=["interp", "poly", "grnn", "linear", "pose"], short_gap="0.05 s")
