@@ -6,7 +6,7 @@
   ``tsmc`` — move the fills?; "–" while gaps are still unfilled), and of ``pma``;
 * the gap RMSE of each ``fill_ensemble`` member run alone (the cleaner with that one
   member and one neighbour count: ``interp``/``poly``/``grnn`` with 3 or 5 rigid
-  neighbours, ``linear``), and of the per-gap oracle that picks, for every gap, the member
+  neighbours, ``linear``; ``pose``: its two members together), and of the per-gap oracle that picks, for every gap, the member
   alone with the lowest error on it (a bound on what choosing members per gap can give);
 * the RMSE over gaps of up to 0.3 s, 0.3–0.8 s and longer, and the share of the default's
   squared gap error that comes from its single worst gap.
@@ -35,6 +35,7 @@ from versus_peers import CAPTURES, DATA, REPO, complete_block
 MEMBERS = {f"{m}{k}": {"members": [m], "neighbours": [k]}
            for m in ("interp", "poly", "grnn") for k in (3, 5)}
 MEMBERS["linear"] = {"members": ["linear"]}
+MEMBERS["pose"] = {"members": ["pose"]}           # its two members (6 and 12 neighbours)
 
 
 def gap_errors(out, truth, gaps, mm):
