@@ -254,7 +254,8 @@ def pose_fills(pos, observed, j, frames, cand, K, train, to_local_train, to_loca
     for M in sizes:                             # when there are fewer than M: same member)
         counts.setdefault(min(K + M, len(feats)), M)
     # frames where every neighbour is seen (usually nearly all): one standardised Gram
-    # matrix serves every member (its leading block); else each member its own frames
+    # matrix serves every member (its leading block); too few: the smallest member alone,
+    # on the frames where its own neighbours are seen
     rows = observed[np.ix_(train, feats)].all(axis=1)
     if rows.sum() < max(10, 2 * len(feats)):
         feats = cand[:min(counts)]
