@@ -20,6 +20,10 @@ and ``e`` when they exist):
    - ``linear`` — global weighted linear regression (ridge) of ``j`` on every marker
      observed through the gap, in their common body frame, the columns weighted by
      ``exp(-d² / 2s²)`` of their mean distance ``d`` to ``j``;
+   - ``pose`` (ours, not in the paper) — linear regression (ridge) of ``j`` on its 6 and
+     on its 12 next most rigid neighbours, all in the rigid frame of its closest
+     neighbours (those of ``interp``; the first count when there are several;
+     :func:`pose_fills`);
    - any fills passed in by the caller (the cleaner passes ``fill_pca``: Gløersen &
      Federolf's weighted PCA).
 3. *Borders*: every fill gets the linear ramp ``(1-f)(x(s-1) - F(s-1)) + f(x(e) - F(e))``
@@ -41,7 +45,11 @@ import numpy as np
 from mocapfix.solvers.rigid import kabsch
 
 #: the fillers computed here (the caller may add its own, e.g. weighted PCA)
-LOCAL_FILLERS = ("interp", "poly", "grnn", "linear")
+LOCAL_FILLERS = ("interp", "poly", "grnn", "linear", "pose")
+#: the fillers run once per neighbour count (the others once per gap)
+PER_NEIGHBOUR_COUNT = ("interp", "poly", "grnn")
+#: ``pose``: its members regress on the frame markers and this many more neighbours each
+POSE_SIZES = (6, 12)
 
 
 def distance_stats(pos: np.ndarray, observed: np.ndarray, min_frames: int = 3,
@@ -202,6 +210,9 @@ def gap_fills(pos, observed, j, s, e, neighbours, train, body, *, fillers=LOCAL_
                 out["poly"] = glob(_ridge(_poly(Xt), Yt)(_poly(Xg))[:, None])[:, 0]
             if "grnn" in fillers and K >= 3:
                 out["grnn"] = glob(_grnn(Xt, Yt)(Xg)[:, None])[:, 0]
+            if "pose" in fillers and K >= 3:
+                out.update(pose_fills(pos, observed, j, frames, body, K, tr_local, tl, loc,
+                                      glob))
     if "linear" in fillers and len(body) >= 3:
         tr = train[observed[np.ix_(train, body)].all(axis=1)]
         if len(tr) >= max(10, len(body)):
@@ -217,6 +228,105 @@ def gap_fills(pos, observed, j, s, e, neighbours, train, body, *, fillers=LOCAL_
             if keep.sum() >= 3:
                 out["linear"] = glob(_ridge(Xt[:, keep], Yt)(Xg[:, keep])[:, None])[:, 0]
     return frames, out
+
+
+def pose_fills(pos, observed, j, frames, cand, K, train, to_local_train, to_local, to_global,
+               *, sizes=POSE_SIZES, lam: float = 1e-3):
+    """The ``pose`` members: marker ``j`` in the rigid frame (Kabsch 1976) of its ``K``
+    most rigid neighbours, predicted by a linear ridge regression on the coordinates, in
+    that same frame, of its ``K + M`` most rigid neighbours (one member ``poseM`` per
+    ``M`` in ``sizes``). The rigid frame removes the motion of the body part; the
+    neighbours beyond it carry the pose of the adjacent parts (a joint's angle), on which
+    the marker's place in that frame depends — what ``poly``/``grnn`` (whose inputs are
+    only the frame markers, nearly constant in their own frame) and ``linear`` (one frame
+    for the whole body) do not model.
+
+    ``cand``: the neighbours observed on ``frames`` (the gap and its borders), most rigid
+    first, the first ``K`` being the frame's; ``train``: frames where ``j`` and the frame
+    markers are seen; ``to_local_train``, ``to_local``, ``to_global``: the frame's
+    transforms on ``train`` and on ``frames`` (:func:`_frames_two`, shared with
+    ``poly``/``grnn``). Returns name → (len(frames), 3), not yet ramped to the borders."""
+    out = {}
+    feats = cand[:K + max(sizes)]
+    if len(feats) <= K:
+        return out
+    counts = {}                                 # member → neighbours used (the first M wins
+    for M in sizes:                             # when there are fewer than M: same member)
+        counts.setdefault(min(K + M, len(feats)), M)
+    # frames where every neighbour is seen (usually nearly all): one standardised Gram
+    # matrix serves every member (its leading block); too few: the smallest member alone,
+    # on the frames where its own neighbours are seen
+    rows = observed[np.ix_(train, feats)].all(axis=1)
+    if rows.sum() < max(10, 2 * len(feats)):
+        feats = cand[:min(counts)]
+        rows = observed[np.ix_(train, feats)].all(axis=1)
+        counts = {len(feats): counts[min(counts)]}
+        if rows.sum() < max(10, 2 * len(feats)):
+            return out
+    Xt = to_local_train(pos[np.ix_(train, feats)])[rows].reshape(int(rows.sum()), -1)
+    Yt = to_local_train(pos[train, j][:, None])[rows, 0]
+    Xg = to_local(pos[np.ix_(frames, feats)]).reshape(len(frames), -1)
+    for k, Y in zip(counts, _nested_ridge(Xt, Yt, Xg, [3 * k for k in counts], lam)):
+        out[f"pose{counts[k]}"] = to_global(Y[:, None])[:, 0]
+    return out
+
+
+def _nested_ridge(X, Y, Xn, widths, lam: float = 1e-3):
+    """:func:`_ridge` of ``Y`` on the first ``w`` columns of ``X`` for each ``w`` in
+    ``widths``, predicted at ``Xn``: one standardisation and one Gram matrix, each fit
+    solving its leading block (the same values as separate calls)."""
+    mx, sx = X.mean(axis=0), X.std(axis=0)
+    sx[sx < 1e-9] = 1.0
+    my = Y.mean(axis=0)
+    Z, Zn = (X - mx) / sx, (Xn - mx) / sx
+    G, b = Z.T @ Z, Z.T @ (Y - my)
+    out = []
+    for w in widths:
+        B = np.linalg.solve(G[:w, :w] + lam * len(Z) * np.eye(w), b[:w])
+        out.append(Zn[:, :w] @ B + my)
+    return out
+    body = cand[:K]
+    tr = train[observed[np.ix_(train, body)].all(axis=1)]
+    feats = cand[:K + max(sizes)]
+    if len(tr) < max(10, 2 * (K + min(sizes))):
+        return out
+    # one rigid frame for every member: its fit on the training and the gap frames
+    ref = _reference(pos[np.ix_(tr, body)])
+    (tl, _), (loc, glob) = _frames_two(pos[np.ix_(tr, body)], pos[np.ix_(frames, body)], ref)
+    Xt_all = tl(pos[np.ix_(tr, feats)])                    # NaN where a marker is not seen
+    Yt_all = tl(pos[tr, j][:, None])[:, 0]
+    Xg_all = loc(pos[np.ix_(frames, feats)])
+    seen = observed[np.ix_(tr, feats)]
+    used = set()
+    for M in sizes:
+        k = min(K + M, len(feats))
+        if k in used:                           # fewer neighbours than M: same member
+            continue
+        used.add(k)
+        rows = seen[:, :k].all(axis=1)
+        if rows.sum() < max(10, 2 * k):
+            continue
+        Xt = Xt_all[rows, :k].reshape(int(rows.sum()), -1)
+        Xg = Xg_all[:, :k].reshape(len(frames), -1)
+        out[f"pose{M}"] = glob(_ridge(Xt, Yt_all[rows], lam)(Xg)[:, None])[:, 0]
+    return out
+    used = set()
+    for M in sizes:
+        feats = cand[:K + M]
+        if len(feats) in used:                  # fewer neighbours than M: same member
+            continue
+        used.add(len(feats))
+        tr = train[observed[np.ix_(train, feats)].all(axis=1)]
+        if len(tr) < max(10, 2 * len(feats)):
+            continue
+        body = cand[:K]
+        ref = _reference(pos[np.ix_(tr, body)])
+        (tl, _), (loc, glob) = _frames_two(pos[np.ix_(tr, body)], pos[np.ix_(frames, body)], ref)
+        Xt = tl(pos[np.ix_(tr, feats)]).reshape(len(tr), -1)
+        Yt = tl(pos[tr, j][:, None])[:, 0]
+        Xg = loc(pos[np.ix_(frames, feats)]).reshape(len(frames), -1)
+        out[f"pose{M}"] = glob(_ridge(Xt, Yt, lam)(Xg)[:, None])[:, 0]
+    return out
 
 
 def meet_borders(fill: np.ndarray, data: np.ndarray, has_start: bool, has_end: bool):
@@ -307,11 +417,11 @@ def member_fills(pos, observed, gaps, external, *, local=LOCAL_FILLERS, neighbou
         fills = {}
         sizes = (neighbours,) if np.isscalar(neighbours) else tuple(neighbours)
         for n, K in enumerate(sizes):
-            # the global regression does not depend on K: computed once
-            names = local if n == 0 else tuple(f for f in local if f != "linear")
+            # the global regression and the pose members do not depend on K: computed once
+            names = local if n == 0 else tuple(f for f in local if f in PER_NEIGHBOUR_COUNT)
             _, part = gap_fills(pos, observed, j, s, e, cand[:K], train, cand, fillers=names,
                                 mu=mu, weight_scale=weight_scale)
-            fills.update({f + ("" if len(sizes) == 1 or f == "linear" else str(K)): v
+            fills.update({f + (str(K) if len(sizes) > 1 and f in PER_NEIGHBOUR_COUNT else ""): v
                           for f, v in part.items()})
         data = np.where(observed[frames, j][:, None], pos[frames, j], np.nan)
         gap_rows = (frames >= s) & (frames < e)
