@@ -25,7 +25,6 @@ import tempfile
 import time
 from pathlib import Path
 
-import numpy as np
 
 from mocapfix import read, write
 from mocapfix.corrupt import occlusion

@@ -26,7 +26,6 @@ from mocapfix import corrupt, formats, metrics, models
 from mocapfix.bench import cleaner_input
 from mocapfix.bench_oracle import TUNED, tuned_method
 from mocapfix.pipeline import parse_config
-from mocapfix.train import discover_training, read_all
 
 REPO = Path(__file__).resolve().parents[1]
 DATA = REPO.parent / "shared" / "data"

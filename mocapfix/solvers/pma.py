@@ -285,48 +285,6 @@ def _nested_ridge(X, Y, Xn, widths, lam: float = 1e-3):
         B = np.linalg.solve(G[:w, :w] + lam * len(Z) * np.eye(w), b[:w])
         out.append(Zn[:, :w] @ B + my)
     return out
-    body = cand[:K]
-    tr = train[observed[np.ix_(train, body)].all(axis=1)]
-    feats = cand[:K + max(sizes)]
-    if len(tr) < max(10, 2 * (K + min(sizes))):
-        return out
-    # one rigid frame for every member: its fit on the training and the gap frames
-    ref = _reference(pos[np.ix_(tr, body)])
-    (tl, _), (loc, glob) = _frames_two(pos[np.ix_(tr, body)], pos[np.ix_(frames, body)], ref)
-    Xt_all = tl(pos[np.ix_(tr, feats)])                    # NaN where a marker is not seen
-    Yt_all = tl(pos[tr, j][:, None])[:, 0]
-    Xg_all = loc(pos[np.ix_(frames, feats)])
-    seen = observed[np.ix_(tr, feats)]
-    used = set()
-    for M in sizes:
-        k = min(K + M, len(feats))
-        if k in used:                           # fewer neighbours than M: same member
-            continue
-        used.add(k)
-        rows = seen[:, :k].all(axis=1)
-        if rows.sum() < max(10, 2 * k):
-            continue
-        Xt = Xt_all[rows, :k].reshape(int(rows.sum()), -1)
-        Xg = Xg_all[:, :k].reshape(len(frames), -1)
-        out[f"pose{M}"] = glob(_ridge(Xt, Yt_all[rows], lam)(Xg)[:, None])[:, 0]
-    return out
-    used = set()
-    for M in sizes:
-        feats = cand[:K + M]
-        if len(feats) in used:                  # fewer neighbours than M: same member
-            continue
-        used.add(len(feats))
-        tr = train[observed[np.ix_(train, feats)].all(axis=1)]
-        if len(tr) < max(10, 2 * len(feats)):
-            continue
-        body = cand[:K]
-        ref = _reference(pos[np.ix_(tr, body)])
-        (tl, _), (loc, glob) = _frames_two(pos[np.ix_(tr, body)], pos[np.ix_(frames, body)], ref)
-        Xt = tl(pos[np.ix_(tr, feats)]).reshape(len(tr), -1)
-        Yt = tl(pos[tr, j][:, None])[:, 0]
-        Xg = loc(pos[np.ix_(frames, feats)]).reshape(len(frames), -1)
-        out[f"pose{M}"] = glob(_ridge(Xt, Yt, lam)(Xg)[:, None])[:, 0]
-    return out
 
 
 def meet_borders(fill: np.ndarray, data: np.ndarray, has_start: bool, has_end: bool):
