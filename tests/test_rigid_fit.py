@@ -62,7 +62,7 @@ def test_distance_stats_match_the_per_pair_computation():
     observed = rng.random((T, J)) > 0.2
     observed[:, 6] = False
     observed[:2, 6] = True                     # seen twice: fewer than min_frames
-    mu, sd = pma.distance_stats(np.where(observed[..., None], pos, np.nan), observed, chunk=256)
+    mu, sd = pma.distance_stats(np.where(observed[..., None], pos, np.nan), observed)
     for a in range(J):
         for b in range(J):
             both = observed[:, a] & observed[:, b]
