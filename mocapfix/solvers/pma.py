@@ -38,7 +38,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from mocapfix.solvers.rigid import kabsch
+from mocapfix.solvers.rigid import kabsch_to_shape
 
 #: the fillers computed here (the caller may add its own, e.g. weighted PCA)
 LOCAL_FILLERS = ("interp", "poly", "grnn", "linear")
@@ -85,14 +85,14 @@ def _frames(points: np.ndarray, ref: np.ndarray | None):
     centre = points.mean(axis=1)
     if K < 3:
         return (lambda x: x - centre[:, None]), (lambda x: x + centre[:, None])
-    return _transforms(*kabsch(points, np.broadcast_to(ref, points.shape), np.ones((n, K))))
+    return _transforms(*kabsch_to_shape(points, ref))
 
 
 def _frames_two(first: np.ndarray, second: np.ndarray, ref: np.ndarray):
     """:func:`_frames` of two point sets (n1, K, 3) and (n2, K, 3), K ≥ 3, with one
     batched Kabsch fit (the same values as two calls)."""
     both = np.concatenate([first, second])
-    R, cs, ct = kabsch(both, np.broadcast_to(ref, both.shape), np.ones(both.shape[:2]))
+    R, cs, ct = kabsch_to_shape(both, ref)
     n1 = len(first)
     return (_transforms(R[:n1], cs[:n1], ct[:n1]), _transforms(R[n1:], cs[n1:], ct[n1:]))
 
@@ -121,7 +121,7 @@ def _reference(points: np.ndarray) -> np.ndarray:
     if points.shape[1] < 3:
         return centred.mean(axis=0)
     ref = centred[0]
-    R, cs, ct = kabsch(points, np.broadcast_to(ref, points.shape), np.ones(points.shape[:2]))
+    R, cs, ct = kabsch_to_shape(points, ref)
     return ((points - cs[:, None]) @ np.swapaxes(R, 1, 2) + ct[:, None]).mean(axis=0)
 
 
