@@ -108,12 +108,23 @@ def rigid_templates(P):
     step = max(1, T // 600)                      # a subsample is enough for medians
     S = P[::step]
     D = _norm(S[:, :, None] - S[:, None])        # (T', J, J)
-    with np.errstate(invalid="ignore"):
-        med = np.nanmedian(D, axis=0)
-        spread = np.nanmedian(np.abs(D - med), axis=0)
+    med = _nanmedian_first_axis(D)
+    spread = _nanmedian_first_axis(np.abs(D - med))
     spread = np.where(np.isnan(spread), np.inf, spread)
     np.fill_diagonal(spread, np.inf)
     return np.argsort(spread, axis=1, kind="stable"), med
+
+
+def _nanmedian_first_axis(x):
+    """``np.nanmedian(x, axis=0)`` (NaN where a column has no number) from one sort with
+    NaN last: the middle value, or the mean of the two middle values. numpy's nanmedian
+    loops in Python over the columns that hold a NaN (J² columns here: ~0.3 s a file)."""
+    s = np.sort(x, axis=0)
+    n = (~np.isnan(x)).sum(axis=0)
+    lo = np.take_along_axis(s, np.maximum((n - 1) // 2, 0)[None], axis=0)[0]
+    hi = np.take_along_axis(s, np.minimum(n // 2, len(x) - 1)[None], axis=0)[0]
+    with np.errstate(invalid="ignore"):
+        return np.where(n > 0, (lo + hi) / 2, np.nan)
 
 
 def template_cost(X, partners_pos, template):
