@@ -315,3 +315,15 @@ def test_swaps_nanmedian_equals_numpy():
     d[rng.random(d.shape) < 0.2] = np.nan
     with np.errstate(invalid="ignore"):
         assert np.array_equal(_nanmedian_first_axis(d), np.nanmedian(d, axis=0), equal_nan=True)
+
+
+def test_swaps_pair_distances_equal_the_direct_norms():
+    from mocapfix.cleaners.swaps import _pair_distances
+
+    rng = np.random.default_rng(6)
+    S = rng.normal(size=(50, 7, 3)) * 300
+    S[rng.random((50, 7)) < 0.1] = np.nan
+    direct = np.linalg.norm(S[:, :, None] - S[:, None], axis=-1)
+    got = _pair_distances(S)
+    assert np.allclose(got, direct, rtol=1e-14, atol=1e-12, equal_nan=True)
+    assert got[3, 2, 5] == pytest.approx(np.sqrt(np.sum((S[3, 2] - S[3, 5]) ** 2)))
