@@ -25,7 +25,7 @@ import numpy as np
 from mocapfix.cleaners import build, register
 from mocapfix.cleaners.base import Cleaner, Param
 from mocapfix.errors import ConfigError
-from mocapfix.motion import Motion
+from mocapfix.motion import Motion, missing_samples
 from mocapfix.solvers import pma
 from mocapfix.solvers.pca_gapfill import fill_gaps_pca
 
@@ -113,8 +113,9 @@ class PMA(Cleaner):
         if self["short_gap"] is not None and self.frames("short_gap", motion) >= 1:
             gaps = self._fill_short(out, conf, gaps, self.frames("short_gap", motion), horizon)
             info["gaps_filled"] = info["gaps"] - len(gaps)
-            info["filled"] = int((~np.isnan(out).any(axis=2) & ~observed).sum())
-            pos, observed = out.copy(), ~np.isnan(out).any(axis=2)
+            seen = ~missing_samples(out)
+            info["filled"] = int((seen & ~observed).sum())
+            pos, observed = out.copy(), seen
         work = motion if pos is motion.positions else motion.replace(positions=pos)
         external = self._external(work)
         if self["weights"] == "plausibility":
@@ -187,7 +188,7 @@ class PMA(Cleaner):
         """Fill (in place) the interior gaps of at most ``short`` frames by cubic Hermite
         curves (:func:`mocapfix.solvers.pma.hermite_short_gaps`); returns the gaps left
         for the members."""
-        observed = ~np.isnan(out).any(axis=2)
+        observed = ~missing_samples(out)
         small = [g for g in gaps if g[2] - g[1] <= short]
         done = pma.hermite_short_gaps(out, observed, small)
         if done:
