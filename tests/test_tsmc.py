@@ -44,6 +44,23 @@ def test_dct_operators_equal_dense_formulas(n):
     assert np.max(np.abs(dct.penalty_solve(Z.T, 3.0, 0.7, axis=0) - dense_m.T)) < 1e-10
 
 
+@pytest.mark.parametrize("n", [1, 2, 3, 4, 7, 8, 33, 100])
+def test_dct_equals_the_orthonormal_dct_ii_matrix(n):
+    """dct/idct (numpy FFT, Makhoul's reordering) against the dense orthonormal DCT-II
+    C[k, t] = s_k cos(π k (2t + 1) / 2n), along either axis and on 1-D and 3-D arrays."""
+    k, t = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
+    C = np.sqrt(2.0 / n) * np.cos(np.pi * k * (2 * t + 1) / (2 * n))
+    C[0] /= np.sqrt(2.0)
+    rng = np.random.default_rng(n)
+    y = rng.normal(size=(n, 5))
+    assert np.max(np.abs(dct.dct(y) - C @ y)) < 1e-12
+    assert np.max(np.abs(dct.idct(y) - C.T @ y)) < 1e-12
+    assert np.max(np.abs(dct.dct(y.T, axis=1) - (C @ y).T)) < 1e-12
+    assert np.max(np.abs(dct.idct(dct.dct(y[:, 0])) - y[:, 0])) < 1e-12
+    z = rng.normal(size=(2, n, 3))
+    assert np.max(np.abs(dct.dct(z, axis=1) - np.einsum("kt,atc->akc", C, z))) < 1e-12
+
+
 def test_gcv_trace_and_choice():
     """GCV picks a μ that removes most of white noise from a smooth signal, and its
     closed-form RSS equals the dense smoother's."""

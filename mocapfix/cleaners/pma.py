@@ -25,7 +25,7 @@ import numpy as np
 from mocapfix.cleaners import build, register
 from mocapfix.cleaners.base import Cleaner, Param
 from mocapfix.errors import ConfigError
-from mocapfix.motion import Motion
+from mocapfix.motion import Motion, missing_samples
 from mocapfix.solvers import pma
 from mocapfix.solvers.pca_gapfill import fill_gaps_pca
 
@@ -113,13 +113,19 @@ class PMA(Cleaner):
         if self["short_gap"] is not None and self.frames("short_gap", motion) >= 1:
             gaps = self._fill_short(out, conf, gaps, self.frames("short_gap", motion), horizon)
             info["gaps_filled"] = info["gaps"] - len(gaps)
-            info["filled"] = int((~np.isnan(out).any(axis=2) & ~observed).sum())
-            pos, observed = out.copy(), ~np.isnan(out).any(axis=2)
+            seen = ~missing_samples(out)
+            info["filled"] = int((seen & ~observed).sum())
+            pos, observed = out.copy(), seen
         work = motion if pos is motion.positions else motion.replace(positions=pos)
         external = self._external(work)
-        members = pma.member_fills(pos, observed, gaps, external, local=local,
-                                   neighbours=self["neighbours"], mu=mu, sd=sd,
-                                   weight_scale=self.length("weight_scale", motion))
+        if self["weights"] == "plausibility":
+            members = pma.member_fills(pos, observed, gaps, external, local=local,
+                                       neighbours=self["neighbours"], mu=mu, sd=sd,
+                                       weight_scale=self.length("weight_scale", motion))
+            validated = [{}] * len(gaps)
+        else:
+            members, validated = self._validated_fills(work, observed, gaps, external, local,
+                                                       mu, sd)
         ks = self["neighbours"]
         expected = (len([f for f in local if f in pma.PER_NEIGHBOUR_COUNT]) * len(ks)
                     + ("linear" in local) + ("pose" in local) * len(pma.POSE_SIZES)
@@ -128,8 +134,6 @@ class PMA(Cleaner):
         lo, hi = seen_points.min(axis=0), seen_points.max(axis=0)
         box_lo, box_hi = lo - 0.1 * (hi - lo), hi + 0.1 * (hi - lo)
         info["rejected_samples"] = 0
-        validated = (self._validation_errors(work, observed, gaps, local, mu, sd)
-                     if self["weights"] != "plausibility" else [{}] * len(gaps))
         for (j, s, e), (cand, fills), verr in zip(gaps, members, validated):
             n = e - s
             frames = np.arange(s, e)
@@ -185,7 +189,7 @@ class PMA(Cleaner):
         """Fill (in place) the interior gaps of at most ``short`` frames by cubic Hermite
         curves (:func:`mocapfix.solvers.pma.hermite_short_gaps`); returns the gaps left
         for the members."""
-        observed = ~np.isnan(out).any(axis=2)
+        observed = ~missing_samples(out)
         small = [g for g in gaps if g[2] - g[1] <= short]
         done = pma.hermite_short_gaps(out, observed, small)
         if done:
@@ -197,13 +201,15 @@ class PMA(Cleaner):
         done = set(done)
         return [g for g in gaps if g not in done]
 
-    def _validation_errors(self, motion, observed, gaps, local, mu, sd):
-        """Per gap: member name → mean squared error on synthetic gaps of the same length
-        cut at random (seeded) places where the marker and its borders were seen."""
-        pos = motion.positions
-        T = pos.shape[0]
+    def _validation_windows(self, observed, gaps):
+        """The synthetic gaps that validate the members: ``validation_copies`` times, per
+        gap a window of the gap's length cut at a random (seeded) place where the marker
+        and its borders were seen (windows of one marker in one copy do not overlap).
+        Returns per copy ``(cut, windows)``: the observed mask with the copy's windows
+        cut, and the windows as ``(gap index, start, stop)``."""
+        T = observed.shape[0]
         rng = np.random.default_rng(0)
-        sums = [dict() for _ in gaps]
+        copies = []
         for _ in range(self["validation_copies"]):
             cut = observed.copy()
             synth = []
@@ -218,19 +224,44 @@ class PMA(Cleaner):
                     continue
                 u = int(rng.choice(good))
                 cut[u:u + n, j] = False
-                synth.append((gi, j, u, u + n))
+                synth.append((gi, u, u + n))
             if not synth:
                 break
+            copies.append((cut, synth))
+        return copies
+
+    def _validated_fills(self, motion, observed, gaps, external, local, mu, sd):
+        """Every member's fill of every gap and, per gap, member name → mean squared error
+        on the gap's validation windows (:meth:`_validation_windows`;
+        :func:`mocapfix.solvers.pma.validated_member_fills`); the external members are
+        rerun on each copy with its windows cut."""
+        copies = self._validation_windows(observed, gaps)
+        rows = pma.validated_member_fills(motion.positions, observed, gaps, copies, external,
+                                          local=local, neighbours=self["neighbours"], mu=mu,
+                                          sd=sd, weight_scale=self.length("weight_scale", motion))
+        members = [(cand, fills) for cand, fills, _ in rows]
+        errors = [errs for _, _, errs in rows]
+        if external:
+            self._external_errors(motion, gaps, copies, errors, mu, sd)
+        return members, errors
+
+    def _external_errors(self, motion, gaps, copies, errors, mu, sd):
+        """Add (in place) each external member's mean squared error on the validation
+        windows of every copy, the member rerun on the copy."""
+        pos = motion.positions
+        sums = [dict() for _ in gaps]
+        for cut, synth in copies:
             pos2 = np.where(cut[..., None], pos, np.nan)
             external = self._external(motion.replace(positions=pos2, confidence=None))
-            fills = pma.member_fills(pos2, cut, [g[1:] for g in synth], external, local=local,
-                                     neighbours=self["neighbours"], mu=mu, sd=sd,
-                                     weight_scale=self.length("weight_scale", motion))
-            for (gi, j, u, v), (_, f) in zip(synth, fills):
+            fills = pma.member_fills(pos2, cut, [(gaps[gi][0], u, v) for gi, u, v in synth],
+                                     external, local=(), neighbours=self["neighbours"],
+                                     mu=mu, sd=sd)
+            for (gi, u, v), (_, f) in zip(synth, fills):
                 for name, value in f.items():
-                    err = float(np.mean(np.sum((value - pos[u:v, j]) ** 2, axis=1)))
+                    err = float(np.mean(np.sum((value - pos[u:v, gaps[gi][0]]) ** 2, axis=1)))
                     sums[gi].setdefault(name, []).append(err)
-        return [{k: float(np.mean(v)) for k, v in d.items()} for d in sums]
+        for into, d in zip(errors, sums):
+            into.update({k: float(np.mean(v)) for k, v in d.items()})
 
 
 def _defaults(params, **new):

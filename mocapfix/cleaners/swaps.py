@@ -47,9 +47,12 @@ def _cross_distance(X, Y):
     """(n, J, J) distances ``|Y[:, j] - X[:, i]|`` at [:, i, j] for (n, J, 3) arrays, by
     ``|x|^2 + |y|^2 - 2 x.y`` (a batched matrix product, ``matmul``: ~20x faster than the
     equivalent ``einsum`` here; inputs centred per frame)."""
-    sq = (np.sum(X * X, axis=-1)[:, :, None] + np.sum(Y * Y, axis=-1)[:, None, :]
-          - 2.0 * (X @ np.swapaxes(Y, 1, 2)))
-    return np.sqrt(np.maximum(sq, 0.0))
+    sq = X @ np.swapaxes(Y, 1, 2)
+    sq *= -2.0                              # in place: 4-5x faster than the temporaries
+    sq += np.sum(X * X, axis=-1)[:, :, None]
+    sq += np.sum(Y * Y, axis=-1)[:, None, :]
+    np.maximum(sq, 0.0, out=sq)
+    return np.sqrt(sq, out=sq)
 
 
 def swap_gain(A, B):
@@ -104,13 +107,40 @@ def rigid_templates(P):
     T = P.shape[0]
     step = max(1, T // 600)                      # a subsample is enough for medians
     S = P[::step]
-    D = _norm(S[:, :, None] - S[:, None])        # (T', J, J)
-    with np.errstate(invalid="ignore"):
-        med = np.nanmedian(D, axis=0)
-        spread = np.nanmedian(np.abs(D - med), axis=0)
+    D = _pair_distances(S)                       # (T', J, J)
+    med = _nanmedian_first_axis(D)
+    spread = _nanmedian_first_axis(np.abs(D - med))
     spread = np.where(np.isnan(spread), np.inf, spread)
     np.fill_diagonal(spread, np.inf)
     return np.argsort(spread, axis=1, kind="stable"), med
+
+
+def _pair_distances(S):
+    """(T, J, J) distances between every two markers of (T, J, 3) ``S``: the same sums as
+    ``_norm(S[:, :, None] - S[:, None])``, one coordinate at a time (6x faster than the
+    (T, J, J, 3) difference array)."""
+    d = None
+    for k in range(3):
+        x = np.ascontiguousarray(S[..., k])
+        diff = x[:, :, None] - x[:, None, :]
+        diff *= diff
+        if d is None:
+            d = diff
+        else:
+            d += diff
+    return np.sqrt(d, out=d)
+
+
+def _nanmedian_first_axis(x):
+    """``np.nanmedian(x, axis=0)`` (NaN where a column has no number) from one sort with
+    NaN last: the middle value, or the mean of the two middle values. numpy's nanmedian
+    loops in Python over the columns that hold a NaN (J² columns here: ~0.3 s a file)."""
+    s = np.sort(x, axis=0)
+    n = (~np.isnan(x)).sum(axis=0)
+    lo = np.take_along_axis(s, np.maximum((n - 1) // 2, 0)[None], axis=0)[0]
+    hi = np.take_along_axis(s, np.minimum(n // 2, len(x) - 1)[None], axis=0)[0]
+    with np.errstate(invalid="ignore"):
+        return np.where(n > 0, (lo + hi) / 2, np.nan)
 
 
 def template_cost(X, partners_pos, template):
@@ -187,9 +217,11 @@ class SwapFix(Cleaner):
             now, before = P[t] - centre, P[t - 1] - centre
             fwd, bwd = 2 * before - (P[t - 2] - centre), 2 * now - (P[t + 1] - centre)
             own = _norm(now - fwd) + _norm(before - bwd)                       # (n, J)
-            M = _cross_distance(fwd, now) + _cross_distance(bwd, before)       # (n, J, J)
+            M = _cross_distance(fwd, now)
+            M += _cross_distance(bwd, before)                                   # (n, J, J)
             keep = own[:, iu[0]] + own[:, iu[1]]
-            swap = (M + M.transpose(0, 2, 1))[:, iu[0], iu[1]]
+            swap = M[:, iu[0], iu[1]]
+            swap += M[:, iu[1], iu[0]]
             # the a-b distances only where the two other conditions of an event hold
             with np.errstate(invalid="ignore"):
                 r, q = np.nonzero((keep - swap > threshold) & (swap < 0.5 * keep))

@@ -73,7 +73,7 @@ import numpy as np
 
 from mocapfix.cleaners import register
 from mocapfix.cleaners.base import Cleaner, Param
-from mocapfix.motion import Motion
+from mocapfix.motion import Motion, missing_samples
 from mocapfix.solvers import dct, segments
 from mocapfix.solvers.lowrank import leave_block_out_residual, ppca_fit, svt
 from mocapfix.solvers.pca_gapfill import fill_gaps_pca
@@ -113,7 +113,7 @@ def trust_mask(pos: np.ndarray, weights: np.ndarray, k: float, lo: float, hi: fl
     """
     T, J, _ = pos.shape
     x = pos.reshape(T, 3 * J)
-    w = np.repeat(np.where(np.isnan(pos).any(axis=2), 0.0, weights), 3, axis=1)
+    w = np.repeat(np.where(missing_samples(pos), 0.0, weights), 3, axis=1)
     if pad > 0 and dct.fast_pad(T, pad) < T:        # reflection needs fewer than T samples
         pad = dct.fast_pad(T, pad)
     xp, p = dct.pad_missing(np.where(w > 0, x, np.nan), pad)
@@ -135,7 +135,7 @@ def trust_mask(pos: np.ndarray, weights: np.ndarray, k: float, lo: float, hi: fl
         if welsch is None:
             scale = np.repeat(theta, 3)
     r = np.linalg.norm((xp - xhat)[p:p + T].reshape(T, J, 3), axis=2)
-    observed = ~np.isnan(pos).any(axis=2)
+    observed = ~missing_samples(pos)
     trusted = observed & (weights > 0) & (r <= theta[None, :])
     return trusted, dct.unpad(xhat, p).reshape(T, J, 3), theta, mu
 

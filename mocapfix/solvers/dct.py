@@ -25,12 +25,11 @@ samples marked missing for the weighted solvers — and :func:`unpad` removes it
 """
 from __future__ import annotations
 
+from functools import lru_cache
+
 import numpy as np
-from scipy import fft
 
 from mocapfix.solvers.segments import extend, linear_bridge
-
-WORKERS = 1  # scipy.fft threads (2 was slower with other work on a 2-core machine)
 
 
 def eigenvalues(n: int) -> np.ndarray:
@@ -45,25 +44,75 @@ def _shape(lam: np.ndarray, ndim: int, axis: int) -> np.ndarray:
     return lam.reshape(shape)
 
 
+@lru_cache(maxsize=8)
+def _twiddle(n: int) -> np.ndarray:
+    """``exp(−iπk / 2n)`` times the orthonormal scale ``√(2/n)`` (``√(1/n)`` at k = 0),
+    k = 0 … n//2."""
+    w = np.exp(-0.5j * np.pi * np.arange(n // 2 + 1) / n) * np.sqrt(2.0 / n)
+    w[0] *= np.sqrt(0.5)
+    w.setflags(write=False)
+    return w
+
+
+def _dct_rows(x: np.ndarray) -> np.ndarray:
+    """Orthonormal DCT-II along the last axis by one real FFT of length n (Makhoul 1980,
+    "A fast cosine transform in one and two dimensions", IEEE TASSP 28(1): the even
+    samples in order, then the odd ones reversed; ``X_k = Re(e^{−iπk/2n} V_k)``, and
+    ``X_{n−k} = −Im(e^{−iπk/2n} V_k)``). numpy's FFT: no scipy import on the default path."""
+    n = x.shape[-1]
+    h, m = n // 2 + 1, (n + 1) // 2
+    v = np.empty(x.shape)
+    v[..., :m] = x[..., ::2]
+    v[..., m:] = x[..., 1::2][..., ::-1]
+    spec = np.fft.rfft(v, axis=-1)
+    spec *= _twiddle(n)
+    out = v                                         # reused: v is not needed any more
+    out[..., :h] = spec.real
+    out[..., h:] = spec.imag[..., n - h:0:-1]
+    out[..., h:] *= -1.0
+    return out
+
+
+def _idct_rows(y: np.ndarray) -> np.ndarray:
+    """Inverse of :func:`_dct_rows` (orthonormal DCT-III): ``V_k = e^{iπk/2n} (X_k − i
+    X_{n−k})`` (X_n = 0) unscaled, one inverse real FFT, samples put back in order."""
+    n = y.shape[-1]
+    h, m = n // 2 + 1, (n + 1) // 2
+    spec = np.empty(y.shape[:-1] + (h,), dtype=np.complex128)
+    spec.real = y[..., :h]
+    spec.imag[..., 0] = 0.0
+    spec.imag[..., 1:] = y[..., n - 1:n - h:-1]
+    spec.imag[..., 1:] *= -1.0
+    tw = _twiddle(n)
+    spec *= np.conj(tw) / (tw.real ** 2 + tw.imag ** 2)
+    v = np.fft.irfft(spec, n=n, axis=-1)
+    out = np.empty(y.shape)
+    out[..., ::2] = v[..., :m]
+    out[..., 1::2] = v[..., m:][..., ::-1]
+    return out
+
+
 def _along_rows(transform, x, axis):
-    """``transform`` along ``axis`` of ``x``; a (T, C) array transformed along axis 0 is
-    transformed as its transpose along contiguous rows (pocketfft is ~2x faster there,
-    same values) and returned as a (T, C) view of the result."""
-    x = np.asarray(x)
-    if x.ndim == 2 and axis % 2 == 0 and x.shape[1] > 1:
-        return transform(np.ascontiguousarray(x.T), type=2, norm="ortho", axis=1,
-                         workers=WORKERS).T
-    return transform(x, type=2, norm="ortho", axis=axis, workers=WORKERS)
+    """``transform`` (along the last axis) along ``axis`` of ``x``; a (T, C) array
+    transformed along axis 0 is transformed as its transpose along contiguous rows and
+    returned as a (T, C) view of the result."""
+    x = np.asarray(x, dtype=np.float64)
+    axis = axis % max(x.ndim, 1)
+    if x.ndim == 2 and axis == 0 and x.shape[1] > 1:
+        return transform(np.ascontiguousarray(x.T)).T
+    if axis == x.ndim - 1:
+        return transform(x)
+    return np.moveaxis(transform(np.moveaxis(x, axis, -1)), -1, axis)
 
 
 def dct(x: np.ndarray, axis: int = 0) -> np.ndarray:
     """Orthonormal DCT-II along ``axis``."""
-    return _along_rows(fft.dct, x, axis)
+    return _along_rows(_dct_rows, x, axis)
 
 
 def idct(x: np.ndarray, axis: int = 0) -> np.ndarray:
     """Inverse of :func:`dct`."""
-    return _along_rows(fft.idct, x, axis)
+    return _along_rows(_idct_rows, x, axis)
 
 
 def smoother(y: np.ndarray, mu, axis: int = 0) -> np.ndarray:
@@ -125,12 +174,10 @@ def gcv_mu(y: np.ndarray | None, n_eff: np.ndarray | None = None,
     if spectrum is None:
         spectrum = dct(np.asarray(y, dtype=np.float64))
     n = spectrum.shape[0]
-    lam2 = eigenvalues(n) ** 2
     mu = 10.0 ** np.asarray(log_mu)
-    gamma = 1.0 / (1.0 + lam2[:, None] * mu[None, :])            # (n, m)
+    damp2, denom = _gcv_tables(n, tuple(np.asarray(log_mu, dtype=np.float64).tolist()))
     power = spectrum ** 2                                       # (n, C)
-    rss = power.T @ (1.0 - gamma) ** 2                           # (C, m)
-    denom = (1.0 - gamma.sum(axis=0) / n) ** 2                   # (m,)
+    rss = power.T @ damp2                                       # (C, m)
     with np.errstate(divide="ignore", invalid="ignore"):
         score = rss / np.where(denom > 0, denom, np.nan)[None, :]
     score = np.where(np.isfinite(score), score, np.inf)
@@ -146,6 +193,20 @@ def gcv_mu(y: np.ndarray | None, n_eff: np.ndarray | None = None,
     refined = np.where((best == i), log_mu[i] + offset * step, log_mu[best])
     n_eff = np.full(spectrum.shape[1], n) if n_eff is None else np.asarray(n_eff)
     return 10.0 ** refined, score[np.arange(len(best)), best] / np.maximum(n_eff, 1)
+
+
+@lru_cache(maxsize=8)
+def _gcv_tables(n: int, log_mu: tuple) -> tuple[np.ndarray, np.ndarray]:
+    """For :func:`gcv_mu`: ``(1 − Γ)²`` (n, m) and ``(1 − tr H / n)²`` (m,) on the grid
+    (they depend on n and the grid only; the robust smoother asks for them every step)."""
+    lam2 = eigenvalues(n) ** 2
+    mu = 10.0 ** np.asarray(log_mu)
+    gamma = 1.0 / (1.0 + lam2[:, None] * mu[None, :])            # (n, m)
+    damp2 = (1.0 - gamma) ** 2
+    denom = (1.0 - gamma.sum(axis=0) / n) ** 2
+    damp2.setflags(write=False)
+    denom.setflags(write=False)
+    return damp2, denom
 
 
 def gcv_smooth(y: np.ndarray, n_pad: int = 0) -> tuple[np.ndarray, np.ndarray]:
@@ -194,15 +255,26 @@ def robust_smooth(x: np.ndarray, weights: np.ndarray, scale: np.ndarray,
     # the DCT is ~2x faster and no array changes memory order
     wT, x0T, xhat = (np.ascontiguousarray(a.T) for a in (w, x0, xhat))
     g = wT.copy()
+    r = np.empty_like(g)
     lam2 = eigenvalues(x.shape[0])[None, :] ** 2
     for _ in range(max(1, iterations)):
-        r = x0T - xhat
-        g = wT * np.exp(-(r * r) / p2)
-        pseudo = g * r + xhat
-        spectrum = dct(pseudo, axis=1)      # shared by GCV and the smoother
+        # in place (the same operations as g = w·exp(−r²/p²), pseudo = g·r + x̂): large
+        # temporaries cost page faults
+        np.subtract(x0T, xhat, out=r)
+        np.multiply(r, r, out=g)
+        np.negative(g, out=g)
+        np.divide(g, p2, out=g)
+        np.exp(g, out=g)
+        g *= wT
+        r *= g
+        r += xhat                           # the pseudo-data
+        spectrum = dct(r, axis=1)           # shared by GCV and the smoother
         if not fixed:
             mu, _ = gcv_mu(None, n_obs, spectrum=spectrum.T)
-        xhat = idct(spectrum / (1.0 + np.asarray(mu)[..., None] * lam2), axis=1)
+        denom = np.multiply(np.asarray(mu)[..., None], lam2)
+        denom += 1.0
+        spectrum /= denom
+        xhat = idct(spectrum, axis=1)
     return (np.ascontiguousarray(xhat.T), np.asarray(mu, dtype=np.float64) * np.ones(x.shape[1]),
             np.ascontiguousarray(g.T))
 

