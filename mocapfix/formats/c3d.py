@@ -78,7 +78,7 @@ from mocapfix.fileio import atomic_open, read_input_bytes
 from mocapfix.formats import suffixes
 from mocapfix.formats.c3d_params import (MAX_DIM, group_record as _group_record, param_data_offset,
                                          param_record as _param_record, string_param as _string_param,
-                                         with_group)
+                                         string_value, with_group)
 from mocapfix.motion import Motion
 from mocapfix.quantity import MAX_FRAME_RATE_HZ, MIN_FRAME_RATE_HZ
 from mocapfix.units import METRES_PER_UNIT, normalise_unit_name
@@ -942,9 +942,7 @@ def _fill_params(motion: Motion, source: C3DSource, filled: np.ndarray) -> list[
                      int(n / motion.fps > LONG_FILL_S)))
     f32 = lambda name, v: (name, 4, (len(v),), np.asarray(v, "<f4").tobytes(), "")  # noqa: E731
     params = _chunked("FILL_POINTS", [r[0] for r in rows],
-                      lambda name, v: (name, -1, (max([len(x) for x in v] + [1]), len(v)),
-                                       "".join(x.ljust(max([len(y) for y in v] + [1])) for x in v).encode("latin-1", "replace"),
-                                       "label of each filled run"))
+                      lambda name, v: (name, -1, *string_value(v, "replace"), "label of each filled run"))
     params += _chunked("FILL_FIRST", [r[1] for r in rows], f32)
     params += _chunked("FILL_LAST", [r[2] for r in rows], f32)
     params += _chunked("FILL_CONFIDENCE", [r[3] for r in rows], f32)
@@ -961,8 +959,8 @@ def _with_fill_group(source: C3DSource, params: list[tuple], path) -> tuple[byte
     later (header word 9 and POINT:DATA_START moved). A section that cannot be edited
     safely is left as it was (logged): the fills are then marked only by residual 0."""
     header, prefix = source.header, source.prefix
-    lo = (header[0] - 2) * BLOCK
-    if source.parameters is None or lo < 0 or lo + 4 > len(prefix):
+    lo = source.parameters.offset - BLOCK if source.parameters is not None else -1
+    if lo < 0 or lo + 4 > len(prefix):
         log.warning("%s: no parameter section to list the fills in", path)
         return header, prefix
     old_len = min(prefix[lo + 2] * BLOCK, len(prefix) - lo)   # some files count blocks they lack

@@ -35,10 +35,16 @@ def group_record(name: str, group_id: int, desc: str) -> bytes:
     return struct.pack("<bb", len(name_b), -group_id) + name_b + struct.pack("<h", 2 + len(body)) + body
 
 
-def string_param(name, group_id, strings: list[str], desc="") -> bytes:
+def string_value(strings: list[str], errors: str = "strict") -> tuple[tuple, bytes]:
+    """(dims, data) of a character parameter holding ``strings``: (width, count), each
+    string padded with blanks to the longest."""
     width = max([len(s) for s in strings] + [1])
-    data = "".join(s.ljust(width) for s in strings).encode("latin-1")
-    return param_record(name, group_id, -1, (width, len(strings)), data, desc)
+    return (width, len(strings)), "".join(s.ljust(width) for s in strings).encode("latin-1", errors)
+
+
+def string_param(name, group_id, strings: list[str], desc="") -> bytes:
+    dims, data = string_value(strings)
+    return param_record(name, group_id, -1, dims, data, desc)
 
 
 @dataclass
