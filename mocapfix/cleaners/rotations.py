@@ -288,7 +288,7 @@ class RotationDenoise(Cleaner):
         joint_of = np.concatenate([np.full(e["size"], n) for n, e in enumerate(rotchannels.layout(rig))])
         groups = joint_of if self["per_joint"] else np.arange(X.shape[1])
         breaks = (glitches.steps(X, max(noise, self["step_floor"]) * shape, groups=groups, threshold=self["steps"])
-                  if self["steps"] is not None else np.zeros((max(len(X) - 1, 0), int(groups.max()) + 1), dtype=bool))
+                  if self["steps"] is not None else None)
         Z, widths = sure.sure_piecewise(X, noise * shape, breaks=breaks, groups=groups, max_width=cap,
                                         span=span, quadratic_widths=sure.QUADRATIC_WIDTHS if self["quadratic"] else ())
         Z[missing] = np.nan
@@ -297,4 +297,4 @@ class RotationDenoise(Cleaner):
             "noise_deg": round(float(noise), 4),
             "median_sigma_frames": float(np.median(widths)) if widths.size else 0.0,
             "unsmoothed_features": int((widths == 0).sum()),
-            "steps_not_smoothed_across": int(breaks.sum())}
+            "steps_not_smoothed_across": 0 if breaks is None else int(breaks.sum())}

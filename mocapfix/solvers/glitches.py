@@ -10,6 +10,7 @@ import numpy as np
 
 from mocapfix.gaps import runs
 from mocapfix.solvers.segments import linear_bridge
+from mocapfix.solvers.sure import column_groups
 
 
 def despike(X: np.ndarray, *, width: int = 7, k: float = 6.0, floor: float = 0.0):
@@ -106,18 +107,15 @@ def steps(X: np.ndarray, noise, *, groups: np.ndarray | None = None,
     X = np.asarray(X, dtype=np.float64)
     T, C = X.shape
     sd = np.broadcast_to(np.asarray(noise, dtype=np.float64), X.shape)
-    labels = np.arange(C) if groups is None else np.unique(np.asarray(groups), return_inverse=True)[1]
-    G = int(labels.max()) + 1 if C else 0
+    _, M = column_groups(groups, C)
     if T < 6 or not C:
-        return np.zeros((max(T - 1, 0), G), dtype=bool)
+        return np.zeros((max(T - 1, 0), M.shape[1]), dtype=bool)
     with np.errstate(divide="ignore", invalid="ignore"):
         D = np.diff(X, axis=0) / np.sqrt(sd[1:] ** 2 + sd[:-1] ** 2)
     D = np.nan_to_num(D, nan=0.0, posinf=0.0, neginf=0.0)
     P = np.pad(D, ((2, 2), (0, 0)), mode="reflect")
     n = T - 1
     around = np.stack([P[:n], P[1:n + 1], P[3:n + 3], P[4:n + 4]])
-    M = np.zeros((C, G))
-    M[np.arange(C), labels] = 1.0
 
     def off(predicted):
         return np.sqrt(((D - predicted) ** 2 @ M) / M.sum(axis=0))

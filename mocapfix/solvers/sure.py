@@ -26,6 +26,16 @@ WIDTHS = (0.7, 1.0, 1.5, 2.0, 3.0, 4.0, 6.0, 8.0, 12.0, 16.0, 24.0, 32.0, 48.0)
 QUADRATIC_WIDTHS = (1.0, 1.5, 2.0, 3.0, 4.0, 6.0, 8.0, 12.0, 16.0, 24.0)
 
 
+def column_groups(groups, C: int) -> tuple[np.ndarray, np.ndarray]:
+    """(labels (C,) as 0 … G − 1 in label order, M (C, G) with M[c, labels[c]] = 1: a
+    (…, C) array times M sums each group's columns) of ``groups`` (C,) labels; None: every
+    column its own group."""
+    labels = np.arange(C) if groups is None else np.unique(np.asarray(groups), return_inverse=True)[1]
+    M = np.zeros((C, int(labels.max()) + 1 if C else 0))
+    M[np.arange(C), labels] = 1.0
+    return labels, M
+
+
 def centre_weight(sigma: float) -> float:
     """g_σ(0) of the discrete Gaussian filter ``ndimage.gaussian_filter1d`` applies."""
     n = int(4 * sigma + 2)
@@ -89,12 +99,9 @@ def sure_gaussian(X: np.ndarray, noise, *, widths=WIDTHS, quadratic_widths=(),
     from scipy import ndimage  # imported here: not loaded unless needed
 
     X = np.asarray(X, dtype=np.float64)
-    C = X.shape[1]
     V = np.broadcast_to(np.asarray(noise, dtype=np.float64) ** 2, X.shape)
-    labels = np.arange(C) if groups is None else np.unique(np.asarray(groups), return_inverse=True)[1]
-    G = int(labels.max()) + 1 if C else 0
-    M = np.zeros((C, G))
-    M[np.arange(C), labels] = 1.0                 # column → group sums
+    labels, M = column_groups(groups, X.shape[1])
+    C = X.shape[1]
     best = X.copy()
     chosen = np.zeros(X.shape if span else C)
     # the identity: SURE = −v + 2v per sample
@@ -114,18 +121,18 @@ def sure_gaussian(X: np.ndarray, noise, *, widths=WIDTHS, quadratic_widths=(),
     return best, (np.median(chosen, axis=0) if span else chosen)
 
 
-def sure_piecewise(X: np.ndarray, noise, *, breaks: np.ndarray, groups: np.ndarray | None = None,
+def sure_piecewise(X: np.ndarray, noise, *, breaks: np.ndarray | None, groups: np.ndarray | None = None,
                    **options):
     """:func:`sure_gaussian` run separately on the pieces of each group of columns between
     its ``breaks`` ((T − 1, G) mask: no smoothing across t → t + 1 for group g; e.g.
-    :func:`mocapfix.solvers.glitches.steps`). Groups with no break go through one call;
-    pieces shorter than 3 samples are left as they are. ``options``: those of
-    :func:`sure_gaussian`. Returns (Z, widths (C,): the median width per column)."""
+    :func:`mocapfix.solvers.glitches.steps`; None: no break). Groups with no break go
+    through one call; pieces shorter than 3 samples are left as they are. ``options``:
+    those of :func:`sure_gaussian`. Returns (Z, widths (C,): the median width per column)."""
     X = np.asarray(X, dtype=np.float64)
     T, C = X.shape
     sd = np.broadcast_to(np.asarray(noise, dtype=np.float64), X.shape)
-    labels = np.arange(C) if groups is None else np.unique(np.asarray(groups), return_inverse=True)[1]
-    broken = np.asarray(breaks, dtype=bool).any(axis=0)
+    labels, M = column_groups(groups, C)
+    broken = np.zeros(M.shape[1], dtype=bool) if breaks is None else np.asarray(breaks, dtype=bool).any(axis=0)
     Z = X.copy()
     widths = np.zeros(C)
     whole = ~broken[labels]
