@@ -126,10 +126,7 @@ class PMA(Cleaner):
         else:
             members, validated = self._validated_fills(work, observed, gaps, external, local,
                                                        mu, sd)
-        ks = self["neighbours"]
-        expected = (len([f for f in local if f in pma.PER_NEIGHBOUR_COUNT]) * len(ks)
-                    + ("linear" in local) + ("pose" in local) * len(pma.POSE_SIZES)
-                    + len(external))
+        expected = len(pma.member_names(local, self["neighbours"])) + len(external)
         seen_points = motion.positions[~motion.missing]
         lo, hi = seen_points.min(axis=0), seen_points.max(axis=0)
         box_lo, box_hi = lo - 0.1 * (hi - lo), hi + 0.1 * (hi - lo)
@@ -235,33 +232,17 @@ class PMA(Cleaner):
         on the gap's validation windows (:meth:`_validation_windows`;
         :func:`mocapfix.solvers.pma.validated_member_fills`); the external members are
         rerun on each copy with its windows cut."""
-        copies = self._validation_windows(observed, gaps)
-        rows = pma.validated_member_fills(motion.positions, observed, gaps, copies, external,
-                                          local=local, neighbours=self["neighbours"], mu=mu,
-                                          sd=sd, weight_scale=self.length("weight_scale", motion))
-        members = [(cand, fills) for cand, fills, _ in rows]
-        errors = [errs for _, _, errs in rows]
-        if external:
-            self._external_errors(motion, gaps, copies, errors, mu, sd)
-        return members, errors
-
-    def _external_errors(self, motion, gaps, copies, errors, mu, sd):
-        """Add (in place) each external member's mean squared error on the validation
-        windows of every copy, the member rerun on the copy."""
         pos = motion.positions
-        sums = [dict() for _ in gaps]
-        for cut, synth in copies:
-            pos2 = np.where(cut[..., None], pos, np.nan)
-            external = self._external(motion.replace(positions=pos2, confidence=None))
-            fills = pma.member_fills(pos2, cut, [(gaps[gi][0], u, v) for gi, u, v in synth],
-                                     external, local=(), neighbours=self["neighbours"],
-                                     mu=mu, sd=sd)
-            for (gi, u, v), (_, f) in zip(synth, fills):
-                for name, value in f.items():
-                    err = float(np.mean(np.sum((value - pos[u:v, gaps[gi][0]]) ** 2, axis=1)))
-                    sums[gi].setdefault(name, []).append(err)
-        for into, d in zip(errors, sums):
-            into.update({k: float(np.mean(v)) for k, v in d.items()})
+
+        def copy_external(cut):
+            return self._external(motion.replace(positions=np.where(cut[..., None], pos, np.nan),
+                                                 confidence=None))
+
+        rows = pma.validated_member_fills(pos, observed, gaps, self._validation_windows(observed, gaps),
+                                          external, local=local, neighbours=self["neighbours"], mu=mu,
+                                          sd=sd, weight_scale=self.length("weight_scale", motion),
+                                          copy_external=copy_external if external else None)
+        return [(cand, fills) for cand, fills, _ in rows], [errs for _, _, errs in rows]
 
 
 def _defaults(params, **new):

@@ -134,14 +134,9 @@ def _reference(points: np.ndarray) -> np.ndarray:
 
 
 def _ridge(X: np.ndarray, Y: np.ndarray, lam: float = 1e-3):
-    """Ridge regression with standardised features; returns a predictor."""
-    mx, sx = X.mean(axis=0), X.std(axis=0)
-    sx[sx < 1e-9] = 1.0
-    my = Y.mean(axis=0)
-    Z = (X - mx) / sx
-    A = Z.T @ Z + lam * len(Z) * np.eye(Z.shape[1])
-    B = np.linalg.solve(A, Z.T @ (Y - my))
-    return lambda Xn: ((Xn - mx) / sx) @ B + my
+    """Ridge regression with standardised features; returns a predictor
+    (:func:`_nested_ridge` on all the columns)."""
+    return lambda Xn: _nested_ridge(X, Y, Xn, [X.shape[1]], lam)[0]
 
 
 def _grnn(X: np.ndarray, Y: np.ndarray, max_train: int = 800):
@@ -172,24 +167,17 @@ def _poly(z: np.ndarray) -> np.ndarray:
     return np.concatenate([z, z ** 2], axis=1)
 
 
-def gap_fills(pos, observed, j, s, e, neighbours, train, body, *, fillers=LOCAL_FILLERS,
-              weight_scale: float = 300.0, mu=None):
-    """The local fillers' estimates of marker ``j`` on frames ``s-1 .. e`` (the gap plus
-    the border frames that exist), as a dict name → (n, 3) array over ``frames``.
-
-    ``neighbours``: indices of the rigid neighbours (observed on ``frames``); ``train``:
-    frames where ``j`` and ``body`` are observed; ``body``: every marker observed on
-    ``frames`` (for ``linear``). ``weight_scale`` in the data's units."""
-    return window_fills(pos, observed, j, [(s, e)], neighbours, train, body, fillers=fillers,
-                        weight_scale=weight_scale, mu=mu)[0]
-
-
 def window_fills(pos, observed, j, windows, neighbours, train, body, *,
                  fillers=LOCAL_FILLERS, weight_scale: float = 300.0, mu=None):
-    """:func:`gap_fills` of several windows ``(s, e)`` of marker ``j`` from one fit of
-    each filler on ``train``: the regressions are learnt once and predict every window
-    (a real gap and the synthetic gaps that validate it). ``neighbours`` and ``body`` must
-    be observed on every window's frames. Returns one ``(frames, fills)`` per window."""
+    """The local fillers' estimates of marker ``j`` on each window ``(s, e)``, on frames
+    ``s-1 .. e`` (the gap plus the border frames that exist), from one fit of each filler
+    on ``train``: the regressions are learnt once and predict every window (a real gap
+    and the synthetic gaps that validate it). Returns one ``(frames, fills)`` per window,
+    ``fills`` name → (len(frames), 3).
+
+    ``neighbours``: indices of the rigid neighbours; ``body``: the markers of ``linear``
+    and ``pose`` (most rigid first); both observed on every window's frames. ``train``:
+    frames where ``j`` is observed. ``weight_scale`` in the data's units."""
     T = pos.shape[0]
     spans = [np.arange(max(s - 1, 0), min(e + 1, T)) for s, e in windows]
     frames = np.concatenate(spans)
@@ -273,16 +261,16 @@ def pose_fills(pos, observed, j, frames, cand, K, train, to_local_train, to_loca
     # frames where every neighbour is seen (usually nearly all): one standardised Gram
     # matrix serves every member (its leading block); too few: the smallest member alone,
     # on the frames where its own neighbours are seen
-    rows = observed[np.ix_(train, feats)].all(axis=1)
+    rows = _block(observed, train, feats).all(axis=1)
     if rows.sum() < max(10, 2 * len(feats)):
         feats = cand[:min(counts)]
-        rows = observed[np.ix_(train, feats)].all(axis=1)
+        rows = _block(observed, train, feats).all(axis=1)
         counts = {len(feats): counts[min(counts)]}
         if rows.sum() < max(10, 2 * len(feats)):
             return out
-    Xt = to_local_train(pos[np.ix_(train, feats)])[rows].reshape(int(rows.sum()), -1)
+    Xt = to_local_train(_block(pos, train, feats))[rows].reshape(int(rows.sum()), -1)
     Yt = to_local_train(pos[train, j][:, None])[rows, 0]
-    Xg = to_local(pos[np.ix_(frames, feats)]).reshape(len(frames), -1)
+    Xg = to_local(_block(pos, frames, feats)).reshape(len(frames), -1)
     for k, Y in zip(counts, _nested_ridge(Xt, Yt, Xg, [3 * k for k in counts], lam)):
         out[f"pose{counts[k]}"] = to_global(Y[:, None])[:, 0]
     return out
@@ -408,15 +396,22 @@ def member_fills(pos, observed, gaps, external, *, local=LOCAL_FILLERS, neighbou
                              mu=mu, weight_scale=weight_scale)
         for g, (_, part) in zip(group, parts):
             fills[g].update({_member_name(f, K, sizes): v for f, v in part.items()})
-    order = [_member_name(f, K, sizes) for n, K in enumerate(sizes) for name in local
-             if n == 0 or name in PER_NEIGHBOUR_COUNT
-             for f in ([f"pose{M}" for M in POSE_SIZES] if name == "pose" else [name])]
+    order = member_names(local, sizes)
     out = []
     for (j, s, e), cand, f in zip(gaps, cands, fills):
         frames = np.arange(max(s - 1, 0), min(e + 1, T))
         f = {name: f[name] for name in order if name in f}
         out.append((cand, _ramped(pos, observed, j, s, e, frames, f, external)))
     return out
+
+
+def member_names(local, neighbours) -> list[str]:
+    """The names of the members :func:`member_fills` computes from the local fillers
+    ``local`` with ``neighbours`` (K or several K), in its order."""
+    sizes = (neighbours,) if np.isscalar(neighbours) else tuple(neighbours)
+    return [_member_name(f, K, sizes) for n, K in enumerate(sizes) for name in local
+            if n == 0 or name in PER_NEIGHBOUR_COUNT
+            for f in ([f"pose{M}" for M in POSE_SIZES] if name == "pose" else [name])]
 
 
 def _member_name(filler: str, K: int, sizes: tuple) -> str:
@@ -427,21 +422,23 @@ def _member_name(filler: str, K: int, sizes: tuple) -> str:
 
 def validated_member_fills(pos, observed, gaps, copies, external, *, local=LOCAL_FILLERS,
                            neighbours=3, weight_scale: float = 300.0, mu=None, sd=None,
-                           max_train: int = 600):
-    """:func:`member_fills` of every gap with each local member's mean squared error on
-    the gap's validation windows. ``copies``: per copy, ``(cut, windows)`` with ``cut`` the
+                           max_train: int = 600, copy_external=None):
+    """:func:`member_fills` of every gap with each member's mean squared error on the
+    gap's validation windows. ``copies``: per copy, ``(cut, windows)`` with ``cut`` the
     observed mask with the copy's windows removed and ``windows`` a list of ``(gap index,
     u, v)``: synthetic gaps of the gap's length where its marker and borders were seen.
     Each copy is filled as a capture of its own (:func:`member_fills` on ``cut``: one fit
-    per marker and neighbour set serves all its windows). Returns one ``(cand, fills,
-    errors)`` per gap, ``errors`` name → mean squared error over the copies (the
-    ``external`` members are not validated here)."""
+    per marker and neighbour set serves all its windows); ``copy_external(cut)`` gives the
+    ``external`` members' fills of the copy (None: the external members are not
+    validated). Returns one ``(cand, fills, errors)`` per gap, ``errors`` name → mean
+    squared error over the copies."""
     real = member_fills(pos, observed, gaps, external, local=local, neighbours=neighbours,
                         weight_scale=weight_scale, mu=mu, sd=sd, max_train=max_train)
     errors = [{} for _ in gaps]
     for cut, windows in copies:
         synth = [(gaps[g][0], u, v) for g, u, v in windows]
-        fills = member_fills(np.where(cut[..., None], pos, np.nan), cut, synth, {}, local=local,
+        fills = member_fills(np.where(cut[..., None], pos, np.nan), cut, synth,
+                             copy_external(cut) if copy_external else {}, local=local,
                              neighbours=neighbours, weight_scale=weight_scale, mu=mu, sd=sd,
                              max_train=max_train)
         for (g, u, v), (_, f) in zip(windows, fills):
