@@ -134,3 +134,85 @@ def test_pose_member_recovers_a_marker_that_follows_its_neighbours_pose():
     assert set(err) == {"interp", "pose6"}          # 7 neighbours: one pose member
     assert err["pose6"] < 0.5, err
     assert err["interp"] > 20 * err["pose6"], err
+
+
+def _centred_ridge(X, Y, mx, sx, lam, Xn):
+    """Independent reference: ridge on the rows given, features scaled by ``mx``/``sx``,
+    centred on these rows, penalty lam·n, by least squares on the augmented system."""
+    Z = (X - mx) / sx
+    zbar, ybar = Z.mean(axis=0), Y.mean(axis=0)
+    n, d = Z.shape
+    A = np.vstack([Z - zbar, np.sqrt(lam * n) * np.eye(d)])
+    b = np.vstack([Y - ybar, np.zeros((d, Y.shape[1]))])
+    B = np.linalg.lstsq(A, b, rcond=None)[0]
+    return ((Xn - mx) / sx - zbar) @ B + ybar
+
+
+def test_ridge_refit_on_other_rows_matches_a_fit_on_those_rows():
+    """A validation copy's model is the real one with rows dropped and added: the same
+    predictions as a ridge fitted on exactly the rows it then has (same scaling)."""
+    rng = np.random.default_rng(0)
+    X = rng.normal(size=(300, 6)) * [1, 5, 0.2, 3, 1, 2] + 4
+    Y = X @ rng.normal(size=(6, 3)) + rng.normal(0, 0.5, size=(300, 3))
+    Xa = rng.normal(size=(40, 6)) * 2 + 4
+    Ya = Xa @ rng.normal(size=(6, 3))
+    Xn = rng.normal(size=(25, 6)) + 4
+    model = kernels.Ridge(X, Y, lam=1e-2)
+    drop = np.zeros(300, bool)
+    drop[50:120] = True
+    got = model.predict(Xn, widths=[6, 4], drop=drop, extra=(Xa, Ya))
+    rows_X, rows_Y = np.vstack([X[~drop], Xa]), np.vstack([Y[~drop], Ya])
+    for w, g in zip([6, 4], got):
+        want = _centred_ridge(rows_X[:, :w], rows_Y, model.mx[:w], model.sx[:w], 1e-2, Xn[:, :w])
+        assert np.allclose(g, want, atol=1e-9), w
+    # no change of rows: the model fitted on all of them
+    assert np.allclose(model.predict(Xn)[0], _centred_ridge(X, Y, model.mx, model.sx, 1e-2, Xn),
+                       atol=1e-9)
+
+
+def test_grnn_with_rows_dropped_and_added_is_the_kernel_mean_over_those_rows():
+    rng = np.random.default_rng(1)
+    X, Y = rng.normal(size=(200, 4)), rng.normal(size=(200, 3))
+    Xa, Ya = rng.normal(size=(30, 4)), rng.normal(size=(30, 3))
+    Xn = rng.normal(size=(10, 4))
+    model = kernels.GRNN(X, Y)
+    drop = np.zeros(200, bool)
+    drop[::3] = True
+    got = model.predict(Xn, drop=drop, extra=(Xa, Ya))
+    Zr = (np.vstack([X[~drop], Xa]) - model.mx) / model.sx
+    Zn = (Xn - model.mx) / model.sx
+    d2 = ((Zn[:, None] - Zr[None]) ** 2).sum(axis=2)
+    w = np.exp(-0.5 * (d2 - d2.min(axis=1, keepdims=True)) / model.spread2)
+    want = (w @ np.vstack([Y[~drop], Ya])) / w.sum(axis=1, keepdims=True)
+    assert np.allclose(got, want, atol=1e-10)
+
+
+def test_local_frames_fit_each_frame_once_with_the_first_reference():
+    """Frames asked for again come from the store; the transforms are those of one direct
+    Kabsch fit onto the reference shape of the first request's frames."""
+    from mocapfix.solvers.rigid import kabsch_to_shape
+
+    pos = _rigid_motion(T=120).positions + np.random.default_rng(2).normal(0, 0.5, (120, 8, 3))
+    markers = np.array([0, 1, 2, 4])
+    store = kernels.LocalFrames()
+    first, second = np.arange(0, 120, 2), np.array([5, 7, 8, 10, 100])
+    (loc_a, _), = store.get("k", pos, markers, (first,), first)
+    (loc_b, glob_b), (loc_c, _) = store.get("k", pos, markers, (second, first[:10]), np.arange(3))
+    ref = kernels._reference(pos[first][:, markers])
+    R, cs, ct = kabsch_to_shape(pos[second][:, markers], ref)
+    x = pos[second][:, [3]]
+    want = (x - cs[:, None]) @ np.swapaxes(R, 1, 2) + ct[:, None]
+    assert np.allclose(loc_b(x), want, atol=1e-9)
+    assert np.allclose(glob_b(loc_b(x)), x, atol=1e-9)
+    assert np.allclose(loc_c(pos[first[:10]][:, [3]]), loc_a(pos[first][:, [3]])[:10])
+
+
+def test_copy_training_keeps_the_real_frames_it_sees_and_as_many():
+    real = np.arange(0, 1000, 2)
+    seen = np.ones(1000, bool)
+    seen[100:200] = False                           # the copy cut a window
+    seen[900:] = False
+    got = kernels._copy_training(real, seen)
+    assert len(got) == len(real)
+    assert seen[got].all() and len(np.unique(got)) == len(got)
+    assert set(real[seen[real]]) <= set(got)

@@ -69,11 +69,14 @@ def _best_rotation(H):
     the Gram–Schmidt basis of its columns; the third axis is the cross product, so
     ``det R = 1``. Each result is checked against Kabsch's optimum ``tr(R H) = s₁ + s₂ +
     sign(det H) s₃``; matrices that fail (degenerate point sets, near-equal small singular
-    values) go through the SVD."""
+    values) go through the SVD, as do batches of fewer than 100 matrices (where the SVD is
+    faster: 0.16 against 0.67 ms for 10, equal near 100)."""
     H = np.asarray(H, dtype=np.float64)
     n = H.shape[0]
     if n == 0:
         return np.zeros((0, 3, 3))
+    if n < 100:                 # the closed form's ~150 array operations cost more here
+        return _best_rotation_svd(H)
     h = [[H[:, i, j] for j in range(3)] for i in range(3)]
     col = [(h[0][j], h[1][j], h[2][j]) for j in range(3)]          # columns of H
     A = [[_dot(col[i], col[j]) for j in range(3)] for i in range(3)]    # HᵀH = V S² Vᵀ
