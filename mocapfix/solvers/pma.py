@@ -110,20 +110,22 @@ class LocalFrames:
         entry = self._store.get(key)
         if entry is None:
             ref = _reference(_block(pos, ref_frames, markers))
-            entry = self._store[key] = {"ref": ref, "frames": np.empty(0, dtype=np.intp),
+            # slot of each frame's fit in R/cs (-1: not fitted yet)
+            entry = self._store[key] = {"ref": ref, "slot": np.full(pos.shape[0], -1, np.intp),
                                         "R": np.empty((0, 3, 3)), "cs": np.empty((0, 3))}
-        new = np.setdiff1d(np.concatenate(frame_sets), entry["frames"])
+        slot = entry["slot"]
+        every = np.concatenate(frame_sets)
+        new = every[slot[every] < 0]
         if len(new):
+            new = np.unique(new)
             R, cs, _ = kabsch_to_shape(_block(pos, new, markers), entry["ref"])
-            every = np.concatenate([entry["frames"], new])
-            order = np.argsort(every, kind="stable")
-            entry["frames"] = every[order]
-            entry["R"] = np.concatenate([entry["R"], R])[order]
-            entry["cs"] = np.concatenate([entry["cs"], cs])[order]
+            slot[new] = len(entry["R"]) + np.arange(len(new))
+            entry["R"] = np.concatenate([entry["R"], R])
+            entry["cs"] = np.concatenate([entry["cs"], cs])
         centre = entry["ref"].mean(axis=0)
         out = []
         for frames in frame_sets:
-            at = np.searchsorted(entry["frames"], frames)
+            at = slot[frames]
             out.append(_transforms(entry["R"][at], entry["cs"][at],
                                    np.broadcast_to(centre, (len(frames), 3))))
         return out
@@ -238,10 +240,12 @@ def _reuse(fits: dict, key, frames: np.ndarray, rows, make):
     caller, with ``drop`` and ``extra`` None."""
     if key in fits:
         model, fitted_on = fits[key]
-        inside = np.isin(fitted_on, frames)
-        added = frames[~np.isin(frames, fitted_on)]
+        size = max(int(fitted_on.max(initial=-1)), int(frames.max(initial=-1))) + 1
+        wanted, had = np.zeros(size, bool), np.zeros(size, bool)
+        wanted[frames], had[fitted_on] = True, True
+        added = frames[~had[frames]]
         if len(added) <= len(frames) // 4:
-            return model, ~inside, (rows(added) if len(added) else None)
+            return model, ~wanted[fitted_on], (rows(added) if len(added) else None)
     model = make(*rows(frames))
     fits[key] = (model, frames)
     return model, None, None
