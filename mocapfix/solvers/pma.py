@@ -85,50 +85,24 @@ def distance_stats(pos: np.ndarray, observed: np.ndarray, min_frames: int = 3):
     return mu, sd
 
 
-def _translation(points: np.ndarray):
-    """``(to_local, to_global)`` of the translation that centres each frame of ``points``
-    (n, K, 3): the local frame of fewer than 3 markers."""
+def _frames(points: np.ndarray, ref: np.ndarray | None):
+    """Rigid transform of each frame of ``points`` (n, K, 3) onto ``ref`` (K, 3); with
+    fewer than 3 points a translation only. Returns ``(to_local, to_global)`` functions of
+    (n, M, 3) arrays."""
+    n, K, _ = points.shape
     centre = points.mean(axis=1)
-    return (lambda x: x - centre[:, None]), (lambda x: x + centre[:, None])
+    if K < 3:
+        return (lambda x: x - centre[:, None]), (lambda x: x + centre[:, None])
+    return _transforms(*kabsch_to_shape(points, ref))
 
 
-class LocalFrames:
-    """Per-frame rigid fits (Kabsch 1976) of a marker's neighbour sets onto their mean
-    shape, each frame fitted once and kept: :func:`validated_member_fills` fills the real
-    gaps and then its validation copies, whose training frames are a subset of the real
-    ones (:func:`member_fills`' ``train``), so most of a copy's fits are already known.
-    Keyed by (marker, neighbour set); the mean shape (:func:`_reference`) is taken from the
-    first request's reference frames (the real capture's training frames)."""
-
-    def __init__(self):
-        self._store: dict = {}
-
-    def get(self, key, pos: np.ndarray, markers: np.ndarray, frame_sets, ref_frames):
-        """``(to_local, to_global)`` on each array of ``frame_sets`` of the rigid frame of
-        ``markers`` (≥ 3, observed on those frames), with the reference shape of
-        ``ref_frames`` on first use; the frames not yet known are fitted in one batch."""
-        entry = self._store.get(key)
-        if entry is None:
-            ref = _reference(_block(pos, ref_frames, markers))
-            # slot of each frame's fit in R/cs (-1: not fitted yet)
-            entry = self._store[key] = {"ref": ref, "slot": np.full(pos.shape[0], -1, np.intp),
-                                        "R": np.empty((0, 3, 3)), "cs": np.empty((0, 3))}
-        slot = entry["slot"]
-        every = np.concatenate(frame_sets)
-        new = every[slot[every] < 0]
-        if len(new):
-            new = np.unique(new)
-            R, cs, _ = kabsch_to_shape(_block(pos, new, markers), entry["ref"])
-            slot[new] = len(entry["R"]) + np.arange(len(new))
-            entry["R"] = np.concatenate([entry["R"], R])
-            entry["cs"] = np.concatenate([entry["cs"], cs])
-        centre = entry["ref"].mean(axis=0)
-        out = []
-        for frames in frame_sets:
-            at = slot[frames]
-            out.append(_transforms(entry["R"][at], entry["cs"][at],
-                                   np.broadcast_to(centre, (len(frames), 3))))
-        return out
+def _frames_two(first: np.ndarray, second: np.ndarray, ref: np.ndarray):
+    """:func:`_frames` of two point sets (n1, K, 3) and (n2, K, 3), K ≥ 3, with one
+    batched Kabsch fit (the same values as two calls)."""
+    both = np.concatenate([first, second])
+    R, cs, ct = kabsch_to_shape(both, ref)
+    n1 = len(first)
+    return (_transforms(R[:n1], cs[:n1], ct[:n1]), _transforms(R[n1:], cs[n1:], ct[n1:]))
 
 
 def _transforms(R, cs, ct):
@@ -159,109 +133,42 @@ def _reference(points: np.ndarray) -> np.ndarray:
     return ((points - cs[:, None]) @ np.swapaxes(R, 1, 2) + ct[:, None]).mean(axis=0)
 
 
-class Ridge:
-    """Ridge regression of ``Y`` on standardised features (penalty λ·n), predicting from
-    the first ``w`` columns for each requested width (nested models from one Gram
-    matrix), and refitted on other training rows when asked (``drop`` some of its rows,
-    add ``extra`` ones): their sums are subtracted or added and the model re-centred on
-    the rows it then has (the standardisation stays). A validation copy's training frames
-    are mostly the real capture's, so its model is the real one with a few rows changed
-    (:func:`_reuse`)."""
-
-    def __init__(self, X: np.ndarray, Y: np.ndarray, lam: float = 1e-3):
-        self.mx, self.sx = X.mean(axis=0), X.std(axis=0)
-        self.sx[self.sx < 1e-9] = 1.0
-        self.Z, self.Y, self.lam = (X - self.mx) / self.sx, Y, lam
-        self.sums = (len(X), self.Z.sum(axis=0), self.Z.T @ self.Z, Y.sum(axis=0),
-                     self.Z.T @ Y)
-
-    def predict(self, Xn: np.ndarray, widths=None, drop=None, extra=None) -> list:
-        n, s1, s2, sy, szy = self.sums
-        if drop is not None and drop.any():
-            Zd, Yd = self.Z[drop], self.Y[drop]
-            n, s1, s2 = n - len(Zd), s1 - Zd.sum(axis=0), s2 - Zd.T @ Zd
-            sy, szy = sy - Yd.sum(axis=0), szy - Zd.T @ Yd
-        if extra is not None:
-            Za, Ya = (extra[0] - self.mx) / self.sx, extra[1]
-            n, s1, s2 = n + len(Za), s1 + Za.sum(axis=0), s2 + Za.T @ Za
-            sy, szy = sy + Ya.sum(axis=0), szy + Za.T @ Ya
-        zbar, ybar = s1 / n, sy / n
-        G = s2 - n * np.outer(zbar, zbar)
-        b = szy - n * np.outer(zbar, ybar)
-        Zn = (Xn - self.mx) / self.sx - zbar
-        out = []
-        for w in widths or [len(zbar)]:
-            B = np.linalg.solve(G[:w, :w] + self.lam * n * np.eye(w), b[:w])
-            out.append(Zn[:, :w] @ B + ybar)
-        return out
+def _ridge(X: np.ndarray, Y: np.ndarray, lam: float = 1e-3):
+    """Ridge regression with standardised features; returns a predictor
+    (:func:`_nested_ridge` on all the columns)."""
+    return lambda Xn: _nested_ridge(X, Y, Xn, [X.shape[1]], lam)[0]
 
 
-class GRNN:
-    """GRNN (Specht 1991): Gaussian-kernel weighted mean of the training targets; spread =
-    the median distance of a training point to its 5th nearest neighbour. At prediction
-    ``drop`` leaves training rows out and ``extra`` adds others (spread and
-    standardisation kept)."""
+def _grnn(X: np.ndarray, Y: np.ndarray, max_train: int = 800):
+    """GRNN (Specht 1991) predictor: Gaussian-kernel weighted mean of the training targets;
+    spread = the median distance of a training point to its 5th nearest neighbour."""
+    if len(X) > max_train:
+        pick = np.linspace(0, len(X) - 1, max_train).astype(int)
+        X, Y = X[pick], Y[pick]
+    mx, sx = X.mean(axis=0), X.std(axis=0)
+    sx[sx < 1e-9] = 1.0
+    Z = (X - mx) / sx
+    sq = (Z ** 2).sum(axis=1)
+    D2 = np.maximum(sq[:, None] + sq[None, :] - 2 * Z @ Z.T, 0.0)
+    k = min(5, len(Z) - 1)
+    spread2 = float(np.median(np.partition(D2, k, axis=1)[:, k])) if k > 0 else 1.0
+    spread2 = max(spread2, 1e-9)
 
-    def __init__(self, X: np.ndarray, Y: np.ndarray, max_train: int = 800):
-        self.rows = np.arange(len(X))
-        if len(X) > max_train:
-            self.rows = np.linspace(0, len(X) - 1, max_train).astype(int)
-            X, Y = X[self.rows], Y[self.rows]
-        self.mx, self.sx = X.mean(axis=0), X.std(axis=0)
-        self.sx[self.sx < 1e-9] = 1.0
-        self.Z, self.Y = (X - self.mx) / self.sx, Y
-        self.sq = (self.Z ** 2).sum(axis=1)
-        D2 = np.maximum(self.sq[:, None] + self.sq[None, :] - 2 * self.Z @ self.Z.T, 0.0)
-        k = min(5, len(self.Z) - 1)
-        spread2 = float(np.median(np.partition(D2, k, axis=1)[:, k])) if k > 0 else 1.0
-        self.spread2 = max(spread2, 1e-9)
-
-    def predict(self, Xn: np.ndarray, drop=None, extra=None) -> np.ndarray:
-        Z, sq, Y = self.Z, self.sq, self.Y
-        if drop is not None and drop.any():
-            keep = ~drop[self.rows]
-            Z, sq, Y = Z[keep], sq[keep], Y[keep]
-        if extra is not None:
-            Za = (extra[0] - self.mx) / self.sx
-            Z, sq, Y = (np.concatenate([Z, Za]), np.concatenate([sq, (Za ** 2).sum(axis=1)]),
-                        np.concatenate([Y, extra[1]]))
-        Zn = (Xn - self.mx) / self.sx
+    def predict(Xn):
+        Zn = (Xn - mx) / sx
         d2 = np.maximum((Zn ** 2).sum(axis=1)[:, None] + sq[None, :] - 2 * Zn @ Z.T, 0.0)
         d2 -= d2.min(axis=1, keepdims=True)              # stable exponent
-        w = np.exp(-0.5 * d2 / self.spread2)
+        w = np.exp(-0.5 * d2 / spread2)
         return (w @ Y) / w.sum(axis=1, keepdims=True)
-
-
-def _reuse(fits: dict, key, frames: np.ndarray, rows, make):
-    """``(model, drop, extra)``: the model stored under ``key`` when ``frames`` (sorted,
-    unique) share all but a quarter of its training frames, with ``drop`` marking its
-    training rows not in ``frames`` and ``extra`` the training rows ``rows(added)`` of the
-    frames it lacks (None when none); else ``make(*rows(frames))``, stored for the next
-    caller, with ``drop`` and ``extra`` None."""
-    if key in fits:
-        model, fitted_on = fits[key]
-        size = max(int(fitted_on.max(initial=-1)), int(frames.max(initial=-1))) + 1
-        wanted, had = np.zeros(size, bool), np.zeros(size, bool)
-        wanted[frames], had[fitted_on] = True, True
-        added = frames[~had[frames]]
-        if len(added) <= len(frames) // 4:
-            return model, ~wanted[fitted_on], (rows(added) if len(added) else None)
-    model = make(*rows(frames))
-    fits[key] = (model, frames)
-    return model, None, None
+    return predict
 
 
 def _poly(z: np.ndarray) -> np.ndarray:
     return np.concatenate([z, z ** 2], axis=1)
 
 
-def _poly_rows(X: np.ndarray, Y: np.ndarray):
-    return _poly(X), Y
-
-
 def window_fills(pos, observed, j, windows, neighbours, train, body, *,
-                 fillers=LOCAL_FILLERS, weight_scale: float = 300.0, mu=None, frames_of=None,
-                 fits=None):
+                 fillers=LOCAL_FILLERS, weight_scale: float = 300.0, mu=None):
     """The local fillers' estimates of marker ``j`` on each window ``(s, e)``, on frames
     ``s-1 .. e`` (the gap plus the border frames that exist), from one fit of each filler
     on ``train``: the regressions are learnt once and predict every window (a real gap
@@ -270,32 +177,22 @@ def window_fills(pos, observed, j, windows, neighbours, train, body, *,
 
     ``neighbours``: indices of the rigid neighbours; ``body``: the markers of ``linear``
     and ``pose`` (most rigid first); both observed on every window's frames. ``train``:
-    frames where ``j`` is observed. ``weight_scale`` in the data's units. ``frames_of``
-    (:class:`LocalFrames`) and ``fits`` (model key → (model, training frames)) carry the
-    rigid fits and the models from one call to the next: a model fitted on a superset of
-    this call's training frames is reused less the frames not in this call's
-    (:func:`_reuse`)."""
+    frames where ``j`` is observed. ``weight_scale`` in the data's units."""
     T = pos.shape[0]
     spans = [np.arange(max(s - 1, 0), min(e + 1, T)) for s, e in windows]
     frames = np.concatenate(spans)
     cuts = np.cumsum([len(f) for f in spans])[:-1]
     out = {}
     K = len(neighbours)
-    frames_of = LocalFrames() if frames_of is None else frames_of
-    fits = {} if fits is None else fits
     if K and set(fillers) & {"interp", "poly", "grnn", "pose"}:
         tr_local = train[_block(observed, train, neighbours).all(axis=1)]
-        key = (j, tuple(neighbours.tolist()))
-        if K >= 3:
-            (loc, glob), _ = frames_of.get(key, pos, neighbours, (frames, tr_local),
-                                           tr_local if len(tr_local) else frames)
+        nb = _block(pos, frames, neighbours)
+        nb_train = _block(pos, tr_local, neighbours)
+        ref = _reference(nb_train if len(tr_local) else nb)
+        if K >= 3 and len(tr_local) >= max(10, 2 * K):
+            (loc, glob), (tl, _) = _frames_two(nb, nb_train, ref)
         else:
-            loc, glob = _translation(_block(pos, frames, neighbours))
-
-        def local_on(fr):
-            """The local frame's transform on frames ``fr`` (K ≥ 3)."""
-            return frames_of.get(key, pos, neighbours, (fr,), tr_local)[0][0]
-
+            (loc, glob), tl = _frames(nb, ref), None
         if "interp" in fillers:
             lj = loc(np.nan_to_num(pos[frames, j])[:, None])[:, 0]
             ramps = []
@@ -307,51 +204,39 @@ def window_fills(pos, observed, j, windows, neighbours, train, body, *,
                 f = (np.arange(n) / max(n - 1, 1))[:, None]
                 ramps.append((1 - f) * a + f * b)
             out["interp"] = glob(np.concatenate(ramps)[:, None])[:, 0]
-        if len(tr_local) >= max(10, 2 * K) and K >= 3:
-            Xg = loc(_block(pos, frames, neighbours)).reshape(len(frames), -1)
-            memo = {}
-
-            def rows(fr):
-                """Training rows (neighbours, marker) in the local frame on frames ``fr``."""
-                if fr.tobytes() not in memo:
-                    tl = local_on(fr)
-                    memo[fr.tobytes()] = (tl(_block(pos, fr, neighbours)).reshape(len(fr), -1),
-                                          tl(pos[fr, j][:, None])[:, 0])
-                return memo[fr.tobytes()]
-
-            if "poly" in fillers:
-                model, drop, extra = _reuse(fits, key + ("poly",), tr_local,
-                                            lambda fr: _poly_rows(*rows(fr)), Ridge)
-                out["poly"] = glob(model.predict(_poly(Xg), drop=drop, extra=extra)[0][:, None])[:, 0]
-            if "grnn" in fillers:
-                model, drop, extra = _reuse(fits, key + ("grnn",), tr_local, rows, GRNN)
-                out["grnn"] = glob(model.predict(Xg, drop=drop, extra=extra)[:, None])[:, 0]
-            if "pose" in fillers:
-                out.update(pose_fills(pos, observed, j, frames, body, K, tr_local, local_on, loc,
-                                      glob, fits=fits, key=key))
+        if len(tr_local) >= max(10, 2 * K):
+            if tl is None:
+                tl, _ = _frames(nb_train, ref)
+            Xt = tl(nb_train).reshape(len(tr_local), -1)
+            Yt = tl(pos[tr_local, j][:, None])[:, 0]
+            Xg = loc(nb).reshape(len(frames), -1)
+            if "poly" in fillers and K >= 3:
+                out["poly"] = glob(_ridge(_poly(Xt), Yt)(_poly(Xg))[:, None])[:, 0]
+            if "grnn" in fillers and K >= 3:
+                out["grnn"] = glob(_grnn(Xt, Yt)(Xg)[:, None])[:, 0]
+            if "pose" in fillers and K >= 3:
+                out.update(pose_fills(pos, observed, j, frames, body, K, tr_local, tl, loc,
+                                      glob))
     if "linear" in fillers and len(body) >= 3:
         tr = train[_block(observed, train, body).all(axis=1)]
-        d = mu[j, body] if mu is not None else np.zeros(len(body))
-        w = np.repeat(np.exp(-0.5 * (np.nan_to_num(d, nan=1e9) / weight_scale) ** 2), 3)
-        keep = w > 1e-6
-        if len(tr) >= max(10, len(body)) and keep.sum() >= 3:
-            key = (j, tuple(body.tolist()))
-            (loc, glob), _ = frames_of.get(key, pos, body, (frames, tr), tr)
-
-            def body_rows(fr):
-                tl = frames_of.get(key, pos, body, (fr,), tr)[0][0]
-                X = tl(_block(pos, fr, body)).reshape(len(fr), -1) * w
-                return X[:, keep], tl(pos[fr, j][:, None])[:, 0]
-
-            model, drop, extra = _reuse(fits, key + ("linear",), tr, body_rows, Ridge)
-            Xg = loc(_block(pos, frames, body)).reshape(len(frames), -1) * w
-            out["linear"] = glob(model.predict(Xg[:, keep], drop=drop, extra=extra)[0][:, None])[:, 0]
+        if len(tr) >= max(10, len(body)):
+            body_train, body_gap = _block(pos, tr, body), _block(pos, frames, body)
+            ref = _reference(body_train)
+            (tl, _), (loc, glob) = _frames_two(body_train, body_gap, ref)
+            d = mu[j, body] if mu is not None else np.zeros(len(body))
+            w = np.repeat(np.exp(-0.5 * (np.nan_to_num(d, nan=1e9) / weight_scale) ** 2), 3)
+            Xt = tl(body_train).reshape(len(tr), -1) * w
+            Yt = tl(pos[tr, j][:, None])[:, 0]
+            Xg = loc(body_gap).reshape(len(frames), -1) * w
+            keep = w > 1e-6
+            if keep.sum() >= 3:
+                out["linear"] = glob(_ridge(Xt[:, keep], Yt)(Xg[:, keep])[:, None])[:, 0]
     parts = {k: np.split(v, cuts) for k, v in out.items()}
     return [(f, {k: v[i] for k, v in parts.items()}) for i, f in enumerate(spans)]
 
 
-def pose_fills(pos, observed, j, frames, cand, K, train, local_on, to_local, to_global,
-               *, sizes=POSE_SIZES, lam: float = 1e-3, fits=None, key=()):
+def pose_fills(pos, observed, j, frames, cand, K, train, to_local_train, to_local, to_global,
+               *, sizes=POSE_SIZES, lam: float = 1e-3):
     """The ``pose`` members: marker ``j`` in the rigid frame (Kabsch 1976) of its ``K``
     most rigid neighbours, predicted by a linear ridge regression on the coordinates, in
     that same frame, of its ``K + M`` most rigid neighbours (one member ``poseM`` per
@@ -363,11 +248,9 @@ def pose_fills(pos, observed, j, frames, cand, K, train, local_on, to_local, to_
 
     ``cand``: the neighbours observed on ``frames`` (the gap and its borders), most rigid
     first, the first ``K`` being the frame's; ``train``: frames where ``j`` and the frame
-    markers are seen; ``local_on(frames)`` gives the frame's transform on any of them,
-    ``to_local``, ``to_global`` those on ``frames`` (:class:`LocalFrames`, shared with
-    ``poly``/``grnn``); ``fits``/``key``: as :func:`window_fills`' (the model's key is
-    ``key`` and its markers). Returns name → (len(frames), 3), not yet ramped to the
-    borders."""
+    markers are seen; ``to_local_train``, ``to_local``, ``to_global``: the frame's
+    transforms on ``train`` and on ``frames`` (:func:`_frames_two`, shared with
+    ``poly``/``grnn``). Returns name → (len(frames), 3), not yet ramped to the borders."""
     out = {}
     feats = cand[:K + max(sizes)]
     if len(feats) <= K:
@@ -385,17 +268,27 @@ def pose_fills(pos, observed, j, frames, cand, K, train, local_on, to_local, to_
         counts = {len(feats): counts[min(counts)]}
         if rows.sum() < max(10, 2 * len(feats)):
             return out
-
-    def feature_rows(fr):
-        tl = local_on(fr)
-        return (tl(_block(pos, fr, feats)).reshape(len(fr), -1), tl(pos[fr, j][:, None])[:, 0])
-
-    model, drop, extra = _reuse({} if fits is None else fits,
-                                key + ("pose", tuple(feats.tolist())), train[rows], feature_rows,
-                                lambda X, Y: Ridge(X, Y, lam))
+    Xt = to_local_train(_block(pos, train, feats))[rows].reshape(int(rows.sum()), -1)
+    Yt = to_local_train(pos[train, j][:, None])[rows, 0]
     Xg = to_local(_block(pos, frames, feats)).reshape(len(frames), -1)
-    for k, Y in zip(counts, model.predict(Xg, [3 * k for k in counts], drop, extra)):
+    for k, Y in zip(counts, _nested_ridge(Xt, Yt, Xg, [3 * k for k in counts], lam)):
         out[f"pose{counts[k]}"] = to_global(Y[:, None])[:, 0]
+    return out
+
+
+def _nested_ridge(X, Y, Xn, widths, lam: float = 1e-3):
+    """:func:`_ridge` of ``Y`` on the first ``w`` columns of ``X`` for each ``w`` in
+    ``widths``, predicted at ``Xn``: one standardisation and one Gram matrix, each fit
+    solving its leading block (the same values as separate calls)."""
+    mx, sx = X.mean(axis=0), X.std(axis=0)
+    sx[sx < 1e-9] = 1.0
+    my = Y.mean(axis=0)
+    Z, Zn = (X - mx) / sx, (Xn - mx) / sx
+    G, b = Z.T @ Z, Z.T @ (Y - my)
+    out = []
+    for w in widths:
+        B = np.linalg.solve(G[:w, :w] + lam * len(Z) * np.eye(w), b[:w])
+        out.append(Zn[:, :w] @ B + my)
     return out
 
 
@@ -462,17 +355,13 @@ def gap_list(observed: np.ndarray, max_gap: float | None = None, fill_ends: bool
 
 
 def member_fills(pos, observed, gaps, external, *, local=LOCAL_FILLERS, neighbours=3,
-                 weight_scale: float = 300.0, mu=None, sd=None, max_train: int = 600,
-                 train=None, frames_of=None, fits=None):
+                 weight_scale: float = 300.0, mu=None, sd=None, max_train: int = 600):
     """Every member's fill of every gap, ramped to meet the borders.
 
     ``external``: name → (T, J, 3) fills computed elsewhere (NaN where not filled);
     ``neighbours``: K, or several K (the local fillers then run once per K, named
     ``interp3``, ``interp5``, ...); ``max_train``: the regressions learn from at most this
-    many frames where the marker is seen (evenly spaced); ``train``: marker → its training
-    frames, filled in for the markers it lacks (a validation copy passes the real
-    capture's, less the frames it cut); ``frames_of``, ``fits``: the rigid fits and models
-    kept across copies (:func:`window_fills`). Returns
+    many frames where the marker is seen (evenly spaced). Returns
     one entry per gap: ``(cand, fills)`` with ``cand`` the markers observed on the gap and
     its borders, most rigid first, and ``fills`` name → (gap length, 3).
 
@@ -497,17 +386,14 @@ def member_fills(pos, observed, gaps, external, *, local=LOCAL_FILLERS, neighbou
             if n == 0 and "linear" in local:
                 jobs.setdefault((j, ("linear",), K, (), tuple(cand)), []).append(g)
     fills = [{} for _ in gaps]
-    train = {} if train is None else train
-    frames_of = LocalFrames() if frames_of is None else frames_of
-    fits = {} if fits is None else fits
+    train = {}
     for (j, members, K, markers, body), group in jobs.items():
         if j not in train:
             train[j] = _training_frames(observed[:, j], max_train)
         parts = window_fills(pos, observed, j, [gaps[g][1:] for g in group],
                              np.array(markers, dtype=np.intp), train[j],
                              np.array(body, dtype=np.intp), fillers=members,
-                             mu=mu, weight_scale=weight_scale, frames_of=frames_of,
-                             fits=fits)
+                             mu=mu, weight_scale=weight_scale)
         for g, (_, part) in zip(group, parts):
             fills[g].update({_member_name(f, K, sizes): v for f, v in part.items()})
     order = member_names(local, sizes)
@@ -542,27 +428,19 @@ def validated_member_fills(pos, observed, gaps, copies, external, *, local=LOCAL
     observed mask with the copy's windows removed and ``windows`` a list of ``(gap index,
     u, v)``: synthetic gaps of the gap's length where its marker and borders were seen.
     Each copy is filled as a capture of its own (:func:`member_fills` on ``cut``: one fit
-    per marker and neighbour set serves all its windows), its models learning from the
-    real capture's training frames it still sees, topped up to as many
-    (:func:`_copy_training`): the real capture's models with those rows changed
-    (:class:`Ridge`, :class:`GRNN`, :func:`_reuse`) and its rigid fits
-    (:class:`LocalFrames`) serve the copies;
-    ``copy_external(cut)`` gives the
+    per marker and neighbour set serves all its windows); ``copy_external(cut)`` gives the
     ``external`` members' fills of the copy (None: the external members are not
     validated). Returns one ``(cand, fills, errors)`` per gap, ``errors`` name → mean
     squared error over the copies."""
-    train, frames_of, fits = {}, LocalFrames(), {}
     real = member_fills(pos, observed, gaps, external, local=local, neighbours=neighbours,
-                        weight_scale=weight_scale, mu=mu, sd=sd, max_train=max_train,
-                        train=train, frames_of=frames_of, fits=fits)
+                        weight_scale=weight_scale, mu=mu, sd=sd, max_train=max_train)
     errors = [{} for _ in gaps]
     for cut, windows in copies:
         synth = [(gaps[g][0], u, v) for g, u, v in windows]
         fills = member_fills(np.where(cut[..., None], pos, np.nan), cut, synth,
                              copy_external(cut) if copy_external else {}, local=local,
                              neighbours=neighbours, weight_scale=weight_scale, mu=mu, sd=sd,
-                             max_train=max_train, frames_of=frames_of, fits=fits,
-                             train={j: _copy_training(t, cut[:, j]) for j, t in train.items()})
+                             max_train=max_train)
         for (g, u, v), (_, f) in zip(windows, fills):
             j = gaps[g][0]
             for name, value in f.items():
@@ -570,22 +448,6 @@ def validated_member_fills(pos, observed, gaps, copies, external, *, local=LOCAL
                     float(np.mean(np.sum((value - pos[u:v, j]) ** 2, axis=1))))
     return [(cand, f, {k: float(np.mean(v)) for k, v in err.items()})
             for (cand, f), err in zip(real, errors)]
-
-
-def _copy_training(real: np.ndarray, seen: np.ndarray) -> np.ndarray:
-    """A validation copy's training frames of a marker: the real capture's (``real``) it
-    still sees, topped up to as many with other frames it sees (evenly spaced), so that a
-    member is validated with as much data as it fills the real gap with (with fewer, the
-    choice of members was worse: HDM05, 6 seeds, gap RMSE 3.51 against 3.30 mm)."""
-    kept = real[seen[real]]
-    short = len(real) - len(kept)
-    others = np.flatnonzero(seen)
-    others = others[~np.isin(others, real)]
-    if short <= 0 or not len(others):
-        return kept
-    if len(others) > short:
-        others = others[np.linspace(0, len(others) - 1, short).astype(int)]
-    return np.union1d(kept, others)
 
 
 def _candidates(observed, sd, j, s, e):
