@@ -223,6 +223,8 @@ class PartletDictionary(FittedCleaner):
         Param("frame_noise", "length", "20 mm", "noise level above which the frame smoothing grows in "
               "proportion (up to 6×; 0: fixed)", unit="mm", low=0.0, high=10.0),
         Param("bones", "bool", True, "project the cleaned bones to their median lengths (files with a skeleton)"),
+        Param("coarse_noise", "length", "180 mm", "noise level above which the model's coarse scale (longer "
+              "windows) codes the file, if it has one (0: never)", unit="mm", low=0.0, high=10.0),
         Param("detail", "bool", True, "add back the residual detail the dictionary misses, "
               "Wiener-weighted against the noise level", ),
         Param("out_of_sample", "float", 0.005, "warn when a partlet's dictionary leaves more than this "
@@ -234,6 +236,9 @@ class PartletDictionary(FittedCleaner):
         Param("window", "int", 16, "training: window length m in samples", low=1, high=200),
         Param("sample_rate", "frequency", "120 Hz", "training: rate of the window samples", unit="Hz",
               low=1.0, high=10000.0),
+        Param("coarse_rate", "frequency", "30 Hz", "training: rate of the window samples of a second, coarse "
+              "scale (windows as long in samples; none unless below half the sample rate)", unit="Hz",
+              low=0.0, high=10000.0),
         Param("train_lambda", "length", "50 mm", "training: outlier weight λ of eq. 5 (as a length)",
               unit="mm", low=0.0, high=10.0),
         Param("beta", "float", 0.05, "training: sparsity β of eq. 5, relative to the median window norm",
@@ -257,6 +262,7 @@ class PartletDictionary(FittedCleaner):
         self.method_ = None
         self.sample_rate_ = None
         self.window_ = None
+        self.coarse_ = None
         self.n_iter_ = None
         self.training_ = None
 
@@ -344,33 +350,50 @@ class PartletDictionary(FittedCleaner):
         self.partlets_ = {k: list(v) for k, v in groups.items()}
         self.sample_rate_, self.window_ = rate, m
         rng = np.random.default_rng(self.values["seed"])
-        data = {p: [] for p in bodyparts.PARTLETS}
+        coarse = self.values["coarse_rate"].si
+        scales = [rate] + ([coarse] if 0 < coarse <= rate / 2 else [])
+        data = [{p: [] for p in bodyparts.PARTLETS} for _ in scales]
         frames = []
         for mo in motions:
             P = self._model_positions(mo, joints)
             local, *_rest, centre, _ = self._normalise(P, mo.fps)
             X = local - centre
-            dil = self._dilation(mo.fps)
             frames.append(len(P))
-            starts = _starts(len(P), m, dil, max(1, dil // 2))
-            if not len(starts):
-                continue
-            for p in bodyparts.PARTLETS:
-                Xp = X[:, self.partlets_[p]].reshape(len(P), -1)
-                W = _windows(Xp, m, dil, starts)
-                W = W[:, ~np.isnan(W).any(axis=0)]
-                data[p].append(W)
-        self.dictionary_, self.unexplained_ = {}, {}
+            for k, r in enumerate(scales):
+                dil = max(1, int(round(mo.fps / r)))
+                # fine scale: a window every half window sample; coarse: every ``dil`` samples
+                # (a quarter as many windows as the fine scale at 30 of 120 Hz)
+                starts = _starts(len(P), m, dil, max(1, dil // 2) if k == 0 else dil)
+                if not len(starts):
+                    continue
+                for p in bodyparts.PARTLETS:
+                    Xp = X[:, self.partlets_[p]].reshape(len(P), -1)
+                    W = _windows(Xp, m, dil, starts)
+                    W = W[:, ~np.isnan(W).any(axis=0)]
+                    data[k][p].append(W)
         K = self.values["atoms"]
+        total = len(bodyparts.PARTLETS) * len(scales)
         with blas_single_thread():
-            iters = self._fit_partlets(data, K, rng, progress)
+            self.dictionary_, self.unexplained_, iters = self._fit_partlets(data[0], K, rng, progress, total)
+            self.coarse_ = None
+            if len(scales) > 1 and all(data[1].values()):
+                # its own random stream: the fine scale's dictionaries do not depend on it
+                crng = np.random.default_rng(self.values["seed"] + 1)
+                done = len(bodyparts.PARTLETS)
+                step = (lambda n, t: progress(done + n, total)) if progress else None
+                D, unexplained, _ = self._fit_partlets(data[1], K, crng, step, total)
+                self.coarse_ = {"dictionary": D, "unexplained": unexplained, "window": m,
+                                "sample_rate": scales[1]}
         self.method_ = self.values["method"]
         self.n_iter_ = iters
         self.training_ = {"frames": int(sum(frames)), "seconds": round(time.perf_counter() - started, 3)}
         return self
 
-    def _fit_partlets(self, data, K, rng, progress):
+    def _fit_partlets(self, data, K, rng, progress, total):
+        """Dictionaries of every partlet from its windows → (dictionaries, unexplained
+        energy fractions, iterations)."""
         iters = 0
+        dictionary, unexplained = {}, {}
         for n, p in enumerate(bodyparts.PARTLETS):
             B = np.concatenate(data[p], axis=1)
             if B.shape[1] > self.values["max_windows"]:
@@ -383,11 +406,11 @@ class PartletDictionary(FittedCleaner):
                 D, W, E, iters = self._train_robust(B, K, rng)
             D = D.astype(np.float64)
             R = B - D @ W - E
-            self.unexplained_[p] = float(np.vdot(R, R) / max(np.vdot(B, B), 1e-300))
-            self.dictionary_[p] = D
+            unexplained[p] = float(np.vdot(R, R) / max(np.vdot(B, B), 1e-300))
+            dictionary[p] = D
             if progress:
-                progress(n + 1, len(bodyparts.PARTLETS))
-        return iters
+                progress(n + 1, total)
+        return dictionary, unexplained, iters
 
     @staticmethod
     def _model_positions(motion: Motion, joints: list[str]) -> np.ndarray:
@@ -441,10 +464,14 @@ class PartletDictionary(FittedCleaner):
                       "frame_joints": [int(j) for j in self.frame_], "method": self.method_,
                       "sample_rate": self.sample_rate_, "window": self.window_,
                       "unexplained": self.unexplained_, "n_iter": self.n_iter_,
+                      "coarse": None if self.coarse_ is None else {
+                          k: self.coarse_[k] for k in ("window", "sample_rate", "unexplained")},
                       "normalisation": "torso frame (robust Kabsch to template, smoothed), "
                                        "each joint centred on the file's median"},
         }
         arrays = {f"dictionary_{p}": D for p, D in self.dictionary_.items()}
+        if self.coarse_ is not None:
+            arrays.update({f"coarse_{p}": D for p, D in self.coarse_["dictionary"].items()})
         arrays["template"] = self.template_
         return header, arrays
 
@@ -467,6 +494,16 @@ class PartletDictionary(FittedCleaner):
                 raise ValueError(f"dictionary {p} has {D.shape[0]} rows for "
                                  f"{len(self.partlets_[p])} joints × window {self.window_}")
             self.dictionary_[p] = D
+        self.coarse_ = None
+        if st.get("coarse"):   # models before the coarse scale have none
+            c = st["coarse"]
+            D = {p: np.asarray(arrays[f"coarse_{p}"], dtype=float) for p in bodyparts.PARTLETS}
+            for p, Dp in D.items():
+                if Dp.shape[0] != 3 * len(self.partlets_[p]) * int(c["window"]):
+                    raise ValueError(f"coarse dictionary {p} has {Dp.shape[0]} rows for "
+                                     f"{len(self.partlets_[p])} joints × window {c['window']}")
+            self.coarse_ = {"dictionary": D, "unexplained": dict(c["unexplained"]),
+                            "window": int(c["window"]), "sample_rate": float(c["sample_rate"])}
         if self.template_.shape != (len(self.frame_), 3):
             raise ValueError("template does not match the frame joints")
         return self
@@ -528,6 +565,16 @@ class PartletDictionary(FittedCleaner):
         info["suspect"] = int(suspect.sum())
         raw_sigma = noise_level(np.where(suspect[..., None], np.nan, P).reshape(T, -1))
         sigma = noise_level(X[:, self.frame_].reshape(T, -1))
+        dictionary = self.dictionary_
+        limit = self.values["coarse_noise"].si
+        if self.coarse_ is not None and limit > 0 and sigma > limit:
+            # heavy noise: windows as long in samples at the coarse rate (16 at 30 Hz: 0.5 s
+            # instead of 0.13 s) constrain the low frequencies the short windows let through
+            cdil = max(1, int(round(motion.fps / self.coarse_["sample_rate"])))
+            cstarts = _starts(T, self.coarse_["window"], cdil, self.values["stride"])
+            if len(cstarts):
+                dictionary, m, dil, starts = self.coarse_["dictionary"], self.coarse_["window"], cdil, cstarts
+                info.update({"scale": "coarse", "dilation": dil})
         total = np.zeros_like(X)
         count = np.zeros(X.shape[:2])
         unexplained, iters = {}, 0
@@ -536,7 +583,7 @@ class PartletDictionary(FittedCleaner):
             Xp = X[:, joints]
             if np.isnan(Xp).all():
                 continue
-            rec, frac, it = self._code_partlet(Xp, self.dictionary_[p], starts, dil, sigma, coding, motion.fps,
+            rec, frac, it = self._code_partlet(Xp, dictionary[p], starts, m, dil, sigma, coding, motion.fps,
                                                suspect[:, joints])
             total[:, joints] += rec
             count[:, joints] += 1
@@ -567,11 +614,11 @@ class PartletDictionary(FittedCleaner):
                                + ", ".join(high) + ": the dictionary explains little of it")
         return motion.replace(positions=pos), info
 
-    def _code_partlet(self, Xp, D, starts, dil, sigma, coding, fps, suspect=None):
-        """Robust structured sparse coding of one partlet (eq. 11), or OMP (Xiao 2015).
+    def _code_partlet(self, Xp, D, starts, m, dil, sigma, coding, fps, suspect=None):
+        """Robust structured sparse coding of one partlet (eq. 11), or OMP (Xiao 2015),
+        with windows of ``m`` samples ``dil`` frames apart.
         Returns (reconstruction (T, n, 3), unexplained energy fraction, iterations)."""
         T, n, _ = Xp.shape
-        m = self.window_
         flat = Xp.reshape(T, -1)
         missing = np.isnan(Xp).any(axis=2)
         if suspect is not None and suspect.any():
