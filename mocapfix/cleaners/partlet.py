@@ -100,6 +100,7 @@ from mocapfix.motion import Motion
 from mocapfix.solvers import sparse
 from mocapfix.solvers.bone_projection import project_lengths
 from mocapfix.solvers.dct import gcv_smooth
+from mocapfix.solvers.local_sure import local_sure_smooth
 from mocapfix.solvers.lowrank import blas_single_thread
 from mocapfix.solvers.rigid import from_frame, kabsch, to_frame, torso_frames
 from mocapfix.solvers.segments import linear_bridge
@@ -182,6 +183,17 @@ def rigid_bones(a: np.ndarray, b: np.ndarray, sigma: float, *, factor: float = 2
     return enough & (spread <= factor * expected + 0.01 * L2)
 
 
+def channel_noise(X: np.ndarray) -> np.ndarray:
+    """σ̂ per channel of X (T, c), as :func:`noise_level` (NaN samples skipped; 0 for a
+    channel with no second difference)."""
+    d2 = np.sort(np.abs(X[2:] - 2 * X[1:-1] + X[:-2]), axis=0)     # NaN sort last
+    k = np.isfinite(d2).sum(axis=0)
+    cols = np.arange(d2.shape[1])
+    lo, hi = np.maximum(k - 1, 0) // 2, np.minimum(k // 2, max(len(d2) - 1, 0))
+    med = 0.5 * (d2[lo, cols] + d2[hi, cols]) if len(d2) else np.zeros(X.shape[1])
+    return np.where(k > 0, np.nan_to_num(med), 0.0) / 0.6745 / np.sqrt(6.0)
+
+
 def noise_level(X: np.ndarray) -> float:
     """σ̂ of white noise on the channels of X (T, c), NaN-aware: the median absolute second
     difference / 0.6745 / √6 (Var of a second difference of white noise is 6σ²)."""
@@ -217,6 +229,8 @@ class PartletDictionary(FittedCleaner):
         Param("despike", "float", 5.0, "samples farther than this many noise σ from a running median are "
               "kept from the presmoothing and the frame fit (0: off)", low=0.0, high=100.0),
         Param("presmooth", "bool", True, "code windows of the input smoothed as GCV finds noise in it"),
+        Param("local_smoothing", "time", "0.5 s", "window over which the presmoothing's strength is chosen "
+              "per sample by SURE (0: one GCV strength per channel)", unit="s", low=0.0, high=60.0),
         Param("frame_gcv", "bool", True, "fit the torso frame to GCV-smoothed torso joints"),
         Param("frame_smoothing", "time", "0.05 s", "Gaussian smoothing of the torso frame", unit="s",
               low=0.0, high=2.0),
@@ -627,7 +641,12 @@ class PartletDictionary(FittedCleaner):
         Z[np.isnan(Z)] = 0.0
         pad = min(T // 2, int(round(0.1 * fps)))
         presmooth = self.values["presmooth"]
-        if presmooth:
+        width = self.values["local_smoothing"].si * fps
+        local = presmooth and width > 0
+        if local:
+            Z, _ = local_sure_smooth(Z, channel_noise(flat) ** 2, width=width, n_pad=pad, group=3)
+            sigma = noise_level(Z)
+        elif presmooth:
             Z, _ = gcv_smooth(Z, n_pad=pad)
             sigma = noise_level(Z)
         Y = _windows(Z, m, dil, starts)
@@ -671,16 +690,20 @@ class PartletDictionary(FittedCleaner):
                 E = E if it > 1 else Q
                 for _ in range(1 if p == 1.0 else 3):   # p = 1: closed form, one step
                     E = sparse.group_shrink_lp(Q, E, 2.0 * thr, p)
-            Zs = np.where(missing[..., None], rec3, Xp - E).reshape(T, -1)
+            if it == n_outer:   # nothing codes it: the next signal is not needed
+                break
+            Z = np.where(missing[..., None], rec3, Xp - E).reshape(T, -1)
             if presmooth:
-                Zs, _ = gcv_smooth(Zs, n_pad=pad)
-            Y = _windows(Zs, m, dil, starts)
+                # the noise level of this signal, not the input's: E takes part of the noise
+                Z = local_sure_smooth(Z, channel_noise(Z) ** 2, width=width, n_pad=pad, group=3)[0] \
+                    if local else gcv_smooth(Z, n_pad=pad)[0]
+            Y = _windows(Z, m, dil, starts)
         obs = ~missing
         resid = np.where(obs[..., None], Xp - E - rec.reshape(T, n, 3), 0.0)
         # out of sample: the energy of the coded (smoothed, outlier-free) signal the
         # dictionary leaves, as a fraction of that signal's energy
-        coded = np.where(obs[..., None], Zs.reshape(T, n, 3), 0.0)
-        left = np.where(obs[..., None], Zs.reshape(T, n, 3) - rec.reshape(T, n, 3), 0.0)
+        coded = np.where(obs[..., None], Z.reshape(T, n, 3), 0.0)
+        left = np.where(obs[..., None], Z.reshape(T, n, 3) - rec.reshape(T, n, 3), 0.0)
         frac = float(np.vdot(left, left) / max(np.vdot(coded, coded), 1e-300))
         rec3 = rec.reshape(T, n, 3)
         if self.values["detail"]:
