@@ -115,6 +115,16 @@ def test_coarse_scale_is_left_alone_under_light_noise():
     assert np.array_equal(out.positions, build("partlet_dictionary", coarse_noise="0 mm").apply(noisy)[0].positions)
 
 
+def test_coarse_scale_only_for_the_robust_coding():
+    """OMP codes of 6 atoms per 0.5 s window are too coarse: the K-SVD coding keeps the
+    fine scale under heavy noise too."""
+    truth = _clean("05_02.amc")
+    noisy, _ = corrupt.apply_protocol(truth, "feng2015", "snr10", 0)
+    noisy = cleaner_input(truth, noisy)
+    assert build("partlet_dictionary").apply(noisy)[1]["scale"] == "coarse"
+    assert "scale" not in build("partlet_dictionary", coding="ksvd").apply(noisy)[1]
+
+
 def test_coarse_scale_is_saved_loaded_and_optional(tmp_path):
     """A model trained with a coarse scale keeps it through save and load (same output when
     it codes); one trained without (``coarse_rate: 0``, or a model from before) has none and
