@@ -41,6 +41,26 @@ the paper tunes λ1, λ2, λ3 per noise setting from a grid, we ship one setting
   1.0 cm).
 - Windows are 16 frames at 120 Hz (the CMU rate): windows sampled at 30 Hz left the noise
   between their samples alone.
+- The presmoothing's strength is chosen per sample (``local_smoothing``, 0.5 s): GCV's
+  strength × e^−1.5, 1, e^1.5, the one of least SURE risk summed over 0.5 s and over a
+  joint's x, y, z (:mod:`mocapfix.solvers.local_sure`); dance holds poses and then moves
+  fast, and one strength per channel blurred the one or left noise on the other. GCV's μ
+  per channel is at the per-channel optimum (30 dB: 0.98 vs 0.97 cm with the best μ per
+  channel from the truth) but a per-second oracle choice is 10–15 % better. The strength
+  is chosen again at each alternation, with the noise level of what is smoothed (the
+  E-step takes part of the Gaussian noise: keeping the first choice, 10 dB 5.52 cm; keeping
+  GCV's first μ, 5.05). 2 seeds: 30 dB 0.935 → 0.907, 20 dB 2.040 → 1.997, 10 dB 5.105 →
+  4.941, 20 % 0.449 → 0.427, 20 dB + 10 % 2.195 → 2.143 (0.25 s and 1 s alike; 5
+  multipliers alike); its cost: 4 transforms per call against GCV's 2.
+- A coarse scale for heavy noise (robust coding only): the model also holds dictionaries of
+  16-sample windows at 30 Hz (0.5 s; training parameter ``coarse_rate``), which code the
+  file when the torso's noise level exceeds ``coarse_noise`` (180 mm; held-out dance is
+  ~70 mm at 20 dB, ~125 mm at 15 dB, ~225 mm at 10 dB, the CMU BVH walks ~1.3× that). On
+  their own, coarse windows were worse at 30 dB (1.18 vs 0.94) and on outliers (0.73 vs
+  0.47), equal at 15 dB and better from 10 dB on (2 seeds: 5.33 → 5.11 with GCV
+  presmoothing; 5 dB −6 %, 10 dB + 20 % outliers −6 %); blending both scales' outputs
+  was no better than switching. Not for OMP codes (K-SVD model, 10 dB: ℓ2 6.23 → 6.49, ℓ1
+  5.18 → 6.04).
 - Suspect samples (:func:`suspect_samples`): a joint sample farther than ``despike`` (5)
   noise σ and ``min_outlier`` from the running median of 7 frames is kept out of the
   presmoothing and of the torso-frame fit; it stays in the data term, where the ℓ2,p term
@@ -59,7 +79,8 @@ the paper tunes λ1, λ2, λ3 per noise setting from a grid, we ship one setting
   shipped defaults). Not in the paper (its Fig. 7 only shows bone lengths as a symptom).
 
 All together, held-out dance 05_02 + 05_10, whole trials, seeds 0–1 (partlet_tables.py):
-30 dB 0.93, 20 dB 2.04, 10 dB 5.33, 20 % outliers 0.45, 20 dB + 10 % 2.20 cm; the paper's
+30 dB 0.91, 20 dB 2.00, 10 dB 4.94, 20 % outliers 0.43, 20 dB + 10 % 2.14 cm (before the
+local strength and the coarse scale 0.93 / 2.04 / 5.33 / 0.45 / 2.20); the paper's
 dance rows 0.86 / 2.55 / 3.73 / 1.93 / 2.42.
 
 Tried for 10 dB and not kept (held-out dance, 1–2 seeds, RMSE cm; before the bone step
@@ -72,7 +93,23 @@ longer windows (16 samples at 30 Hz or 32 at 60 Hz, with bones: 4.97 / 4.96 but 
 the training covariance (8.3) and a per-frame PCA projection (6.4). With the true torso
 frame the 10 dB error is 5.5 instead of 5.85: the local coding bounds it. Windows of
 0.13 s at 120 Hz can represent almost any smooth signal, so against the low-frequency
-noise GCV leaves they add little; the paper's 3.73 cm is not reached.
+noise GCV leaves they add little (λ3 × 0.25 … × 4 and ``detail`` off change no cell by
+more than 0.5 %: the output is in effect the presmoothed signal); the paper's 3.73 cm is
+not reached.
+
+Tried with the coarse scale and the local strength work (seed 0 unless said; 10 dB was
+5.25, 30 dB 0.94 then): non-local averaging across time (each frame's partlet replaced by
+a weighted mean over its k most similar 0.5 s windows elsewhere in the trial, weights from
+the distance over the noise's, cKDTree on principal components: k = 4 / 8 / 16 gave 10 dB
+6.03 / 6.33 / 6.67 and 20 dB 2.24–2.37; even with matches found on the clean truth the
+gain was ≤ 15–20 % on 05_02 and nil on 05_10 — trials of 7–9 s hold few repeats), a
+singular-value shrinkage of the cleaned body in the torso frame under heavy noise (soft
+at 0.25 × the noise's level: 10 dB −1.4 %, 5 dB −3.4 %; hard: ≤ 1 %; at 30 dB every rank
+cut costs 1–5 %), GCV's μ × 2 / × 4 (10 dB 5.18 / 5.70), a higher-order smoothness
+penalty (no gain at the per-channel oracle), torso frame smoothing 0.1 / 0.2 s (10 dB
+5.45 / 5.83), coarse dictionaries of 64 atoms or 32-sample windows (10 dB 5.01 / 5.09 vs
+5.01), the local strength for the torso frame fit too (2 seeds: 30 dB −0.4 %, 10 dB
++1.1 %), 2 or 4 alternations (mixed), 10 FISTA iterations (30 dB 0.95).
 
 Xiao 2015 (``coding: ksvd``): codes by OMP with ``sparsity`` atoms from a K-SVD model;
 ``loss: l2`` for Gaussian noise, ``loss: l1`` reweights samples against outliers.
