@@ -53,13 +53,14 @@ def test_shipped_models_exist_and_load():
     assert sum(p.stat().st_size for p in ships.values()) < 8e6, "shipped models must stay small"
 
 
-@pytest.mark.parametrize("setting,ratio", [("snr30", 0.92), ("snr20", 0.8), ("snr10", 0.75),
+@pytest.mark.parametrize("setting,ratio", [("snr30", 0.92), ("snr20", 0.78), ("snr10", 0.72),
                                            ("out20", 0.3), ("snr20+out10", 0.6)])
 def test_against_the_best_classical_filter_on_held_out_dance(setting, ratio):
     """05_02 and 05_10 are not in the training corpus. Bound: on every seed, below
     ``ratio`` × the best oracle-tuned classical filter of that very case. Measured (480
-    frames, seeds 0–2, worst of 6): 30 dB 0.87, 20 dB 0.73, 10 dB 0.69, 20 % outliers 0.25,
-    20 dB + 10 % 0.54."""
+    frames, seeds 0–2, worst of 6): 30 dB 0.86, 20 dB 0.70, 10 dB 0.64, 20 % outliers 0.25,
+    20 dB + 10 % 0.54 (before the local strength and the coarse scale 0.87, 0.73, 0.69,
+    0.25, 0.54)."""
     cleaner = build("partlet_dictionary")
     for name in ("05_02.amc", "05_10.amc"):
         truth = _clean(name)

@@ -117,7 +117,7 @@ Xiao 2015 (``coding: ksvd``): codes by OMP with ``sparsity`` atoms from a K-SVD 
 The report's ``unexplained`` is, per partlet, the fraction of the energy of the coded
 (smoothed, outlier-free, centred) signal the dictionary cannot explain on observed samples;
 a limb above ``out_of_sample`` (0.5 %) is reported as motion unlike the training set
-(measured, clean: held-out CMU dance 0.03–0.07 %, CMU walk 05_01 ≤ 0.12 %, the CMU BVH walks'
+(measured, clean: held-out CMU dance 0.03–0.08 %, CMU walk 05_01 ≤ 0.12 %, the CMU BVH walks'
 arms 0.4–1.2 %).
 """
 from __future__ import annotations
