@@ -191,7 +191,12 @@ def suspect_samples(P: np.ndarray, k: float, floor: float = 0.0, width: int = 7)
     if T < width or not ok.any():
         return np.zeros(P.shape[:2], dtype=bool)
     filled = np.ascontiguousarray(linear_bridge(flat[:, ok]).T)      # channels contiguous: faster
-    med = ndimage.median_filter(filled, size=(1, width), mode="nearest")
+    if width % 2:   # the same as ndimage.median_filter(mode="nearest"), in half the time
+        h = width // 2
+        view = sliding_window_view(np.pad(filled, ((0, 0), (h, h)), mode="edge"), width, axis=1)
+        med = np.partition(view, h, axis=-1)[..., h]
+    else:
+        med = ndimage.median_filter(filled, size=(1, width), mode="nearest")
     r = np.full(flat.shape, np.nan)
     r[:, ok] = (filled - med).T
     r[np.isnan(flat)] = np.nan
