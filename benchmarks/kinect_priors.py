@@ -35,7 +35,7 @@ Measured with ``--every 1`` (all 11 files, seed 0; ~1 min):
 | blend wiener | 7.78 | 0.694 | 0.765 (05_10) |
 | mssa(trained) | 12.15 | 1.091 | 2.051 (cmu_131_03) |
 | blend mssa | 7.91 | 0.706 | 0.809 (cmu_131_03) |
-| partlet(kinect) | 17.22 | 1.482 | 2.777 (90_31) |
+| partlet(kinect) | 16.99 | 1.459 | 2.766 (90_31) |
 | per-joint GCV | 9.84 | 0.879 | 0.999 (143_35) |
 | per-joint oracle (one strength) | 9.80 | 0.875 | 1.001 (143_35) |
 | per-joint oracle (±5 frames) | 8.41 | 0.751 | 0.840 (61_10) |

@@ -5,7 +5,7 @@ them). Anyone can re-run it::
     python scripts/train_models.py [--training DIR] [--out DIR]
 
 - ``partlet-cmu.npz``: partlet dictionaries (Feng 2015) on the 31 CMU ASF joints, windows of
-  16 frames at 120 Hz; used by
+  16 frames at 120 Hz, and a coarse scale of 16 samples at 30 Hz for heavy noise; used by
   ``partlet_dictionary`` with no ``model`` on CMU ASF/AMC and CMU BVH skeletons.
 - ``partlet-kinect.npz``: the same method on Kinect v2 joints made from the CMU joints
   (:data:`mocapfix.bodyparts.ASF_TO_KINECT_V2`), for Kinect v1/v2/Azure skeletons.

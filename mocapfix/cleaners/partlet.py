@@ -41,6 +41,26 @@ the paper tunes λ1, λ2, λ3 per noise setting from a grid, we ship one setting
   1.0 cm).
 - Windows are 16 frames at 120 Hz (the CMU rate): windows sampled at 30 Hz left the noise
   between their samples alone.
+- The presmoothing's strength is chosen per sample (``local_smoothing``, 0.5 s): GCV's
+  strength × e^−1.5, 1, e^1.5, the one of least SURE risk summed over 0.5 s and over a
+  joint's x, y, z (:mod:`mocapfix.solvers.local_sure`); dance holds poses and then moves
+  fast, and one strength per channel blurred the one or left noise on the other. GCV's μ
+  per channel is at the per-channel optimum (30 dB: 0.98 vs 0.97 cm with the best μ per
+  channel from the truth) but a per-second oracle choice is 10–15 % better. The strength
+  is chosen again at each alternation, with the noise level of what is smoothed (the
+  E-step takes part of the Gaussian noise: keeping the first choice, 10 dB 5.52 cm; keeping
+  GCV's first μ, 5.05). 2 seeds: 30 dB 0.935 → 0.907, 20 dB 2.040 → 1.997, 10 dB 5.105 →
+  4.941, 20 % 0.449 → 0.427, 20 dB + 10 % 2.195 → 2.143 (0.25 s and 1 s alike; 5
+  multipliers alike); its cost: 4 transforms per call against GCV's 2.
+- A coarse scale for heavy noise (robust coding only): the model also holds dictionaries of
+  16-sample windows at 30 Hz (0.5 s; training parameter ``coarse_rate``), which code the
+  file when the torso's noise level exceeds ``coarse_noise`` (180 mm; held-out dance is
+  ~70 mm at 20 dB, ~125 mm at 15 dB, ~225 mm at 10 dB, the CMU BVH walks ~1.3× that). On
+  their own, coarse windows were worse at 30 dB (1.18 vs 0.94) and on outliers (0.73 vs
+  0.47), equal at 15 dB and better from 10 dB on (2 seeds: 5.33 → 5.11 with GCV
+  presmoothing; 5 dB −6 %, 10 dB + 20 % outliers −6 %); blending both scales' outputs
+  was no better than switching. Not for OMP codes (K-SVD model, 10 dB: ℓ2 6.23 → 6.49, ℓ1
+  5.18 → 6.04).
 - Suspect samples (:func:`suspect_samples`): a joint sample farther than ``despike`` (5)
   noise σ and ``min_outlier`` from the running median of 7 frames is kept out of the
   presmoothing and of the torso-frame fit; it stays in the data term, where the ℓ2,p term
@@ -59,7 +79,8 @@ the paper tunes λ1, λ2, λ3 per noise setting from a grid, we ship one setting
   shipped defaults). Not in the paper (its Fig. 7 only shows bone lengths as a symptom).
 
 All together, held-out dance 05_02 + 05_10, whole trials, seeds 0–1 (partlet_tables.py):
-30 dB 0.93, 20 dB 2.04, 10 dB 5.33, 20 % outliers 0.45, 20 dB + 10 % 2.20 cm; the paper's
+30 dB 0.91, 20 dB 2.00, 10 dB 4.94, 20 % outliers 0.43, 20 dB + 10 % 2.14 cm (before the
+local strength and the coarse scale 0.93 / 2.04 / 5.33 / 0.45 / 2.20); the paper's
 dance rows 0.86 / 2.55 / 3.73 / 1.93 / 2.42.
 
 Tried for 10 dB and not kept (held-out dance, 1–2 seeds, RMSE cm; before the bone step
@@ -72,7 +93,23 @@ longer windows (16 samples at 30 Hz or 32 at 60 Hz, with bones: 4.97 / 4.96 but 
 the training covariance (8.3) and a per-frame PCA projection (6.4). With the true torso
 frame the 10 dB error is 5.5 instead of 5.85: the local coding bounds it. Windows of
 0.13 s at 120 Hz can represent almost any smooth signal, so against the low-frequency
-noise GCV leaves they add little; the paper's 3.73 cm is not reached.
+noise GCV leaves they add little (λ3 × 0.25 … × 4 and ``detail`` off change no cell by
+more than 0.5 %: the output is in effect the presmoothed signal); the paper's 3.73 cm is
+not reached.
+
+Tried with the coarse scale and the local strength work (seed 0 unless said; 10 dB was
+5.25, 30 dB 0.94 then): non-local averaging across time (each frame's partlet replaced by
+a weighted mean over its k most similar 0.5 s windows elsewhere in the trial, weights from
+the distance over the noise's, cKDTree on principal components: k = 4 / 8 / 16 gave 10 dB
+6.03 / 6.33 / 6.67 and 20 dB 2.24–2.37; even with matches found on the clean truth the
+gain was ≤ 15–20 % on 05_02 and nil on 05_10 — trials of 7–9 s hold few repeats), a
+singular-value shrinkage of the cleaned body in the torso frame under heavy noise (soft
+at 0.25 × the noise's level: 10 dB −1.4 %, 5 dB −3.4 %; hard: ≤ 1 %; at 30 dB every rank
+cut costs 1–5 %), GCV's μ × 2 / × 4 (10 dB 5.18 / 5.70), a higher-order smoothness
+penalty (no gain at the per-channel oracle), torso frame smoothing 0.1 / 0.2 s (10 dB
+5.45 / 5.83), coarse dictionaries of 64 atoms or 32-sample windows (10 dB 5.01 / 5.09 vs
+5.01), the local strength for the torso frame fit too (2 seeds: 30 dB −0.4 %, 10 dB
++1.1 %), 2 or 4 alternations (mixed), 10 FISTA iterations (30 dB 0.95).
 
 Xiao 2015 (``coding: ksvd``): codes by OMP with ``sparsity`` atoms from a K-SVD model;
 ``loss: l2`` for Gaussian noise, ``loss: l1`` reweights samples against outliers.
@@ -80,7 +117,7 @@ Xiao 2015 (``coding: ksvd``): codes by OMP with ``sparsity`` atoms from a K-SVD 
 The report's ``unexplained`` is, per partlet, the fraction of the energy of the coded
 (smoothed, outlier-free, centred) signal the dictionary cannot explain on observed samples;
 a limb above ``out_of_sample`` (0.5 %) is reported as motion unlike the training set
-(measured, clean: held-out CMU dance 0.03–0.07 %, CMU walk 05_01 ≤ 0.12 %, the CMU BVH walks'
+(measured, clean: held-out CMU dance 0.03–0.08 %, CMU walk 05_01 ≤ 0.12 %, the CMU BVH walks'
 arms 0.4–1.2 %).
 """
 from __future__ import annotations
@@ -100,6 +137,7 @@ from mocapfix.motion import Motion
 from mocapfix.solvers import sparse
 from mocapfix.solvers.bone_projection import project_lengths
 from mocapfix.solvers.dct import gcv_smooth
+from mocapfix.solvers.local_sure import local_sure_smooth
 from mocapfix.solvers.lowrank import blas_single_thread
 from mocapfix.solvers.rigid import from_frame, kabsch, to_frame, torso_frames
 from mocapfix.solvers.segments import linear_bridge
@@ -153,7 +191,12 @@ def suspect_samples(P: np.ndarray, k: float, floor: float = 0.0, width: int = 7)
     if T < width or not ok.any():
         return np.zeros(P.shape[:2], dtype=bool)
     filled = np.ascontiguousarray(linear_bridge(flat[:, ok]).T)      # channels contiguous: faster
-    med = ndimage.median_filter(filled, size=(1, width), mode="nearest")
+    if width % 2:   # the same as ndimage.median_filter(mode="nearest"), in half the time
+        h = width // 2
+        view = sliding_window_view(np.pad(filled, ((0, 0), (h, h)), mode="edge"), width, axis=1)
+        med = np.partition(view, h, axis=-1)[..., h]
+    else:
+        med = ndimage.median_filter(filled, size=(1, width), mode="nearest")
     r = np.full(flat.shape, np.nan)
     r[:, ok] = (filled - med).T
     r[np.isnan(flat)] = np.nan
@@ -180,6 +223,17 @@ def rigid_bones(a: np.ndarray, b: np.ndarray, sigma: float, *, factor: float = 2
     expected = np.sqrt(8.0 * L2 * sigma ** 2 + 24.0 * sigma ** 4)
     enough = np.isfinite(l2).sum(axis=0) >= 3
     return enough & (spread <= factor * expected + 0.01 * L2)
+
+
+def channel_noise(X: np.ndarray) -> np.ndarray:
+    """σ̂ per channel of X (T, c), as :func:`noise_level` (NaN samples skipped; 0 for a
+    channel with no second difference)."""
+    d2 = np.sort(np.abs(X[2:] - 2 * X[1:-1] + X[:-2]), axis=0)     # NaN sort last
+    k = np.isfinite(d2).sum(axis=0)
+    cols = np.arange(d2.shape[1])
+    lo, hi = np.maximum(k - 1, 0) // 2, np.minimum(k // 2, max(len(d2) - 1, 0))
+    med = 0.5 * (d2[lo, cols] + d2[hi, cols]) if len(d2) else np.zeros(X.shape[1])
+    return np.where(k > 0, np.nan_to_num(med), 0.0) / 0.6745 / np.sqrt(6.0)
 
 
 def noise_level(X: np.ndarray) -> float:
@@ -217,12 +271,16 @@ class PartletDictionary(FittedCleaner):
         Param("despike", "float", 5.0, "samples farther than this many noise σ from a running median are "
               "kept from the presmoothing and the frame fit (0: off)", low=0.0, high=100.0),
         Param("presmooth", "bool", True, "code windows of the input smoothed as GCV finds noise in it"),
+        Param("local_smoothing", "time", "0.5 s", "window over which the presmoothing's strength is chosen "
+              "per sample by SURE (0: one GCV strength per channel)", unit="s", low=0.0, high=60.0),
         Param("frame_gcv", "bool", True, "fit the torso frame to GCV-smoothed torso joints"),
         Param("frame_smoothing", "time", "0.05 s", "Gaussian smoothing of the torso frame", unit="s",
               low=0.0, high=2.0),
         Param("frame_noise", "length", "20 mm", "noise level above which the frame smoothing grows in "
               "proportion (up to 6×; 0: fixed)", unit="mm", low=0.0, high=10.0),
         Param("bones", "bool", True, "project the cleaned bones to their median lengths (files with a skeleton)"),
+        Param("coarse_noise", "length", "180 mm", "noise level above which the model's coarse scale (longer "
+              "windows) codes the file (robust coding), if it has one (0: never)", unit="mm", low=0.0, high=10.0),
         Param("detail", "bool", True, "add back the residual detail the dictionary misses, "
               "Wiener-weighted against the noise level", ),
         Param("out_of_sample", "float", 0.005, "warn when a partlet's dictionary leaves more than this "
@@ -234,6 +292,9 @@ class PartletDictionary(FittedCleaner):
         Param("window", "int", 16, "training: window length m in samples", low=1, high=200),
         Param("sample_rate", "frequency", "120 Hz", "training: rate of the window samples", unit="Hz",
               low=1.0, high=10000.0),
+        Param("coarse_rate", "frequency", "30 Hz", "training: rate of the window samples of a second, coarse "
+              "scale (windows as long in samples; none unless below half the sample rate)", unit="Hz",
+              low=0.0, high=10000.0),
         Param("train_lambda", "length", "50 mm", "training: outlier weight λ of eq. 5 (as a length)",
               unit="mm", low=0.0, high=10.0),
         Param("beta", "float", 0.05, "training: sparsity β of eq. 5, relative to the median window norm",
@@ -257,6 +318,7 @@ class PartletDictionary(FittedCleaner):
         self.method_ = None
         self.sample_rate_ = None
         self.window_ = None
+        self.coarse_ = None
         self.n_iter_ = None
         self.training_ = None
 
@@ -344,33 +406,50 @@ class PartletDictionary(FittedCleaner):
         self.partlets_ = {k: list(v) for k, v in groups.items()}
         self.sample_rate_, self.window_ = rate, m
         rng = np.random.default_rng(self.values["seed"])
-        data = {p: [] for p in bodyparts.PARTLETS}
+        coarse = self.values["coarse_rate"].si
+        scales = [rate] + ([coarse] if 0 < coarse <= rate / 2 else [])
+        data = [{p: [] for p in bodyparts.PARTLETS} for _ in scales]
         frames = []
         for mo in motions:
             P = self._model_positions(mo, joints)
             local, *_rest, centre, _ = self._normalise(P, mo.fps)
             X = local - centre
-            dil = self._dilation(mo.fps)
             frames.append(len(P))
-            starts = _starts(len(P), m, dil, max(1, dil // 2))
-            if not len(starts):
-                continue
-            for p in bodyparts.PARTLETS:
-                Xp = X[:, self.partlets_[p]].reshape(len(P), -1)
-                W = _windows(Xp, m, dil, starts)
-                W = W[:, ~np.isnan(W).any(axis=0)]
-                data[p].append(W)
-        self.dictionary_, self.unexplained_ = {}, {}
+            for k, r in enumerate(scales):
+                dil = max(1, int(round(mo.fps / r)))
+                # fine scale: a window every half window sample; coarse: every ``dil`` samples
+                # (a quarter as many windows as the fine scale at 30 of 120 Hz)
+                starts = _starts(len(P), m, dil, max(1, dil // 2) if k == 0 else dil)
+                if not len(starts):
+                    continue
+                for p in bodyparts.PARTLETS:
+                    Xp = X[:, self.partlets_[p]].reshape(len(P), -1)
+                    W = _windows(Xp, m, dil, starts)
+                    W = W[:, ~np.isnan(W).any(axis=0)]
+                    data[k][p].append(W)
         K = self.values["atoms"]
+        total = len(bodyparts.PARTLETS) * len(scales)
         with blas_single_thread():
-            iters = self._fit_partlets(data, K, rng, progress)
+            self.dictionary_, self.unexplained_, iters = self._fit_partlets(data[0], K, rng, progress, total)
+            self.coarse_ = None
+            if len(scales) > 1 and all(data[1].values()):
+                # its own random stream: the fine scale's dictionaries do not depend on it
+                crng = np.random.default_rng(self.values["seed"] + 1)
+                done = len(bodyparts.PARTLETS)
+                step = (lambda n, t: progress(done + n, total)) if progress else None
+                D, unexplained, _ = self._fit_partlets(data[1], K, crng, step, total)
+                self.coarse_ = {"dictionary": D, "unexplained": unexplained, "window": m,
+                                "sample_rate": scales[1]}
         self.method_ = self.values["method"]
         self.n_iter_ = iters
         self.training_ = {"frames": int(sum(frames)), "seconds": round(time.perf_counter() - started, 3)}
         return self
 
-    def _fit_partlets(self, data, K, rng, progress):
+    def _fit_partlets(self, data, K, rng, progress, total):
+        """Dictionaries of every partlet from its windows → (dictionaries, unexplained
+        energy fractions, iterations)."""
         iters = 0
+        dictionary, unexplained = {}, {}
         for n, p in enumerate(bodyparts.PARTLETS):
             B = np.concatenate(data[p], axis=1)
             if B.shape[1] > self.values["max_windows"]:
@@ -383,11 +462,11 @@ class PartletDictionary(FittedCleaner):
                 D, W, E, iters = self._train_robust(B, K, rng)
             D = D.astype(np.float64)
             R = B - D @ W - E
-            self.unexplained_[p] = float(np.vdot(R, R) / max(np.vdot(B, B), 1e-300))
-            self.dictionary_[p] = D
+            unexplained[p] = float(np.vdot(R, R) / max(np.vdot(B, B), 1e-300))
+            dictionary[p] = D
             if progress:
-                progress(n + 1, len(bodyparts.PARTLETS))
-        return iters
+                progress(n + 1, total)
+        return dictionary, unexplained, iters
 
     @staticmethod
     def _model_positions(motion: Motion, joints: list[str]) -> np.ndarray:
@@ -441,10 +520,14 @@ class PartletDictionary(FittedCleaner):
                       "frame_joints": [int(j) for j in self.frame_], "method": self.method_,
                       "sample_rate": self.sample_rate_, "window": self.window_,
                       "unexplained": self.unexplained_, "n_iter": self.n_iter_,
+                      "coarse": None if self.coarse_ is None else {
+                          k: self.coarse_[k] for k in ("window", "sample_rate", "unexplained")},
                       "normalisation": "torso frame (robust Kabsch to template, smoothed), "
                                        "each joint centred on the file's median"},
         }
         arrays = {f"dictionary_{p}": D for p, D in self.dictionary_.items()}
+        if self.coarse_ is not None:
+            arrays.update({f"coarse_{p}": D for p, D in self.coarse_["dictionary"].items()})
         arrays["template"] = self.template_
         return header, arrays
 
@@ -467,6 +550,16 @@ class PartletDictionary(FittedCleaner):
                 raise ValueError(f"dictionary {p} has {D.shape[0]} rows for "
                                  f"{len(self.partlets_[p])} joints × window {self.window_}")
             self.dictionary_[p] = D
+        self.coarse_ = None
+        if st.get("coarse"):   # models before the coarse scale have none
+            c = st["coarse"]
+            D = {p: np.asarray(arrays[f"coarse_{p}"], dtype=float) for p in bodyparts.PARTLETS}
+            for p, Dp in D.items():
+                if Dp.shape[0] != 3 * len(self.partlets_[p]) * int(c["window"]):
+                    raise ValueError(f"coarse dictionary {p} has {Dp.shape[0]} rows for "
+                                     f"{len(self.partlets_[p])} joints × window {c['window']}")
+            self.coarse_ = {"dictionary": D, "unexplained": dict(c["unexplained"]),
+                            "window": int(c["window"]), "sample_rate": float(c["sample_rate"])}
         if self.template_.shape != (len(self.frame_), 3):
             raise ValueError("template does not match the frame joints")
         return self
@@ -528,6 +621,18 @@ class PartletDictionary(FittedCleaner):
         info["suspect"] = int(suspect.sum())
         raw_sigma = noise_level(np.where(suspect[..., None], np.nan, P).reshape(T, -1))
         sigma = noise_level(X[:, self.frame_].reshape(T, -1))
+        dictionary = self.dictionary_
+        limit = self.values["coarse_noise"].si
+        if self.coarse_ is not None and limit > 0 and sigma > limit and coding == "robust":
+            # heavy noise: windows as long in samples at the coarse rate (16 at 30 Hz: 0.5 s
+            # instead of 0.13 s) constrain the low frequencies the short windows let through.
+            # Not for OMP codes: 6 atoms per 0.5 s window are too few (K-SVD model, 10 dB,
+            # 2 seeds: ℓ2 6.23 → 6.49, ℓ1 5.18 → 6.04 cm)
+            cdil = max(1, int(round(motion.fps / self.coarse_["sample_rate"])))
+            cstarts = _starts(T, self.coarse_["window"], cdil, self.values["stride"])
+            if len(cstarts):
+                dictionary, m, dil, starts = self.coarse_["dictionary"], self.coarse_["window"], cdil, cstarts
+                info.update({"scale": "coarse", "dilation": dil})
         total = np.zeros_like(X)
         count = np.zeros(X.shape[:2])
         unexplained, iters = {}, 0
@@ -536,7 +641,7 @@ class PartletDictionary(FittedCleaner):
             Xp = X[:, joints]
             if np.isnan(Xp).all():
                 continue
-            rec, frac, it = self._code_partlet(Xp, self.dictionary_[p], starts, dil, sigma, coding, motion.fps,
+            rec, frac, it = self._code_partlet(Xp, dictionary[p], starts, m, dil, sigma, coding, motion.fps,
                                                suspect[:, joints])
             total[:, joints] += rec
             count[:, joints] += 1
@@ -567,11 +672,11 @@ class PartletDictionary(FittedCleaner):
                                + ", ".join(high) + ": the dictionary explains little of it")
         return motion.replace(positions=pos), info
 
-    def _code_partlet(self, Xp, D, starts, dil, sigma, coding, fps, suspect=None):
-        """Robust structured sparse coding of one partlet (eq. 11), or OMP (Xiao 2015).
+    def _code_partlet(self, Xp, D, starts, m, dil, sigma, coding, fps, suspect=None):
+        """Robust structured sparse coding of one partlet (eq. 11), or OMP (Xiao 2015),
+        with windows of ``m`` samples ``dil`` frames apart.
         Returns (reconstruction (T, n, 3), unexplained energy fraction, iterations)."""
         T, n, _ = Xp.shape
-        m = self.window_
         flat = Xp.reshape(T, -1)
         missing = np.isnan(Xp).any(axis=2)
         if suspect is not None and suspect.any():
@@ -580,7 +685,12 @@ class PartletDictionary(FittedCleaner):
         Z[np.isnan(Z)] = 0.0
         pad = min(T // 2, int(round(0.1 * fps)))
         presmooth = self.values["presmooth"]
-        if presmooth:
+        width = self.values["local_smoothing"].si * fps
+        local = presmooth and width > 0
+        if local:
+            Z, _ = local_sure_smooth(Z, channel_noise(flat) ** 2, width=width, n_pad=pad, group=3)
+            sigma = noise_level(Z)
+        elif presmooth:
             Z, _ = gcv_smooth(Z, n_pad=pad)
             sigma = noise_level(Z)
         Y = _windows(Z, m, dil, starts)
@@ -624,16 +734,20 @@ class PartletDictionary(FittedCleaner):
                 E = E if it > 1 else Q
                 for _ in range(1 if p == 1.0 else 3):   # p = 1: closed form, one step
                     E = sparse.group_shrink_lp(Q, E, 2.0 * thr, p)
-            Zs = np.where(missing[..., None], rec3, Xp - E).reshape(T, -1)
+            if it == n_outer:   # nothing codes it: the next signal is not needed
+                break
+            Z = np.where(missing[..., None], rec3, Xp - E).reshape(T, -1)
             if presmooth:
-                Zs, _ = gcv_smooth(Zs, n_pad=pad)
-            Y = _windows(Zs, m, dil, starts)
+                # the noise level of this signal, not the input's: E takes part of the noise
+                Z = local_sure_smooth(Z, channel_noise(Z) ** 2, width=width, n_pad=pad, group=3)[0] \
+                    if local else gcv_smooth(Z, n_pad=pad)[0]
+            Y = _windows(Z, m, dil, starts)
         obs = ~missing
         resid = np.where(obs[..., None], Xp - E - rec.reshape(T, n, 3), 0.0)
         # out of sample: the energy of the coded (smoothed, outlier-free) signal the
         # dictionary leaves, as a fraction of that signal's energy
-        coded = np.where(obs[..., None], Zs.reshape(T, n, 3), 0.0)
-        left = np.where(obs[..., None], Zs.reshape(T, n, 3) - rec.reshape(T, n, 3), 0.0)
+        coded = np.where(obs[..., None], Z.reshape(T, n, 3), 0.0)
+        left = np.where(obs[..., None], Z.reshape(T, n, 3) - rec.reshape(T, n, 3), 0.0)
         frac = float(np.vdot(left, left) / max(np.vdot(coded, coded), 1e-300))
         rec3 = rec.reshape(T, n, 3)
         if self.values["detail"]:
