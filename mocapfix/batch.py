@@ -220,8 +220,7 @@ def run_tasks(task: Callable, items: list, workers: int = 1,
     (:class:`mocapfix.executors.ExecutorSpec`: local processes or Dask), else ``workers``
     local processes. With one worker (or one item) and no executor the tasks run in this
     process, in order. In worker processes every task runs with one BLAS thread
-    (:mod:`mocapfix.threads`); every process that runs tasks gets the heap thresholds of
-    :mod:`mocapfix.allocator`. At most ``window`` tasks (default: twice the executor's
+    (:mod:`mocapfix.threads`). At most ``window`` tasks (default: twice the executor's
     slots) are in flight, so memory does not grow with the number of items.
 
     ``task`` must be picklable for a process pool and must turn its own failures into an
@@ -234,11 +233,9 @@ def run_tasks(task: Callable, items: list, workers: int = 1,
         return
     with open_executor(spec or ExecutorSpec(jobs=workers), len(items)) as running:
         if running.executor is None:
-            from mocapfix import allocator
             from mocapfix.threads import blas_threads, limit_blas
 
             limit_blas(blas_threads(1))
-            allocator.tune()
             for n, item in enumerate(items):
                 yield n, _guarded(task, item)
             return
@@ -247,18 +244,15 @@ def run_tasks(task: Callable, items: list, workers: int = 1,
 
 @dataclass(frozen=True)
 class InWorker:
-    """``task`` run in a batch worker: BLAS held to ``threads`` threads and the heap
-    thresholds set (:mod:`mocapfix.allocator`) first."""
+    """``task`` run in a batch worker: BLAS held to ``threads`` threads first."""
 
     task: Callable
     threads: int = 1
 
     def __call__(self, item):
-        from mocapfix import allocator
         from mocapfix.threads import limit_blas
 
         limit_blas(self.threads)
-        allocator.tune()
         return self.task(item)
 
 
