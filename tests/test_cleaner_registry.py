@@ -52,3 +52,16 @@ def test_default_c3d_clean_loads_no_scipy():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True, cwd=Path(__file__).resolve().parents[1])
     assert out.stdout.strip() == ""
+
+
+def test_listing_every_cleaner_loads_no_scipy():
+    """`mocapfix cleaners` imports every cleaner module to list their parameters; the
+    solvers import scipy only inside the routines that use it (importing scipy.sparse,
+    scipy.spatial and scipy.ndimage had made the listing ~0.9 s against ~0.25 s)."""
+    code = ("import sys\n"
+            "from mocapfix import cleaners\n"
+            "names = sorted(cleaners.registry())\n"
+            "assert 'partlet_dictionary' in names and 'lowrank_isometry' in names\n"
+            "print(' '.join(m for m in sys.modules if m.split('.')[0] == 'scipy'))\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == ""

@@ -126,7 +126,6 @@ import time
 import warnings
 
 import numpy as np
-from scipy import ndimage
 from numpy.lib.stride_tricks import sliding_window_view
 
 from mocapfix import bodyparts
@@ -196,6 +195,8 @@ def suspect_samples(P: np.ndarray, k: float, floor: float = 0.0, width: int = 7)
         view = sliding_window_view(np.pad(filled, ((0, 0), (h, h)), mode="edge"), width, axis=1)
         med = np.partition(view, h, axis=-1)[..., h]
     else:
+        from scipy import ndimage   # imported here: listing the cleaners need not load it
+
         med = ndimage.median_filter(filled, size=(1, width), mode="nearest")
     r = np.full(flat.shape, np.nan)
     r[:, ok] = (filled - med).T

@@ -33,7 +33,6 @@ target lengths, in the unit of ``N``. Jacobian rows ``g`` are (B, 3, T).
 from __future__ import annotations
 
 import numpy as np
-import scipy.sparse as sp
 
 
 def bone_vectors(N: np.ndarray, bones: np.ndarray) -> np.ndarray:
@@ -121,6 +120,8 @@ class IsometrySystem:
         self.inc = incidence(self.bones, n_joints)
         # sparse copies: products with these tiny matrices must not go through a
         # multithreaded BLAS (slow and erratic on a busy machine)
+        import scipy.sparse as sp   # imported here: listing the cleaners need not load it
+
         self._inc_sp = sp.csr_matrix(self.inc)
         self._abs_inc_sp = sp.csr_matrix(np.abs(self.inc))
         if solver == "tree":

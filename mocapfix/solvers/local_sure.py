@@ -23,7 +23,6 @@ per call against GCV's 2.
 from __future__ import annotations
 
 import numpy as np
-from scipy.ndimage import uniform_filter1d
 
 from mocapfix.solvers.dct import dct, eigenvalues, gcv_mu, idct, pad_reflect, unpad
 
@@ -38,6 +37,8 @@ def local_sure_smooth(y: np.ndarray, sigma2: np.ndarray, *, width: float, n_pad:
     ``width`` the length in samples of the (triangular) window the risk is summed over,
     ``group`` the number of consecutive columns that share one choice (C must be a
     multiple of it). Returns ``(smoothed, mu)``, μ the GCV strength per column."""
+    from scipy.ndimage import uniform_filter1d   # imported here: not loaded unless used
+
     yp, p = pad_reflect(y, n_pad)
     n, C = yp.shape
     T, G, Cg = y.shape[0], len(multipliers), C // group

@@ -28,8 +28,6 @@ eq. 11 nor K-SVD, and would be a heavy dependency for three short loops.
 from __future__ import annotations
 
 import numpy as np
-import scipy.sparse as sp
-from scipy.spatial import cKDTree
 
 
 
@@ -162,10 +160,13 @@ def ksvd_step(X: np.ndarray, D: np.ndarray, W: np.ndarray, *, rng: np.random.Gen
     return D, W
 
 
-def knn_laplacian(windows: np.ndarray, k: int = 5) -> sp.csr_matrix:
+def knn_laplacian(windows: np.ndarray, k: int = 5):
     """Laplacian ``L = O − S`` of the k-nearest-neighbour graph between the rows of
     ``windows`` (n, d) with ℓ1 distances, symmetrised (S_ab = 1 if either is among the
-    other's k nearest), as a sparse (n, n) matrix (Feng 2015, eq. 9)."""
+    other's k nearest), as a scipy.sparse CSR (n, n) matrix (Feng 2015, eq. 9)."""
+    import scipy.sparse as sp               # imported here: only this kernel needs them
+    from scipy.spatial import cKDTree
+
     n = windows.shape[0]
     k = min(k, n - 1)
     if k <= 0:
