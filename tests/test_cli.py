@@ -8,13 +8,12 @@ import shutil
 import subprocess
 import sys
 
-import numpy as np
 import pytest
 from click.testing import CliRunner
 
 from mocapfix.cli import main
 from mocapfix.formats import read
-from conftest import DATA, SAMPLE_DATA, need, shared_files
+from conftest import SAMPLE_DATA, need, shared_files
 
 ALL_SHARED = [p for sub in ("c3d", "bvh", "asfamc", "kinect")
               for p in shared_files(sub, "*.amc" if sub == "asfamc" else "*")]
