@@ -369,8 +369,10 @@ class PartletDictionary(FittedCleaner):
             centre = np.nanmedian(local, axis=0)
         return local, R, c, centre, valid
 
-    def _dilation(self, fps: float) -> int:
-        return max(1, int(round(fps / self.sample_rate_)))
+    @staticmethod
+    def _dilation(fps: float, rate: float) -> int:
+        """Frames between a window's samples for windows sampled at ``rate``."""
+        return max(1, int(round(fps / rate)))
 
     # -- fit -----------------------------------------------------------------------------
     def fit(self, motions, progress=None) -> "PartletDictionary":
@@ -417,7 +419,7 @@ class PartletDictionary(FittedCleaner):
             X = local - centre
             frames.append(len(P))
             for k, r in enumerate(scales):
-                dil = max(1, int(round(mo.fps / r)))
+                dil = self._dilation(mo.fps, r)
                 # fine scale: a window every half window sample; coarse: every ``dil`` samples
                 # (a quarter as many windows as the fine scale at 30 of 120 Hz)
                 starts = _starts(len(P), m, dil, max(1, dil // 2) if k == 0 else dil)
@@ -593,7 +595,7 @@ class PartletDictionary(FittedCleaner):
         T = motion.n_frames
         coding = self.values["coding"] if self.values["coding"] != "auto" else (
             "ksvd" if self.method_ == "ksvd" else "robust")
-        dil = self._dilation(motion.fps)
+        dil = self._dilation(motion.fps, self.sample_rate_)
         m = self.window_
         starts = _starts(T, m, dil, self.values["stride"])
         info = {"model_joints": int((idx >= 0).sum()), "coding": coding, "dilation": dil}
@@ -629,7 +631,7 @@ class PartletDictionary(FittedCleaner):
             # instead of 0.13 s) constrain the low frequencies the short windows let through.
             # Not for OMP codes: 6 atoms per 0.5 s window are too few (K-SVD model, 10 dB,
             # 2 seeds: ℓ2 6.23 → 6.49, ℓ1 5.18 → 6.04 cm)
-            cdil = max(1, int(round(motion.fps / self.coarse_["sample_rate"])))
+            cdil = self._dilation(motion.fps, self.coarse_["sample_rate"])
             cstarts = _starts(T, self.coarse_["window"], cdil, self.values["stride"])
             if len(cstarts):
                 dictionary, m, dil, starts = self.coarse_["dictionary"], self.coarse_["window"], cdil, cstarts
