@@ -689,12 +689,17 @@ class PartletDictionary(FittedCleaner):
         pad = min(T // 2, int(round(0.1 * fps)))
         presmooth = self.values["presmooth"]
         width = self.values["local_smoothing"].si * fps
-        local = presmooth and width > 0
-        if local:
-            Z, _ = local_sure_smooth(Z, channel_noise(flat) ** 2, width=width, n_pad=pad, group=3)
-            sigma = noise_level(Z)
-        elif presmooth:
-            Z, _ = gcv_smooth(Z, n_pad=pad)
+
+        def presmoothed(Z, noisy):
+            """Z smoothed per sample by SURE with the channel noise of ``noisy`` (or by one
+            GCV strength per channel when ``local_smoothing`` is 0)."""
+            if width > 0:
+                return local_sure_smooth(Z, channel_noise(noisy) ** 2, width=width, n_pad=pad,
+                                         group=3)[0]
+            return gcv_smooth(Z, n_pad=pad)[0]
+
+        if presmooth:
+            Z = presmoothed(Z, flat)
             sigma = noise_level(Z)
         Y = _windows(Z, m, dil, starts)
         G = D.T @ D
@@ -742,8 +747,7 @@ class PartletDictionary(FittedCleaner):
             Z = np.where(missing[..., None], rec3, Xp - E).reshape(T, -1)
             if presmooth:
                 # the noise level of this signal, not the input's: E takes part of the noise
-                Z = local_sure_smooth(Z, channel_noise(Z) ** 2, width=width, n_pad=pad, group=3)[0] \
-                    if local else gcv_smooth(Z, n_pad=pad)[0]
+                Z = presmoothed(Z, Z)
             Y = _windows(Z, m, dil, starts)
         obs = ~missing
         resid = np.where(obs[..., None], Xp - E - rec.reshape(T, n, 3), 0.0)
