@@ -9,12 +9,15 @@
 3. Issue 16's case and its scaling: 85_02 looped to 1,125 / 4,500 / 18,000 frames, 25 %
    of the markers with 1–3 gaps of 0.1–1.5 s, 2 mm jitter, 2 % spikes of 20–100 mm
    (``occlusion`` ``mixed``), ``mocapfix clean`` end to end, with the peak resident memory
-   of the process; and the start-up cost (``mocapfix --version`` against
-   ``mocapfix cleaners``, which loads every cleaner module).
+   of the process, each size run five times as it ships (the cores for the file's own
+   parallel loops, :mod:`mocapfix.threads`) in turn with ``MOCAPFIX_THREADS=1``: the
+   medians and the median of the paired ratios; and the start-up cost (``mocapfix
+   --version`` against ``mocapfix cleaners``, which loads every cleaner module).
 
 Every child process may write and use compiled bytecode (``PYTHONDONTWRITEBYTECODE`` is
 dropped from its environment: an installed tool runs from its ``__pycache__``; compiling
-mocapfix's modules from source costs ~0.2 s a run), and the best of several runs is kept.
+mocapfix's modules from source costs ~0.2 s a run); case 1 and the start-up keep the best
+of three runs.
 
     python benchmarks/clean_speed.py [--scaling]     (--scaling: case 3 only)
 """
@@ -35,6 +38,8 @@ from mocapfix.corrupt import occlusion
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "c3d"
 #: the children's environment: bytecode cached as in an installed tool
 ENV = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
+#: runs per size in ``--scaling`` (medians are printed)
+RUNS = 5
 
 
 def _fresh(motion, positions):
@@ -76,14 +81,14 @@ def main():
         print(f"| 20 corrupted captures | {t1:.1f} | {t2:.1f} | {t1 / t2:.2f}× |")
 
 
-def _peak_mib_of(args) -> tuple[float, float]:
+def _peak_mib_of(args, env=None) -> tuple[float, float]:
     """Wall time and peak RSS (MiB) of one child process."""
     code = ("import resource, subprocess, sys, time; t = time.perf_counter(); "
             "subprocess.run(sys.argv[1:], check=True, capture_output=True); "
             "print(time.perf_counter() - t, "
             "resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024)")
     out = subprocess.run([sys.executable, "-c", code, *args], check=True, capture_output=True,
-                         text=True, env=ENV).stdout.split()
+                         text=True, env=env or ENV).stdout.split()
     return float(out[0]), float(out[1])
 
 
@@ -95,8 +100,9 @@ def scaling():
     version, cleaners = start.values()
     print(f"\nstart-up: `mocapfix --version` {version:.2f} s, `mocapfix cleaners` {cleaners:.2f} s")
     print("\n| frames × markers (85_02 looped, mixed corruption) | `mocapfix clean` wall (s) "
-          "| peak RSS (MiB) |")
-    print("|---|---:|---:|")
+          "| with one task thread (s) | ratio | peak RSS (MiB) |")
+    print("|---|---:|---:|---:|---:|")
+    one = {**ENV, "MOCAPFIX_THREADS": "1"}
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         for T in (1125, 4500, 18000):
@@ -104,9 +110,17 @@ def scaling():
             long = np.concatenate([base.positions, base.positions[::-1]] * reps)[:T]
             corrupted, _ = occlusion(_fresh(base, long), "mixed", 0)
             write(_fresh(base, corrupted.positions), tmp / f"c{T}.c3d")
-            runs = [_peak_mib_of(cli + ["clean", str(tmp / f"c{T}.c3d"), "-o", str(tmp / f"o{T}_{k}")])
-                    for k in range(2)]
-            print(f"| {T} × {base.n_joints} | {min(r[0] for r in runs):.2f} | "
+            # the default (the cores of the machine for a single file) and one task thread,
+            # run in turn so that a drift of the machine's speed hits both alike
+            runs, single = [], []
+            for k in range(RUNS):
+                runs.append(_peak_mib_of(cli + ["clean", str(tmp / f"c{T}.c3d"), "-o",
+                                                str(tmp / f"o{T}_{k}")]))
+                single.append(_peak_mib_of(cli + ["clean", str(tmp / f"c{T}.c3d"), "-o",
+                                                  str(tmp / f"s{T}_{k}")], one))
+            ratio = np.median([a[0] / b[0] for a, b in zip(runs, single)])
+            print(f"| {T} × {base.n_joints} | {np.median([r[0] for r in runs]):.2f} | "
+                  f"{np.median([r[0] for r in single]):.2f} | {ratio:.2f} | "
                   f"{max(r[1] for r in runs):.0f} |")
 
 

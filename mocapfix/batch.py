@@ -219,7 +219,8 @@ def run_tasks(task: Callable, items: list, workers: int = 1,
     Where: an injected ``executor`` (anything with ``submit``), else ``spec``
     (:class:`mocapfix.executors.ExecutorSpec`: local processes or Dask), else ``workers``
     local processes. With one worker (or one item) and no executor the tasks run in this
-    process, in order. In worker processes every task runs with one BLAS thread
+    process, in order, each with the cores for its own parallel loops; in worker
+    processes every task runs with one BLAS thread and one task thread
     (:mod:`mocapfix.threads`). At most ``window`` tasks (default: twice the executor's
     slots) are in flight, so memory does not grow with the number of items.
 
@@ -233,26 +234,34 @@ def run_tasks(task: Callable, items: list, workers: int = 1,
         return
     with open_executor(spec or ExecutorSpec(jobs=workers), len(items)) as running:
         if running.executor is None:
-            from mocapfix.threads import blas_threads, limit_blas
+            from mocapfix.threads import (blas_threads, limit_blas, set_task_threads,
+                                          single_process_task_threads, task_threads)
 
             limit_blas(blas_threads(1))
-            for n, item in enumerate(items):
-                yield n, _guarded(task, item)
+            before = task_threads()
+            set_task_threads(single_process_task_threads())
+            try:
+                for n, item in enumerate(items):
+                    yield n, _guarded(task, item)
+            finally:
+                set_task_threads(before)
             return
         yield from _run_on(running.executor, task, items, window or 2 * running.slots)
 
 
 @dataclass(frozen=True)
 class InWorker:
-    """``task`` run in a batch worker: BLAS held to ``threads`` threads first."""
+    """``task`` run in a batch worker: BLAS held to ``threads`` threads and the task's
+    own loops to one thread first."""
 
     task: Callable
     threads: int = 1
 
     def __call__(self, item):
-        from mocapfix.threads import limit_blas
+        from mocapfix.threads import limit_blas, set_task_threads
 
         limit_blas(self.threads)
+        set_task_threads(1)
         return self.task(item)
 
 

@@ -1,4 +1,4 @@
-"""BLAS thread policy: how many threads numpy's BLAS/LAPACK may use.
+"""Thread policy: how many threads numpy's BLAS/LAPACK, and a task's own parallel loops, may use.
 
 - In a batch, every worker process (a local process-pool worker, a Dask worker) runs its
   BLAS with **one** thread: the files are the parallelism, and N workers × M BLAS threads
@@ -17,15 +17,30 @@
 
 The limits are set with ``threadpoolctl`` (a runtime dependency) for the whole process,
 once per process; kernels may lower them further for their own span, never raise them.
+
+**Task threads.** A few steps have independent pieces of work inside one file — the gap
+models of ``fill_ensemble`` (one per marker and neighbour set), the channel blocks of
+the robust smoothing of ``trust`` — that :func:`parallel_map` runs on threads (numpy
+releases the GIL in its array loops, FFTs and BLAS calls). The budget is
+:func:`task_threads`: the cores available when one file is cleaned in this process
+(``-j 1`` or a single file; ``MOCAPFIX_THREADS`` lowers it, ``1`` turns it off), one in
+a batch worker (the files are the parallelism) and one by default (library use). The
+results do not depend on the number of threads: the pieces are the same, each is
+computed alone and they are put together in their order.
 """
 from __future__ import annotations
 
 import os
+import threading
 
 #: BLAS threads when one file is cleaned in this process (see the module docstring).
 SINGLE_FILE_THREADS = 1
 
 _LIMITED: dict = {}
+#: threads of :func:`parallel_map` in this process (see the module docstring)
+_TASK_THREADS = [1]
+#: marks parallel_map's own threads (a nested call runs in the calling thread)
+_IN_POOL = threading.local()
 
 
 def cores() -> int:
@@ -60,10 +75,48 @@ def limit_blas(threads: int) -> None:
 
 def worker_init(threads: int = 1) -> None:
     """Initializer of a batch worker process: environment for any library loaded later,
-    and the live BLAS pools."""
+    the live BLAS pools, and one task thread."""
     for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
         os.environ[var] = str(threads)
     limit_blas(threads)
+    set_task_threads(1)
+
+
+def single_process_task_threads() -> int:
+    """Task threads when one file at a time is cleaned in this process: the cores
+    available, at most ``MOCAPFIX_THREADS``."""
+    wanted = os.environ.get("MOCAPFIX_THREADS", "")
+    n = int(wanted) if wanted.isdigit() and int(wanted) > 0 else cores()
+    return max(1, min(n, cores()))
+
+
+def set_task_threads(n: int) -> None:
+    """Set this process's budget of task threads (:func:`parallel_map`)."""
+    _TASK_THREADS[0] = max(1, int(n))
+
+
+def task_threads() -> int:
+    """This process's budget of task threads."""
+    return _TASK_THREADS[0]
+
+
+def parallel_map(fn, items) -> list:
+    """``[fn(item) for item in items]``, on up to :func:`task_threads` threads (in this
+    thread when the budget is one, there is one item, or this is already one of
+    parallel_map's threads). ``fn`` must not depend on the order in which the items run;
+    exceptions propagate as from the loop."""
+    items = list(items)
+    n = min(task_threads(), len(items))
+    if n <= 1 or getattr(_IN_POOL, "active", False):
+        return [fn(item) for item in items]
+    from concurrent.futures import ThreadPoolExecutor
+
+    def run(item):
+        _IN_POOL.active = True
+        return fn(item)
+
+    with ThreadPoolExecutor(n) as pool:
+        return list(pool.map(run, items))
 
 
 def max_blas_threads() -> int:

@@ -36,13 +36,15 @@ and ``e`` when they exist):
    its 1–3 most rigid neighbours, it is moved radially onto the interval's edge (corrections
    of the violated neighbours averaged, a few rounds; :func:`soft_distance_constraint`).
 
-Kernels are vectorised over the frames of a gap; the loop is over gaps.
+Kernels are vectorised over the frames of a gap; the loop is over gaps (over the fits
+that serve them, on the task's threads).
 """
 from __future__ import annotations
 
 import numpy as np
 
 from mocapfix.solvers.rigid import kabsch_to_shape
+from mocapfix.threads import parallel_map
 
 #: the fillers computed here (the caller may add its own, e.g. weighted PCA)
 LOCAL_FILLERS = ("interp", "poly", "grnn", "linear", "pose")
@@ -367,7 +369,8 @@ def member_fills(pos, observed, gaps, external, *, local=LOCAL_FILLERS, neighbou
 
     A member learns the same model for every gap of a marker with the same neighbours (the
     training frames are those where the marker is seen): it is fitted once per marker and
-    neighbour set and predicts all those gaps (:func:`window_fills`)."""
+    neighbour set and predicts all those gaps (:func:`window_fills`). The fits are
+    independent: they run on the task's threads (:func:`mocapfix.threads.parallel_map`)."""
     if mu is None:
         mu, sd = distance_stats(pos, observed)
     T = pos.shape[0]
@@ -385,15 +388,18 @@ def member_fills(pos, observed, gaps, external, *, local=LOCAL_FILLERS, neighbou
                 jobs.setdefault((j, members, K, tuple(cand[:K]), extra), []).append(g)
             if n == 0 and "linear" in local:
                 jobs.setdefault((j, ("linear",), K, (), tuple(cand)), []).append(g)
+    train = {j: _training_frames(observed[:, j], max_train) for j, *_ in jobs}
+
+    def fit_and_fill(job):
+        (j, members, K, markers, body), group = job
+        return window_fills(pos, observed, j, [gaps[g][1:] for g in group],
+                            np.array(markers, dtype=np.intp), train[j],
+                            np.array(body, dtype=np.intp), fillers=members,
+                            mu=mu, weight_scale=weight_scale)
+
     fills = [{} for _ in gaps]
-    train = {}
-    for (j, members, K, markers, body), group in jobs.items():
-        if j not in train:
-            train[j] = _training_frames(observed[:, j], max_train)
-        parts = window_fills(pos, observed, j, [gaps[g][1:] for g in group],
-                             np.array(markers, dtype=np.intp), train[j],
-                             np.array(body, dtype=np.intp), fillers=members,
-                             mu=mu, weight_scale=weight_scale)
+    for ((j, members, K, markers, body), group), parts in zip(
+            jobs.items(), parallel_map(fit_and_fill, jobs.items())):
         for g, (_, part) in zip(group, parts):
             fills[g].update({_member_name(f, K, sizes): v for f, v in part.items()})
     order = member_names(local, sizes)
