@@ -99,8 +99,30 @@ def _pad_frames(cleaner: Cleaner, motion: Motion) -> int:
     return int(min(round(cleaner.frames("pad", motion)), max(T - 1, 0)))
 
 
+#: markers per block of :func:`trust_mask` (the blocks run on the task's threads)
+TRUST_BLOCK = 10
+
+
 def trust_mask(pos: np.ndarray, weights: np.ndarray, k: float, lo: float, hi: float,
                iterations: int, pad: int, welsch: float | None = None):
+    """:func:`trust_mask_block` of blocks of at most :data:`TRUST_BLOCK` markers (every
+    marker's detection is its own: the same blocks whatever the thread count) on the
+    task's threads (:func:`mocapfix.threads.parallel_map`), put back together."""
+    from mocapfix.threads import parallel_map
+
+    J = pos.shape[1]
+    if J <= TRUST_BLOCK:
+        return trust_mask_block(pos, weights, k, lo, hi, iterations, pad, welsch)
+    blocks = [slice(b[0], b[-1] + 1) for b in np.array_split(np.arange(J), -(-J // TRUST_BLOCK))]
+    parts = parallel_map(lambda b: trust_mask_block(pos[:, b], weights[:, b], k, lo, hi,
+                                                    iterations, pad, welsch), blocks)
+    trusted, smooth, theta, mu = zip(*parts)
+    return (np.concatenate(trusted, axis=1), np.concatenate(smooth, axis=1),
+            np.concatenate(theta), np.concatenate(mu))
+
+
+def trust_mask_block(pos: np.ndarray, weights: np.ndarray, k: float, lo: float, hi: float,
+                     iterations: int, pad: int, welsch: float | None = None):
     """Trust-data detection (Feng 2014 Algorithm 1) on marker positions (T, J, 3).
 
     ``weights`` (T, J) in [0, 1] (0 = missing or not confident). Thresholds ``lo``/``hi`` and
@@ -399,10 +421,13 @@ class TSMC(Cleaner):
             sinfo = {"iterations": 0, "residual": 0.0, "converged": True, "rank": None}
         smoothed_channels = 0
         if mode in ("smooth", "auto"):
-            smoothed, _ = _gcv_denoise(est, p)
             # the noise is judged on the trusted samples with linear bridges, not on the
-            # model's fills (a poor fill distorts the smooth around it)
-            _, noise = _gcv_denoise(linear_bridge(np.where(omega, x, np.nan)), p, omega)
+            # model's fills (a poor fill distorts the smooth around it); the two smooths
+            # are independent: on the task's threads
+            from mocapfix.threads import parallel_map
+
+            (smoothed, _), (_, noise) = parallel_map(lambda args: _gcv_denoise(*args), [
+                (est, p), (linear_bridge(np.where(omega, x, np.nan)), p, omega)])
             noisy = noise > self.length("noise_floor", motion) if mode == "auto" \
                 else np.ones(noise.shape, bool)
             est = np.where(noisy[None, :], smoothed, est)

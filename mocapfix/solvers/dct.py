@@ -220,10 +220,6 @@ def gcv_smooth(y: np.ndarray, n_pad: int = 0) -> tuple[np.ndarray, np.ndarray]:
 
 # -- weighted robust smoothing (Algorithm 1 of Feng 2014) --------------------------------
 
-#: channels per block of :func:`robust_smooth` (the blocks run on the task's threads)
-ROBUST_BLOCK = 32
-
-
 def robust_smooth(x: np.ndarray, weights: np.ndarray, scale: np.ndarray,
                   iterations: int = 8, mu: np.ndarray | None = None,
                   init: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -247,30 +243,8 @@ def robust_smooth(x: np.ndarray, weights: np.ndarray, scale: np.ndarray,
     Returns
     -------
     (x̂, mu, G): the smooth (n, C), the last μ per channel and the last weights.
-
-    The channels are independent: they are solved in blocks of at most
-    :data:`ROBUST_BLOCK` (the same blocks whatever the thread count) on the task's
-    threads (:func:`mocapfix.threads.parallel_map`).
     """
     x = np.asarray(x, dtype=np.float64)
-    C = x.shape[1] if x.ndim == 2 else 1
-    scale = np.broadcast_to(np.asarray(scale, dtype=np.float64), (C,))
-    blocks = np.array_split(np.arange(C), max(1, -(-C // ROBUST_BLOCK)))
-    if x.ndim != 2 or len(blocks) == 1:
-        return _robust_smooth_block(x, weights, scale, iterations, mu, init)
-    from mocapfix.threads import parallel_map
-
-    weights = np.broadcast_to(np.asarray(weights, dtype=np.float64), x.shape)
-    mu = None if mu is None else np.broadcast_to(np.asarray(mu, dtype=np.float64), (C,))
-    cols = [slice(b[0], b[-1] + 1) for b in blocks]
-    parts = parallel_map(lambda c: _robust_smooth_block(
-        x[:, c], weights[:, c], scale[c], iterations, None if mu is None else mu[c],
-        None if init is None else np.asarray(init)[:, c]), cols)
-    return tuple(np.concatenate([p[k] for p in parts], axis=-1) for k in range(3))
-
-
-def _robust_smooth_block(x, weights, scale, iterations, mu, init):
-    """:func:`robust_smooth` of one block of channels."""
     w = np.where(np.isnan(x), 0.0, np.asarray(weights, dtype=np.float64))
     x0 = np.where(w > 0, x, 0.0)
     xhat = linear_bridge(np.where(w > 0, x, np.nan)) if init is None else np.array(init, dtype=np.float64)

@@ -135,6 +135,16 @@ def _reference(points: np.ndarray) -> np.ndarray:
     return ((points - cs[:, None]) @ np.swapaxes(R, 1, 2) + ct[:, None]).mean(axis=0)
 
 
+def _cached_reference(cache: dict | None, key, points):
+    """:func:`_reference` of ``points()``, from ``cache[key]`` when there, stored there
+    when not (``cache`` None: no cache)."""
+    if cache is None:
+        return _reference(points())
+    if key not in cache:
+        cache[key] = _reference(points())
+    return cache[key]
+
+
 def _ridge(X: np.ndarray, Y: np.ndarray, lam: float = 1e-3):
     """Ridge regression with standardised features; returns a predictor
     (:func:`_nested_ridge` on all the columns)."""
@@ -180,7 +190,8 @@ def _poly(z: np.ndarray) -> np.ndarray:
 
 
 def window_fills(pos, observed, j, windows, neighbours, train, body, *,
-                 fillers=LOCAL_FILLERS, weight_scale: float = 300.0, mu=None):
+                 fillers=LOCAL_FILLERS, weight_scale: float = 300.0, mu=None,
+                 references: dict | None = None):
     """The local fillers' estimates of marker ``j`` on each window ``(s, e)``, on frames
     ``s-1 .. e`` (the gap plus the border frames that exist), from one fit of each filler
     on ``train``: the regressions are learnt once and predict every window (a real gap
@@ -189,7 +200,10 @@ def window_fills(pos, observed, j, windows, neighbours, train, body, *,
 
     ``neighbours``: indices of the rigid neighbours; ``body``: the markers of ``linear``
     and ``pose`` (most rigid first); both observed on every window's frames. ``train``:
-    frames where ``j`` is observed. ``weight_scale`` in the data's units."""
+    frames where ``j`` is observed. ``weight_scale`` in the data's units.
+    ``references``: reference shapes of the rigid frames by ``(j, markers)``, used when
+    present and added when not (so that the validation copies of a gap fit their frames
+    onto the real gap's reference shape instead of computing it again)."""
     T = pos.shape[0]
     spans = [np.arange(max(s - 1, 0), min(e + 1, T)) for s, e in windows]
     frames = np.concatenate(spans)
@@ -200,7 +214,8 @@ def window_fills(pos, observed, j, windows, neighbours, train, body, *,
         tr_local = train[_block(observed, train, neighbours).all(axis=1)]
         nb = _block(pos, frames, neighbours)
         nb_train = _block(pos, tr_local, neighbours)
-        ref = _reference(nb_train if len(tr_local) else nb)
+        ref = _cached_reference(references, (j, tuple(neighbours.tolist())),
+                                lambda: nb_train if len(tr_local) else nb)
         if K >= 3 and len(tr_local) >= max(10, 2 * K):
             (loc, glob), (tl, _) = _frames_two(nb, nb_train, ref)
         else:
@@ -233,7 +248,7 @@ def window_fills(pos, observed, j, windows, neighbours, train, body, *,
         tr = train[_block(observed, train, body).all(axis=1)]
         if len(tr) >= max(10, len(body)):
             body_train, body_gap = _block(pos, tr, body), _block(pos, frames, body)
-            ref = _reference(body_train)
+            ref = _cached_reference(references, (j, tuple(body.tolist())), lambda: body_train)
             (tl, _), (loc, glob) = _frames_two(body_train, body_gap, ref)
             d = mu[j, body] if mu is not None else np.zeros(len(body))
             w = np.repeat(np.exp(-0.5 * (np.nan_to_num(d, nan=1e9) / weight_scale) ** 2), 3)
@@ -367,13 +382,15 @@ def gap_list(observed: np.ndarray, max_gap: float | None = None, fill_ends: bool
 
 
 def member_fills(pos, observed, gaps, external, *, local=LOCAL_FILLERS, neighbours=3,
-                 weight_scale: float = 300.0, mu=None, sd=None, max_train: int = 600):
+                 weight_scale: float = 300.0, mu=None, sd=None, max_train: int = 600,
+                 references: dict | None = None):
     """Every member's fill of every gap, ramped to meet the borders.
 
     ``external``: name → (T, J, 3) fills computed elsewhere (NaN where not filled);
     ``neighbours``: K, or several K (the local fillers then run once per K, named
     ``interp3``, ``interp5``, ...); ``max_train``: the regressions learn from at most this
-    many frames where the marker is seen (evenly spaced). Returns
+    many frames where the marker is seen (evenly spaced); ``references``: the rigid
+    frames' reference shapes to use and extend (:func:`window_fills`). Returns
     one entry per gap: ``(cand, fills)`` with ``cand`` the markers observed on the gap and
     its borders, most rigid first, and ``fills`` name → (gap length, 3).
 
@@ -405,7 +422,7 @@ def member_fills(pos, observed, gaps, external, *, local=LOCAL_FILLERS, neighbou
         return window_fills(pos, observed, j, [gaps[g][1:] for g in group],
                             np.array(markers, dtype=np.intp), train[j],
                             np.array(body, dtype=np.intp), fillers=members,
-                            mu=mu, weight_scale=weight_scale)
+                            mu=mu, weight_scale=weight_scale, references=references)
 
     fills = [{} for _ in gaps]
     for ((j, members, K, markers, body), group), parts in zip(
@@ -446,17 +463,21 @@ def validated_member_fills(pos, observed, gaps, copies, external, *, local=LOCAL
     Each copy is filled as a capture of its own (:func:`member_fills` on ``cut``: one fit
     per marker and neighbour set serves all its windows); ``copy_external(cut)`` gives the
     ``external`` members' fills of the copy (None: the external members are not
-    validated). Returns one ``(cand, fills, errors)`` per gap, ``errors`` name → mean
+    validated). The copies fit their rigid frames onto the reference shapes of the real
+    gaps' frames (the same marker and neighbours; a reference only fixes the frame's
+    orientation). Returns one ``(cand, fills, errors)`` per gap, ``errors`` name → mean
     squared error over the copies."""
+    references: dict = {}
     real = member_fills(pos, observed, gaps, external, local=local, neighbours=neighbours,
-                        weight_scale=weight_scale, mu=mu, sd=sd, max_train=max_train)
+                        weight_scale=weight_scale, mu=mu, sd=sd, max_train=max_train,
+                        references=references)
     errors = [{} for _ in gaps]
     for cut, windows in copies:
         synth = [(gaps[g][0], u, v) for g, u, v in windows]
         fills = member_fills(np.where(cut[..., None], pos, np.nan), cut, synth,
                              copy_external(cut) if copy_external else {}, local=local,
                              neighbours=neighbours, weight_scale=weight_scale, mu=mu, sd=sd,
-                             max_train=max_train)
+                             max_train=max_train, references=references)
         for (g, u, v), (_, f) in zip(windows, fills):
             j = gaps[g][0]
             for name, value in f.items():
