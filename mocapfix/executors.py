@@ -17,7 +17,6 @@ Dask is imported only when asked for; without it the error names the extra.
 from __future__ import annotations
 
 import contextlib
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 
 from mocapfix.errors import ConfigError
@@ -77,6 +76,8 @@ def open_executor(spec: ExecutorSpec, n_items: int):
         if spec.jobs <= 1 or n_items <= 1:
             yield Running(None, 1, "this process")
             return
+        from concurrent.futures import ProcessPoolExecutor     # (multiprocessing: ~10 ms to import)
+
         workers = min(spec.jobs, n_items)
         pool = ProcessPoolExecutor(max_workers=workers, initializer=worker_init, initargs=(1,))
         try:
