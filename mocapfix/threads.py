@@ -19,8 +19,9 @@ The limits are set with ``threadpoolctl`` (a runtime dependency) for the whole p
 once per process; kernels may lower them further for their own span, never raise them.
 
 **Task threads.** A few steps have independent pieces of work inside one file — the gap
-models of ``fill_ensemble`` (one per marker and neighbour set), the channel blocks of
-the robust smoothing of ``trust`` — that :func:`parallel_map` runs on threads (numpy
+models of ``fill_ensemble`` (one per marker and neighbour set), ``trust``'s blocks of
+markers, ``swaps``' chunks of frames, ``tsmc``'s two GCV smooths — that
+:func:`parallel_map` runs on threads (numpy
 releases the GIL in its array loops, FFTs and BLAS calls). The budget is
 :func:`task_threads`: the cores available when one file is cleaned in this process
 (``-j 1`` or a single file; ``MOCAPFIX_THREADS`` lowers it, ``1`` turns it off), one in

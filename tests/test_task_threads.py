@@ -1,5 +1,5 @@
 """Task threads (mocapfix.threads.parallel_map): the independent pieces of work inside one
-file (fill_ensemble's gap models, trust's channel blocks, swaps' frame chunks) run on the
+file (fill_ensemble's gap models, trust's marker blocks, swaps' frame chunks) run on the
 cores available to a single-file clean, one thread in a batch worker, and the results do
 not depend on the number of threads."""
 from __future__ import annotations
