@@ -237,12 +237,13 @@ def missing_patterns(missing):
     return rows, missing[rows[first]], inverse.ravel()
 
 
-def conditional_mean_rows(X, grouping, mean, W, sigma2, chunk: int = 4096):
+def conditional_mean_rows(X, grouping, mean, W, sigma2):
     """:func:`conditional_mean` for rows with different missing patterns at once.
 
     ``grouping`` is :func:`missing_patterns` of the missing mask. One k x k system per
     distinct pattern (``W_o^T W_o = W^T W - W_m^T W_m``, inverted as a batch), then one
-    product for all rows -- a handful of array operations however many patterns there are.
+    (rows of the pattern) x k product per pattern and one product for all rows -- a
+    handful of array operations however many rows there are.
 
     Returns the predictions (len(rows), C) of every column of those rows (callers keep the
     missing ones).
@@ -258,13 +259,41 @@ def conditional_mean_rows(X, grouping, mean, W, sigma2, chunk: int = 4096):
     ridge = sigma2 if sigma2 > 0 else 1e-10 * scale + 1e-300
     grams[:, np.arange(k), np.arange(k)] += ridge
     inverses = np.linalg.inv(grams)
-    out = np.empty((len(rows), W.shape[0]))
-    for lo in range(0, len(rows), chunk):
-        r, pat = rows[lo:lo + chunk], inverse[lo:lo + chunk]
-        centred = np.where(patterns[pat], 0.0, X[r] - mean)
-        z = (inverses[pat] @ (centred @ W)[..., None])[..., 0]
-        out[lo:lo + chunk] = z @ W.T + mean
+    centred = X[rows] - mean
+    centred[patterns[inverse]] = 0.0
+    proj = centred @ W                                              # (n, k)
+    z = np.empty_like(proj)
+    order = np.argsort(inverse, kind="stable")
+    bounds = np.searchsorted(inverse[order], np.arange(len(patterns) + 1))
+    for p in range(len(patterns)):                # the rows of one pattern share its inverse
+        sel = order[bounds[p]:bounds[p + 1]]
+        z[sel] = proj[sel] @ inverses[p].T
+    out = z @ W.T
+    out += mean
     return out
+
+
+class _Moments:
+    """Mean and covariance (as :func:`ppca_fit` computes them) of a (T, C) matrix whose
+    ``changing`` columns are rewritten between calls while the others stay fixed: the
+    fixed block is computed once and each call recomputes only the changing columns'
+    rows and columns of the covariance (C × |changing| products instead of C × C)."""
+
+    def __init__(self, X, changing):
+        self.changing = np.asarray(changing, dtype=np.intp)
+        self.mean = X.mean(axis=0)
+        self.Z = X - self.mean
+        self.cov = self.Z.T @ self.Z / max(len(X), 1)
+
+    def update(self, X):
+        c = self.changing
+        if len(c):
+            self.mean[c] = X[:, c].mean(axis=0)
+            self.Z[:, c] = X[:, c] - self.mean[c]
+            block = self.Z.T @ self.Z[:, c] / max(len(X), 1)           # (C, |c|)
+            self.cov[:, c] = block
+            self.cov[c, :] = block.T
+        return self.mean.copy(), self.cov.copy()
 
 
 def impute_lowrank(X, missing, variance: float = 0.99, rank: int | None = None,
@@ -275,8 +304,9 @@ def impute_lowrank(X, missing, variance: float = 0.99, rank: int | None = None,
     entry by its conditional mean given the observed entries of its row
     (:func:`conditional_mean_rows`); stop when the largest change of a missing entry is
     <= ``tol`` or after ``max_iter`` fits. Observed entries never change. Each iteration
-    costs one C x C eigen-decomposition, one k x k inverse per missing pattern and a few
-    (T, C) x (C, k) products.
+    costs one C x C eigen-decomposition, one k x k inverse per missing pattern, a few
+    (T, C) x (C, k) products and the covariance of the columns with missing entries
+    against all (:class:`_Moments`: the rest of the covariance does not change).
 
     Parameters
     ----------
@@ -295,19 +325,19 @@ def impute_lowrank(X, missing, variance: float = 0.99, rank: int | None = None,
     missing = np.asarray(missing, dtype=bool)
     grouping = missing_patterns(missing)
     rows = grouping[0]
-    hole = missing[rows]
+    hole_row, hole_col = np.nonzero(missing[rows])          # the holes, by row of ``rows``
+    hole_x = rows[hole_row]                                 # ... and by row of X
     change = 0.0
-    model = ppca_fit(X, variance, rank)
+    moments = _Moments(X, np.unique(hole_col))
+    model = ppca_from_moments(*moments.update(X), variance, rank)
     iterations = 0
     for iterations in range(1, max_iter + 1):
         if not len(rows):
             break
-        predicted = conditional_mean_rows(X, grouping, *model[:3])
-        block = X[rows]
-        change = float(np.max(np.abs(predicted[hole] - block[hole])))
-        block[hole] = predicted[hole]
-        X[rows] = block
-        model = ppca_fit(X, variance, rank)
+        predicted = conditional_mean_rows(X, grouping, *model[:3])[hole_row, hole_col]
+        change = float(np.max(np.abs(predicted - X[hole_x, hole_col])))
+        X[hole_x, hole_col] = predicted
+        model = ppca_from_moments(*moments.update(X), variance, rank)
         if change <= tol:
             break
     info = dict(iterations=iterations, rank=int(model[3]), last_change=change,
