@@ -237,9 +237,10 @@ def run_tasks(task: Callable, items: list, workers: int = 1,
             from mocapfix.threads import (blas_threads, limit_blas, set_task_threads,
                                           single_process_task_threads, task_threads)
 
-            limit_blas(blas_threads(1))
+            blas = blas_threads(1)
+            limit_blas(blas)
             before = task_threads()
-            set_task_threads(single_process_task_threads())
+            set_task_threads(single_process_task_threads(blas))
             try:
                 for n, item in enumerate(items):
                     yield n, _guarded(task, item)

@@ -24,7 +24,8 @@ markers, ``swaps``' chunks of frames, ``tsmc``'s two GCV smooths — that
 :func:`parallel_map` runs on threads (numpy
 releases the GIL in its array loops, FFTs and BLAS calls). The budget is
 :func:`task_threads`: the cores available when one file is cleaned in this process
-(``-j 1`` or a single file; ``MOCAPFIX_THREADS`` lowers it, ``1`` turns it off), one in
+(``-j 1`` or a single file; divided by the BLAS threads when ``MOCAPFIX_BLAS_THREADS``
+raises those; ``MOCAPFIX_THREADS`` lowers it, ``1`` turns it off), one in
 a batch worker (the files are the parallelism) and one by default (library use). The
 results do not depend on the number of threads: the pieces are the same, each is
 computed alone and they are put together in their order.
@@ -83,12 +84,15 @@ def worker_init(threads: int = 1) -> None:
     set_task_threads(1)
 
 
-def single_process_task_threads() -> int:
-    """Task threads when one file at a time is cleaned in this process: the cores
-    available, at most ``MOCAPFIX_THREADS``."""
+def single_process_task_threads(blas: int = 1) -> int:
+    """Task threads when one file at a time is cleaned in this process with ``blas``
+    BLAS threads: the cores available divided by ``blas`` (so that task threads × BLAS
+    threads stay within the cores), at most ``MOCAPFIX_THREADS`` (a value that is not a
+    positive integer is ignored)."""
     wanted = os.environ.get("MOCAPFIX_THREADS", "")
-    n = int(wanted) if wanted.isdigit() and int(wanted) > 0 else cores()
-    return max(1, min(n, cores()))
+    room = max(1, cores() // max(1, blas))
+    n = int(wanted) if wanted.isdigit() and int(wanted) > 0 else room
+    return max(1, min(n, room))
 
 
 def set_task_threads(n: int) -> None:

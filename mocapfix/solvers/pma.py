@@ -214,8 +214,10 @@ def window_fills(pos, observed, j, windows, neighbours, train, body, *,
         tr_local = train[_block(observed, train, neighbours).all(axis=1)]
         nb = _block(pos, frames, neighbours)
         nb_train = _block(pos, tr_local, neighbours)
-        ref = _cached_reference(references, (j, tuple(neighbours.tolist())),
-                                lambda: nb_train if len(tr_local) else nb)
+        # only a reference from the training frames is shared (a pure function of the
+        # key); one from this job's own frames stays this job's
+        ref = (_cached_reference(references, (j, tuple(neighbours.tolist())), lambda: nb_train)
+               if len(tr_local) else _reference(nb))
         if K >= 3 and len(tr_local) >= max(10, 2 * K):
             (loc, glob), (tl, _) = _frames_two(nb, nb_train, ref)
         else:
