@@ -237,7 +237,7 @@ def missing_patterns(missing):
     return rows, missing[rows[first]], inverse.ravel()
 
 
-def conditional_mean_rows(X, grouping, mean, W, sigma2):
+def conditional_mean_rows(X, grouping, mean, W, sigma2, at=None):
     """:func:`conditional_mean` for rows with different missing patterns at once.
 
     ``grouping`` is :func:`missing_patterns` of the missing mask. One k x k system per
@@ -246,7 +246,8 @@ def conditional_mean_rows(X, grouping, mean, W, sigma2):
     handful of array operations however many rows there are.
 
     Returns the predictions (len(rows), C) of every column of those rows (callers keep the
-    missing ones).
+    missing ones), or with ``at = (i, c)`` (indices into those rows and the columns) only
+    the predictions of those entries, (len(i),).
     """
     rows, patterns, inverse = grouping
     k = W.shape[1]
@@ -268,6 +269,9 @@ def conditional_mean_rows(X, grouping, mean, W, sigma2):
     for p in range(len(patterns)):                # the rows of one pattern share its inverse
         sel = order[bounds[p]:bounds[p + 1]]
         z[sel] = proj[sel] @ inverses[p].T
+    if at is not None:
+        i, c = at
+        return np.einsum("nk,nk->n", z[i], W[c]) + mean[c]
     out = z @ W.T
     out += mean
     return out
@@ -334,7 +338,7 @@ def impute_lowrank(X, missing, variance: float = 0.99, rank: int | None = None,
     for iterations in range(1, max_iter + 1):
         if not len(rows):
             break
-        predicted = conditional_mean_rows(X, grouping, *model[:3])[hole_row, hole_col]
+        predicted = conditional_mean_rows(X, grouping, *model[:3], at=(hole_row, hole_col))
         change = float(np.max(np.abs(predicted - X[hole_x, hole_col])))
         X[hole_x, hole_col] = predicted
         model = ppca_from_moments(*moments.update(X), variance, rank)
