@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mocapfix.cleaners.partlet import channel_noise
+from mocapfix.solvers.ssa import channel_noise
 from mocapfix.solvers.dct import gcv_smooth
 from mocapfix.solvers.local_sure import local_sure_smooth
 

@@ -140,6 +140,7 @@ from mocapfix.solvers.local_sure import local_sure_smooth
 from mocapfix.solvers.lowrank import blas_single_thread
 from mocapfix.solvers.rigid import from_frame, kabsch, to_frame, torso_frames
 from mocapfix.solvers.segments import linear_bridge
+from mocapfix.solvers.ssa import channel_noise
 
 #: a model for a file when no ``model`` is given: shipped name by skeleton convention
 AUTO_MODELS = (("lfemur", "partlet-cmu"), ("kneeleft", "partlet-kinect"))
@@ -224,17 +225,6 @@ def rigid_bones(a: np.ndarray, b: np.ndarray, sigma: float, *, factor: float = 2
     expected = np.sqrt(8.0 * L2 * sigma ** 2 + 24.0 * sigma ** 4)
     enough = np.isfinite(l2).sum(axis=0) >= 3
     return enough & (spread <= factor * expected + 0.01 * L2)
-
-
-def channel_noise(X: np.ndarray) -> np.ndarray:
-    """σ̂ per channel of X (T, c), as :func:`noise_level` (NaN samples skipped; 0 for a
-    channel with no second difference)."""
-    d2 = np.sort(np.abs(X[2:] - 2 * X[1:-1] + X[:-2]), axis=0)     # NaN sort last
-    k = np.isfinite(d2).sum(axis=0)
-    cols = np.arange(d2.shape[1])
-    lo, hi = np.maximum(k - 1, 0) // 2, np.minimum(k // 2, max(len(d2) - 1, 0))
-    med = 0.5 * (d2[lo, cols] + d2[hi, cols]) if len(d2) else np.zeros(X.shape[1])
-    return np.where(k > 0, np.nan_to_num(med), 0.0) / 0.6745 / np.sqrt(6.0)
 
 
 def noise_level(X: np.ndarray) -> float:
