@@ -135,13 +135,13 @@ def _reference(points: np.ndarray) -> np.ndarray:
     return ((points - cs[:, None]) @ np.swapaxes(R, 1, 2) + ct[:, None]).mean(axis=0)
 
 
-def _cached_reference(cache: dict | None, key, points):
-    """:func:`_reference` of ``points()``, from ``cache[key]`` when there, stored there
-    when not (``cache`` None: no cache)."""
+def _cached_reference(cache: dict | None, key, points: np.ndarray) -> np.ndarray:
+    """:func:`_reference` of ``points``, from ``cache[key]`` when there, stored there when
+    not (``cache`` None: no cache)."""
     if cache is None:
-        return _reference(points())
+        return _reference(points)
     if key not in cache:
-        cache[key] = _reference(points())
+        cache[key] = _reference(points)
     return cache[key]
 
 
@@ -216,7 +216,7 @@ def window_fills(pos, observed, j, windows, neighbours, train, body, *,
         nb_train = _block(pos, tr_local, neighbours)
         # only a reference from the training frames is shared (a pure function of the
         # key); one from this job's own frames stays this job's
-        ref = (_cached_reference(references, (j, tuple(neighbours.tolist())), lambda: nb_train)
+        ref = (_cached_reference(references, (j, tuple(neighbours.tolist())), nb_train)
                if len(tr_local) else _reference(nb))
         if K >= 3 and len(tr_local) >= max(10, 2 * K):
             (loc, glob), (tl, _) = _frames_two(nb, nb_train, ref)
@@ -250,7 +250,7 @@ def window_fills(pos, observed, j, windows, neighbours, train, body, *,
         tr = train[_block(observed, train, body).all(axis=1)]
         if len(tr) >= max(10, len(body)):
             body_train, body_gap = _block(pos, tr, body), _block(pos, frames, body)
-            ref = _cached_reference(references, (j, tuple(body.tolist())), lambda: body_train)
+            ref = _cached_reference(references, (j, tuple(body.tolist())), body_train)
             (tl, _), (loc, glob) = _frames_two(body_train, body_gap, ref)
             d = mu[j, body] if mu is not None else np.zeros(len(body))
             w = np.repeat(np.exp(-0.5 * (np.nan_to_num(d, nan=1e9) / weight_scale) ** 2), 3)
