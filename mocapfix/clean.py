@@ -12,6 +12,7 @@ from mocapfix.fileio import atomic_write_text
 from mocapfix.motion import Motion
 from mocapfix.pipeline import Pipeline
 from mocapfix.report import CleanResult, build_report, to_html, to_json, to_markdown
+from mocapfix.selection import not_cleaned
 from mocapfix.writeback import write_back
 
 REPORT_KINDS = ("json", "md", "html")
@@ -26,7 +27,8 @@ def clean_motion(motion: Motion, pipeline: Pipeline) -> CleanResult:
     if cleaned.rig is not None and cleaned.channels is not None:
         channels, positions, residual = write_back(cleaned)
         cleaned = cleaned.replace(channels=channels, positions=positions)
-    return CleanResult(motion, cleaned, records, residual, time.perf_counter() - started)
+    return CleanResult(motion, cleaned, records, residual, time.perf_counter() - started,
+                       not_cleaned(motion, pipeline.select))
 
 
 def report_paths(output: Path, kinds) -> dict[str, Path]:

@@ -61,6 +61,7 @@ def summarise(motion: Motion) -> dict:
         "fps": round(float(motion.fps), 6),
         "duration_s": round(float(motion.duration), 6),
         "joints": f["joints"],
+        "model_outputs": f.get("points_not_cleaned", 0),
         "names": list(motion.names),
         "units": motion.units,
         "skeleton": motion.skeleton is not None or motion.rig is not None,
@@ -96,7 +97,9 @@ def format_text(summary: dict, verbose: bool = False) -> str:
         f"{s['path']}",
         f"  format      {s['format']}",
         f"  frames      {s['frames']} at {s['fps']:g} fps ({s['duration_s']:.2f} s)",
-        f"  {'markers' if s['format'] == 'c3d' else 'joints':<11} {s['joints']}  (units {s['units']}; "
+        f"  {'markers' if s['format'] == 'c3d' else 'joints':<11} {s['joints']}"
+        + (f" + {s['model_outputs']} model outputs" if s.get("model_outputs") else "")
+        + f"  (units {s['units']}; "
         f"skeleton {'yes' if s['skeleton'] else 'no'}; rotations {'yes' if s['rotations'] else 'no'})",
         f"  names       {_list(s['names'], limit)}",
         f"  missing     {100 * s['missing_fraction']:.1f} % in {s['gaps']} gaps "

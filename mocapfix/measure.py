@@ -46,6 +46,8 @@ class CleanResult:
     records: list
     writeback_residual: np.ndarray | None = None
     seconds: float = 0.0
+    #: per point, why the pipeline left it alone (None: cleaned); see selection.not_cleaned
+    not_cleaned: list | None = None
 
 
 def bones_of(motion: Motion) -> np.ndarray:
@@ -149,8 +151,14 @@ def gap_runs(missing: np.ndarray):
 
 
 def measure_input(motion: Motion, *, swaps: bool = True, outliers: bool = True) -> dict:
-    """Measurements of a capture as read: ``{"file": {...}, "joints": [{...}]}``."""
+    """Measurements of a capture as read: ``{"file": {...}, "joints": [{...}]}``. Model
+    outputs a C3D file lists (``Motion.kinds``) are measured but carry ``"skipped"`` (the
+    rules pass them over) and are left out of the file figures."""
+    from mocapfix.selection import not_cleaned, take
+
     T, J = motion.positions.shape[:2]
+    why = not_cleaned(motion)
+    marker = np.array([w is None for w in why], bool)
     fps = float(motion.fps) if motion.fps and np.isfinite(motion.fps) else float("nan")
     missing = motion.missing
     count, longest, (_, start, length) = gap_runs(missing)
@@ -172,26 +180,31 @@ def measure_input(motion: Motion, *, swaps: bool = True, outliers: bool = True) 
             "outliers": finite(flags[:, j].sum() / observed[j]) if observed[j] else 0.0,
             "jitter": finite(jit[j]),
             "bone_variation": finite(jbvar[j]),
+            **({"skipped": why[j]} if why[j] else {}),
         })
-    swap_list = suspected_swaps(motion) if swaps else []
+    swap_list = suspected_swaps(motion if marker.all() else take(motion, marker)) if swaps else []
     notes = list(motion.notes)
     if swap_list is None:
-        notes.append(f"marker swaps not searched ({J} points > {MAX_SWAP_POINTS})")
+        notes.append(f"marker swaps not searched ({int(marker.sum())} points > {MAX_SWAP_POINTS})")
         swap_list = []
+    if not marker.all():
+        missing, flags, observed, jit = missing[:, marker], flags[:, marker], observed[marker], jit[marker]
+        count, longest, (_, start, length) = gap_runs(missing)
+    names = [n for n, m in zip(motion.names, marker) if m]
     file = {
         "path": motion.path,
         "format": motion.format,
         "frames": T,
         "fps": finite(fps),
         "duration_s": finite(motion.duration),
-        "joints": J,
+        "joints": int(marker.sum()),
         "units": motion.units,
         "missing": finite(missing.mean()) if missing.size else 0.0,
         "gaps": int(len(length)),
         "interior_gaps": int(np.sum((start > 0) & (start + length < T))),
         "longest_gap_s": finite(length.max() / fps) if len(length) else 0.0,
         "longest_gap_frames": int(length.max()) if len(length) else 0,
-        "never_seen": [motion.names[j] for j in range(J) if T and observed[j] == 0],
+        "never_seen": [names[j] for j in range(len(names)) if T and observed[j] == 0],
         "outliers": finite(flags.sum() / max(int(observed.sum()), 1)),
         "jitter": finite(np.nanmedian(jit)) if np.isfinite(jit).any() else None,
         "bone_variation": finite(np.nanmax(bvar)) if np.isfinite(bvar).any() else None,
@@ -199,6 +212,8 @@ def measure_input(motion: Motion, *, swaps: bool = True, outliers: bool = True) 
         **timing(motion),
         "notes": notes,
     }
+    if not marker.all():
+        file["points_not_cleaned"] = int((~marker).sum())
     if motion.confidence is not None and motion.confidence.size:
         conf = motion.confidence
         file["tracking"] = {
@@ -250,9 +265,13 @@ def uncertainty(before: Motion, after: Motion) -> np.ndarray:
 
 
 def measure_cleaning(result: CleanResult) -> dict:
-    """Per-joint and per-file figures of a cleaned file (no status: see rules)."""
+    """Per-joint and per-file figures of a cleaned file (no status: see rules). Only the
+    points the pipeline cleaned are measured and counted; the others (model outputs,
+    points the config excludes) are listed under ``not_cleaned`` with the reason."""
     before, after, records = result.original, result.cleaned, result.records
     T, J = before.positions.shape[:2]
+    why = result.not_cleaned or [None] * J
+    graded = np.array([w is None for w in why], bool)
     mm = before.metres_per_unit * 1000.0
     miss_b, miss_a = before.missing, after.missing
     flagged = np.zeros((T, J), bool)
@@ -266,9 +285,11 @@ def measure_cleaning(result: CleanResult) -> dict:
     var_b, var_a = bone_variation(before.positions, bones), bone_variation(after.positions, bones)
     unc = uncertainty(before, after)
     col, start, length = runs(miss_b)
+    counted = graded[col]
+    col, start, length = col[counted], start[counted], length[counted]
     labels = [r.step for r in records]
     joints = []
-    for j in range(J):
+    for j in np.flatnonzero(graded):
         sel = col == j
         gaps_filled, gaps_left = [], []
         for s, n in zip(start[sel], length[sel]):
@@ -309,12 +330,13 @@ def measure_cleaning(result: CleanResult) -> dict:
             res = result.writeback_residual[:, j] * mm
             entry["writeback_residual_mm"] = {"mean": finite(np.nanmean(res)), "max": finite(np.nanmax(res))}
         joints.append(entry)
+    miss_b, miss_a, flagged = miss_b[:, graded], miss_a[:, graded], flagged[:, graded]
     file = {
         "path": before.path,
         "format": before.format,
         "frames": T,
         "fps": finite(before.fps),
-        "joints": J,
+        "joints": int(graded.sum()),
         "units": before.units,
         "missing_before": finite(miss_b.mean()) if miss_b.size else 0.0,
         "missing_after": finite(miss_a.mean()) if miss_a.size else 0.0,
@@ -332,6 +354,10 @@ def measure_cleaning(result: CleanResult) -> dict:
               **({"skipped": r.skipped} if r.skipped else {}), "info": r.info}
              for r in records]
     out = {"file": file, "steps": steps, "joints": joints}
+    if not graded.all():
+        file["points_not_cleaned"] = int((~graded).sum())
+        out["not_cleaned"] = [{"name": before.names[j], "why": why[j]}
+                              for j in np.flatnonzero(~graded)]
     if len(bones):
         out["bones"] = [{"bone": f"{before.names[a]}-{before.names[b]}",
                          "variation_before": finite(vb), "variation_after": finite(va)}

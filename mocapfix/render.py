@@ -72,6 +72,20 @@ def _long_fills(report: dict) -> list[str]:
     return out
 
 
+def _not_cleaned(report: dict, shown: int = 12) -> list[str]:
+    """Markdown section naming the points left alone by design, grouped by reason."""
+    by_why: dict[str, list[str]] = {}
+    for p in report.get("not_cleaned") or []:
+        by_why.setdefault(p["why"], []).append(p["name"])
+    if not by_why:
+        return []
+    out = ["", "## Not cleaned (passed through unchanged, not graded)", ""]
+    for why, names in by_why.items():
+        more = f", … (+{len(names) - shown})" if len(names) > shown else ""
+        out.append(f"- {len(names)} × {why}: {', '.join(names[:shown])}{more}")
+    return out
+
+
 def to_markdown(report: dict) -> str:
     f = report["file"]
     name = Path(f["path"]).name if f.get("path") else "motion"
@@ -84,7 +98,9 @@ def to_markdown(report: dict) -> str:
            f"- gaps before: {f['gaps_before']}, still unfilled: {f['gaps_unfilled']}, "
            f"long fills (> {LONG_FILL_S:g} s): {f.get('long_fills', 0)}",
            f"- joints OK / WARN / FAIL: {f['joints_by_status']['OK']} / "
-           f"{f['joints_by_status']['WARN']} / {f['joints_by_status']['FAIL']}"]
+           f"{f['joints_by_status']['WARN']} / {f['joints_by_status']['FAIL']}"
+           + (f" ({f['points_not_cleaned']} more points not cleaned: see below)"
+              if f.get("points_not_cleaned") else "")]
     if "writeback_residual_mm" in f:
         wb = f["writeback_residual_mm"]
         out.append(f"- rotation write-back residual: mean {_num(wb['mean'], '{:.3f}')} mm, "
@@ -114,6 +130,7 @@ def to_markdown(report: dict) -> str:
             f"| {_num(j['jitter_before'], '{:.2f}')} → {_num(j['jitter_after'], '{:.2f}')} "
             f"| {'; '.join(j['reasons']) or '–'} |")
     out += _long_fills(report)
+    out += _not_cleaned(report)
     rules = report.get("rules") or []
     if rules:
         out += ["", "Rules: " + "; ".join(

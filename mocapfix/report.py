@@ -10,7 +10,14 @@ JSON schema ``mocapfix.report/1``::
      "unfilled": [...]}, "outliers_flagged",
      "correction_mm": {"mean", "max"}, "jitter_before", "jitter_after" (RMS acceleration,
      m/s²), "bone_variation_before", "bone_variation_after",
-     "writeback_residual_mm": {"mean", "max"} }], "bones": [...]}
+     "writeback_residual_mm": {"mean", "max"} }], "bones": [...],
+     "not_cleaned": [{"name", "why"}]}
+
+``joints`` holds the points the pipeline cleaned, and only they are graded and counted in
+the file summary; points it left alone by design — C3D model outputs (angles, forces,
+moments, powers, ...) and markers the config's pipeline-wide ``exclude:`` leaves out —
+are listed under ``not_cleaned`` with the reason (``file.points_not_cleaned`` counts them;
+both absent when every point was cleaned).
 
 A filled gap is ``long`` when it spans more than ``measure.LONG_FILL_S`` (0.5 s); its
 ``confidence`` is the mean per-sample fill confidence (``None`` when the filler gives
@@ -48,7 +55,7 @@ def build_report(result: CleanResult, thresholds: dict | None = None) -> dict:
     report = {"schema": SCHEMA, "file": file, "steps": measured["steps"],
               "thresholds": {**DEFAULT_THRESHOLDS, **{k: v for k, v in section.items() if k in REPORT_KEYS}},
               "rules": rules.describe(), "joints": measured["joints"]}
-    for key in ("bones",):
+    for key in ("bones", "not_cleaned"):
         if key in measured:
             report[key] = measured[key]
     return report

@@ -375,8 +375,10 @@ class RuleSet:
         return RuleSet(rules, self.source)
 
     def judge(self, measured: dict) -> Judgement:
-        """Judge ``{"file": {...}, "joints": [...]}`` (either stage)."""
-        file, joints = measured["file"], measured["joints"]
+        """Judge ``{"file": {...}, "joints": [...]}`` (either stage). Joints marked
+        ``"skipped"`` (model outputs, see :mod:`mocapfix.measure`) are not judged."""
+        file = measured["file"]
+        joints = [j for j in measured["joints"] if not j.get("skipped")]
         fmt, fps = file.get("format"), file.get("fps")
         findings: list[Finding] = []
         joint_status = {j["name"]: "OK" for j in joints}

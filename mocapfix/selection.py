@@ -71,6 +71,21 @@ def cleanable(motion: Motion, *selections: "Selection | None") -> np.ndarray:
     return keep
 
 
+def not_cleaned(motion: Motion, selection: "Selection | None" = None) -> list[str | None]:
+    """Per point, why the pipeline leaves it alone (None: it is cleaned): a model output
+    the file lists (``"model output (force)"``) or a point the pipeline's own
+    ``markers:``/``exclude:`` leaves out. The report grades only the points cleaned."""
+    out: list[str | None] = [None] * motion.n_joints
+    if selection is not None:
+        for j in np.flatnonzero(~selection.mask(motion.names)):
+            out[j] = "excluded by the config"
+    if motion.kinds is not None:
+        for j, kind in enumerate(motion.kinds):
+            if kind != "marker":
+                out[j] = f"model output ({kind})"
+    return out
+
+
 def take(motion: Motion, cols: np.ndarray) -> Motion:
     """The Motion of the points ``cols`` (J,) bool only (rig/channels formats refused: their
     positions are tied to every joint of the rig)."""

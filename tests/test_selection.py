@@ -90,3 +90,93 @@ def test_markers_list_selects_names_and_patterns():
 def test_bad_selection_is_a_config_error():
     with pytest.raises(ConfigError, match="'exclude' must be"):
         loads_config("pipeline:\n  - {cleaner: fill, exclude: 3}\n")
+
+
+# -- the report grades only what was cleaned ------------------------------------------------
+
+def _clean_report(path, config=None):
+    from mocapfix.clean import clean_motion
+    from mocapfix.pipeline import load_config
+    from mocapfix.presets import resolve_config
+    from mocapfix.report import build_report
+
+    pipe = loads_config(config) if config else load_config(resolve_config("default"))
+    motion = read(path)
+    return motion, build_report(clean_motion(motion, pipe), pipe.report)
+
+
+@pytest.mark.parametrize("rel", PIG)
+def test_report_lists_model_outputs_as_not_cleaned_and_grades_markers_only(rel):
+    motion, report = _clean_report(shared(rel))
+    model = [n for n, k in zip(motion.names, motion.kinds) if k != "marker"]
+    markers = [n for n, k in zip(motion.names, motion.kinds) if k == "marker"]
+    assert [j["name"] for j in report["joints"]] == markers
+    assert [p["name"] for p in report["not_cleaned"]] == model
+    kinds = dict(zip(motion.names, motion.kinds))
+    assert all(p["why"] == f"model output ({kinds[p['name']]})" for p in report["not_cleaned"])
+    f = report["file"]
+    assert f["joints"] == len(markers) and f["points_not_cleaned"] == len(model)
+    is_marker = np.array([k == "marker" for k in motion.kinds])
+    assert f["missing_before"] == pytest.approx(motion.missing[:, is_marker].mean(), abs=1e-6)
+    # no finding names a model output, however much of it is missing
+    assert motion.missing[:, ~is_marker].mean(axis=0).max() > 0.2
+    reasons = " ".join(r for j in report["joints"] for r in j["reasons"])
+    assert not any(n in reasons for n in model)
+
+
+def test_pig_walk_with_complete_markers_is_ok():
+    """btk's PiG walk: every marker complete, forces/moments/powers missing outside the
+    force-plate contacts. It used to FAIL on 'LAnkleForce 24.1 % still missing'."""
+    motion, report = _clean_report(shared(PIG[1]))
+    is_marker = np.array([k == "marker" for k in motion.kinds])
+    assert not motion.missing[:, is_marker].any()
+    assert report["file"]["status"] == "OK"
+    assert report["file"]["joints_by_status"] == {"OK": int(is_marker.sum()), "WARN": 0, "FAIL": 0}
+
+
+def test_pipeline_exclude_takes_markers_out_of_the_grading():
+    """ktk's racing capture has six calibration probes never seen in the trial: excluded
+    for the whole pipeline they are listed as such, not rebuilt, and do not fail the file."""
+    path = shared("c3d/ktk_racing_full.c3d")
+    motion, plain = _clean_report(path)
+    probes = [f"Probe{k}" for k in range(1, 7)]
+    assert all(motion.missing[:, motion.names.index(p)].all() for p in probes)
+    failing = {j["name"] for j in plain["joints"] if j["status"] == "FAIL"}
+    assert set(probes) <= failing
+    _, excluded = _clean_report(path, "exclude: ['Probe*']\npipeline:\n"
+                                "  - {cleaner: fill, method: linear, max_gap: 0.5 s}\n")
+    assert [p["name"] for p in excluded["not_cleaned"]] == probes
+    assert {p["why"] for p in excluded["not_cleaned"]} == {"excluded by the config"}
+    assert not set(probes) & {j["name"] for j in excluded["joints"]}
+    assert excluded["file"]["joints"] == motion.n_joints - 6
+
+
+def test_markdown_report_names_what_was_not_cleaned():
+    from mocapfix.report import to_markdown
+
+    _, report = _clean_report(shared(PIG[0]))
+    md = to_markdown(report)
+    assert "## Not cleaned (passed through unchanged, not graded)" in md
+    assert "8 × model output (force): LGroundReactionForce" in md
+    assert "(32 more points not cleaned: see below)" in md
+
+
+def test_check_passes_over_model_outputs_whatever_their_names():
+    """`check` judges markers: a rule without name patterns does not see the model outputs
+    (the shipped optical-gait rules also exclude them by name, for files that do not list
+    them in POINT:ANGLES/...)."""
+    from mocapfix.check import check_motion
+    from mocapfix.rules import loads_rules
+
+    motion = read(shared(PIG[1]))
+    rules = loads_rules("version: 1\nrules:\n  - {metric: missing, fail: 0 %}\n"
+                        "  - {metric: missing, scope: file, fail: 0 %, name: file-missing}\n")
+    result = check_motion(motion, rules)
+    assert result["status"] == "OK", result["findings"][:2]
+    skipped = [j["name"] for j in result["joints"] if j.get("skipped")]
+    assert skipped == [n for n, k in zip(motion.names, motion.kinds) if k != "marker"]
+    assert result["file"]["missing"] == 0.0
+    # the same rule does fail a marker that misses samples
+    gappy = motion.positions.copy()
+    gappy[:10, motion.kinds.index("marker")] = np.nan
+    assert check_motion(motion.replace(positions=gappy), rules)["status"] == "FAIL"
