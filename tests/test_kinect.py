@@ -627,3 +627,68 @@ def test_unknown_numeric_table_is_refused(tmp_path):
 def test_undecodable_bytes_refused(tmp_path):
     err = _error(_write(tmp_path, "bin.csv", b"\x00\x01\xff\xfe\x00"))
     assert "not a text file" in err.reason
+
+
+# ---------------------------------------------------------------------------------------
+# The bulk writer of headerless Kinect CSVs gives the bytes of the sample-by-sample one
+
+_CELL_STYLES = ["{:.6f}", "{:.3f}", "{:.9f}", "{:g}", " {:.6f}", "{:.6f} ", "{:.2e}",
+                "{:+.6f}", "{:.4E}", "{:.0f}"]
+
+
+def _odd_v2_csv(rng, frames=80, trailing=False) -> str:
+    """A Kinect v2 CSV whose lines mix plain six-decimal lines (most) with lines holding
+    short and long decimals, %g, exponents, blanks around cells, signs, integers, "nan"
+    cells of NotTracked joints; some lines end with a comma, CRLF and LF endings mixed."""
+    out = []
+    for t in range(frames):
+        plain = rng.random() < 0.5
+        odd = _CELL_STYLES[rng.integers(len(_CELL_STYLES))]     # one oddity per line
+        cells = [str(10_000_000_000 + 333_333 * t)]
+        for j in range(25):
+            state = int(rng.choice([0, 1, 2], p=[0.1, 0.2, 0.7]))
+            xyz = rng.normal(0, 0.4, 3) + [0, 0, 2.5]
+            for v in xyz:
+                style = odd if not plain and rng.random() < 0.3 else "{:.6f}"
+                cells.append("nan" if (state == 0 and not plain and rng.random() < 0.3)
+                             else style.format(v))
+            cells.append(str(state))
+        line = ",".join(cells) + ("," if trailing and t % 3 == 0 else "")
+        out.append(line + ("\r\n" if t % 7 == 3 else "\n"))
+    return "".join(out)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_bulk_csv_writer_gives_the_bytes_of_the_sample_by_sample_writer(seed, tmp_path):
+    rng = np.random.default_rng(seed)
+    path = _write(tmp_path, "odd.csv", _odd_v2_csv(rng, trailing=seed % 2 == 1))
+    motion = kinect.read(path, layout="kinect_v2_csv")
+    src = motion.source
+    assert src.layout == "kinect_v2_csv" and motion.missing.any()
+    new = motion.positions.copy()
+    T, J = motion.missing.shape
+    edit = rng.random((T, J))
+    moved = (edit < 0.5) & ~motion.missing
+    new[moved] += rng.normal(0, 0.01, (int(moved.sum()), 3))
+    filled = (edit < 0.7) & motion.missing
+    new[filled] = rng.normal(0, 0.3, (int(filled.sum()), 3)) + [0, 0, 2.5]
+    removed = (edit > 0.95) & ~motion.missing
+    new[removed] = np.nan
+    new[5] = motion.positions[5]                    # one row left as it was
+    cleaned = motion.replace(positions=new)
+    bulk, reference = kinect._fast_csv_text(src, cleaned), kinect._edited_text(src, cleaned)
+    assert bulk == reference
+    assert bulk.splitlines()[5] == src.lines[5]
+    again = kinect.read(_write(tmp_path, "again.csv", bulk), layout="kinect_v2_csv")
+    np.testing.assert_array_equal(again.missing, np.isnan(new).any(axis=2))
+    np.testing.assert_allclose(again.positions[~again.missing], new[~again.missing], atol=5e-3)
+
+
+@pytest.mark.parametrize("name", ["kv2_laban_Ges01_wavehand.csv", "kv2_laban_KinectReader_joints.csv"])
+def test_bulk_csv_writer_matches_on_real_files(name):
+    motion = formats.read(shared(f"kinect/{name}"))
+    rng = np.random.default_rng(1)
+    new = motion.positions + rng.normal(0, 0.005, motion.positions.shape)
+    new[::11, 3] = np.nan
+    cleaned = motion.replace(positions=new)
+    assert kinect._fast_csv_text(motion.source, cleaned) == kinect._edited_text(motion.source, cleaned)

@@ -900,44 +900,63 @@ def _sample_edits(source: KinectSource, motion: Motion):
             yield int(t), int(j), "fill" if source.missing[t, j] else "move"
 
 
+#: what keeps a line of a headerless Kinect CSV out of :func:`_fast_csv_text`'s bulk
+#: rewrite: a character other than digits, signs, points and commas (an exponent, a blank
+#: around a cell, "nan"), or a number with more than 6 decimals. On the other lines each
+#: rewritten coordinate is exactly ``f"{v:.6f}"`` and each state cell a bare digit.
+_NOT_PLAIN = (re.compile(r"[^0-9.,+\n-]"), re.compile(r"\.[0-9.+-]{7}"))
+
+
+def _plain_lines(lines: list[str]) -> np.ndarray:
+    """(len(lines),) True where a line has nothing ``_NOT_PLAIN`` matches (one scan of
+    the joined text: a regex call per line costs more than the rewrite it guards)."""
+    text = "\n".join(lines)
+    sizes = np.fromiter(map(len, lines), np.int64, len(lines)) + 1
+    starts = np.cumsum(sizes) - sizes
+    hits = [m.start() for pattern in _NOT_PLAIN for m in pattern.finditer(text)]
+    plain = np.ones(len(lines), bool)
+    plain[np.searchsorted(starts, hits, side="right") - 1] = False
+    return plain
+
+
 def _fast_csv_text(source: KinectSource, motion: Motion) -> str:
-    """:func:`_patched_text` for the headerless Kinect CSVs (one line per frame, fields
-    at fixed places): the same tokens, without a Python object per sample -- a cleaned
-    10-minute recording (450,000 samples) is written in seconds, not minutes."""
+    """:func:`_edited_text` for the headerless Kinect CSVs (one line per frame, fields at
+    fixed places): the same bytes, without a Python object per sample. Lines whose tokens
+    are plain (see ``_NOT_PLAIN``: numbers of at most six decimals, as mocapfix's bench
+    writes them) are rewritten in bulk -- one ``%`` format for all their new coordinates,
+    cells placed by numpy indexing; the others token by token (:func:`_patch_csv_line`)."""
     new = motion.positions
     new_missing = np.isnan(new).any(axis=2)
     same = np.all(new == source.original, axis=2)
     unchanged = np.where(source.missing, new_missing, same & ~new_missing)
     lines = list(source.lines)
+    J = new.shape[1]
     rows = np.flatnonzero(~unchanged.all(axis=1))
     line_of = source.line_of[rows, 0].tolist()
-    values_all = new[rows].tolist()
-    removed_all = new_missing[rows].tolist()
-    filled_all = source.missing[rows].tolist()
-    edit_all = (~unchanged[rows]).tolist()
-    for r in range(len(rows)):
-        li = line_of[r]
-        fields = lines[li].split(",")
-        values, removed, filled, edit = values_all[r], removed_all[r], filled_all[r], edit_all[r]
-        for j in range(len(edit)):
-            if not edit[j]:
-                continue
-            f0 = 1 + 4 * j
-            if removed[j]:                                      # removed: NotTracked
-                fields[f0 + 3] = _pad(fields[f0 + 3], "0")
-                continue
-            v = values[j]
-            for k in range(3):
-                tok = fields[f0 + k]
-                if "e" in tok or "E" in tok or tok != tok.strip():
-                    fields[f0 + k] = _pad(tok, _format_like(v[k], tok))
-                else:
-                    dot = tok.find(".")
-                    d = 0 if dot < 0 else len(tok) - dot - 1
-                    fields[f0 + k] = f"{v[k]:.{d if d > 6 else 6}f}"
-            if filled[j]:                                       # filled: Inferred
-                fields[f0 + 3] = _pad(fields[f0 + 3], "1")
-        lines[li] = ",".join(fields)
+    fields = [lines[li].split(",") for li in line_of]
+    bulk = _plain_lines([lines[li] for li in line_of])
+    bulk &= np.array([len(f) >= 1 + 4 * J for f in fields], bool)
+    for r in np.flatnonzero(~bulk):
+        lines[line_of[r]] = _patch_csv_line(fields[r], new[rows[r]], new_missing[rows[r]],
+                                            source.missing[rows[r]], ~unchanged[rows[r]])
+    if bulk.any():
+        b = np.flatnonzero(bulk)
+        cells = np.array([f[:1 + 4 * J] for f in (fields[i] for i in b)], dtype=object)
+        edit = ~unchanged[rows[b]]
+        removed = edit & new_missing[rows[b]]
+        moved = edit & ~removed
+        r, j = np.nonzero(moved)
+        values = new[rows[b]][r, j].ravel().tolist()
+        text = ("%.6f," * len(values)) % tuple(values)
+        coords = ((1 + 4 * j)[:, None] + np.arange(3)).ravel()
+        cells[np.repeat(r, 3), coords] = text.split(",")[:-1]
+        r, j = np.nonzero(removed)
+        cells[r, 4 + 4 * j] = "0"
+        r, j = np.nonzero(moved & source.missing[rows[b]])
+        cells[r, 4 + 4 * j] = "1"
+        for k, i in enumerate(b):
+            tail = fields[i][1 + 4 * J:]
+            lines[line_of[i]] = ",".join(cells[k].tolist() + tail)
     deleted = set(source.skip_lines)
     out = [source.bom]
     for i, line in enumerate(lines):
@@ -946,9 +965,37 @@ def _fast_csv_text(source: KinectSource, motion: Motion) -> str:
     return "".join(out)
 
 
+def _patch_csv_line(fields: list[str], values, removed, filled, edit) -> str:
+    """One headerless Kinect CSV line with the edited samples' tokens rewritten (joint j
+    at fields 1 + 4j .. 4 + 4j: x, y, z, tracking state)."""
+    for j in np.flatnonzero(edit).tolist():
+        f0 = 1 + 4 * j
+        if removed[j]:                                      # removed: NotTracked
+            fields[f0 + 3] = _pad(fields[f0 + 3], "0")
+            continue
+        v = values[j].tolist()
+        for k in range(3):
+            tok = fields[f0 + k]
+            if "e" in tok or "E" in tok or tok != tok.strip():
+                fields[f0 + k] = _pad(tok, _format_like(v[k], tok))
+            else:
+                dot = tok.find(".")
+                d = 0 if dot < 0 else len(tok) - dot - 1
+                fields[f0 + k] = f"{v[k]:.{d if d > 6 else 6}f}"
+        if filled[j]:                                       # filled: Inferred
+            fields[f0 + 3] = _pad(fields[f0 + 3], "1")
+    return ",".join(fields)
+
+
 def _patched_text(source: KinectSource, motion: Motion) -> str:
     if source.layout in ("kinect_v2_csv", "kinect_v1_csv") and source.sep == ",":
         return _fast_csv_text(source, motion)
+    return _edited_text(source, motion)
+
+
+def _edited_text(source: KinectSource, motion: Motion) -> str:
+    """The source's lines with every changed sample's tokens rewritten, one sample at a
+    time (any layout; rows of the long layout inserted or deleted)."""
     lines = list(source.lines)
     edited: dict[int, _Line] = {}
     deleted: set[int] = set(source.skip_lines)
