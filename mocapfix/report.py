@@ -30,7 +30,7 @@ from __future__ import annotations
 
 from mocapfix.measure import CleanResult, measure_cleaning
 from mocapfix.render import markdown_to_html, to_html, to_json, to_markdown
-from mocapfix.rules import DEFAULT_THRESHOLDS, STATUS_ORDER, REPORT_KEYS, report_rules
+from mocapfix.rules import DEFAULT_THRESHOLDS, STATUS_ORDER, report_rules, report_thresholds
 
 SCHEMA = "mocapfix.report/1"
 
@@ -39,10 +39,11 @@ __all__ = ["SCHEMA", "CleanResult", "DEFAULT_THRESHOLDS", "STATUS_ORDER", "build
 
 
 def build_report(result: CleanResult, thresholds: dict | None = None) -> dict:
-    """Measure ``result`` and judge it with the report rules: the default thresholds,
-    overridden by a config's validated ``report:`` section (``thresholds``)."""
+    """Measure ``result`` and judge it with the report rules: the default thresholds (and
+    the file format's own, ``rules.FORMAT_THRESHOLDS``), overridden by a config's validated
+    ``report:`` section (``thresholds``)."""
     measured = measure_cleaning(result)
-    rules = report_rules(thresholds)
+    rules = report_rules(thresholds, result.original.format)
     verdict = rules.judge(measured)
     for j in measured["joints"]:
         j["status"] = verdict.joint_status[j["name"]]
@@ -51,9 +52,8 @@ def build_report(result: CleanResult, thresholds: dict | None = None) -> dict:
     file["status"] = verdict.status
     file["joints_by_status"] = {k: sum(j["status"] == k for j in measured["joints"])
                                 for k in STATUS_ORDER}
-    section = thresholds or {}
     report = {"schema": SCHEMA, "file": file, "steps": measured["steps"],
-              "thresholds": {**DEFAULT_THRESHOLDS, **{k: v for k, v in section.items() if k in REPORT_KEYS}},
+              "thresholds": report_thresholds(thresholds, result.original.format),
               "rules": rules.describe(), "joints": measured["joints"]}
     for key in ("bones", "not_cleaned"):
         if key in measured:

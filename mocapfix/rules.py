@@ -550,6 +550,24 @@ DEFAULT_THRESHOLDS = {
 }
 
 
+#: defaults that differ by format (a config's ``report:`` keys still override them).
+#: Kinect: the cleaning moves Tracked joints by ~1-2 cm and Inferred/occluded ones by up to
+#: ~15 cm on good recordings (the 4 LabanotationSuite v2 files: largest move per joint
+#: 48-147 mm; MSR Action3D 43-159 mm), while on recordings with glitches, leg confusion or
+#: sparse rows many joints move by 20-70 cm (UTKinect: 5-17 joints > 200 mm;
+#: KinectReader_joints, 32 % Inferred: 7 joints > 200 mm). 200 mm separates the two
+#: groups; the 50 mm for optical markers flags every Kinect file.
+FORMAT_THRESHOLDS = {"kinect": {"warn_correction_mm": 200.0}}
+
+
+def report_thresholds(section: dict | None = None, fmt: str | None = None) -> dict:
+    """The clean report's thresholds for a file of format ``fmt``: the defaults, the
+    format's own defaults, then the config's ``report:`` keys."""
+    section = section or {}
+    return {**DEFAULT_THRESHOLDS, **FORMAT_THRESHOLDS.get(fmt, {}),
+            **{k: v for k, v in section.items() if k in REPORT_KEYS}}
+
+
 def validate_report_section(data, source: str) -> dict:
     """Check a config's ``report:`` mapping: known threshold keys with finite, non-negative
     numbers, and optionally ``rules:`` (a list of rules on cleaned-stage metrics). Returns
@@ -580,11 +598,11 @@ def validate_report_section(data, source: str) -> dict:
     return out
 
 
-def report_rules(section: dict | None = None) -> RuleSet:
-    """The clean report's rules: the default thresholds overridden by the config's
-    ``report:`` keys, then the section's own ``rules:``."""
+def report_rules(section: dict | None = None, fmt: str | None = None) -> RuleSet:
+    """The clean report's rules for a file of format ``fmt``: the thresholds of
+    :func:`report_thresholds`, then the section's own ``rules:``."""
     section = section or {}
-    th = {**DEFAULT_THRESHOLDS, **{k: v for k, v in section.items() if k in REPORT_KEYS}}
+    th = report_thresholds(section, fmt)
     rules: list[Rule] = []
     by_metric: dict = {}
     for key, value in th.items():

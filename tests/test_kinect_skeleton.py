@@ -240,3 +240,27 @@ def test_fast_kinect_csv_writer_writes_what_the_general_one_writes(path):
     m.source.layout = "generic"                     # force the per-sample path
     assert fast == kf._patched_text(m.source, out)
     assert fast != "".join(line + end for line, end in zip(m.source.lines, m.source.endings))
+
+
+@pytest.mark.parametrize("config", ["default", "kinect"])
+def test_report_status_separates_good_kinect_recordings_from_bad(config):
+    """Both shipped configs run the same Kinect step and grade it alike: the clean
+    LabanotationSuite and MSR recordings OK, the glitchy UTKinect ones and KinectReader
+    (32 % Inferred) WARN. With the optical markers' 50 mm every Kinect file warned."""
+    from mocapfix.clean import clean_motion
+    from mocapfix.pipeline import load_config
+    from mocapfix.presets import resolve_config
+    from mocapfix.report import build_report
+    from tests.conftest import need
+
+    pipe = load_config(resolve_config(config))
+    status = {}
+    for param in shared_files("kinect"):
+        path = need(param.values[0])
+        report = build_report(clean_motion(formats.read(path), pipe), pipe.report)
+        assert report["thresholds"]["warn_correction_mm"] == 200.0
+        status[path.name] = report["file"]["status"]
+    bad = {n for n in status if "utkinect" in n or "KinectReader" in n}
+    assert len(status) == 12 and len(bad) == 4
+    assert {n: s for n, s in status.items() if n in bad} == dict.fromkeys(bad, "WARN")
+    assert {n: s for n, s in status.items() if n not in bad} == dict.fromkeys(set(status) - bad, "OK")
