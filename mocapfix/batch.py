@@ -234,6 +234,7 @@ def run_tasks(task: Callable, items: list, workers: int = 1,
         return
     with open_executor(spec or ExecutorSpec(jobs=workers), len(items)) as running:
         if running.executor is None:
+            from mocapfix.memory import release_freed_memory
             from mocapfix.threads import (blas_threads, limit_blas, set_task_threads,
                                           single_process_task_threads, task_threads)
 
@@ -243,7 +244,9 @@ def run_tasks(task: Callable, items: list, workers: int = 1,
             set_task_threads(single_process_task_threads(blas))
             try:
                 for n, item in enumerate(items):
-                    yield n, _guarded(task, item)
+                    result = _guarded(task, item)
+                    release_freed_memory()
+                    yield n, result
             finally:
                 set_task_threads(before)
             return
@@ -259,11 +262,15 @@ class InWorker:
     threads: int = 1
 
     def __call__(self, item):
+        from mocapfix.memory import release_freed_memory
         from mocapfix.threads import limit_blas, set_task_threads
 
         limit_blas(self.threads)
         set_task_threads(1)
-        return self.task(item)
+        try:
+            return self.task(item)
+        finally:
+            release_freed_memory()
 
 
 def _run_on(pool: Executor, task, items: list, window: int) -> Iterator[tuple[int, dict]]:

@@ -66,6 +66,9 @@ def common(fn):
 @click.pass_context
 def main(ctx, debug):
     """Clean motion-capture files: ASF/AMC, BVH, C3D and Kinect skeleton text."""
+    from mocapfix.memory import retain_freed_memory
+
+    retain_freed_memory()
     ctx.obj = {"debug": debug}
 
 

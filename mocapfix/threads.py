@@ -77,11 +77,15 @@ def limit_blas(threads: int) -> None:
 
 def worker_init(threads: int = 1) -> None:
     """Initializer of a batch worker process: environment for any library loaded later,
-    the live BLAS pools, and one task thread."""
+    the live BLAS pools, one task thread, and freed memory kept between the steps of a
+    file (:mod:`mocapfix.memory`)."""
+    from mocapfix.memory import retain_freed_memory
+
     for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
         os.environ[var] = str(threads)
     limit_blas(threads)
     set_task_threads(1)
+    retain_freed_memory()
 
 
 def single_process_task_threads(blas: int = 1) -> int:
