@@ -1,8 +1,10 @@
 """Speed of partlet_dictionary (issue targets: denoising 4,500 frames × 31 joints in under
 1.5 s — the paper: 13.7 s for one walk; training on the whole corpus in under 3 minutes on
-2 cores). CPU and wall seconds; run on an otherwise idle machine.
+2 cores). CPU and wall seconds; run on an otherwise idle machine. The process keeps freed
+memory as the CLI does (:mod:`mocapfix.memory`; ``--library-memory``: as an importing
+program gets it).
 
-    python benchmarks/partlet_speed.py [--repeat 3] [--train]
+    python benchmarks/partlet_speed.py [--repeat 3] [--train] [--library-memory]
 """
 from __future__ import annotations
 
@@ -33,8 +35,16 @@ def main():
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--frames", default="1125,2250,4500,9000")
     ap.add_argument("--train", action="store_true", help="also time training on the corpus")
+    ap.add_argument("--library-memory", action="store_true",
+                    help="leave the C library's memory policy as a library user gets it "
+                         "(default: the CLI's, mocapfix.memory.retain_freed_memory)")
     args = ap.parse_args()
-    print(f"# {os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.2f}")
+    if not args.library_memory:
+        from mocapfix.memory import retain_freed_memory
+
+        retain_freed_memory()
+    print(f"# {os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.2f}, memory policy "
+          f"{'library' if args.library_memory else 'CLI'}")
     print("| frames × joints | setting | wall s (best of %d) | CPU s |" % args.repeat)
     print("|---:|---|---:|---:|")
     cleaner = build("partlet_dictionary")
