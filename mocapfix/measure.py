@@ -26,6 +26,7 @@ import numpy as np
 from mocapfix.gaps import runs
 from mocapfix.metrics import bone_lengths, rms_acceleration
 from mocapfix.motion import Motion
+from mocapfix.selection import not_cleaned, take
 
 #: an interval longer than this many times the median is a dropped-frame gap
 GAP_FACTOR = 1.5
@@ -154,8 +155,6 @@ def measure_input(motion: Motion, *, swaps: bool = True, outliers: bool = True) 
     """Measurements of a capture as read: ``{"file": {...}, "joints": [{...}]}``. Model
     outputs a C3D file lists (``Motion.kinds``) are measured but carry ``"skipped"`` (the
     rules pass them over) and are left out of the file figures."""
-    from mocapfix.selection import not_cleaned, take
-
     T, J = motion.positions.shape[:2]
     why = not_cleaned(motion)
     marker = np.array([w is None for w in why], bool)
@@ -270,7 +269,8 @@ def measure_cleaning(result: CleanResult) -> dict:
     points the config excludes) are listed under ``not_cleaned`` with the reason."""
     before, after, records = result.original, result.cleaned, result.records
     T, J = before.positions.shape[:2]
-    why = result.not_cleaned or [None] * J
+    # without the pipeline's own selection (a result built by hand): the model outputs
+    why = not_cleaned(before) if result.not_cleaned is None else result.not_cleaned
     graded = np.array([w is None for w in why], bool)
     mm = before.metres_per_unit * 1000.0
     miss_b, miss_a = before.missing, after.missing

@@ -13,10 +13,11 @@ against 12.8–14.6 s (the same settings given as MALLOC_* environment variables
 alternating runs each), peak RSS 200 → 235 MB. README, "Speed", has the CLI timings.
 
 :func:`retain_freed_memory` sets ``M_MMAP_THRESHOLD`` (256 MB) and ``M_TRIM_THRESHOLD``
-(1 GB) with glibc's ``mallopt``; :func:`release_freed_memory` (``malloc_trim``) returns
+(1 GB; 32 MB where an older glibc refuses more) with glibc's ``mallopt``; :func:`release_freed_memory` (``malloc_trim``) returns
 what is free after each file of a batch. Both do nothing on other C libraries (macOS,
-Windows, musl) and in processes that did not ask: the CLI and its process-pool workers
-call :func:`retain_freed_memory`; importing mocapfix as a library changes nothing.
+Windows, musl) and in processes that did not ask: the CLI and the process-pool workers
+mocapfix starts call :func:`retain_freed_memory`; importing mocapfix changes nothing in
+the calling process, and Dask workers (not ours) are left as they are.
 Written here because no maintained package exposes ``mallopt``; ``ctypes`` reaches it.
 """
 from __future__ import annotations
@@ -27,6 +28,8 @@ import functools
 #: glibc's mallopt parameter numbers (malloc.h)
 M_TRIM_THRESHOLD, M_MMAP_THRESHOLD = -1, -3
 MMAP_THRESHOLD = 256 << 20
+#: the largest mmap threshold older glibc accepts (HEAP_MAX_SIZE / 2 on 64-bit)
+MMAP_THRESHOLD_OLD_GLIBC = 32 << 20
 TRIM_THRESHOLD = 1 << 30
 
 _RETAINED = [False]
@@ -51,10 +54,15 @@ def retain_freed_memory() -> bool:
     libc = _libc()
     if libc is None:
         return False
-    ok = libc.mallopt(M_MMAP_THRESHOLD, ctypes.c_int(MMAP_THRESHOLD)) == 1
-    ok &= libc.mallopt(M_TRIM_THRESHOLD, ctypes.c_int(TRIM_THRESHOLD)) == 1
-    _RETAINED[0] = bool(ok)
-    return _RETAINED[0]
+    # glibc before ~2.35 refuses an mmap threshold above 32 MiB; the trim threshold alone
+    # would turn off the adaptive mmap threshold and make things worse, so it is set only
+    # once an mmap threshold took
+    took = any(libc.mallopt(M_MMAP_THRESHOLD, ctypes.c_int(value)) == 1
+               for value in (MMAP_THRESHOLD, MMAP_THRESHOLD_OLD_GLIBC))
+    if took:
+        took = libc.mallopt(M_TRIM_THRESHOLD, ctypes.c_int(TRIM_THRESHOLD)) == 1
+    _RETAINED[0] = took
+    return took
 
 
 def release_freed_memory() -> None:

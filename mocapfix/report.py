@@ -31,6 +31,7 @@ from __future__ import annotations
 from mocapfix.measure import CleanResult, measure_cleaning
 from mocapfix.render import markdown_to_html, to_html, to_json, to_markdown
 from mocapfix.rules import DEFAULT_THRESHOLDS, STATUS_ORDER, report_rules, report_thresholds
+from mocapfix.selection import EXCLUDED
 
 SCHEMA = "mocapfix.report/1"
 
@@ -50,6 +51,12 @@ def build_report(result: CleanResult, thresholds: dict | None = None) -> dict:
         j["reasons"] = verdict.joint_reasons[j["name"]]
     file = measured["file"]
     file["status"] = verdict.status
+    if not measured["joints"] and any(p["why"] == EXCLUDED for p in measured.get("not_cleaned", [])):
+        # a markers:/exclude: that selects nothing (a typo?) must not read as a clean pass
+        file["notes"].append("the config's markers:/exclude: leave none of this file's "
+                             "markers to clean: nothing was cleaned or graded")
+        if STATUS_ORDER[file["status"]] < STATUS_ORDER["WARN"]:
+            file["status"] = "WARN"
     file["joints_by_status"] = {k: sum(j["status"] == k for j in measured["joints"])
                                 for k in STATUS_ORDER}
     report = {"schema": SCHEMA, "file": file, "steps": measured["steps"],

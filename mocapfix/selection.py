@@ -71,6 +71,10 @@ def cleanable(motion: Motion, *selections: "Selection | None") -> np.ndarray:
     return keep
 
 
+#: the reason :func:`not_cleaned` gives for a point the pipeline's selection leaves out
+EXCLUDED = "excluded by the config"
+
+
 def not_cleaned(motion: Motion, selection: "Selection | None" = None) -> list[str | None]:
     """Per point, why the pipeline leaves it alone (None: it is cleaned): a model output
     the file lists (``"model output (force)"``) or a point the pipeline's own
@@ -78,7 +82,7 @@ def not_cleaned(motion: Motion, selection: "Selection | None" = None) -> list[st
     out: list[str | None] = [None] * motion.n_joints
     if selection is not None:
         for j in np.flatnonzero(~selection.mask(motion.names)):
-            out[j] = "excluded by the config"
+            out[j] = EXCLUDED
     if motion.kinds is not None:
         for j, kind in enumerate(motion.kinds):
             if kind != "marker":

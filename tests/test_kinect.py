@@ -686,7 +686,12 @@ def test_bulk_csv_writer_gives_the_bytes_of_the_sample_by_sample_writer(seed, tm
 
 @pytest.mark.parametrize("name", ["kv2_laban_Ges01_wavehand.csv", "kv2_laban_KinectReader_joints.csv"])
 def test_bulk_csv_writer_matches_on_real_files(name):
+    """Kinect SDK exports (%g-style numbers, 3-9 decimals, a few exponents): nearly every
+    line takes the bulk path, the ones with an exponent the token-by-token one."""
     motion = formats.read(shared(f"kinect/{name}"))
+    lines = [motion.source.lines[i] for i in motion.source.line_of[:, 0]]
+    plain = kinect._plain_lines(lines)
+    assert 0.9 < plain.mean() < 1.0
     rng = np.random.default_rng(1)
     new = motion.positions + rng.normal(0, 0.005, motion.positions.shape)
     new[::11, 3] = np.nan

@@ -60,3 +60,15 @@ def test_cli_and_pool_workers_keep_freed_memory(monkeypatch):
     finally:
         set_task_threads(before)
     assert len(calls) == 2
+
+
+def test_freed_memory_is_returned_after_every_file(monkeypatch):
+    """In the calling process (-j 1) and in a batch worker, each file ends with a trim."""
+    import mocapfix.memory as memory
+    from mocapfix.batch import InWorker, run_tasks
+
+    calls = []
+    monkeypatch.setattr(memory, "release_freed_memory", lambda: calls.append(1))
+    results = [r for _, r in run_tasks(lambda item: {"status": "OK", "item": item}, [1, 2, 3])]
+    assert [r["item"] for r in results] == [1, 2, 3] and len(calls) == 3
+    assert InWorker(lambda item: item * 2)(4) == 8 and len(calls) == 4

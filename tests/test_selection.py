@@ -180,3 +180,27 @@ def test_check_passes_over_model_outputs_whatever_their_names():
     gappy = motion.positions.copy()
     gappy[:10, motion.kinds.index("marker")] = np.nan
     assert check_motion(motion.replace(positions=gappy), rules)["status"] == "FAIL"
+
+
+def test_a_result_built_without_the_pipeline_still_skips_model_outputs():
+    """measure_cleaning works the model outputs out from the motion when the caller did
+    not say what the pipeline left alone (library users, benchmark scripts)."""
+    from mocapfix.measure import CleanResult
+    from mocapfix.pipeline import load_config
+    from mocapfix.presets import resolve_config
+    from mocapfix.report import build_report
+
+    motion = read(shared(PIG[1]))
+    pipe = load_config(resolve_config("default"))
+    report = build_report(CleanResult(motion, *pipe.run(motion)), pipe.report)
+    markers = [n for n, k in zip(motion.names, motion.kinds) if k == "marker"]
+    assert [j["name"] for j in report["joints"]] == markers
+    assert report["file"]["status"] == "OK"
+
+
+def test_a_selection_that_picks_no_marker_warns():
+    """A mistyped markers: list must not read as a clean pass."""
+    _, report = _clean_report(shared("c3d/c3dorg_s02_pc_real.c3d"),
+                              "markers: ['NoSuchMarker*']\npipeline:\n  - {cleaner: fill}\n")
+    assert report["file"]["joints"] == 0 and report["file"]["status"] == "WARN"
+    assert any("leave none of this file's markers" in n for n in report["file"]["notes"])

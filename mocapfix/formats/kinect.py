@@ -902,9 +902,10 @@ def _sample_edits(source: KinectSource, motion: Motion):
 
 #: what keeps a line of a headerless Kinect CSV out of :func:`_fast_csv_text`'s bulk
 #: rewrite: a character other than digits, signs, points and commas (an exponent, a blank
-#: around a cell, "nan"), or a number with more than 6 decimals. On the other lines each
-#: rewritten coordinate is exactly ``f"{v:.6f}"`` and each state cell a bare digit.
-_NOT_PLAIN = (re.compile(r"[^0-9.,+\n-]"), re.compile(r"\.[0-9.+-]{7}"))
+#: around a cell, "nan"). On the other lines each rewritten coordinate is exactly
+#: ``f"{v:.{max(6, d)}f}"`` with ``d`` the characters after its old token's first point,
+#: and each state cell a bare digit.
+_NOT_PLAIN = (re.compile(r"[^0-9.,+\n-]"),)
 
 
 def _plain_lines(lines: list[str]) -> np.ndarray:
@@ -922,9 +923,9 @@ def _plain_lines(lines: list[str]) -> np.ndarray:
 def _fast_csv_text(source: KinectSource, motion: Motion) -> str:
     """:func:`_edited_text` for the headerless Kinect CSVs (one line per frame, fields at
     fixed places): the same bytes, without a Python object per sample. Lines whose tokens
-    are plain (see ``_NOT_PLAIN``: numbers of at most six decimals, as mocapfix's bench
-    writes them) are rewritten in bulk -- one ``%`` format for all their new coordinates,
-    cells placed by numpy indexing; the others token by token (:func:`_patch_csv_line`)."""
+    are plain numbers (see ``_NOT_PLAIN``) are rewritten in bulk -- one ``%`` format per
+    number of decimals for all their new coordinates, cells placed by numpy indexing; the
+    others token by token (:func:`_patch_csv_line`)."""
     new = motion.positions
     new_missing = np.isnan(new).any(axis=2)
     same = np.all(new == source.original, axis=2)
@@ -946,10 +947,15 @@ def _fast_csv_text(source: KinectSource, motion: Motion) -> str:
         removed = edit & new_missing[rows[b]]
         moved = edit & ~removed
         r, j = np.nonzero(moved)
-        values = new[rows[b]][r, j].ravel().tolist()
-        text = ("%.6f," * len(values)) % tuple(values)
-        coords = ((1 + 4 * j)[:, None] + np.arange(3)).ravel()
-        cells[np.repeat(r, 3), coords] = text.split(",")[:-1]
+        r, coords = np.repeat(r, 3), ((1 + 4 * j)[:, None] + np.arange(3)).ravel()
+        values = new[rows[b]][moved].ravel()
+        old = cells[r, coords].astype(str)
+        dot = np.char.find(old, ".")
+        decimals = np.maximum(np.where(dot < 0, 0, np.char.str_len(old) - dot - 1), 6)
+        for d in np.unique(decimals):
+            at = np.flatnonzero(decimals == d)
+            text = (f"%.{d}f," * len(at)) % tuple(values[at].tolist())
+            cells[r[at], coords[at]] = text.split(",")[:-1]
         r, j = np.nonzero(removed)
         cells[r, 4 + 4 * j] = "0"
         r, j = np.nonzero(moved & source.missing[rows[b]])
