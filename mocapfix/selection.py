@@ -61,28 +61,23 @@ class Selection:
 
 def cleanable(motion: Motion, *selections: "Selection | None") -> np.ndarray:
     """(J,) True for the points the pipeline may clean: markers (not model outputs) that
-    every given selection keeps."""
-    keep = np.ones(motion.n_joints, bool)
-    if motion.kinds is not None:
-        keep &= np.array([k == "marker" for k in motion.kinds], bool)
-    for sel in selections:
-        if sel is not None:
-            keep &= sel.mask(motion.names)
-    return keep
+    every given selection keeps (:func:`not_cleaned` says why the others are left)."""
+    return np.array([why is None for why in not_cleaned(motion, *selections)], bool)
 
 
-#: the reason :func:`not_cleaned` gives for a point the pipeline's selection leaves out
+#: the reason :func:`not_cleaned` gives for a point a selection leaves out
 EXCLUDED = "excluded by the config"
 
 
-def not_cleaned(motion: Motion, selection: "Selection | None" = None) -> list[str | None]:
+def not_cleaned(motion: Motion, *selections: "Selection | None") -> list[str | None]:
     """Per point, why the pipeline leaves it alone (None: it is cleaned): a model output
-    the file lists (``"model output (force)"``) or a point the pipeline's own
-    ``markers:``/``exclude:`` leaves out. The report grades only the points cleaned."""
+    the file lists (``"model output (force)"``) or a point a given ``markers:``/``exclude:``
+    selection leaves out. The report grades only the points cleaned."""
     out: list[str | None] = [None] * motion.n_joints
-    if selection is not None:
-        for j in np.flatnonzero(~selection.mask(motion.names)):
-            out[j] = EXCLUDED
+    for sel in selections:
+        if sel is not None:
+            for j in np.flatnonzero(~sel.mask(motion.names)):
+                out[j] = EXCLUDED
     if motion.kinds is not None:
         for j, kind in enumerate(motion.kinds):
             if kind != "marker":
