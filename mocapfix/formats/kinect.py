@@ -887,13 +887,18 @@ def _format_like(value: float, token: str) -> str:
     return f"{value:.{max(6, decimals)}f}"
 
 
+def _changed(source: KinectSource, motion: Motion) -> tuple[np.ndarray, np.ndarray]:
+    """(T, J) masks: the samples whose stored tokens must change (moved, filled or
+    removed), and the samples missing in ``motion``."""
+    new_missing = np.isnan(motion.positions).any(axis=2)
+    same = np.all(motion.positions == source.original, axis=2)
+    return ~np.where(source.missing, new_missing, same & ~new_missing), new_missing
+
+
 def _sample_edits(source: KinectSource, motion: Motion):
     """(t, j, action) for every sample whose stored tokens must change."""
-    new = motion.positions
-    new_missing = np.isnan(new).any(axis=2)
-    same = np.all(new == source.original, axis=2)
-    unchanged = np.where(source.missing, new_missing, same & ~new_missing)
-    for t, j in np.argwhere(~unchanged):
+    changed, new_missing = _changed(source, motion)
+    for t, j in np.argwhere(changed):
         if new_missing[t, j]:
             yield int(t), int(j), "remove"
         else:
@@ -905,7 +910,7 @@ def _sample_edits(source: KinectSource, motion: Motion):
 #: around a cell, "nan"). On the other lines each rewritten coordinate is exactly
 #: ``f"{v:.{max(6, d)}f}"`` with ``d`` the characters after its old token's first point,
 #: and each state cell a bare digit.
-_NOT_PLAIN = (re.compile(r"[^0-9.,+\n-]"),)
+_NOT_PLAIN = re.compile(r"[^0-9.,+\n-]")
 
 
 def _plain_lines(lines: list[str]) -> np.ndarray:
@@ -914,7 +919,7 @@ def _plain_lines(lines: list[str]) -> np.ndarray:
     text = "\n".join(lines)
     sizes = np.fromiter(map(len, lines), np.int64, len(lines)) + 1
     starts = np.cumsum(sizes) - sizes
-    hits = [m.start() for pattern in _NOT_PLAIN for m in pattern.finditer(text)]
+    hits = [m.start() for m in _NOT_PLAIN.finditer(text)]
     plain = np.ones(len(lines), bool)
     plain[np.searchsorted(starts, hits, side="right") - 1] = False
     return plain
@@ -927,23 +932,21 @@ def _fast_csv_text(source: KinectSource, motion: Motion) -> str:
     number of decimals for all their new coordinates, cells placed by numpy indexing; the
     others token by token (:func:`_patch_csv_line`)."""
     new = motion.positions
-    new_missing = np.isnan(new).any(axis=2)
-    same = np.all(new == source.original, axis=2)
-    unchanged = np.where(source.missing, new_missing, same & ~new_missing)
+    changed, new_missing = _changed(source, motion)
     lines = list(source.lines)
     J = new.shape[1]
-    rows = np.flatnonzero(~unchanged.all(axis=1))
+    rows = np.flatnonzero(changed.any(axis=1))
     line_of = source.line_of[rows, 0].tolist()
     fields = [lines[li].split(",") for li in line_of]
     bulk = _plain_lines([lines[li] for li in line_of])
     bulk &= np.array([len(f) >= 1 + 4 * J for f in fields], bool)
     for r in np.flatnonzero(~bulk):
         lines[line_of[r]] = _patch_csv_line(fields[r], new[rows[r]], new_missing[rows[r]],
-                                            source.missing[rows[r]], ~unchanged[rows[r]])
+                                            source.missing[rows[r]], changed[rows[r]])
     if bulk.any():
         b = np.flatnonzero(bulk)
         cells = np.array([f[:1 + 4 * J] for f in (fields[i] for i in b)], dtype=object)
-        edit = ~unchanged[rows[b]]
+        edit = changed[rows[b]]
         removed = edit & new_missing[rows[b]]
         moved = edit & ~removed
         r, j = np.nonzero(moved)
