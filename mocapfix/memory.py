@@ -12,6 +12,14 @@ with the freed memory kept; the default clean of ``numediart_03_rolling.c3d`` 9.
 against 12.8–14.6 s (the same settings given as MALLOC_* environment variables, two
 alternating runs each), peak RSS 200 → 235 MB. README, "Speed", has the CLI timings.
 
+An earlier ``mocapfix/allocator.py`` (32 MB mmap, 128 MB trim threshold, set where a batch
+ran its tasks) was removed in commit 12cd8a4: on the 4,500-frame case of
+``benchmarks/clean_speed.py`` it gave a wall ratio of 0.97 in nine alternating runs. Re-measured
+with this module (whole ``mocapfix clean`` runs, with and without the policy in turn):
+4,500 frames paired wall ratio 0.80–0.95 (median 0.90, six pairs), 18,000 frames 0.84–1.02
+(median 0.99), and the capture where it matters, numediart (215 gaps, 300 EM steps),
+12.3–13.1 s against 14.5–17.7 s, system time 1.0–1.1 s against 2.9–4.0 s (three pairs).
+
 :func:`retain_freed_memory` sets ``M_MMAP_THRESHOLD`` (256 MB) and ``M_TRIM_THRESHOLD``
 (1 GB; 32 MB where an older glibc refuses more) with glibc's ``mallopt``; :func:`release_freed_memory` (``malloc_trim``) returns
 what is free after each file of a batch. Both do nothing on other C libraries (macOS,
