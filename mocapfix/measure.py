@@ -160,7 +160,7 @@ def measure_input(motion: Motion, *, swaps: bool = True, outliers: bool = True) 
     marker = np.array([w is None for w in why], bool)
     fps = float(motion.fps) if motion.fps and np.isfinite(motion.fps) else float("nan")
     missing = motion.missing
-    count, longest, (_, start, length) = gap_runs(missing)
+    count, longest, (col, start, length) = gap_runs(missing)
     flags = outlier_flags(motion) if outliers else np.zeros((T, J), bool)
     observed = (~missing).sum(axis=0)
     jit = jitter(motion)
@@ -186,9 +186,9 @@ def measure_input(motion: Motion, *, swaps: bool = True, outliers: bool = True) 
     if swap_list is None:
         notes.append(f"marker swaps not searched ({int(marker.sum())} points > {MAX_SWAP_POINTS})")
         swap_list = []
-    if not marker.all():
+    if not marker.all():                    # the file figures: markers only
         missing, flags, observed, jit = missing[:, marker], flags[:, marker], observed[marker], jit[marker]
-        count, longest, (_, start, length) = gap_runs(missing)
+        start, length = start[marker[col]], length[marker[col]]
     names = [n for n, m in zip(motion.names, marker) if m]
     file = {
         "path": motion.path,
