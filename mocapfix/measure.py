@@ -10,7 +10,8 @@ This module only measures; :mod:`mocapfix.rules` judges the figures and
   (from the file's time stamps), marker swaps suspected (events the ``swaps`` cleaner
   repairs, optical marker data only), frame rate.
 - :func:`measure_cleaning` — what a pipeline did (``clean``'s report): missing before and
-  after, which step filled each gap, samples flagged, correction size, jitter and bone
+  after, which step filled each gap, samples flagged (made missing or rebuilt in place),
+  correction size and what caused the largest, jitter and bone
   variation before and after, rotation write-back residual, and how much of each joint
   is left *uncertain* (not measured in the input, weighted by the fill's confidence when
   the cleaned motion carries one).
@@ -263,6 +264,21 @@ def uncertainty(before: Motion, after: Motion) -> np.ndarray:
     return (miss_b * weight).sum(axis=0) / max(T, 1)
 
 
+def _correction_cause(outliers: np.ndarray, parents: np.ndarray, names, frame: int,
+                      joint: int) -> str | None:
+    """Why a joint's largest move happened, when a step judged something wrong there: the
+    sample itself was an outlier, or a joint up its chain was (a BVH/AMC rotation spike
+    replaced at a parent moves every joint below it)."""
+    if outliers[frame, joint]:
+        return "where it was judged an outlier and rebuilt"
+    up, seen = parents[joint], 0
+    while up >= 0 and seen < len(parents):
+        if outliers[frame, up]:
+            return f"where {names[up]} was judged an outlier and rebuilt"
+        up, seen = parents[up], seen + 1
+    return None
+
+
 def measure_cleaning(result: CleanResult) -> dict:
     """Per-joint and per-file figures of a cleaned file (no status: see rules). Only the
     points the pipeline cleaned are measured and counted; the others (model outputs,
@@ -276,12 +292,14 @@ def measure_cleaning(result: CleanResult) -> dict:
     miss_b, miss_a = before.missing, after.missing
     flagged = np.zeros((T, J), bool)
     for rec in records:
-        flagged |= rec.flagged
+        flagged |= rec.outliers
     who = who_filled(records, T, J)
     moved = np.linalg.norm(after.positions - before.positions, axis=-1) * mm
     moved[miss_b | miss_a] = np.nan
     jitter_b, jitter_a = jitter(before), jitter(after)
     bones = bones_of(before)
+    parents = np.full(J, -1, dtype=np.intp)
+    parents[bones[:, 1]] = bones[:, 0]
     var_b, var_a = bone_variation(before.positions, bones), bone_variation(after.positions, bones)
     unc = uncertainty(before, after)
     col, start, length = runs(miss_b)
@@ -306,6 +324,14 @@ def measure_cleaning(result: CleanResult) -> dict:
                                   "filled_frames": int((span_who >= 0).sum())})
         mv = moved[:, j]
         has_mv = np.isfinite(mv).any()
+        correction = {"mean": finite(np.nanmean(mv)) if has_mv else 0.0,
+                      "max": finite(np.nanmax(mv)) if has_mv else 0.0}
+        if has_mv and correction["max"] > 0:
+            frame = int(np.nanargmax(mv))
+            correction["frame"] = frame
+            cause = _correction_cause(flagged, parents, before.names, frame, j)
+            if cause:
+                correction["cause"] = cause
         entry = {
             "name": before.names[j],
             "missing_before": finite(miss_b[:, j].mean()) if T else 0.0,
@@ -315,8 +341,7 @@ def measure_cleaning(result: CleanResult) -> dict:
                      "longest_frames": int(length[sel].max()) if sel.any() else 0,
                      "filled": gaps_filled, "unfilled": gaps_left},
             "outliers_flagged": int(flagged[:, j].sum()),
-            "correction_mm": {"mean": finite(np.nanmean(mv)) if has_mv else 0.0,
-                              "max": finite(np.nanmax(mv)) if has_mv else 0.0},
+            "correction_mm": correction,
             "jitter_before": finite(jitter_b[j]),
             "jitter_after": finite(jitter_a[j]),
         }
@@ -349,7 +374,7 @@ def measure_cleaning(result: CleanResult) -> dict:
         "notes": list(before.notes) + [n for n in after.notes if n not in before.notes],
     }
     steps = [{"step": r.step, "cleaner": r.cleaner, "seconds": finite(r.seconds),
-              "filled": int(r.filled.sum()), "flagged": int(r.flagged.sum()),
+              "filled": int(r.filled.sum()), "flagged": int(r.outliers.sum()),
               "moved_mean_mm": finite(np.mean(r.moved) * mm) if r.moved.size else 0.0,
               **({"skipped": r.skipped} if r.skipped else {}), "info": r.info}
              for r in records]

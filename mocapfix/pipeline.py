@@ -31,7 +31,7 @@ import numpy as np
 import yaml
 
 from mocapfix.cleaners import build
-from mocapfix.cleaners.base import Cleaner, FittedCleaner
+from mocapfix.cleaners.base import REPLACED_FRAMES, Cleaner, FittedCleaner
 from mocapfix.errors import ConfigError
 from mocapfix.formats import NAMES
 from mocapfix.motion import Motion
@@ -127,10 +127,23 @@ class Pipeline:
         return put(motion, cols, part), info
 
 
+def replaced_mask(info: dict, names, shape) -> np.ndarray:
+    """(T, J) mask of the samples a step's ``info[REPLACED_FRAMES]`` lists."""
+    mask = np.zeros(shape, bool)
+    listed = info.get(REPLACED_FRAMES) or {}
+    index = {name: j for j, name in enumerate(names)}
+    for name, frames in listed.items():
+        if name in index and len(frames):
+            mask[np.asarray(frames, dtype=np.intp), index[name]] = True
+    return mask
+
+
 @dataclass
 class StepRecord:
     """What one step did, per sample: filled (missing → present), flagged (present →
-    missing) and the displacement of samples present before and after."""
+    missing), replaced (judged wrong and rebuilt in place: the step's
+    ``info["replaced_frames"]``, :data:`~mocapfix.cleaners.base.REPLACED_FRAMES`) and the displacement of
+    samples present before and after."""
 
     step: str
     cleaner: str
@@ -140,6 +153,12 @@ class StepRecord:
     moved: np.ndarray
     info: dict
     skipped: str | None = None
+    replaced: np.ndarray | None = None
+
+    @property
+    def outliers(self) -> np.ndarray:
+        """Samples the step judged wrong: flagged (made missing) or replaced in place."""
+        return self.flagged if self.replaced is None else self.flagged | self.replaced
 
     @classmethod
     def compare(cls, step: Step, before: Motion, after: Motion, info: dict, seconds: float):
@@ -152,8 +171,10 @@ class StepRecord:
         moved += diff[..., 2] * diff[..., 2]    # 5x faster than reducing an axis of 3
         np.sqrt(moved, out=moved)
         moved[miss_before | miss_after] = 0.0
+        info = info or {}
         return cls(step.label, step.cleaner.name, seconds, miss_before & ~miss_after,
-                   ~miss_before & miss_after, moved, info or {})
+                   ~miss_before & miss_after, moved, info,
+                   replaced=replaced_mask(info, after.names, miss_before.shape) & ~miss_before)
 
     @classmethod
     def not_run(cls, step: Step, motion: Motion, why: str):

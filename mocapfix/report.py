@@ -8,7 +8,7 @@ JSON schema ``mocapfix.report/1``::
      "missing_before", "missing_after", "uncertain", "gaps": {"count", "longest_frames",
      "filled": [{"start", "length", "seconds", "long", "confidence", "filled_by"}],
      "unfilled": [...]}, "outliers_flagged",
-     "correction_mm": {"mean", "max"}, "jitter_before", "jitter_after" (RMS acceleration,
+     "correction_mm": {"mean", "max", "frame", "cause"}, "jitter_before", "jitter_after" (RMS acceleration,
      m/s²), "bone_variation_before", "bone_variation_after",
      "writeback_residual_mm": {"mean", "max"} }], "bones": [...],
      "not_cleaned": [{"name", "why"}]}
@@ -24,6 +24,10 @@ A filled gap is ``long`` when it spans more than ``measure.LONG_FILL_S`` (0.5 s)
 none); the file summary counts ``long_fills``, and the Markdown/HTML report lists them.
 ``uncertain`` is the fraction of a joint's frames that rest on no measurement (missing in
 the input; weighted by the cleaned motion's per-sample confidence where it has one).
+``outliers_flagged`` counts the samples a step made missing as outliers or rebuilt in
+place (a step's ``info["replaced_frames"]``); ``correction_mm.frame`` is the frame of the
+largest move and ``cause`` (only when one applies) says a step judged that sample, or a
+joint above it in the skeleton, wrong there.
 Lengths are in mm whatever the file's unit.
 """
 from __future__ import annotations

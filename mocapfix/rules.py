@@ -84,6 +84,11 @@ _GETTERS = {
     "gaps_unfilled": lambda j, f: len(j["gaps"]["unfilled"]),
 }
 
+#: what a joint's entry says about why a metric's value is what it is, added to a finding
+_DETAILS = {
+    "correction": _get("correction_mm", "cause"),
+}
+
 METRICS = {m.name: m for m in (
     # what a capture is like as read
     Metric("missing", "input", "fraction", "{v} missing", "fraction of samples missing", "mean"),
@@ -394,7 +399,8 @@ class RuleSet:
                     value = m.joint_value(j, file)
                     level, th = rule.level(value, fps)
                     if level != "OK":
-                        f = _finding(rule, level, value, th, j["name"])
+                        detail = _DETAILS.get(m.name, lambda j, f: None)(j, file)
+                        f = _finding(rule, level, value, th, j["name"], detail)
                         findings.append(f)
                         joint_reasons[j["name"]].append(f"{level}: {f.message}")
                         if STATUS_ORDER[level] > STATUS_ORDER[joint_status[j["name"]]]:
@@ -438,9 +444,11 @@ def _file_value(rule: Rule, file: dict, joints: list):
     return max(values)
 
 
-def _finding(rule: Rule, level: str, value, th: Threshold, joint) -> Finding:
+def _finding(rule: Rule, level: str, value, th: Threshold, joint, detail=None) -> Finding:
     m = rule.metric
     shown = m.phrase.format(v=show(m.kind, value))
+    if detail:
+        shown = f"{shown} {detail}"
     where = f"{joint}: " if joint is not None else ""
     side = "below" if m.below else "above"
     message = f"{where}{shown} ({level.lower()} {side} {th.text}, rule {rule.name})"
@@ -556,8 +564,11 @@ DEFAULT_THRESHOLDS = {
 #: 48-147 mm; MSR Action3D 43-159 mm), while on recordings with glitches, leg confusion or
 #: sparse rows many joints move by 20-70 cm (UTKinect: 5-17 joints > 200 mm;
 #: KinectReader_joints, 32 % Inferred: 7 joints > 200 mm). 200 mm separates the two
-#: groups; the 50 mm for optical markers flags every Kinect file.
-FORMAT_THRESHOLDS = {"kinect": {"warn_correction_mm": 200.0}}
+#: groups; the 50 mm for optical markers flags every Kinect file. Outliers: the Kinect
+#: step replaces glitching hands and wrists in place on good recordings too, up to 8.2 %
+#: of a joint's frames on the 37-57-frame MSR files (2-4 samples; Laban 0-1.9 %), so a
+#: joint warns above 10 % (5 % for optical markers).
+FORMAT_THRESHOLDS = {"kinect": {"warn_correction_mm": 200.0, "warn_outlier_fraction": 0.10}}
 
 
 def report_thresholds(section: dict | None = None, fmt: str | None = None) -> dict:

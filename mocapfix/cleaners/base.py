@@ -9,7 +9,10 @@ the declared default unit, and are converted to the motion's units and frame rat
 
 ``info`` is a JSON-serialisable dict of what the cleaner wants in the report (iterations,
 swaps found, ...). What was filled, flagged or moved is derived by the pipeline from the
-motion before and after, so cleaners need not report it.
+motion before and after, so cleaners need not report it. A cleaner that judges samples
+wrong and rebuilds them in place (a rotation spike re-made, a Kinect outlier replaced)
+rather than making them missing lists them under :data:`REPLACED_FRAMES`, so the report
+counts them as outliers and can say why a joint moved.
 """
 from __future__ import annotations
 
@@ -22,6 +25,10 @@ from mocapfix.motion import Motion
 from mocapfix.quantity import Quantity, parse_quantity
 
 _PHYSICAL = {"length", "time", "frequency"}
+
+#: the info key of the samples a step judged wrong and rebuilt in place:
+#: ``{name: [frame, ...]}`` (JSON-able, so the report keeps it)
+REPLACED_FRAMES = "replaced_frames"
 
 
 @dataclass(frozen=True)

@@ -80,7 +80,7 @@ from __future__ import annotations
 import numpy as np
 
 from mocapfix.cleaners import register
-from mocapfix.cleaners.base import Cleaner, Param
+from mocapfix.cleaners.base import REPLACED_FRAMES, Cleaner, Param
 from mocapfix.formats.kinect_layouts import normalise_name
 from mocapfix.motion import Motion
 from mocapfix.solvers import run_offsets, svshrink, whittaker
@@ -477,6 +477,9 @@ class KinectSkeleton(Cleaner):
                 rows = ~(tracked | inferred)[:, j] | flagged[:, j]
                 rows &= ~np.isnan(Zr[:, j]).any(axis=1)
                 Z[rows, j] = Z[rows, pj] + Zr[rows, j]
+        replaced = flagged & observed
+        info[REPLACED_FRAMES] = {names[j]: np.flatnonzero(replaced[:, j]).tolist()
+                                 for j in np.flatnonzero(replaced.any(axis=0))}
         info.update(outliers=int(flagged.sum()), depth_exponent=round(p_exp, 3),
                     noise_mm={names[j]: round(float(scale[j]) * 1e3, 2) for j in range(J)},
                     cutoff_hz={names[j]: round(float(c), 2) for j, c in enumerate(cut)

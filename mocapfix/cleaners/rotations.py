@@ -21,7 +21,7 @@ from __future__ import annotations
 import numpy as np
 
 from mocapfix.cleaners import register
-from mocapfix.cleaners.base import Cleaner, Param
+from mocapfix.cleaners.base import REPLACED_FRAMES, Cleaner, Param
 from mocapfix.errors import ConfigError
 from mocapfix.kinematics import nearest_branch, nearest_euler
 from mocapfix.motion import Motion
@@ -222,10 +222,12 @@ class RotationOutliers(Cleaner):
             rows = joint_bad[:, n]
             if rows.any():
                 out[np.ix_(rows, rig.rot_columns[j])] = new[np.ix_(rows, rig.rot_columns[j])]
-        hit = {layout[n]["joint"]: int(joint_bad[:, n].sum()) for n in np.flatnonzero(joint_bad.any(axis=0))}
+        hit = np.flatnonzero(joint_bad.any(axis=0))
         return motion.replace(channels=out, positions=rig.positions(out)), {
             "spike_frames": int(joint_bad.any(axis=1).sum()), "joint_frames_replaced": int(joint_bad.sum()),
-            "joints": hit}
+            "joints": {layout[n]["joint"]: int(joint_bad[:, n].sum()) for n in hit},
+            REPLACED_FRAMES: {layout[n]["joint"]: np.flatnonzero(joint_bad[:, n]).tolist()
+                              for n in hit}}
 
 
 @register
