@@ -131,10 +131,15 @@ def replaced_mask(info: dict, names, shape) -> np.ndarray:
     """(T, J) mask of the samples a step's ``info[REPLACED_FRAMES]`` lists."""
     mask = np.zeros(shape, bool)
     listed = info.get(REPLACED_FRAMES) or {}
-    index = {name: j for j, name in enumerate(names)}
+    index: dict = {}
+    for j, name in enumerate(names):
+        index[name] = j if name not in index else None     # a repeated label: ambiguous
     for name, frames in listed.items():
-        if name in index and len(frames):
-            mask[np.asarray(frames, dtype=np.intp), index[name]] = True
+        j = index.get(name)
+        rows = np.asarray(frames, dtype=np.intp).ravel()
+        rows = rows[(rows >= 0) & (rows < shape[0])]
+        if j is not None and rows.size:
+            mask[rows, j] = True
     return mask
 
 

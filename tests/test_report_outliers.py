@@ -54,3 +54,13 @@ def test_a_kinect_glitch_replaced_in_place_is_counted_and_named():
     assert glitched["correction_mm"]["frame"] == frame
     assert glitched["correction_mm"]["cause"] == "where it was judged an outlier and rebuilt"
     assert report["file"]["samples_flagged"] == before["file"]["samples_flagged"] + 1
+
+
+def test_replaced_frames_map_to_samples_by_name_and_skip_what_cannot_be_placed():
+    from mocapfix.pipeline import replaced_mask
+
+    info = {"replaced_frames": {"A": [0, 5, 99, -1], "B": [1], "C": [2], "Z": [3]}}
+    mask = replaced_mask(info, ["A", "B", "B", "C"], (10, 4))
+    # frames outside the clip, an unknown name and a label two points share are skipped
+    assert np.argwhere(mask).tolist() == [[0, 0], [2, 3], [5, 0]]
+    assert not replaced_mask({}, ["A"], (3, 1)).any()
