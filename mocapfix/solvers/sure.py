@@ -18,6 +18,8 @@ frames around it go unsmoothed.
 """
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 #: Gaussian widths tried, in samples (0.7 … 48)
@@ -36,8 +38,10 @@ def column_groups(groups, C: int) -> tuple[np.ndarray, np.ndarray]:
     return labels, M
 
 
+@functools.lru_cache(maxsize=256)
 def centre_weight(sigma: float) -> float:
-    """g_σ(0) of the discrete Gaussian filter ``ndimage.gaussian_filter1d`` applies."""
+    """g_σ(0) of the discrete Gaussian filter ``ndimage.gaussian_filter1d`` applies
+    (cached: every piece of every channel asks for the same few widths)."""
     n = int(4 * sigma + 2)
     impulse = np.zeros(2 * n + 1)
     impulse[n] = 1.0
@@ -45,10 +49,18 @@ def centre_weight(sigma: float) -> float:
     return float(ndimage.gaussian_filter1d(impulse, sigma)[n])
 
 
+@functools.lru_cache(maxsize=256)
 def local_quadratic_kernel(sigma: float) -> np.ndarray:
     """Taps (2n + 1) of the Gaussian-weighted local quadratic fit evaluated at the centre:
     ``e₀ᵀ (Uᵀ K U)⁻¹ Uᵀ K`` with U = [1, u, u²] and K = exp(−u²/2σ²) (Fan & Gijbels
-    1996, eq. 3.5). It reproduces quadratics exactly; its taps sum to 1."""
+    1996, eq. 3.5). It reproduces quadratics exactly; its taps sum to 1. Cached and
+    read-only (the same few widths serve every channel and piece)."""
+    taps = _local_quadratic_taps(sigma)
+    taps.setflags(write=False)
+    return taps
+
+
+def _local_quadratic_taps(sigma: float) -> np.ndarray:
     n = int(np.ceil(4 * sigma)) + 1
     u = np.arange(-n, n + 1, dtype=np.float64)
     k = np.exp(-0.5 * (u / sigma) ** 2)
