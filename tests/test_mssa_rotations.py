@@ -285,6 +285,35 @@ def test_sure_piecewise_does_not_smooth_across_a_step():
     np.testing.assert_array_equal(same, whole)
 
 
+@pytest.mark.parametrize("span", [None, 12.0])
+def test_sure_piecewise_gives_each_piece_its_own_smoother(span):
+    """Pieces of equal length go through one call side by side; each must still come out
+    as if smoothed alone (its own columns, its own risk, its own width)."""
+    rng = np.random.default_rng(3)
+    T, groups = 300, np.array([0, 0, 1, 2, 2, 2])
+    t = np.arange(T)[:, None]
+    X = np.sin(2 * np.pi * t * np.array([1, 2, 5, 9, 0.5, 3]) / T) * 10 + rng.normal(0, 1, (T, 6))
+    breaks = np.zeros((T - 1, 3), bool)
+    breaks[[49, 99, 149, 151, 160], 0] = True          # pieces of 50, 50, 50, 2, 9, 139
+    breaks[[99, 199], 1] = True                         # 100, 100, 100
+    breaks[[49, 59, 69], 2] = True                      # 50, 10, 10, 230
+    noise = rng.uniform(0.5, 1.5, (T, 6))
+    Z, widths = sure.sure_piecewise(X, noise, breaks=breaks, groups=groups, span=span)
+    for g in range(3):
+        cols = groups == g
+        cuts = np.r_[0, np.flatnonzero(breaks[:, g]) + 1, T]
+        chosen = []
+        for a, b in zip(cuts[:-1], cuts[1:]):
+            if b - a < 3:
+                np.testing.assert_array_equal(Z[a:b, cols], X[a:b, cols])
+                continue
+            alone, w = sure.sure_gaussian(X[a:b, cols], noise[a:b, cols],
+                                          groups=np.zeros(int(cols.sum()), int), span=span)
+            np.testing.assert_array_equal(Z[a:b, cols], alone)
+            chosen.append(np.repeat(w[:1], b - a))
+        assert (widths[cols] == np.median(np.concatenate(chosen))).all()
+
+
 @pytest.mark.parametrize("name", ["asfamc/60_10.amc", "asfamc/05_10.amc"])
 def test_rotation_denoise_does_not_smooth_across_steps_of_the_motion(name):
     """CMU 60_10 and 05_10 hold frame-to-frame jumps of 15–100° in their own data (a femur,

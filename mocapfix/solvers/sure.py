@@ -77,10 +77,27 @@ def _filter_trend_padded(X: np.ndarray, taps: np.ndarray) -> np.ndarray:
 
     T, n = len(X), len(taps) // 2
     m = min(n, T - 1)
-    P = np.concatenate([2 * X[:1] - X[1:m + 1][::-1], X, 2 * X[-1:] - X[-m - 1:-1][::-1]])
-    if n > m:
-        P = np.pad(P, ((n - m, n - m), (0, 0)), mode="edge")
+    head, tail = 2 * X[:1] - X[1:m + 1][::-1], 2 * X[-1:] - X[-m - 1:-1][::-1]
+    if n > m:                       # a piece shorter than the kernel: the ends held
+        head = np.concatenate([np.repeat(head[:1], n - m, axis=0), head])
+        tail = np.concatenate([tail, np.repeat(tail[-1:], n - m, axis=0)])
+    P = np.concatenate([head, X, tail])
     return ndimage.correlate1d(P, taps, axis=0, mode="nearest")[n:n + T]
+
+
+@functools.lru_cache(maxsize=256)
+def gaussian_taps(sigma: float) -> np.ndarray:
+    """The taps ``ndimage.gaussian_filter1d`` correlates with for ``sigma`` (its impulse
+    response, read-only): filtering with them is that function without recomputing the
+    kernel on every call."""
+    from scipy import ndimage  # imported here: not loaded unless needed
+
+    n = int(4.0 * float(sigma) + 0.5)
+    impulse = np.zeros(2 * n + 1)
+    impulse[n] = 1.0
+    taps = ndimage.gaussian_filter1d(impulse, sigma, mode="constant")
+    taps.setflags(write=False)
+    return taps
 
 
 def _family(X, widths, quadratic_widths, max_width):
@@ -88,7 +105,7 @@ def _family(X, widths, quadratic_widths, max_width):
 
     for w in widths:
         if max_width is None or w <= max_width:
-            yield ndimage.gaussian_filter1d(X, w, axis=0, mode="nearest"), centre_weight(w), w
+            yield ndimage.correlate1d(X, gaussian_taps(w), axis=0, mode="nearest"), centre_weight(w), w
     for w in quadratic_widths:
         if max_width is None or w <= max_width:
             taps = local_quadratic_kernel(w)
@@ -138,8 +155,11 @@ def sure_piecewise(X: np.ndarray, noise, *, breaks: np.ndarray | None, groups: n
     """:func:`sure_gaussian` run separately on the pieces of each group of columns between
     its ``breaks`` ((T − 1, G) mask: no smoothing across t → t + 1 for group g; e.g.
     :func:`mocapfix.solvers.glitches.steps`; None: no break). Groups with no break go
-    through one call; pieces shorter than 3 samples are left as they are. ``options``:
-    those of :func:`sure_gaussian`. Returns (Z, widths (C,): the median width per column)."""
+    through one call, and so do all the pieces of one length (side by side, each piece a
+    column group of its own: the same values as one call per piece, without the per-call
+    cost — a CMU take has hundreds of short pieces between steps); pieces shorter than 3
+    samples are left as they are. ``options``: those of :func:`sure_gaussian`. Returns
+    (Z, widths (C,): the median width per column)."""
     X = np.asarray(X, dtype=np.float64)
     T, C = X.shape
     sd = np.broadcast_to(np.asarray(noise, dtype=np.float64), X.shape)
@@ -151,14 +171,26 @@ def sure_piecewise(X: np.ndarray, noise, *, breaks: np.ndarray | None, groups: n
     if whole.any():
         Z[:, whole], widths[whole] = sure_gaussian(X[:, whole], sd[:, whole], groups=labels[whole],
                                                    **options)
+    # the pieces, by length: pieces of one length go through one call, side by side as
+    # column groups of their own (each still takes its own smoother by its own risk)
+    by_length: dict = {}
     for g in np.flatnonzero(broken):
-        cols = labels == g
         cuts = np.r_[0, np.flatnonzero(breaks[:, g]) + 1, T]
-        chosen = []
         for a, b in zip(cuts[:-1], cuts[1:]):
             if b - a >= 3:
-                Z[a:b, cols], w = sure_gaussian(X[a:b][:, cols], sd[a:b][:, cols],
-                                                groups=np.zeros(int(cols.sum()), int), **options)
-                chosen.append(np.repeat(w[:1], b - a))
-        widths[cols] = np.median(np.concatenate(chosen)) if chosen else 0.0
+                by_length.setdefault(int(b - a), []).append((g, int(a)))
+    chosen: dict = {}
+    for L, pieces in by_length.items():
+        cols = [np.flatnonzero(labels == g) for g, _ in pieces]
+        rows = np.concatenate([np.add.outer(np.arange(a, a + L), np.zeros(len(c), int))
+                               for (_, a), c in zip(pieces, cols)], axis=1)
+        take = np.concatenate([np.broadcast_to(c, (L, len(c))) for c in cols], axis=1)
+        piece_of = np.concatenate([np.full(len(c), n) for n, c in enumerate(cols)])
+        Zp, w = sure_gaussian(X[rows, take], sd[rows, take], groups=piece_of, **options)
+        Z[rows, take] = Zp
+        first = np.r_[0, np.cumsum([len(c) for c in cols])[:-1]]
+        for (g, _), k in zip(pieces, first):
+            chosen.setdefault(g, []).append(np.repeat(w[k:k + 1], L))
+    for g in np.flatnonzero(broken):
+        widths[labels == g] = np.median(np.concatenate(chosen[g])) if g in chosen else 0.0
     return Z, widths
