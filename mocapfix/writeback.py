@@ -209,9 +209,17 @@ def solve_channels(rig: Rig, channels: np.ndarray, target: np.ndarray,
 
 def write_back(motion, keep_tol: float = 1e-6):
     """Channels, FK positions and per-joint residual (T, J) for a motion whose positions
-    were cleaned while ``motion.channels`` still hold the values read from the file."""
+    were cleaned while ``motion.channels`` still hold the values read from the file.
+    When the positions already are the channels' forward kinematics, bit for bit (the
+    rotation cleaners return both; nothing else moved a sample), the channels are kept as
+    they are: solving would only re-derive them, to ``keep_tol`` at best."""
     rig = motion.rig
-    channels = solve_channels(rig, motion.channels, motion.positions, keep_tol)
-    positions = rig.positions(channels)
-    residual = np.linalg.norm(positions - motion.positions, axis=-1)
+    fk = rig.positions(motion.channels)
+    target = motion.positions
+    if ((fk == target) | np.isnan(target)).all():
+        channels, positions = np.array(motion.channels, dtype=np.float64), fk
+    else:
+        channels = solve_channels(rig, motion.channels, target, keep_tol)
+        positions = rig.positions(channels)
+    residual = np.linalg.norm(positions - target, axis=-1)
     return channels, positions, residual

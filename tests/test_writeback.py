@@ -140,3 +140,28 @@ def test_nearest_euler_picks_the_equivalent_triplet_of_the_reference(axes):
     np.testing.assert_allclose(nearest_euler(principal, ref), ref, atol=1e-9)
     np.testing.assert_allclose(np.deg2rad(nearest_euler(principal, ref)),
                                nearest_euler(np.deg2rad(principal), np.deg2rad(ref), degrees=False), atol=1e-12)
+
+
+def test_write_back_keeps_the_channels_of_rotation_cleaners_and_solves_moved_positions(monkeypatch):
+    """The rotation cleaners return channels and their forward kinematics: nothing is
+    left to solve, the channels are written as the cleaner made them (residual 0). A step
+    that moves positions still gets its channels solved."""
+    from mocapfix import formats, writeback
+    from mocapfix.clean import clean_motion
+    from mocapfix.pipeline import loads_config
+
+    m = formats.read(shared("bvh/cmu_cgspeed_131_01.bvh"))
+    calls = []
+    real = writeback.solve_channels
+    monkeypatch.setattr(writeback, "solve_channels", lambda *a, **k: calls.append(1) or real(*a, **k))
+    rot = loads_config("pipeline:\n  - cleaner: rotation_denoise\n")
+    result = clean_motion(m, rot)
+    alone, _ = rot.steps[0].cleaner.apply(m)
+    assert calls == []
+    np.testing.assert_array_equal(result.cleaned.channels, alone.channels)
+    assert np.nanmax(result.writeback_residual) == 0.0
+    moved = loads_config("pipeline:\n  - cleaner: gaussian\n    sigma: 0.02 s\n")
+    result = clean_motion(m, moved)
+    assert calls == [1]
+    assert not np.array_equal(result.cleaned.channels, m.channels)
+    assert np.nanmax(result.writeback_residual) < 1.0        # cm: the smoothed pose is reached
