@@ -13,13 +13,16 @@
    parallel loops, :mod:`mocapfix.threads`) in turn with ``MOCAPFIX_THREADS=1``: the
    medians and the median of the paired ratios; and the start-up cost (``mocapfix
    --version`` against ``mocapfix cleaners``, which loads every cleaner module).
+4. A long BVH/AMC take: CMU 05_02 (ASF/AMC) written six times over (6,738 frames × 31
+   joints, 56 s), ``mocapfix clean`` with the default config (rotation_outliers →
+   rotation_denoise → write-back), best of three runs.
 
 Every child process may write and use compiled bytecode (``PYTHONDONTWRITEBYTECODE`` is
 dropped from its environment: an installed tool runs from its ``__pycache__``; compiling
 mocapfix's modules from source costs ~0.2 s a run); case 1 and the start-up keep the best
 of three runs.
 
-    python benchmarks/clean_speed.py [--scaling]     (--scaling: case 3 only)
+    python benchmarks/clean_speed.py [--scaling | --bvh]   (only case 3 / case 4)
 """
 from __future__ import annotations
 
@@ -124,9 +127,26 @@ def scaling():
                   f"{max(r[1] for r in runs):.0f} |")
 
 
+def long_take():
+    amc = DATA.parent / "asfamc" / "05_02.amc"
+    take = read(amc)
+    channels = np.concatenate([take.channels] * 6)
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        write(take.replace(channels=channels, positions=take.rig.positions(channels)),
+              tmp / "05_02x6.amc")
+        t = min(clean([tmp / "05_02x6.amc"], tmp / f"out{k}", 1) for k in range(3))
+    print("\n| take | frames × joints | `mocapfix clean` wall time (s) |")
+    print("|---|---:|---:|")
+    print(f"| CMU 05_02 ×6 (AMC) | {len(channels)} × {take.n_joints} | {t:.2f} |")
+
+
 if __name__ == "__main__":
     if "--scaling" in sys.argv:
         scaling()
+    elif "--bvh" in sys.argv:
+        long_take()
     else:
         main()
         scaling()
+        long_take()
