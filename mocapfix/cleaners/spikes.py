@@ -83,17 +83,21 @@ def hampel_flags(pos: np.ndarray, half: int, k: float, floor: float,
     for _ in range(half):
         if not flags.any():
             break
-        # refit without the flagged samples; grow into neighbours that are still off
-        _, r, lev, usable = _residuals(pos, w * ~flags, half, observed)
-        sigma = np.maximum(scale[None, :], _local_scale(r, usable, half))
+        # refit without the flagged samples; grow into neighbours that are still off.
+        # Only the markers with flags change: the fits are per marker, so the others'
+        # refits would give back what they have (the same values, at the cost of all)
+        cols = np.flatnonzero(flags.any(axis=0))
+        f = flags[:, cols]
+        _, r, lev, usable = _residuals(pos[:, cols], (w * ~flags)[:, cols], half, observed[:, cols])
+        sigma = np.maximum(scale[None, cols], _local_scale(r, usable, half))
         weak = np.maximum(k * sigma * np.sqrt(1.0 + lev), 0.5 * floor)
-        near = np.zeros_like(flags)
-        near[1:] |= flags[:-1]
-        near[:-1] |= flags[1:]
-        grow = near & ~flags & (r > weak)
+        near = np.zeros_like(f)
+        near[1:] |= f[:-1]
+        near[:-1] |= f[1:]
+        grow = near & ~f & (r > weak)
         if not grow.any():
             break
-        flags = flags | grow
+        flags[:, cols] = f | grow
     return flags, np.median(thr, axis=0)
 
 
