@@ -382,19 +382,21 @@ def test_spikes_fill_butterworth_beats_raw_and_linear_gaussian(capture, cutoff, 
 def test_spike_flags_of_a_marker_do_not_depend_on_the_other_markers():
     """The detector fits each marker on its own: flagging a whole capture gives, marker
     by marker, what flagging that marker alone gives (spikes of 1-3 frames in some
-    markers, none in others, a gap, fast motion in one)."""
+    markers, a spike's shoulders found by growing in another, none in others, a gap)."""
     from mocapfix.cleaners.spikes import hampel_flags
 
     rng = np.random.default_rng(4)
     T, J = 600, 6
     t = np.arange(T)[:, None] / 120.0
-    pos = np.stack([np.sin(2 * np.pi * f * t + np.arange(3)) * 100 for f in (0.5, 1, 2, 4, 7, 1.5)], axis=1)
-    pos += rng.normal(0, 1.0, pos.shape)
-    for j, s, n in ((0, 100, 1), (0, 300, 3), (2, 50, 2), (4, 400, 1), (4, 402, 1)):
-        pos[s:s + n, j] += 40.0
-    pos[200:220, 3] = np.nan
+    pos = np.stack([np.sin(2 * np.pi * f * t + np.arange(3)) * 100 for f in (0.5, 1, 2, 1.5, 7, 1.5)], axis=1)
+    pos += rng.normal(0, 1.0, pos.shape) * np.array([0.5, 1, 2, 0.5, 3, 0.7])[None, :, None]
+    for j, s, n in ((1, 100, 1), (3, 300, 3), (2, 50, 2), (4, 400, 1)):
+        pos[s:s + n, j] += 60.0
+    pos[298:300, 3] += [[8.0], [20.0]]            # the shoulders of marker 3's spike
+    pos[200:220, 5] = np.nan
     flags, thr = hampel_flags(pos, 5, 5.0, 10.0)
-    assert flags[100, 0] and flags[300:303, 0].all() and flags[50:52, 2].all() and flags[400, 4]
+    assert flags[100, 1] and flags[300:303, 3].all() and flags[50:52, 2].all() and flags[400, 4]
+    assert flags[298:300, 3].all()
     for j in range(J):
         alone, thr_j = hampel_flags(pos[:, j:j + 1], 5, 5.0, 10.0)
         np.testing.assert_array_equal(flags[:, j:j + 1], alone)
