@@ -22,7 +22,7 @@ dropped from its environment: an installed tool runs from its ``__pycache__``; c
 mocapfix's modules from source costs ~0.2 s a run); case 1 and the start-up keep the best
 of three runs.
 
-    python benchmarks/clean_speed.py [--scaling | --bvh]   (only case 3 / case 4)
+    python benchmarks/clean_speed.py [--scaling | --animation]   (only case 3 / case 4)
 """
 from __future__ import annotations
 
@@ -144,7 +144,7 @@ def long_take():
 if __name__ == "__main__":
     if "--scaling" in sys.argv:
         scaling()
-    elif "--bvh" in sys.argv:
+    elif "--animation" in sys.argv:
         long_take()
     else:
         main()

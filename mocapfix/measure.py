@@ -264,12 +264,12 @@ def uncertainty(before: Motion, after: Motion) -> np.ndarray:
     return (miss_b * weight).sum(axis=0) / max(T, 1)
 
 
-def _correction_cause(outliers: np.ndarray, parents: np.ndarray, names, frame: int,
-                      joint: int) -> str | None:
+def _correction_cause(outliers: np.ndarray, own: np.ndarray, parents: np.ndarray, names,
+                      frame: int, joint: int) -> str | None:
     """Why a joint's largest move happened, when a step judged something wrong there: the
-    sample itself was an outlier, or a joint up its chain was (a BVH/AMC rotation spike
-    replaced at a parent moves every joint below it)."""
-    if outliers[frame, joint]:
+    sample itself (``own``: outliers that move the joint's own position), or a joint up
+    its chain (a BVH/AMC rotation spike re-made at a parent moves every joint below it)."""
+    if own[frame, joint]:
         return "where it was judged an outlier and rebuilt"
     up, seen = parents[joint], 0
     while up >= 0 and seen < len(parents):
@@ -291,8 +291,14 @@ def measure_cleaning(result: CleanResult) -> dict:
     mm = before.metres_per_unit * 1000.0
     miss_b, miss_a = before.missing, after.missing
     flagged = np.zeros((T, J), bool)
+    made_missing = np.zeros((T, J), bool)
     for rec in records:
         flagged |= rec.outliers
+        made_missing |= rec.flagged
+    # a sample judged wrong moves its own point, except a BVH joint's re-made rotation,
+    # which moves the joints below it only (an ASF/AMC bone's rotation moves its end too)
+    rig = before.rig
+    own = flagged if rig is None else made_missing | (flagged & np.asarray(rig.offset_in_own_frame, bool)[None, :J])
     who = who_filled(records, T, J)
     moved = np.linalg.norm(after.positions - before.positions, axis=-1) * mm
     moved[miss_b | miss_a] = np.nan
@@ -329,7 +335,7 @@ def measure_cleaning(result: CleanResult) -> dict:
         if has_mv and correction["max"] > 0:
             frame = int(np.nanargmax(mv))
             correction["frame"] = frame
-            cause = _correction_cause(flagged, parents, before.names, frame, j)
+            cause = _correction_cause(flagged, own, parents, before.names, frame, j)
             if cause:
                 correction["cause"] = cause
         entry = {

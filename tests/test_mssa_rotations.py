@@ -314,6 +314,36 @@ def test_sure_piecewise_gives_each_piece_its_own_smoother(span):
         assert (widths[cols] == np.median(np.concatenate(chosen))).all()
 
 
+def test_sure_piecewise_with_more_pieces_of_one_length_than_one_call_takes():
+    """333 pieces of 3 frames (two calls side by side): each still as if smoothed alone;
+    and a one-frame channel goes through the quadratic fits (it raised once)."""
+    rng = np.random.default_rng(5)
+    T = 1000
+    X = np.cumsum(rng.normal(size=(T, 2)), axis=0)
+    breaks = np.zeros((T - 1, 1), bool)
+    breaks[2::3] = True
+    Z, _ = sure.sure_piecewise(X, 0.5, breaks=breaks, groups=np.zeros(2, int),
+                               quadratic_widths=sure.QUADRATIC_WIDTHS)
+    for a in range(0, 999, 3):
+        alone, _ = sure.sure_gaussian(X[a:a + 3], 0.5, groups=np.zeros(2, int),
+                                      quadratic_widths=sure.QUADRATIC_WIDTHS)
+        np.testing.assert_array_equal(Z[a:a + 3], alone)
+    one = X[:1]                 # nothing to average: the sample itself, to rounding
+    np.testing.assert_allclose(sure.sure_gaussian(one, 0.5, quadratic_widths=sure.QUADRATIC_WIDTHS)[0],
+                               one, rtol=1e-12)
+
+
+def test_group_sums_add_a_group_alike_wherever_it_stands():
+    def sums(R, labels):
+        return sure.group_sums(R, sure.group_plan(np.asarray(labels)), int(max(labels)) + 1)
+
+    R = np.array([[0.1, 0.2, 0.3, 1e16, 1.0, -1e16]])
+    assert sums(R, [0, 0, 0, 1, 1, 1]).tolist() == [[0.6000000000000001, 0.0]]   # in order
+    # the same group's columns with another group interleaved: the same sum, bit for bit
+    R2 = np.array([[0.1, 5.0, 0.2, 7.0, 0.3]])
+    assert sums(R2, [0, 1, 0, 1, 0])[0].tolist() == [sums(R[:, :3], [0, 0, 0])[0, 0], 12.0]
+
+
 @pytest.mark.parametrize("name", ["asfamc/60_10.amc", "asfamc/05_10.amc"])
 def test_rotation_denoise_does_not_smooth_across_steps_of_the_motion(name):
     """CMU 60_10 and 05_10 hold frame-to-frame jumps of 15–100° in their own data (a femur,

@@ -64,3 +64,21 @@ def test_replaced_frames_map_to_samples_by_name_and_skip_what_cannot_be_placed()
     # frames outside the clip, an unknown name and a label two points share are skipped
     assert np.argwhere(mask).tolist() == [[0, 0], [2, 3], [5, 0]]
     assert not replaced_mask({}, ["A"], (3, 1)).any()
+
+
+def test_a_bvh_joint_re_made_where_its_parent_was_is_moved_by_the_parent():
+    """In BVH a joint's own rotation turns the joints below it, not itself: when a joint
+    and its parent are both re-made at a frame, the parent is named as the cause of the
+    joint's move (bvh-python's test file: LeftFoot and LeftToeBase re-made at frames
+    62-65, LeftToeBase moved 34 mm at frame 64)."""
+    from mocapfix.pipeline import load_config
+    from mocapfix.presets import resolve_config
+
+    m = formats.read(shared("bvh/bvhpython_test_freebvh.bvh"))
+    pipe = load_config(resolve_config("default"))
+    report = build_report(clean_motion(m, pipe), pipe.report)
+    replaced = next(s for s in report["steps"] if s["cleaner"] == "rotation_outliers")["info"]["replaced_frames"]
+    toe = _joint(report, "mixamorig:LeftToeBase")
+    frame = toe["correction_mm"]["frame"]
+    assert frame in replaced["mixamorig:LeftToeBase"] and frame in replaced["mixamorig:LeftFoot"]
+    assert toe["correction_mm"]["cause"] == "where mixamorig:LeftFoot was judged an outlier and rebuilt"

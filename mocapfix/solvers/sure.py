@@ -38,6 +38,32 @@ def column_groups(groups, C: int) -> tuple[np.ndarray, np.ndarray]:
     return labels, M
 
 
+def group_plan(labels: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
+    """For :func:`group_sums`: per rank q, the columns that are the q-th of their group
+    (in column order) and their groups."""
+    if not len(labels):
+        return []
+    order = np.argsort(labels, kind="stable")
+    sizes = np.bincount(labels)
+    rank = np.empty(len(labels), dtype=np.intp)
+    rank[order] = np.arange(len(labels)) - np.repeat(np.cumsum(sizes) - sizes, sizes)
+    return [(cols, labels[cols]) for cols in (np.flatnonzero(rank == q) for q in range(int(sizes.max())))]
+
+
+def group_sums(R: np.ndarray, plan, G: int) -> np.ndarray:
+    """(…, G): the columns of R (…, C) summed by group (``plan`` from :func:`group_plan`),
+    each group's columns added one after another in column order — so a group's sum does
+    not depend on which other columns stand beside it (a matrix product with an indicator
+    matrix may add them in another order, and in another again when more groups are
+    present), and no (C, G) matrix is built."""
+    cols, groups = plan[0] if plan else (np.zeros(0, np.intp), np.zeros(0, np.intp))
+    out = np.zeros(R.shape[:-1] + (G,))
+    out[..., groups] = R[..., cols]               # each group's first column: 0 + x = x
+    for cols, groups in plan[1:]:
+        out[..., groups] += R[..., cols]
+    return out
+
+
 @functools.lru_cache(maxsize=256)
 def centre_weight(sigma: float) -> float:
     """g_σ(0) of the discrete Gaussian filter ``ndimage.gaussian_filter1d`` applies
@@ -79,8 +105,9 @@ def _filter_trend_padded(X: np.ndarray, taps: np.ndarray) -> np.ndarray:
     m = min(n, T - 1)
     head, tail = 2 * X[:1] - X[1:m + 1][::-1], 2 * X[-1:] - X[-m - 1:-1][::-1]
     if n > m:                       # a piece shorter than the kernel: the ends held
-        head = np.concatenate([np.repeat(head[:1], n - m, axis=0), head])
-        tail = np.concatenate([tail, np.repeat(tail[-1:], n - m, axis=0)])
+        first, last = (head[:1], tail[-1:]) if m else (X[:1], X[-1:])
+        head = np.concatenate([np.repeat(first, n - m, axis=0), head])
+        tail = np.concatenate([tail, np.repeat(last, n - m, axis=0)])
     P = np.concatenate([head, X, tail])
     return ndimage.correlate1d(P, taps, axis=0, mode="nearest")[n:n + T]
 
@@ -129,16 +156,19 @@ def sure_gaussian(X: np.ndarray, noise, *, widths=WIDTHS, quadratic_widths=(),
 
     X = np.asarray(X, dtype=np.float64)
     V = np.broadcast_to(np.asarray(noise, dtype=np.float64) ** 2, X.shape)
-    labels, M = column_groups(groups, X.shape[1])
     C = X.shape[1]
+    labels = np.arange(C) if groups is None else np.unique(np.asarray(groups), return_inverse=True)[1]
+    G = int(labels.max()) + 1 if C else 0
+    plan = group_plan(labels)
     best = X.copy()
     chosen = np.zeros(X.shape if span else C)
     # the identity: SURE = −v + 2v per sample
-    risk = (ndimage.gaussian_filter1d(V, span, axis=0, mode="nearest") if span else V.sum(axis=0)) @ M
+    risk = group_sums(ndimage.gaussian_filter1d(V, span, axis=0, mode="nearest") if span
+                      else V.sum(axis=0), plan, G)
     for Z, centre, w in _family(X, widths, quadratic_widths, max_width):
         per_sample = (X - Z) ** 2 - V + 2 * V * centre
-        r = (ndimage.gaussian_filter1d(per_sample, span, axis=0, mode="nearest") if span
-             else per_sample.sum(axis=0)) @ M
+        r = group_sums(ndimage.gaussian_filter1d(per_sample, span, axis=0, mode="nearest") if span
+                       else per_sample.sum(axis=0), plan, G)
         better = r < risk
         risk[better] = r[better]
         cols = better[..., labels]
@@ -150,21 +180,29 @@ def sure_gaussian(X: np.ndarray, noise, *, widths=WIDTHS, quadratic_widths=(),
     return best, (np.median(chosen, axis=0) if span else chosen)
 
 
+#: pieces smoothed side by side in one call of :func:`sure_gaussian` at most (bounds the
+#: arrays of one call however dense a take's steps are)
+_PIECES_PER_CALL = 256
+
+
 def sure_piecewise(X: np.ndarray, noise, *, breaks: np.ndarray | None, groups: np.ndarray | None = None,
                    **options):
     """:func:`sure_gaussian` run separately on the pieces of each group of columns between
     its ``breaks`` ((T − 1, G) mask: no smoothing across t → t + 1 for group g; e.g.
     :func:`mocapfix.solvers.glitches.steps`; None: no break). Groups with no break go
-    through one call, and so do all the pieces of one length (side by side, each piece a
-    column group of its own: the same values as one call per piece, without the per-call
-    cost — a CMU take has hundreds of short pieces between steps); pieces shorter than 3
+    through one call, and so do the pieces of one length (side by side, up to
+    ``_PIECES_PER_CALL`` at a time, each piece a column group of its own: the same values
+    as one call per piece — :func:`group_sums` adds a group's risks alike wherever it
+    stands — without the per-call cost; a CMU take has hundreds of short pieces between
+    steps); pieces shorter than 3
     samples are left as they are. ``options``: those of :func:`sure_gaussian`. Returns
     (Z, widths (C,): the median width per column)."""
     X = np.asarray(X, dtype=np.float64)
     T, C = X.shape
     sd = np.broadcast_to(np.asarray(noise, dtype=np.float64), X.shape)
-    labels, M = column_groups(groups, C)
-    broken = np.zeros(M.shape[1], dtype=bool) if breaks is None else np.asarray(breaks, dtype=bool).any(axis=0)
+    labels = np.arange(C) if groups is None else np.unique(np.asarray(groups), return_inverse=True)[1]
+    G = int(labels.max()) + 1 if C else 0
+    broken = np.zeros(G, dtype=bool) if breaks is None else np.asarray(breaks, dtype=bool).any(axis=0)
     Z = X.copy()
     widths = np.zeros(C)
     whole = ~broken[labels]
@@ -180,7 +218,9 @@ def sure_piecewise(X: np.ndarray, noise, *, breaks: np.ndarray | None, groups: n
             if b - a >= 3:
                 by_length.setdefault(int(b - a), []).append((g, int(a)))
     chosen: dict = {}
-    for L, pieces in by_length.items():
+    batches = [(L, pieces[i:i + _PIECES_PER_CALL]) for L, pieces in by_length.items()
+               for i in range(0, len(pieces), _PIECES_PER_CALL)]
+    for L, pieces in batches:
         cols = [np.flatnonzero(labels == g) for g, _ in pieces]
         rows = np.concatenate([np.add.outer(np.arange(a, a + L), np.zeros(len(c), int))
                                for (_, a), c in zip(pieces, cols)], axis=1)
