@@ -304,8 +304,8 @@ def measure_cleaning(result: CleanResult) -> dict:
     moved[miss_b | miss_a] = np.nan
     jitter_b, jitter_a = jitter(before), jitter(after)
     bones = bones_of(before)
-    parents = np.full(J, -1, dtype=np.intp)
-    parents[bones[:, 1]] = bones[:, 0]
+    # the kinematic chain (a marker set's rigid pairs in ``bones`` are not one)
+    parents = before.skeleton.parents if before.skeleton is not None else np.full(J, -1, np.intp)
     var_b, var_a = bone_variation(before.positions, bones), bone_variation(after.positions, bones)
     unc = uncertainty(before, after)
     col, start, length = runs(miss_b)

@@ -28,12 +28,18 @@ WIDTHS = (0.7, 1.0, 1.5, 2.0, 3.0, 4.0, 6.0, 8.0, 12.0, 16.0, 24.0, 32.0, 48.0)
 QUADRATIC_WIDTHS = (1.0, 1.5, 2.0, 3.0, 4.0, 6.0, 8.0, 12.0, 16.0, 24.0)
 
 
-def column_groups(groups, C: int) -> tuple[np.ndarray, np.ndarray]:
-    """(labels (C,) as 0 … G − 1 in label order, M (C, G) with M[c, labels[c]] = 1: a
-    (…, C) array times M sums each group's columns) of ``groups`` (C,) labels; None: every
+def group_labels(groups, C: int) -> tuple[np.ndarray, int]:
+    """(labels (C,) as 0 … G − 1 in label order, G) of ``groups`` (C,) labels; None: every
     column its own group."""
     labels = np.arange(C) if groups is None else np.unique(np.asarray(groups), return_inverse=True)[1]
-    M = np.zeros((C, int(labels.max()) + 1 if C else 0))
+    return labels, int(labels.max()) + 1 if C else 0
+
+
+def column_groups(groups, C: int) -> tuple[np.ndarray, np.ndarray]:
+    """(labels as :func:`group_labels`, M (C, G) with M[c, labels[c]] = 1: a (…, C) array
+    times M sums each group's columns)."""
+    labels, G = group_labels(groups, C)
+    M = np.zeros((C, G))
     M[np.arange(C), labels] = 1.0
     return labels, M
 
@@ -157,8 +163,7 @@ def sure_gaussian(X: np.ndarray, noise, *, widths=WIDTHS, quadratic_widths=(),
     X = np.asarray(X, dtype=np.float64)
     V = np.broadcast_to(np.asarray(noise, dtype=np.float64) ** 2, X.shape)
     C = X.shape[1]
-    labels = np.arange(C) if groups is None else np.unique(np.asarray(groups), return_inverse=True)[1]
-    G = int(labels.max()) + 1 if C else 0
+    labels, G = group_labels(groups, C)
     plan = group_plan(labels)
     best = X.copy()
     chosen = np.zeros(X.shape if span else C)
@@ -200,8 +205,7 @@ def sure_piecewise(X: np.ndarray, noise, *, breaks: np.ndarray | None, groups: n
     X = np.asarray(X, dtype=np.float64)
     T, C = X.shape
     sd = np.broadcast_to(np.asarray(noise, dtype=np.float64), X.shape)
-    labels = np.arange(C) if groups is None else np.unique(np.asarray(groups), return_inverse=True)[1]
-    G = int(labels.max()) + 1 if C else 0
+    labels, G = group_labels(groups, C)
     broken = np.zeros(G, dtype=bool) if breaks is None else np.asarray(breaks, dtype=bool).any(axis=0)
     Z = X.copy()
     widths = np.zeros(C)
