@@ -36,7 +36,8 @@ _EXTERNAL = ("pca", "tsmc")
 REFILL_MIN_S = 0.2
 #: validation copies of the refilled members (one: c3d.org s01 and the PhoeniX dance, six
 #: seeds, gap RMSE within 1 % of two; with the later rounds' skipping of unchanged
-#: markers, numediart_03_rolling's fill 19.6 → 16.9 s against 8.0 s without refill)
+#: markers and the first pass's reference shapes, numediart_03_rolling's fill 19.6 →
+#: 16.3 s, against 7.4 s without the refill)
 REFILL_COPIES = 1
 
 
@@ -134,8 +135,12 @@ class PMA(Cleaner):
                                        weight_scale=self.length("weight_scale", motion))
             validated = [{}] * len(gaps)
         else:
+            # the rigid frames' reference shapes, by marker and neighbours: the first pass
+            # makes them, the refill rounds reuse them (a reference only fixes a frame's
+            # orientation)
+            references: dict = {}
             members, validated = self._validated_fills(work, observed, gaps, external, local,
-                                                       mu, sd)
+                                                       mu, sd, references=references)
         expected = len(pma.member_names(local, self["neighbours"])) + len(external)
         seen_points = motion.positions[~motion.missing]
         lo, hi = seen_points.min(axis=0), seen_points.max(axis=0)
@@ -144,8 +149,8 @@ class PMA(Cleaner):
         combined = [self._combine(pos, gap, cand, fills, verr, mu, sd, floor, box)
                     for gap, (cand, fills), verr in zip(gaps, members, validated)]
         if self["refill"] > 0 and self["weights"] != "plausibility":
-            combined = self._refill(work, observed, gaps, external, local, mu, sd, floor, box,
-                                    members, validated, combined, info)
+            combined = self._refill(work, observed, gaps, local, mu, sd, floor, box,
+                                    members, validated, combined, info, references)
         info["rejected_samples"] = 0
         for (j, s, e), result in zip(gaps, combined):
             n = e - s
@@ -224,8 +229,8 @@ class PMA(Cleaner):
             else np.ones(len(names))
         return np.tensordot(w / w.sum(), np.stack([fills[k] for k in names]), axes=1)
 
-    def _refill(self, motion, observed, gaps, external, local, mu, sd, floor, box, members,
-                validated, combined, info):
+    def _refill(self, motion, observed, gaps, local, mu, sd, floor, box, members, validated,
+                combined, info, references):
         """The refill rounds (``refill``): an interior gap of at least
         :data:`REFILL_MIN_S` during which one of its marker's most rigid neighbours (as
         many as the largest ``neighbours`` count) is missing too, and that neighbour's
@@ -296,11 +301,13 @@ class PMA(Cleaner):
                 if round_ == 0:
                     again, errors = self._validated_fills(motion.replace(positions=second), seen,
                                                           redone, {}, local, mu, sd,
-                                                          copies=REFILL_COPIES)
+                                                          copies=REFILL_COPIES,
+                                                          references=references)
                 else:
                     again = pma.member_fills(second, seen, redone, {}, local=local,
                                              neighbours=self["neighbours"], mu=mu, sd=sd,
-                                             weight_scale=self.length("weight_scale", motion))
+                                             weight_scale=self.length("weight_scale", motion),
+                                             references=references)
                     errors = [{k[:-1]: v for k, v in validated[g].items() if k.endswith("+")}
                               for g in group]
                 for g, (_, fills2), err2 in zip(group, again, errors):
@@ -360,7 +367,8 @@ class PMA(Cleaner):
             out.append((cut, synth))
         return out
 
-    def _validated_fills(self, motion, observed, gaps, external, local, mu, sd, copies=None):
+    def _validated_fills(self, motion, observed, gaps, external, local, mu, sd, copies=None,
+                         references=None):
         """Every member's fill of every gap and, per gap, member name → mean squared error
         on the gap's validation windows (:meth:`_validation_windows`;
         :func:`mocapfix.solvers.pma.validated_member_fills`); the external members are
@@ -374,7 +382,8 @@ class PMA(Cleaner):
         rows = pma.validated_member_fills(pos, observed, gaps, self._validation_windows(observed, gaps, copies),
                                           external, local=local, neighbours=self["neighbours"], mu=mu,
                                           sd=sd, weight_scale=self.length("weight_scale", motion),
-                                          copy_external=copy_external if external else None)
+                                          copy_external=copy_external if external else None,
+                                          references=references)
         return [(cand, fills) for cand, fills, _ in rows], [errs for _, _, errs in rows]
 
 

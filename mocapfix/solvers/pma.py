@@ -457,7 +457,8 @@ def _member_name(filler: str, K: int, sizes: tuple) -> str:
 
 def validated_member_fills(pos, observed, gaps, copies, external, *, local=LOCAL_FILLERS,
                            neighbours=3, weight_scale: float = 300.0, mu=None, sd=None,
-                           max_train: int = 600, copy_external=None):
+                           max_train: int = 600, copy_external=None,
+                           references: dict | None = None):
     """:func:`member_fills` of every gap with each member's mean squared error on the
     gap's validation windows. ``copies``: per copy, ``(cut, windows)`` with ``cut`` the
     observed mask with the copy's windows removed and ``windows`` a list of ``(gap index,
@@ -467,9 +468,10 @@ def validated_member_fills(pos, observed, gaps, copies, external, *, local=LOCAL
     ``external`` members' fills of the copy (None: the external members are not
     validated). The copies fit their rigid frames onto the reference shapes of the real
     gaps' frames (the same marker and neighbours; a reference only fixes the frame's
-    orientation). Returns one ``(cand, fills, errors)`` per gap, ``errors`` name → mean
-    squared error over the copies."""
-    references: dict = {}
+    orientation; ``references``: those shapes by ``(marker, neighbours)``, used and
+    extended, shared with other calls on the same capture). Returns one ``(cand, fills,
+    errors)`` per gap, ``errors`` name → mean squared error over the copies."""
+    references = {} if references is None else references
     real = member_fills(pos, observed, gaps, external, local=local, neighbours=neighbours,
                         weight_scale=weight_scale, mu=mu, sd=sd, max_train=max_train,
                         references=references)
