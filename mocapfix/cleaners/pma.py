@@ -239,16 +239,18 @@ class PMA(Cleaner):
         missing serve the members again. The new fills join the gap's members (named
         ``<member>+``) with their own validation errors, measured in the first round and
         kept in the later ones (which only replace the fills: c3d.org s01 and the PhoeniX
-        dance, six seeds, within 0.3 % of re-validating, for one fit per round instead of
-        three; reusing the first pass's errors instead: s01 3 s gaps 5.89 → 6.14 mm). The
+        dance, six seeds, within 0.3 % of re-validating them with two copies, for one
+        fit per round instead of three; reusing the first pass's errors instead: s01 3 s gaps 5.89 → 6.14 mm). The
         marker's own gaps stay missing in its refills. The other markers' fills are their
         members' validation-weighted averages before the soft distance constraint (s01:
         gap RMSE 4.44 / 6.42 mm at 1.5 / 3 s gaps against 4.54 / 6.61 with the
         constrained fills, one round). Edge gaps are neither refilled nor lent: with an
         extrapolated neighbour passed for seen, fills on four shared files jumped by up to
         471 mm from one frame to the next (c3d.org s09; the marker's own data moves at
-        most 61 mm a frame). A later round skips the markers none of whose gaps lies by a
-        gap refilled in the round before. Returns the gaps' combined fills
+        most 61 mm a frame). A later round skips the markers none of whose refilled gaps
+        lies by a gap refilled in the round before (their fills would move by a fraction
+        of a millimetre: at most 0.23 mm on the PhoeniX dance). ``refilled_gaps`` in the
+        info counts the gaps chosen for the rounds. Returns the gaps' combined fills
         (:meth:`_combine`)."""
         pos = motion.positions
         T = pos.shape[0]
@@ -285,8 +287,8 @@ class PMA(Cleaner):
         for round_ in range(self["refill"] if redo else 0):
             if round_:
                 filled = current_fills()
-                # a marker none of whose gaps lies by a gap refilled last round would
-                # get the same neighbours again: it keeps its fills
+                # a marker none of whose refilled gaps lies by a gap refilled last round
+                # would get nearly the same neighbours again: it keeps its fills
                 todo = {j: group for j, group in redo.items()
                         if any(near(g, h) for k in changed - {j} for h in redo[k] for g in group)}
             else:
@@ -413,8 +415,8 @@ class FillEnsemble(PMA):
     (with ``fill_pca`` as an eighth member) against 3.98 / 7.57 for ``pma``; CMU 85_02
     38.2 / 15.3 against 41.4 / 14.6 (37.9 / 15.3 with ``fill_pca``, at 6× the time: it
     is left out). An interior gap of at least 0.2 s during which one of its marker's five
-    most rigid neighbours is missing too is filled again, twice, with the other markers'
-    interior fills counted as seen (``refill: 2``, :meth:`PMA._refill`): on
+    most rigid neighbours is missing too is filled again (two rounds) with the other
+    markers' interior fills counted as seen (``refill: 2``, :meth:`PMA._refill`): on
     benchmarks/versus_peers.py (six seeds) the default's gap RMSE fell in 17 of 18
     capture × gap-length cells, c3d.org s01 0.84 → 0.76 and 0.88 → 0.76 of ``pma``, the
     PhoeniX dance 0.81 → 0.73 and 0.85 → 0.70 (Vicon 1.5 s 0.55 → 0.63).

@@ -214,8 +214,9 @@ def window_fills(pos, observed, j, windows, neighbours, train, body, *,
         tr_local = train[_block(observed, train, neighbours).all(axis=1)]
         nb = _block(pos, frames, neighbours)
         nb_train = _block(pos, tr_local, neighbours)
-        # only a reference from the training frames is shared (a pure function of the
-        # key); one from this job's own frames stays this job's
+        # only a reference from the training frames is shared (the first call's for the
+        # key: the refill rounds train on more frames and reuse it; it only fixes the
+        # frame's orientation); one from this job's own frames stays this job's
         ref = (_cached_reference(references, (j, tuple(neighbours.tolist())), nb_train)
                if len(tr_local) else _reference(nb))
         if K >= 3 and len(tr_local) >= max(10, 2 * K):
@@ -469,7 +470,8 @@ def validated_member_fills(pos, observed, gaps, copies, external, *, local=LOCAL
     validated). The copies fit their rigid frames onto the reference shapes of the real
     gaps' frames (the same marker and neighbours; a reference only fixes the frame's
     orientation; ``references``: those shapes by ``(marker, neighbours)``, used and
-    extended, shared with other calls on the same capture). Returns one ``(cand, fills,
+    extended; the refill rounds of :class:`mocapfix.cleaners.pma.PMA` pass the first
+    pass's, made from other training frames). Returns one ``(cand, fills,
     errors)`` per gap, ``errors`` name → mean squared error over the copies."""
     references = {} if references is None else references
     real = member_fills(pos, observed, gaps, external, local=local, neighbours=neighbours,
