@@ -270,7 +270,7 @@ def clean(inputs, outdir, config_path, reports, jobs, as_json, fps, allow_inside
 
     from mocapfix.batch import check_output_folder, plan_outputs, run_batch
     from mocapfix.clean import output_files, remove_outputs
-    from mocapfix.fileio import atomic_write_text
+    from mocapfix.fileio import atomic_write_text, remove_stale_temporaries
     from mocapfix.manifest import Manifest, run_key
     from mocapfix.pipeline import load_config
     from mocapfix.presets import resolve_config
@@ -313,6 +313,12 @@ def clean(inputs, outdir, config_path, reports, jobs, as_json, fps, allow_inside
         _fail(str(exc), debug, exc)
     todo = [j for j in jobs_list if j not in finished and not (policy == "skip" and j.output.exists())]
     skipped = [j for j in jobs_list if j not in todo]
+    if not dry_run:
+        # a killed run leaves its half-written temporaries; the files this run writes
+        # anew take theirs away (never anything else)
+        for j in todo:
+            for f in output_files(j.output):
+                remove_stale_temporaries(f)
     for j in skipped:
         why = "finished earlier" if j in finished else "output exists"
         out.line(f"SKIP  {j.source}: {why} ({j.output})")

@@ -30,6 +30,25 @@ def atomic_open(path, mode: str = "wb"):
         raise
 
 
+def remove_stale_temporaries(path) -> int:
+    """Remove the temporary siblings :func:`atomic_open` leaves for ``path`` when the
+    process writing it was killed (``.NAME.XXXXXXXX.part``; a crash between writing and
+    renaming cannot clean up after itself). Only names of that exact pattern, for this
+    ``path``, are touched. Returns how many were removed."""
+    path = Path(path)
+    removed = 0
+    prefix = f".{path.name}."
+    with contextlib.suppress(OSError):
+        for p in path.parent.iterdir():
+            middle = p.name[len(prefix):-len(".part")]
+            if (p.name.startswith(prefix) and p.name.endswith(".part") and len(middle) == 8
+                    and middle.replace("_", "").isalnum() and p.is_file()):
+                with contextlib.suppress(FileNotFoundError):
+                    p.unlink()
+                    removed += 1
+    return removed
+
+
 def current_umask() -> int:
     """The process umask (read by setting and restoring it)."""
     mask = os.umask(0o022)

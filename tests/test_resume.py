@@ -76,7 +76,10 @@ def test_killed_batch_resumes_and_skips_finished_files(tmp_path):
     done_at_kill = _done(out)
     total = 12                                            # 3 copies × 4 motion files
     assert 3 <= len(done_at_kill) < total, "the batch finished before it could be killed"
-    assert not list(out.rglob("*.part"))                  # atomic outputs: nothing half-written
+    # atomic outputs: every report under its final name is whole (a SIGKILL may leave a
+    # hidden .NAME.XXXXXXXX.part temporary, which the re-run takes away)
+    for report in out.rglob("*.report.json"):
+        json.loads(report.read_text())
 
     r = _run(src, "-o", out, "-c", cfg, "-j", "2")
     assert r.exit_code == 0, r.output
@@ -85,6 +88,7 @@ def test_killed_batch_resumes_and_skips_finished_files(tmp_path):
     assert f"cleaned {total - len(done_at_kill)} of {total - len(done_at_kill)} files" in r.output
     assert len(_done(out)) == total                       # ... and the rest are
     assert len((out / MANIFEST_NAME).read_text().splitlines()) == total   # compacted
+    assert not list(out.rglob("*.part"))                  # no temporary left behind
 
     fresh = tmp_path / "fresh"
     assert _run(src, "-o", fresh, "-c", cfg).exit_code == 0
@@ -158,3 +162,22 @@ def test_failed_file_is_retried(tmp_path):
     bad.write_bytes((src / "take0" / "walk.bvh").read_bytes())
     r = _run(src, "-o", out, "-c", cfg)
     assert r.exit_code == 0 and "cleaned 1 of 1 files (4 skipped: finished earlier)" in r.output
+
+
+def test_a_rerun_takes_away_the_temporaries_a_killed_run_left(tmp_path):
+    """A run killed between writing and renaming leaves ``.NAME.XXXXXXXX.part``; the next
+    run that writes NAME removes it, and nothing else: not another file's temporary, not a
+    user's file that merely looks alike."""
+    src, cfg = _inputs(tmp_path, copies=1), _cfg(tmp_path)
+    out = tmp_path / "out"
+    (out / "take0").mkdir(parents=True)
+    stale = [out / "take0" / ".walk_markers.c3d.k3j_9x2a.part",
+             out / "take0" / ".walk_markers.report.json.abcdefgh.part"]
+    kept = [out / "take0" / ".other.c3d.abcdefgh.part",             # not written by this run
+            out / "take0" / ".walk_markers.c3d.notes.part",          # not the temporary pattern
+            out / "take0" / "walk_markers.c3d.abcdefgh.part"]        # not hidden
+    for p in stale + kept:
+        p.write_bytes(b"half")
+    assert _run(src, "-o", out, "-c", cfg, "-q").exit_code == 0
+    assert not any(p.exists() for p in stale)
+    assert all(p.exists() for p in kept)
