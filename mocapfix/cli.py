@@ -316,9 +316,7 @@ def clean(inputs, outdir, config_path, reports, jobs, as_json, fps, allow_inside
     if not dry_run:
         # a killed run leaves its half-written temporaries; the files this run writes
         # anew take theirs away (never anything else)
-        for j in todo:
-            for f in output_files(j.output):
-                remove_stale_temporaries(f)
+        remove_stale_temporaries(f for j in todo for f in output_files(j.output))
     for j in skipped:
         why = "finished earlier" if j in finished else "output exists"
         out.line(f"SKIP  {j.source}: {why} ({j.output})")

@@ -30,21 +30,27 @@ def atomic_open(path, mode: str = "wb"):
         raise
 
 
-def remove_stale_temporaries(path) -> int:
-    """Remove the temporary siblings :func:`atomic_open` leaves for ``path`` when the
-    process writing it was killed (``.NAME.XXXXXXXX.part``; a crash between writing and
-    renaming cannot clean up after itself). Only names of that exact pattern, for this
-    ``path``, are touched. Returns how many were removed."""
-    path = Path(path)
+def remove_stale_temporaries(paths) -> int:
+    """Remove the temporary siblings :func:`atomic_open` leaves for each of ``paths`` when
+    the process writing it was killed (``.NAME.XXXXXXXX.part``; a crash between writing
+    and renaming cannot clean up after itself). Only names of that exact pattern, for
+    these paths, are touched; each folder is listed once. Returns how many were removed."""
+    by_folder: dict[Path, set[str]] = {}
+    for p in map(Path, paths):
+        by_folder.setdefault(p.parent, set()).add(p.name)
     removed = 0
-    prefix = f".{path.name}."
-    with contextlib.suppress(OSError):
-        for p in path.parent.iterdir():
-            middle = p.name[len(prefix):-len(".part")]
-            if (p.name.startswith(prefix) and p.name.endswith(".part") and len(middle) == 8
-                    and middle.replace("_", "").isalnum() and p.is_file()):
+    for folder, names in by_folder.items():
+        try:
+            entries = [e for e in os.scandir(folder) if e.name.startswith(".")
+                       and e.name.endswith(".part")]
+        except OSError:
+            continue
+        for e in entries:
+            name, _, middle = e.name[1:-len(".part")].rpartition(".")
+            if (name in names and len(middle) == 8 and middle.replace("_", "").isalnum()
+                    and e.is_file(follow_symlinks=False)):
                 with contextlib.suppress(FileNotFoundError):
-                    p.unlink()
+                    os.unlink(e.path)
                     removed += 1
     return removed
 
