@@ -70,15 +70,11 @@ def group_sums(R: np.ndarray, plan, G: int) -> np.ndarray:
     return out
 
 
-@functools.lru_cache(maxsize=256)
 def centre_weight(sigma: float) -> float:
-    """g_σ(0) of the discrete Gaussian filter ``ndimage.gaussian_filter1d`` applies
-    (cached: every piece of every channel asks for the same few widths)."""
-    n = int(4 * sigma + 2)
-    impulse = np.zeros(2 * n + 1)
-    impulse[n] = 1.0
-    from scipy import ndimage  # imported here: not loaded unless needed
-    return float(ndimage.gaussian_filter1d(impulse, sigma)[n])
+    """g_σ(0) of the discrete Gaussian filter ``ndimage.gaussian_filter1d`` applies: the
+    middle tap of :func:`gaussian_taps` (cached there)."""
+    taps = gaussian_taps(sigma)
+    return float(taps[len(taps) // 2])
 
 
 @functools.lru_cache(maxsize=256)
