@@ -28,6 +28,7 @@ from mocapfix.errors import ConfigError
 from mocapfix.motion import Motion, missing_samples
 from mocapfix.solvers import pma
 from mocapfix.solvers.pca_gapfill import fill_gaps_pca
+from mocapfix.solvers.segments import largest_steps, steepest_step
 
 _EXTERNAL = ("pca", "tsmc")
 #: shortest gap (s) the refill rounds fill again: shorter ones changed by at most 0.04 mm
@@ -75,6 +76,12 @@ class PMA(Cleaner):
               "the other markers' interior fills counted as seen, each interior gap of 0.2 s "
               "or more during which one of its marker's most rigid neighbours is missing "
               "too; those fills join the members (0: none)", low=0, high=5),
+        Param("max_step", "float", 0.0, "a member whose fill (joined to the data at the gap's "
+              "borders) moves further from one frame to the next than this many times the "
+              "marker's largest observed step is left out of the gap's average when that average "
+              "jumps so too, unless no member or every member does (0: every member kept)",
+              low=0.0,
+              high=1e6),
         Param("validation_copies", "int", 2, "weights: validation/best — synthetic gaps per "
               "real gap", low=1, high=20),
         Param("confidence_scale", "length", "10 mm", "member spread at which a filled "
@@ -146,11 +153,12 @@ class PMA(Cleaner):
         lo, hi = seen_points.min(axis=0), seen_points.max(axis=0)
         box = (lo - 0.1 * (hi - lo), hi + 0.1 * (hi - lo))
         floor = self.length("sd_floor", motion)
-        combined = [self._combine(pos, gap, cand, fills, verr, mu, sd, floor, box)
+        top = largest_steps(pos, observed)
+        combined = [self._combine(pos, gap, cand, fills, verr, mu, sd, floor, box, top)
                     for gap, (cand, fills), verr in zip(gaps, members, validated)]
         if self["refill"] > 0 and self["weights"] != "plausibility":
             combined = self._refill(work, observed, gaps, local, mu, sd, floor, box,
-                                    members, validated, combined, info, references)
+                                    members, validated, combined, info, references, top)
         info["rejected_samples"] = 0
         for (j, s, e), result in zip(gaps, combined):
             n = e - s
@@ -179,15 +187,28 @@ class PMA(Cleaner):
             info["weights_mean"] = {k: round(v / averaged, 3) for k, v in weight_sum.items()}
         return motion.replace(positions=out, confidence=conf), info
 
-    def _combine(self, pos, gap, cand, fills, verr, mu, sd, floor, box):
+    def _combine(self, pos, gap, cand, fills, verr, mu, sd, floor, box, top):
         """One gap's fill from its members' fills: their average weighted by validation
         error (or by plausibility where a member was not validated), pulled inside the
-        distance intervals of the marker's most rigid neighbours. Returns None when no
-        member filled the gap, else ``(avg, spread, names, weights)`` with ``avg`` None
-        when the fill leaves the capture volume ``box``."""
-        j, s, e = gap
+        distance intervals of the marker's most rigid neighbours; averaged again without
+        the members that jump when that fill jumps (:meth:`_without_jumps`). Returns None
+        when no member filled the gap, else ``(avg, spread, names, weights)`` with ``avg``
+        None when the fill leaves the capture volume ``box``."""
         if not fills:
             return None
+        result = self._weighted(pos, gap, cand, fills, verr, mu, sd, floor)
+        smooth = self._without_jumps(pos, gap, fills, top, result[0])
+        if smooth is not None:
+            result = self._weighted(pos, gap, cand, smooth, verr, mu, sd, floor)
+        avg = result[0]
+        if ((avg < box[0]) | (avg > box[1])).any():
+            return (None, *result[1:])
+        return result
+
+    def _weighted(self, pos, gap, cand, fills, verr, mu, sd, floor):
+        """:meth:`_combine`'s weighted average of ``fills`` and soft constraint →
+        ``(avg, spread, names, weights)``."""
+        j, s, e = gap
         frames = np.arange(s, e)
         names = list(fills)
         stack = np.stack([fills[k] for k in names])              # (M, n, 3)
@@ -210,8 +231,6 @@ class PMA(Cleaner):
             avg = pma.soft_distance_constraint(
                 avg, pos[np.ix_(frames, rig)], mu[j, rig], np.maximum(sd[j, rig], floor),
                 self["width"])
-        if ((avg < box[0]) | (avg > box[1])).any():
-            avg = None
         return avg, spread, names, w
 
     def _validation_weights(self, mse):
@@ -221,16 +240,40 @@ class PMA(Cleaner):
         return (mse == mse.min()).astype(float) if self["weights"] == "best" \
             else 1.0 / (mse + 1e-12 + 1e-6 * mse.min())
 
-    def _average(self, fills, verr):
+    def _without_jumps(self, pos, gap, fills, top, fill):
+        """When ``fill`` (a gap's average), joined to the data at the gap's borders, moves
+        further from one frame to the next than ``max_step`` × the marker's largest
+        observed step ``top[j]``: the members of ``fills`` that do not, if there are some
+        and not all; else None (keep the average: ``max_step`` 0, a marker never seen
+        twice in a row, a fill that does not jump, or no member that does better)."""
+        j, s, e = gap
+        limit = self["max_step"] * top[j]
+        if limit <= 0:
+            return None
+        T = pos.shape[0]
+        before = pos[s - 1, j] if s > 0 else None
+        after = pos[e, j] if e < T else None
+        if steepest_step(fill, before, after) <= limit:
+            return None
+        smooth = {k: f for k, f in fills.items() if steepest_step(f, before, after) <= limit}
+        return smooth if 0 < len(smooth) < len(fills) else None
+
+    def _average(self, pos, gap, fills, verr, top):
         """The validation-weighted average of a gap's validated member fills (all of them
-        when none was validated)."""
+        when none was validated), without the members that jump when it jumps
+        (:meth:`_without_jumps`)."""
+        avg = self._plain_average(fills, verr)
+        smooth = self._without_jumps(pos, gap, fills, top, avg)
+        return avg if smooth is None else self._plain_average(smooth, verr)
+
+    def _plain_average(self, fills, verr):
         names = [k for k in fills if k in verr] or list(fills)
         w = self._validation_weights([verr[k] for k in names]) if names[0] in verr \
             else np.ones(len(names))
         return np.tensordot(w / w.sum(), np.stack([fills[k] for k in names]), axes=1)
 
     def _refill(self, motion, observed, gaps, local, mu, sd, floor, box, members, validated,
-                combined, info, references):
+                combined, info, references, top):
         """The refill rounds (``refill``): an interior gap of at least
         :data:`REFILL_MIN_S` during which one of its marker's most rigid neighbours (as
         many as the largest ``neighbours`` count) is missing too, and that neighbour's
@@ -263,7 +306,7 @@ class PMA(Cleaner):
             filled = pos.copy()
             for (j, s, e), (_, fills), verr, done in zip(gaps, members, validated, combined):
                 if 0 < s and e < T and done is not None and done[0] is not None:
-                    filled[s:e, j] = self._average(fills, verr)
+                    filled[s:e, j] = self._average(pos, (j, s, e), fills, verr, top)
             return filled
 
         filled = current_fills()
@@ -319,7 +362,8 @@ class PMA(Cleaner):
             changed = set(todo)
         for g in (g for group in redo.values() for g in group):
             cand, fills = members[g]
-            combined[g] = self._combine(pos, gaps[g], cand, fills, validated[g], mu, sd, floor, box)
+            combined[g] = self._combine(pos, gaps[g], cand, fills, validated[g], mu, sd, floor, box,
+                                        top)
         return combined
 
     @staticmethod
@@ -419,8 +463,19 @@ class FillEnsemble(PMA):
     markers' interior fills counted as seen (``refill: 2``, :meth:`PMA._refill`): on
     benchmarks/versus_peers.py (six seeds) the default's gap RMSE fell in 17 of 18
     capture × gap-length cells, c3d.org s01 0.84 → 0.76 and 0.88 → 0.76 of ``pma``, the
-    PhoeniX dance 0.81 → 0.73 and 0.85 → 0.70 (Vicon 1.5 s 0.55 → 0.63).
-    benchmarks/versus_peers.py has the table over eleven captures."""
+    PhoeniX dance 0.81 → 0.73 and 0.85 → 0.70 (Vicon 1.5 s 0.55 → 0.63). A gap whose
+    fill jumps from one frame to the next by more than 3× its marker's largest observed
+    step is averaged again without the members that jump so (``max_step: 3``,
+    :meth:`PMA._without_jumps`): a GRNN member far from its training poses turns into a
+    nearest-neighbour lookup and jumps when the nearest pose changes (numediart_03_rolling
+    LR_HME: 140 mm in one frame where the marker's data moves at most 11.7 mm, now 11.7;
+    filled runs stepping more than 3× their marker's largest step: 11 of 209 → 5 of 207,
+    the largest 12× → 5.2×; two gaps whose smooth members leave the capture volume are
+    left to the next step). On benchmarks/versus_peers.py (six seeds) only OptiTrack 1.5 s
+    moved by more than 2 % (0.35 → 0.28 of ``pma``; geometric means 0.56 / 0.61). Left out
+    whenever a member jumps (not only when the average does), at 1.5×, 2× or 3×: cells
+    moved both ways by up to 25 % (CMU 85_02 3 s 0.60 → 0.74 at 2×, Vicon 3 s 0.74 → 0.82
+    at 3×). benchmarks/versus_peers.py has the table over eleven captures."""
 
     name = "fill_ensemble"
     summary = ("fill gaps by averaging nine fillers weighted by their error on synthetic "
@@ -428,4 +483,4 @@ class FillEnsemble(PMA):
                "missing too (PMA-style ensemble)")
     params = _defaults(PMA.params, neighbours=[3, 5], weights="validation",
                        members=["interp", "poly", "grnn", "linear", "pose"], short_gap="0.05 s",
-                       width=3.0, refill=2)
+                       width=3.0, refill=2, max_step=3.0)

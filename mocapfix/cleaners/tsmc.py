@@ -65,7 +65,15 @@ Other changes to the paper, each measured with the ``occlusion`` scenarios:
   the same to 3 decimals as tol = 3e-3 with ``prior: pca``;
 - fills outside the capture volume are rejected (:func:`mocapfix.solvers.segments.implausible_runs`) and
   frames with fewer than ``min_observed`` (0.2) of the markers trusted are not filled, as
-  in ``fill_pca`` (0.5 there: 0.5 left 23 % of ``feng2014`` mixed unfilled).
+  in ``fill_pca`` (0.5 there: 0.5 left 23 % of ``feng2014`` mixed unfilled);
+- so is a filled run that, joined to the samples around it, moves further from one frame
+  to the next than ``max_step`` (3) × the marker's largest step between trusted samples
+  (:func:`mocapfix.solvers.segments.discontinuous_runs`): where a group of markers leaves
+  the volume at once the PCA prior changes its mind, and on c3d.org s04 and s09 the
+  default filled the first 11 / 33 frames of a foot marker's trailing gap 558 / 622 mm from
+  its last sample (11–12× its largest step; 29 cm under the floor on s09). Those runs are
+  now left missing and counted in ``rejected_samples``; the gaps of
+  benchmarks/versus_peers.py, which ``fill_ensemble`` fills before, are not affected.
 """
 from __future__ import annotations
 
@@ -397,6 +405,9 @@ class TSMC(Cleaner):
               "does) or 'global'", choices=("body", "global")),
         Param("pad", "time", "0.5 s", "missing frames added at each end before solving",
               unit="s", low=0.0),
+        Param("max_step", "float", 3.0, "a filled run that (joined to the samples around it) "
+              "moves further from one frame to the next than this many times the marker's "
+              "largest trusted step is left missing (0: no such check)", low=0.0, high=1e6),
     )
 
     def _apply(self, motion: Motion):
@@ -440,6 +451,9 @@ class TSMC(Cleaner):
         written = ~trusted & rows[None, :] & frame_ok[:, None]
         out[~trusted & rows[None, :] & ~frame_ok[:, None]] = np.nan   # too few markers seen
         rejected = implausible_runs(out, written, pos[trusted])
+        rejected |= segments.discontinuous_runs(out, written & ~rejected,
+                                                segments.largest_steps(pos, trusted),
+                                                self["max_step"])
         out[rejected] = np.nan
         untrusted = observed & ~trusted
         per = untrusted.sum(axis=0)

@@ -381,3 +381,49 @@ def implausible_runs(filled, write, observed_points, margin: float = 0.1) -> np.
         if outside[s:s + n, c].any():
             rejected[s:s + n, c] = True
     return rejected
+
+
+def largest_steps(positions: np.ndarray, seen: np.ndarray) -> np.ndarray:
+    """(J,) the largest distance each point of ``positions`` (T, J, 3) moves from one
+    frame to the next between two frames where ``seen`` (T, J) holds (0 where it never
+    does): how fast the data says the point can move."""
+    both = seen[1:] & seen[:-1]
+    d = np.diff(positions, axis=0)
+    step = np.sqrt(np.einsum("tjk,tjk->tj", d, d, optimize=False))
+    return np.where(both, np.nan_to_num(step), 0.0).max(axis=0, initial=0.0)
+
+
+def steepest_step(fill: np.ndarray, before: np.ndarray | None, after: np.ndarray | None) -> float:
+    """The largest frame-to-frame step of ``fill`` (n, 3), joined to the data sample
+    ``before`` its first frame and ``after`` its last (None at the capture's ends)."""
+    parts = ([before[None]] if before is not None else []) + [fill] + \
+        ([after[None]] if after is not None else [])
+    seg = np.concatenate(parts) if len(parts) > 1 else fill
+    if len(seg) < 2:
+        return 0.0
+    d = np.diff(seg, axis=0)
+    return float(np.sqrt((d * d).sum(axis=1)).max())
+
+
+def discontinuous_runs(filled: np.ndarray, write: np.ndarray, top: np.ndarray,
+                       factor: float) -> np.ndarray:
+    """(T, J) mask of the runs of ``write`` (samples a filler wrote into ``filled`` (T, J,
+    3)) to reject because the fill, joined to the samples around the run, steps further
+    from one frame to the next than ``factor`` × the point's largest observed step
+    ``top`` (J,; :func:`largest_steps`): a fill that jumps where the data never does
+    (a model that changes its mind when the markers it leans on drop out) is worse than a
+    gap left for the report. Points with ``top`` 0 (never seen on two frames in a row) are
+    not judged."""
+    rejected = np.zeros_like(write)
+    if factor <= 0 or not write.any():
+        return rejected
+    T = filled.shape[0]
+    d = np.diff(filled, axis=0)
+    step = np.sqrt(np.einsum("tjk,tjk->tj", d, d, optimize=False))      # (T-1, J)
+    for c, s, n in zip(*runs(write)):
+        if top[c] <= 0:
+            continue
+        seg = step[max(s - 1, 0):min(s + n, T - 1), c]
+        if seg.size and np.nanmax(seg, initial=0.0) > factor * top[c]:
+            rejected[s:s + n, c] = True
+    return rejected
