@@ -44,7 +44,8 @@ def output_files(output: Path) -> list[Path]:
 
 def remove_outputs(paths) -> None:
     for p in paths:
-        with contextlib.suppress(FileNotFoundError):
+        # not there: neither the file nor, when part of its folder path is a file, the folder
+        with contextlib.suppress(FileNotFoundError, NotADirectoryError):
             Path(p).unlink()
 
 

@@ -13,21 +13,42 @@ from pathlib import Path
 
 @contextlib.contextmanager
 def atomic_open(path, mode: str = "wb"):
-    """Open a temporary sibling of ``path`` for writing; rename it over ``path`` on success."""
+    """Open a temporary sibling of ``path`` for writing; rename it over ``path`` on success.
+
+    An OS failure of our own (the folder cannot be made or written, the disk is full, the
+    rename fails) is a :class:`~mocapfix.errors.WriteError` naming ``path``."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part", dir=path.parent)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part", dir=path.parent)
+    except OSError as exc:
+        raise _write_error(path, exc) from None
     try:
         with os.fdopen(fd, mode, **({} if "b" in mode else {"encoding": "utf-8", "newline": ""})) as fh:
             yield fh
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.chmod(tmp, 0o666 & ~current_umask())   # mkstemp made it 0600: honour the umask
-        os.replace(tmp, path)
+            try:
+                fh.flush()
+                os.fsync(fh.fileno())
+            except OSError as exc:
+                raise _write_error(path, exc) from None
+        try:
+            os.chmod(tmp, 0o666 & ~current_umask())   # mkstemp made it 0600: honour the umask
+            os.replace(tmp, path)
+        except OSError as exc:
+            raise _write_error(path, exc) from None
     except BaseException:
         with contextlib.suppress(OSError):
             os.unlink(tmp)
         raise
+
+
+def _write_error(path: Path, exc: OSError):
+    from mocapfix.errors import WriteError
+
+    why = exc.strerror or str(exc)
+    if isinstance(exc, (FileExistsError, NotADirectoryError)):
+        why = "part of the folder path is a file"
+    return WriteError(path, f"cannot write: {why}")
 
 
 def remove_stale_temporaries(paths) -> int:

@@ -1,0 +1,53 @@
+"""Bad or odd input met the way a demanding user meets it, through the command line:
+each case is one readable line naming the file and the cause, the documented exit code,
+the rest of the batch processed, inputs unchanged, nothing left for a failed file and no
+traceback (the developers' guide, "Bad input gets a clear error and loses nothing")."""
+from __future__ import annotations
+
+import hashlib
+import shutil
+from pathlib import Path
+
+from click.testing import CliRunner
+
+from mocapfix.cli import main
+from conftest import SAMPLE_DATA
+
+BVH, C3D, KIN = SAMPLE_DATA / "walk.bvh", SAMPLE_DATA / "walk_markers.c3d", SAMPLE_DATA / "walk_kinect_v2.csv"
+FAST = "version: 1\npipeline:\n  - cleaner: fill\n    max_gap: 0.5 s\n"
+
+
+def _cfg(tmp_path, text=FAST, name="cfg.yaml") -> str:
+    p = tmp_path / name
+    p.write_text(text)
+    return str(p)
+
+
+def _md5s(folder: Path) -> dict:
+    return {p: hashlib.md5(p.read_bytes()).hexdigest() for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+def _no_traceback(r):
+    assert "Traceback" not in r.output
+    assert r.exception is None or isinstance(r.exception, SystemExit), repr(r.exception)
+
+
+def test_output_subfolder_blocked_by_a_file_fails_that_file_only(tmp_path):
+    # in/a/x.bvh must go to out/a/x.bvh, but out/a is a file: that one file fails, the
+    # rest of the batch is written and the run ends normally (config record, exit 1)
+    src = tmp_path / "in"
+    (src / "a").mkdir(parents=True)
+    shutil.copy(BVH, src / "a" / "x.bvh")
+    shutil.copy(BVH, src / "y.bvh")
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "a").write_text("not a folder")
+    before = _md5s(src)
+    r = CliRunner().invoke(main, ["clean", str(src), "-o", str(out), "-c", _cfg(tmp_path)])
+    _no_traceback(r)
+    assert r.exit_code == 1, r.output
+    error = [line for line in r.output.splitlines() if line.startswith("ERROR")]
+    assert len(error) == 1 and "x.bvh" in error[0] and "internal error" not in error[0]
+    assert (out / "y.bvh").is_file() and (out / "mocapfix-config.yaml").is_file()
+    assert (out / "a").read_text() == "not a folder"
+    assert _md5s(src) == before
