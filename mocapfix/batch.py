@@ -161,6 +161,28 @@ def check_output_folder(outdir) -> Path:
     return outdir
 
 
+def check_output_file(path, option: str) -> Path:
+    """Make sure a single output file (``--junit``, ``bench --json``, a trained model) can
+    be written before the work that produces it starts, creating nothing: its folder, or
+    the nearest folder above it that exists, must take a new file. A ConfigError naming
+    ``option`` and the path otherwise (exit 2, nothing processed)."""
+    path = Path(path)
+    folder = path.parent
+    while not folder.exists() and folder != folder.parent:
+        folder = folder.parent
+    if path.is_dir():
+        raise ConfigError(f"{option} {path}: is a folder, not a file")
+    if not folder.is_dir():
+        raise ConfigError(f"{option} {path}: cannot write there: part of the path is a file")
+    try:
+        fd, probe = tempfile.mkstemp(prefix=".mocapfix-probe.", dir=folder)
+        os.close(fd)
+        os.unlink(probe)
+    except OSError as exc:
+        raise ConfigError(f"{option} {path}: cannot write there: {exc.strerror or exc}") from None
+    return path
+
+
 def _under(path: Path, folder: Path) -> bool:
     return path == folder or folder in path.parents
 

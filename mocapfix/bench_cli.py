@@ -61,6 +61,17 @@ def bench(ctx, clean_files, protocol, methods, configs, seeds, settings, json_ou
     from mocapfix import bench as bench_lib
     from mocapfix.fileio import atomic_write_text
 
+    from mocapfix.batch import check_output_file
+
+    try:                      # before the work: a long run must not end on an unwritable path
+        for option, path in (("--json", json_out), ("--markdown", md_out)):
+            if path:
+                check_output_file(path, option)
+    except MocapfixError as exc:
+        if _debug(ctx):
+            raise
+        click.echo(f"mocapfix: error: {exc}", err=True)
+        sys.exit(EXIT_USAGE)
     if protocol == "kinect":  # CMU captures made into Kinect v2 CSVs: its own runner
         from mocapfix.bench_kinect import main as kinect_main
 

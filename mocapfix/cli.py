@@ -395,7 +395,7 @@ def check(inputs, rules_path, junit_path, as_json, fail_on, exit_zero, would_cle
     """
     import time
 
-    from mocapfix.batch import run_tasks
+    from mocapfix.batch import check_output_file, run_tasks
     from mocapfix.check import CheckTask, exit_code, summary
     from mocapfix.fileio import atomic_write_text
     from mocapfix.pipeline import load_config
@@ -409,6 +409,8 @@ def check(inputs, rules_path, junit_path, as_json, fail_on, exit_zero, would_cle
     started = time.perf_counter()
     try:
         spec = _executor_spec(jobs, scheduler, dask_workers)
+        if junit_path:
+            check_output_file(junit_path, "--junit")
         rules = load_rules(resolve_rules_path(rules_path or "default")).with_fail_on(list(fail_on))
         config = source = None
         if would_clean:
@@ -433,8 +435,11 @@ def check(inputs, rules_path, junit_path, as_json, fail_on, exit_zero, would_cle
         _fail(str(exc), debug, exc)
     seconds = time.perf_counter() - started
     if junit_path:
-        atomic_write_text(junit_path, check_junit(
-            [{**r, "path": r["name"]} for r in results], seconds))
+        try:
+            atomic_write_text(junit_path, check_junit(
+                [{**r, "path": r["name"]} for r in results], seconds))
+        except MocapfixError as exc:     # the folder went away during the run
+            _fail(str(exc), debug, exc)
     s = summary(results)
     if as_json:
         click.echo(json.dumps({"summary": s, "rules": rules.describe(), "files": results}, indent=1))
@@ -502,6 +507,9 @@ def train_dictionary(training, output, method, atoms, window, sample_rate, lam, 
               "beta": beta, "train_iterations": iterations, "max_windows": max_windows, "seed": seed,
               "bases": bases, "energy": energy}
     try:
+        from mocapfix.batch import check_output_file
+
+        check_output_file(output, "-o")
         summary = train(training, output, method, params, jobs, fps, progress,
                         spec=_executor_spec(jobs, scheduler, dask_workers))
     except MocapfixError as exc:

@@ -51,3 +51,35 @@ def test_output_subfolder_blocked_by_a_file_fails_that_file_only(tmp_path):
     assert (out / "y.bvh").is_file() and (out / "mocapfix-config.yaml").is_file()
     assert (out / "a").read_text() == "not a folder"
     assert _md5s(src) == before
+
+
+def test_unwritable_report_files_are_refused_before_any_work(tmp_path):
+    # --junit, bench --json/--markdown and train-dictionary -o under a path that runs
+    # through a file: exit 2 naming the option and the path, before any file is read
+    # (it used to be a traceback after checking, benchmarking or training everything)
+    blocker = tmp_path / "afile"
+    blocker.write_text("x")
+    bad = str(blocker / "sub" / "out")
+    runs = {
+        "--junit": ["check", str(BVH), "--junit", bad + ".xml"],
+        "--json": ["bench", str(C3D), "--protocol", "occlusion", "--seeds", "1",
+                   "--methods", "fill", "-q", "--json", bad + ".json"],
+        "--markdown": ["bench", str(KIN), "--protocol", "kinect", "--seeds", "1", "-q",
+                       "--markdown", bad + ".md"],
+        "-o": ["train-dictionary", str(BVH), "--method", "mssa", "-o", bad + ".npz"],
+    }
+    for option, args in runs.items():
+        r = CliRunner().invoke(main, args)
+        _no_traceback(r)
+        assert r.exit_code == 2, (option, r.output)
+        lines = r.output.strip().splitlines()
+        assert len(lines) == 1 and option in lines[0] and str(blocker) in lines[0], r.output
+        assert "part of the path is a file" in lines[0]
+    assert blocker.read_text() == "x"
+
+
+def test_junit_into_a_new_folder_is_still_written(tmp_path):
+    junit = tmp_path / "reports" / "ci" / "check.xml"
+    r = CliRunner().invoke(main, ["check", str(BVH), "--junit", str(junit), "--exit-zero"])
+    assert r.exit_code == 0, r.output
+    assert junit.read_text().startswith("<?xml")
