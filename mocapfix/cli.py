@@ -114,6 +114,7 @@ def patterns(fn):
 
 from mocapfix.cli_options import executor_spec as _executor_spec  # noqa: E402
 from mocapfix.cli_options import executors  # noqa: E402,F401
+from mocapfix.cli_options import FPS  # noqa: E402
 
 
 # -- info --------------------------------------------------------------------------------------
@@ -121,7 +122,7 @@ from mocapfix.cli_options import executors  # noqa: E402,F401
 @main.command()
 @click.argument("inputs", nargs=-1, required=True, type=click.Path())
 @click.option("--json", "as_json", is_flag=True, help="Print a JSON list instead of text.")
-@click.option("--fps", type=float, default=None,
+@click.option("--fps", type=FPS, default=None,
               help="Frame rate for formats that do not store one (AMC; default 120).")
 @patterns
 @common
@@ -245,7 +246,7 @@ def _clean_line(r: dict, verbose: bool) -> str:
 @click.option("-j", "--jobs", default=1, show_default=True, type=click.IntRange(1, 256),
               help="Files cleaned in parallel (process pool).")
 @click.option("--json", "as_json", is_flag=True, help="Print a JSON summary on stdout (per-file lines go to stderr).")
-@click.option("--fps", type=float, default=None, help="Frame rate for files that store none (AMC).")
+@click.option("--fps", type=FPS, default=None, help="Frame rate for files that store none (AMC).")
 @click.option("--allow-inside-input", is_flag=True,
               help="Allow the output folder to lie inside an input folder.")
 @click.option("--dry-run", is_flag=True, help="Say what would be cleaned and written; write nothing.")
@@ -381,7 +382,7 @@ def _config_body(text: str) -> str:
               help="Also run this pipeline in memory and say what it would fill and leave uncertain.")
 @click.option("-j", "--jobs", default=1, show_default=True, type=click.IntRange(1, 256),
               help="Files checked in parallel.")
-@click.option("--fps", type=float, default=None, help="Frame rate for files that store none (AMC).")
+@click.option("--fps", type=FPS, default=None, help="Frame rate for files that store none (AMC).")
 @patterns
 @executors
 @common
@@ -472,7 +473,7 @@ def check(inputs, rules_path, junit_path, as_json, fail_on, exit_zero, would_cle
               help="mssa: energy the bases keep (default 0.99).")
 @click.option("-j", "--jobs", default=1, show_default=True, type=click.IntRange(1, 256),
               help="Files read in parallel.")
-@click.option("--fps", type=float, default=None, help="Frame rate for files that store none (AMC).")
+@click.option("--fps", type=FPS, default=None, help="Frame rate for files that store none (AMC).")
 @executors
 @common
 def train_dictionary(training, output, method, atoms, window, sample_rate, lam, beta,

@@ -83,3 +83,31 @@ def test_junit_into_a_new_folder_is_still_written(tmp_path):
     r = CliRunner().invoke(main, ["check", str(BVH), "--junit", str(junit), "--exit-zero"])
     assert r.exit_code == 0, r.output
     assert junit.read_text().startswith("<?xml")
+
+
+def test_absurd_fps_is_a_usage_error_for_every_command(tmp_path):
+    # --fps nan/inf used to be taken (an AMC "cleaned" at nan Hz, exit 0), 0 silently
+    # meant the default and -1 failed each file separately (exit 1): all are usage errors
+    amc = SAMPLE_DATA / "walker_01.amc"
+    for value in ("nan", "inf", "-inf", "0", "-1", "1e308"):
+        for args in (["info", str(amc)], ["check", str(amc)],
+                     ["clean", str(amc), "-o", str(tmp_path / "out"), "-c", _cfg(tmp_path)],
+                     ["train-dictionary", str(amc), "--method", "mssa", "-o", str(tmp_path / "m.npz")]):
+            r = CliRunner().invoke(main, [*args, "--fps", value])
+            _no_traceback(r)
+            assert r.exit_code == 2, (args[0], value, r.output)
+            assert "--fps" in r.output and "is not a frame rate" in r.output
+    assert not (tmp_path / "out").exists() and not (tmp_path / "m.npz").exists()
+    r = CliRunner().invoke(main, ["info", str(amc), "--fps", "60", "--json"])
+    assert r.exit_code == 0 and '"fps": 60.0' in r.output
+
+
+def test_reading_an_amc_at_a_non_finite_rate_is_refused():
+    import pytest
+
+    from mocapfix import formats
+    from mocapfix.errors import UnreadableFileError
+
+    for fps in (float("nan"), float("inf"), 0.0):
+        with pytest.raises(UnreadableFileError, match="frame rate must be a positive number"):
+            formats.read(SAMPLE_DATA / "walker_01.amc", fps=fps)

@@ -722,8 +722,8 @@ def _motion(source: AsfAmcSource, channels: np.ndarray, fps, notes: list[str]) -
         fps = DEFAULT_FPS
         if source.values is not None:
             notes.append("AMC files store no frame rate; assumed 120 Hz (CMU default)")
-    elif fps <= 0:
-        raise UnreadableFileError(source.asf_path, f"frame rate must be positive, got {fps}")
+    elif not (np.isfinite(float(fps)) and float(fps) > 0):
+        raise UnreadableFileError(source.asf_path, f"frame rate must be a positive number, got {fps}")
     scale = asf.length_scale
     units = "in" if scale == 1.0 else f"in/{scale:g}"
     return Motion(
