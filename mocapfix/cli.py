@@ -69,7 +69,21 @@ def main(ctx, debug):
     from mocapfix.memory import retain_freed_memory
 
     retain_freed_memory()
+    _printable_file_names()
     ctx.obj = {"debug": debug}
+
+
+def _printable_file_names():
+    """A file name that is not UTF-8 (bytes on Linux; ``\\udcff`` in Python) must not stop a
+    run when a line names it: under a UTF-8 locale Python's stdout/stderr refuse such
+    characters ('strict'), so they are printed escaped instead (the C/POSIX locale already
+    passes them through as the original bytes)."""
+    for stream in (sys.stdout, sys.stderr):
+        if getattr(stream, "errors", None) == "strict" and hasattr(stream, "reconfigure"):
+            try:
+                stream.reconfigure(errors="backslashreplace")
+            except (ValueError, OSError):       # a stream that cannot be reconfigured
+                pass
 
 
 def _ctx():

@@ -90,7 +90,10 @@ def atomic_write_bytes(path, data: bytes) -> Path:
 
 
 def atomic_write_text(path, text: str) -> Path:
-    return atomic_write_bytes(path, text.encode("utf-8"))
+    """Write ``text`` as UTF-8. A file name that is not UTF-8 (bytes on Linux, decoded by
+    Python to lone surrogates such as ``\\udcff``) is written as that escape, so reports
+    and JUnit XML that quote it stay valid UTF-8 text."""
+    return atomic_write_bytes(path, text.encode("utf-8", errors="backslashreplace"))
 
 
 def read_input_bytes(path) -> bytes:

@@ -111,3 +111,38 @@ def test_reading_an_amc_at_a_non_finite_rate_is_refused():
     for fps in (float("nan"), float("inf"), 0.0):
         with pytest.raises(UnreadableFileError, match="frame rate must be a positive number"):
             formats.read(SAMPLE_DATA / "walker_01.amc", fps=fps)
+
+
+def test_a_file_name_that_is_not_utf8_is_cleaned_and_reported(tmp_path):
+    # Linux names are bytes; b"take\xff.bvh" reaches Python as "take\udcff.bvh". The
+    # Markdown/HTML reports and the JUnit XML could not be encoded: the file failed with
+    # "internal error UnicodeEncodeError" and check --junit ended in a traceback
+    import os
+    import xml.etree.ElementTree as ET
+
+    import pytest
+
+    src = tmp_path / "in"
+    src.mkdir()
+    try:
+        raw = os.path.join(os.fsencode(src), b"take\xff.bvh")
+        with open(raw, "wb") as fh:
+            fh.write(BVH.read_bytes())
+    except (OSError, UnicodeError):
+        pytest.skip("this file system refuses names that are not UTF-8")
+    out = tmp_path / "out"
+    r = CliRunner().invoke(main, ["clean", str(src), "-o", str(out), "-c", _cfg(tmp_path),
+                                  "--report", "json,md,html"])
+    _no_traceback(r)
+    assert r.exit_code == 0, r.output
+    names = sorted(os.listdir(os.fsencode(out)))
+    for name in (b"take\xff.bvh", b"take\xff.report.json", b"take\xff.report.md", b"take\xff.report.html"):
+        assert name in names, names
+    md = (out / os.fsdecode(b"take\xff.report.md")).read_bytes()
+    md.decode("utf-8")                                   # the reports stay UTF-8 text
+    junit = tmp_path / "check.xml"
+    r = CliRunner().invoke(main, ["check", str(src), "--junit", str(junit), "--exit-zero"])
+    _no_traceback(r)
+    assert r.exit_code == 0, r.output
+    case = ET.parse(junit).getroot().find(".//testcase")
+    assert case is not None and "take" in case.get("name")
