@@ -67,7 +67,9 @@ def clean_file(source: Path, output: Path, pipeline: Pipeline, reports=("json",)
     texts = {kind: writers[kind]() for kind in paths}
     written: list[Path] = []
     try:
-        written = list(formats.write(result.cleaned, output))
+        # in the format that was read, which the content decided, not the name: a BVH
+        # saved as .c3d stays a BVH (the output mirrors the input's name)
+        written = list(formats.write(result.cleaned, output, format=motion.format))
         for kind, path in paths.items():
             atomic_write_text(path, texts[kind])
     except BaseException:

@@ -146,3 +146,27 @@ def test_a_file_name_that_is_not_utf8_is_cleaned_and_reported(tmp_path):
     assert r.exit_code == 0, r.output
     case = ET.parse(junit).getroot().find(".//testcase")
     assert case is not None and "take" in case.get("name")
+
+
+def test_a_file_whose_content_is_another_format_is_written_back_in_that_format(tmp_path):
+    # The reader goes by content, the writer went by the name: a BVH saved as .c3d came
+    # out as a real C3D of joint positions (its rotation channels and hierarchy lost) and
+    # a C3D saved as .bvh failed with "the motion has no BVH channels to write"
+    from mocapfix import formats
+
+    src = tmp_path / "in"
+    src.mkdir()
+    shutil.copy(BVH, src / "bvh_inside.c3d")
+    shutil.copy(C3D, src / "c3d_inside.bvh")
+    before = _md5s(src)
+    out = tmp_path / "out"
+    r = CliRunner().invoke(main, ["clean", str(src), "-o", str(out), "-c", _cfg(tmp_path)])
+    _no_traceback(r)
+    assert r.exit_code == 0, r.output
+    assert (out / "bvh_inside.c3d").read_bytes().startswith(b"HIERARCHY")
+    assert (out / "c3d_inside.bvh").read_bytes()[1:2] == b"\x50"        # the C3D key
+    for name, fmt, original in (("bvh_inside.c3d", "bvh", BVH), ("c3d_inside.bvh", "c3d", C3D)):
+        back, first = formats.read(out / name), formats.read(original)
+        assert back.format == fmt and back.names == first.names
+        assert back.positions.shape == first.positions.shape
+    assert _md5s(src) == before
