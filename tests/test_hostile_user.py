@@ -170,3 +170,33 @@ def test_a_file_whose_content_is_another_format_is_written_back_in_that_format(t
         assert back.format == fmt and back.names == first.names
         assert back.positions.shape == first.positions.shape
     assert _md5s(src) == before
+
+
+def test_a_key_given_twice_in_a_config_or_rules_file_is_refused(tmp_path):
+    # YAML keeps the last of two equal keys without a word: "max_gap: 5 s" after
+    # "max_gap: 0.5 s" ran with five seconds, a second "pipeline:" replaced the first
+    twice = FAST + "    max_gap: 5 s\n"
+    r = CliRunner().invoke(main, ["clean", str(BVH), "-o", str(tmp_path / "out"),
+                                  "-c", _cfg(tmp_path, twice, "twice.yaml")])
+    _no_traceback(r)
+    assert r.exit_code == 2, r.output
+    assert "twice.yaml (line 5): key 'max_gap' appears twice" in r.output and "line 4" in r.output
+    assert not (tmp_path / "out").exists()
+    two_pipelines = "version: 1\npipeline: []\npipeline:\n  - cleaner: fill\n"
+    r = CliRunner().invoke(main, ["check", str(BVH), "--would-clean",
+                                  _cfg(tmp_path, two_pipelines, "two.yaml")])
+    assert r.exit_code == 2 and "key 'pipeline' appears twice" in r.output, r.output
+    rules = "version: 1\nrules:\n  - metric: missing\n    warn: 5 %\n    warn: 50 %\n"
+    r = CliRunner().invoke(main, ["check", str(BVH), "-r", _cfg(tmp_path, rules, "rules.yaml")])
+    assert r.exit_code == 2 and "rules.yaml (line 5): key 'warn' appears twice" in r.output, r.output
+
+
+def test_merge_keys_and_equal_keys_in_different_mappings_still_load():
+    from mocapfix.pipeline import loads_config
+
+    text = ("version: 1\npipeline:\n  - &f {cleaner: fill, max_gap: 0.5 s}\n"
+            "  - <<: *f\n    max_gap: 0.2 s\n  - cleaner: butterworth\n    cutoff: 6 Hz\n")
+    pipeline = loads_config(text)
+    steps = pipeline.config()["pipeline"]
+    assert [s["cleaner"] for s in steps] == ["fill", "fill", "butterworth"]
+    assert [s.get("max_gap") for s in steps[:2]] == ["0.5 s", "0.2 s"]
