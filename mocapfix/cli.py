@@ -150,6 +150,8 @@ def info(inputs, as_json, fps, include, exclude):
     debug, out = obj["debug"], Out(obj["verbosity"])
     try:
         found = _discover(inputs, include, exclude, out)
+        if not found.files:              # as clean and check: not a silent success
+            raise MocapfixError("no motion files found in " + ", ".join(inputs))
     except MocapfixError as exc:
         _fail(str(exc), debug, exc)
     summaries, failed = [], 0

@@ -200,3 +200,14 @@ def test_merge_keys_and_equal_keys_in_different_mappings_still_load():
     steps = pipeline.config()["pipeline"]
     assert [s["cleaner"] for s in steps] == ["fill", "fill", "butterworth"]
     assert [s.get("max_gap") for s in steps[:2]] == ["0.5 s", "0.2 s"]
+
+
+def test_info_on_a_folder_without_motion_files_says_so(tmp_path):
+    # clean and check say "no motion files found" (exit 2); info printed nothing, exit 0
+    (tmp_path / "notes.txt").write_text("session notes, not motion\n")
+    (tmp_path / "sub").mkdir()
+    for args in (["info", str(tmp_path)], ["info", str(tmp_path), "--json"],
+                 ["check", str(tmp_path)], ["info", str(SAMPLE_DATA), "--include", "*.nothing"]):
+        r = CliRunner().invoke(main, args)
+        _no_traceback(r)
+        assert r.exit_code == 2 and "no motion files found in" in r.output, (args, r.output)
