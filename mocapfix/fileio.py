@@ -20,7 +20,8 @@ def atomic_open(path, mode: str = "wb"):
     path = Path(path)
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part", dir=path.parent)
+        fd, tmp = tempfile.mkstemp(prefix=f".{_temp_stem(path.name)}.", suffix=".part",
+                                   dir=path.parent)
     except OSError as exc:
         raise _write_error(path, exc) from None
     try:
@@ -42,6 +43,30 @@ def atomic_open(path, mode: str = "wb"):
         raise
 
 
+#: the longest file name (bytes) of common Linux, macOS and Windows file systems
+NAME_MAX = 255
+_TEMP_EXTRA = len("..XXXXXXXX.part")          # the dots, mkstemp's 8 characters, .part
+
+
+def _temp_stem(name: str) -> str:
+    """The part of ``name`` in its temporary's name ``.STEM.XXXXXXXX.part``: the whole name,
+    or as much of it as keeps the temporary within :data:`NAME_MAX` bytes (a legal output
+    name of 241-255 bytes must not fail on its temporary's length)."""
+    raw, room = os.fsencode(name), NAME_MAX - _TEMP_EXTRA
+    if len(raw) <= room:
+        return name
+    cut = raw[:room]
+    while cut:                                 # do not split a UTF-8 character
+        try:
+            cut.decode("utf-8")
+            break
+        except UnicodeDecodeError as exc:
+            if exc.start < len(cut) - 3:       # not UTF-8 before the cut: bytes as they are
+                break
+            cut = cut[:exc.start]
+    return os.fsdecode(cut)
+
+
 def _write_error(path: Path, exc: OSError):
     from mocapfix.errors import WriteError
 
@@ -58,7 +83,7 @@ def remove_stale_temporaries(paths) -> int:
     these paths, are touched; each folder is listed once. Returns how many were removed."""
     by_folder: dict[Path, set[str]] = {}
     for p in map(Path, paths):
-        by_folder.setdefault(p.parent, set()).add(p.name)
+        by_folder.setdefault(p.parent, set()).add(_temp_stem(p.name))
     removed = 0
     for folder, names in by_folder.items():
         try:

@@ -211,3 +211,28 @@ def test_info_on_a_folder_without_motion_files_says_so(tmp_path):
         r = CliRunner().invoke(main, args)
         _no_traceback(r)
         assert r.exit_code == 2 and "no motion files found in" in r.output, (args, r.output)
+
+
+def test_a_long_but_legal_file_name_is_cleaned_and_its_stale_temporary_removed(tmp_path):
+    # a 244-byte name (the limit is 255) failed with "File name too long": not for the
+    # output, whose name is the same, but for its temporary ".NAME.XXXXXXXX.part"
+    stem = "take_" + "x" * 235
+    src = tmp_path / "in"
+    src.mkdir()
+    shutil.copy(BVH, src / f"{stem}.bvh")
+    out = tmp_path / "out"
+    r = CliRunner().invoke(main, ["clean", str(src), "-o", str(out), "-c", _cfg(tmp_path)])
+    _no_traceback(r)
+    assert r.exit_code == 0, r.output
+    assert (out / f"{stem}.bvh").read_bytes().startswith(b"HIERARCHY")
+    assert (out / f"{stem}.report.json").is_file()
+    # the temporary a killed run leaves for that name is found and removed by the next run
+    from mocapfix.fileio import NAME_MAX
+
+    leftover = out / f".{(stem + '.bvh')[:NAME_MAX - 15]}.k3j_9x2a.part"
+    leftover.write_bytes(b"half")
+    other = out / ".someone_else.k3j_9x2a.part"
+    other.write_bytes(b"not ours")
+    r = CliRunner().invoke(main, ["clean", str(src), "-o", str(out), "-c", _cfg(tmp_path), "--overwrite"])
+    assert r.exit_code == 0, r.output
+    assert not leftover.exists() and other.read_bytes() == b"not ours"
