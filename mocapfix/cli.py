@@ -324,6 +324,9 @@ def clean(inputs, outdir, config_path, reports, jobs, as_json, fps, allow_inside
                                 "or another output folder)")
         if not dry_run:
             check_output_folder(outdir)
+            if config_file.is_dir():
+                raise MocapfixError(f"{config_file}: is a folder; the run's config record "
+                                    "cannot be written there (move it away)")
     except click.BadParameter as exc:
         _fail(str(exc), debug, exc)
     except MocapfixError as exc:

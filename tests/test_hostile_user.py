@@ -236,3 +236,32 @@ def test_a_long_but_legal_file_name_is_cleaned_and_its_stale_temporary_removed(t
     r = CliRunner().invoke(main, ["clean", str(src), "-o", str(out), "-c", _cfg(tmp_path), "--overwrite"])
     assert r.exit_code == 0, r.output
     assert not leftover.exists() and other.read_bytes() == b"not ours"
+
+
+def test_a_damaged_manifest_or_config_record_in_the_output_folder(tmp_path):
+    # the journal is a text file anyone can edit; a record whose "files" is not a list of
+    # names crashed every re-run with a TypeError traceback, a folder in place of the
+    # manifest or of the config record with IsADirectoryError (the latter after cleaning)
+    import json
+
+    out = tmp_path / "out"
+    cfg = _cfg(tmp_path)
+    assert CliRunner().invoke(main, ["clean", str(BVH), "-o", str(out), "-c", cfg]).exit_code == 0
+    manifest = out / "mocapfix-manifest.jsonl"
+    record = json.loads(manifest.read_text().splitlines()[0])
+    for damaged in (5, [None], {"a": 1}, "walk.bvh"):
+        manifest.write_text(json.dumps({**record, "files": damaged}) + "\n")
+        for policy in ([], ["--skip-existing"]):
+            r = CliRunner().invoke(main, ["clean", str(BVH), "-o", str(out), "-c", cfg, *policy])
+            _no_traceback(r)
+            if policy:             # the existing output is kept, as the option says
+                assert r.exit_code == 0 and "output exists" in r.output, r.output
+            else:                  # no trustworthy record: an existing output, refused
+                assert r.exit_code == 2 and "exist already" in r.output, r.output
+    for name in ("mocapfix-manifest.jsonl", "mocapfix-config.yaml"):
+        bad = tmp_path / f"bad_{name}"
+        (bad / name).mkdir(parents=True)
+        r = CliRunner().invoke(main, ["clean", str(BVH), "-o", str(bad), "-c", cfg])
+        _no_traceback(r)
+        assert r.exit_code == 2 and name in r.output, r.output
+        assert not (bad / "walk.bvh").exists()
