@@ -209,7 +209,36 @@ def plan_outputs(found: list, outdir, allow_inside_input: bool = False, inputs=(
         if job.output in seen:
             raise ConfigError(f"{job.source} and {seen[job.output]} would both be written to {job.output}")
         seen[job.output] = job.source
+    _check_shared_skeletons(jobs)
     return jobs
+
+
+def _check_shared_skeletons(jobs: list[Job]) -> None:
+    """An AMC is written beside a copy of its ASF; two AMCs from different folders whose
+    ASFs have one name but different content would overwrite each other's skeleton in the
+    output folder (files named one by one land side by side): a ConfigError naming both."""
+    from mocapfix.formats.asfamc import skeleton_output
+
+    skeletons: dict[Path, tuple[Path, Path]] = {}
+    for job in jobs:
+        if job.source.suffix.lower() != ".amc":
+            continue
+        found = skeleton_output(job.source, job.output)
+        if found is None:
+            continue
+        target, asf = found
+        first = skeletons.setdefault(target, (asf, job.source))
+        if first[0] != asf and not _same_bytes(first[0], asf):
+            raise ConfigError(f"{first[1]} and {job.source} would both write their skeleton to "
+                              f"{target}, but {first[0]} and {asf} differ; clean them into "
+                              "separate output folders (or name the folder above theirs)")
+
+
+def _same_bytes(a: Path, b: Path) -> bool:
+    try:
+        return a.stat().st_size == b.stat().st_size and a.read_bytes() == b.read_bytes()
+    except OSError:
+        return True                 # unreadable: reading the AMC reports it
 
 
 def discover(inputs, outdir, allow_inside_input: bool = False, include=(), exclude=()) -> list[Job]:

@@ -265,3 +265,54 @@ def test_a_damaged_manifest_or_config_record_in_the_output_folder(tmp_path):
         _no_traceback(r)
         assert r.exit_code == 2 and name in r.output, r.output
         assert not (bad / "walk.bvh").exists()
+
+
+def _two_subjects(tmp_path) -> tuple[Path, Path]:
+    """subjects/a/x_01.amc and subjects/b/y_01.amc, each beside its own walker.asf; b's
+    bones are longer."""
+    import re
+
+    asf = (SAMPLE_DATA / "walker.asf").read_text()
+    longer = re.sub(r"(length\s+)([0-9.]+)", lambda m: f"{m.group(1)}{1.3 * float(m.group(2)):.4f}", asf)
+    assert longer != asf
+    paths = []
+    for sub, text, amc in (("a", asf, "x_01.amc"), ("b", longer, "y_01.amc")):
+        folder = tmp_path / "subjects" / sub
+        folder.mkdir(parents=True)
+        (folder / "walker.asf").write_text(text)
+        shutil.copy(SAMPLE_DATA / "walker_01.amc", folder / amc)
+        paths.append(folder / amc)
+    return paths[0], paths[1]
+
+
+def test_two_amcs_never_share_an_output_skeleton_they_do_not_have_in_common(tmp_path):
+    # an AMC is written beside a copy of its ASF; x (a/walker.asf) and y (b/walker.asf,
+    # other bones) named one by one both wrote out/walker.asf: the last one won and
+    # out/x_01.amc silently came with y's skeleton
+    from mocapfix import formats
+
+    x, y = _two_subjects(tmp_path)
+    before = _md5s(tmp_path)
+    cfg = _cfg(tmp_path, "version: 1\npipeline: []\n", "none.yaml")
+    out = tmp_path / "out"
+    r = CliRunner().invoke(main, ["clean", str(x), str(y), "-o", str(out), "-c", cfg])
+    _no_traceback(r)
+    assert r.exit_code == 2 and "walker.asf" in r.output and "differ" in r.output, r.output
+    assert not out.exists()
+    # one at a time into one folder: the second is refused, the first keeps its skeleton
+    assert CliRunner().invoke(main, ["clean", str(x), "-o", str(out), "-c", cfg]).exit_code == 0
+    r = CliRunner().invoke(main, ["clean", str(y), "-o", str(out), "-c", cfg])
+    _no_traceback(r)
+    assert r.exit_code == 1 and "holds another ASF" in r.output, r.output
+    assert (out / "walker.asf").read_bytes() == (x.parent / "walker.asf").read_bytes()
+    assert not list(out.glob("y_01*"))
+    np_x = formats.read(out / "x_01.amc").positions
+    assert abs(np_x - formats.read(x).positions).max() < 1e-6
+    # the folder above theirs named instead: mirrored, each with its own skeleton
+    r = CliRunner().invoke(main, ["clean", str(x.parent.parent), "-o", str(tmp_path / "o2"), "-c", cfg])
+    assert r.exit_code == 0, r.output
+    for amc in (x, y):
+        got = tmp_path / "o2" / amc.parent.name
+        assert (got / "walker.asf").read_bytes() == (amc.parent / "walker.asf").read_bytes()
+    assert _md5s(x.parent) == {k: v for k, v in before.items() if k.parent == x.parent}
+    assert _md5s(y.parent) == {k: v for k, v in before.items() if k.parent == y.parent}
