@@ -60,7 +60,27 @@ def common(fn):
     return wrapper
 
 
-@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+class _OneLineErrors(click.Group):
+    """The last guard of "never a traceback": an exception that no command turned into its
+    one-line error (a bug, or an OS failure at an unforeseen place) is printed as one line
+    naming its type, with exit 1 as Python's own; ``--debug`` shows the traceback."""
+
+    def invoke(self, ctx):
+        try:
+            return super().invoke(ctx)
+        except (click.exceptions.ClickException, click.exceptions.Exit, click.exceptions.Abort):
+            raise
+        except Exception as exc:  # noqa: BLE001
+            obj = ctx.obj if isinstance(ctx.obj, dict) else {}
+            if obj.get("debug"):
+                raise
+            message = str(exc) if isinstance(exc, MocapfixError) else \
+                f"internal error {type(exc).__name__}: {exc} (--debug shows the traceback)"
+            click.echo(f"mocapfix: error: {message}", err=True)
+            sys.exit(EXIT_SOME_FAILED)
+
+
+@click.group(cls=_OneLineErrors, context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(__version__, prog_name="mocapfix")
 @click.option("--debug", is_flag=True, help="Show tracebacks instead of one-line errors.")
 @click.pass_context
@@ -162,12 +182,16 @@ def info(inputs, as_json, fps, include, exclude):
             summaries.append(s)
             if not as_json:
                 out.line(format_text(s, verbose=obj["verbosity"] > 0) + "\n", level=-1)
-        except MocapfixError as exc:
+        except Exception as exc:  # noqa: BLE001 — one bad file must not stop the others
             if debug:
                 raise
             failed += 1
-            out.error(f"mocapfix: error: {exc}")
-            summaries.append({"path": str(f.path), "error": str(exc)})
+            from mocapfix.batch import name_the_file
+
+            message = str(exc) if isinstance(exc, MocapfixError) else \
+                name_the_file(f.path, f"internal error {type(exc).__name__}: {exc}")
+            out.error(f"mocapfix: error: {message}")
+            summaries.append({"path": str(f.path), "error": message})
     if as_json:
         click.echo(json.dumps(summaries, indent=2))
     if failed:

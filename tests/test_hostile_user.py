@@ -316,3 +316,39 @@ def test_two_amcs_never_share_an_output_skeleton_they_do_not_have_in_common(tmp_
         assert (got / "walker.asf").read_bytes() == (amc.parent / "walker.asf").read_bytes()
     assert _md5s(x.parent) == {k: v for k, v in before.items() if k.parent == x.parent}
     assert _md5s(y.parent) == {k: v for k, v in before.items() if k.parent == y.parent}
+
+
+def test_an_unforeseen_failure_is_one_line_and_the_other_files_go_on(tmp_path, monkeypatch):
+    # info caught only mocapfix's own errors: anything else in one file (a bug, an OS
+    # error) ended the run with a traceback and the files after it were never shown; any
+    # command's unforeseen failure was a traceback. Simulated here, since every known
+    # cause is fixed: the guard itself is what is tested
+    import mocapfix.info
+    import mocapfix.manifest
+
+    real = mocapfix.info.summarise
+
+    def flaky(motion):
+        if str(motion.path).endswith(".bvh"):
+            raise ValueError("simulated")
+        return real(motion)
+
+    monkeypatch.setattr(mocapfix.info, "summarise", flaky)
+    r = CliRunner().invoke(main, ["info", str(BVH), str(KIN), "--json"])
+    _no_traceback(r)
+    assert r.exit_code == 3, r.output
+    assert "walk.bvh: internal error ValueError: simulated" in r.output
+    assert '"frames"' in r.output                        # the Kinect file still summarised
+
+    def broken_close(self, compact=True):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(mocapfix.manifest.Manifest, "close", broken_close)
+    args = ["clean", str(KIN), "-o", str(tmp_path / "out"), "-c", _cfg(tmp_path)]
+    r = CliRunner().invoke(main, args)
+    _no_traceback(r)
+    assert r.exit_code == 1
+    assert r.output.strip().splitlines()[-1] == ("mocapfix: error: internal error OSError: [Errno 28] "
+                                                 "No space left on device (--debug shows the traceback)")
+    r = CliRunner().invoke(main, ["--debug", *args, "--overwrite"])
+    assert isinstance(r.exception, OSError)              # --debug: the real exception
