@@ -352,3 +352,26 @@ def test_an_unforeseen_failure_is_one_line_and_the_other_files_go_on(tmp_path, m
                                                  "No space left on device (--debug shows the traceback)")
     r = CliRunner().invoke(main, ["--debug", *args, "--overwrite"])
     assert isinstance(r.exception, OSError)              # --debug: the real exception
+
+
+def test_one_absurd_kinect_coordinate_does_not_move_its_joint(tmp_path):
+    # one corrupt field (1e9-1e300 m: a flipped exponent bit) steered the first GCV
+    # smooth of kinect_skeleton: the whole joint came out 0.3 m (1e9) to 2.6 m (1e12) off
+    # in every frame, with no warning. Corrupt a clean take, clean it, bound the error
+    # against the clean of the uncorrupted take
+    import numpy as np
+
+    from mocapfix import formats
+    from mocapfix.pipeline import loads_config
+
+    pipeline = loads_config("version: 1\npipeline:\n  - cleaner: kinect_skeleton\n")
+    motion = formats.read(KIN)
+    reference, _ = pipeline.run(motion)
+    j = motion.names.index("SpineBase")
+    for value in (1e9, 1e12, -1e15, 1e300):
+        positions = motion.positions.copy()
+        positions[20, j, 0] = value
+        cleaned, records = pipeline.run(motion.replace(positions=positions))
+        error = np.linalg.norm(cleaned.positions - reference.positions, axis=-1)
+        assert np.nanmax(error) < 0.02, (value, float(np.nanmax(error)))
+        assert 20 in records[0].info["replaced_frames"]["SpineBase"]

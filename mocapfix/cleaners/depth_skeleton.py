@@ -37,7 +37,8 @@ Written for mocapfix (issue 12); each stage cites the method it uses:
 5. **Outliers.** Samples whose residual exceeds ``max(outlier_k max(σ, σ_local),
    min_outlier)`` (σ_local: median residual over ±3 samples / 1.5382, Hampel's local
    scale, so a stretch the smooth cannot follow is not called an outlier) get weight 0 and the joint is refitted (``passes`` rounds): tracked is trusted unless the
-   geometry says otherwise. Their fitted value replaces them.
+   geometry says otherwise. Their fitted value replaces them. A sample more than 100 m
+   from its joint's median position (a corrupt field) is an outlier from the start.
 6. **Untrusted samples from the parent** (``limb_frame``): missing and outlier samples
    become the parent's estimate plus the smooth of the joint's offset to it, parents
    first (an occluded hand follows the tracked elbow). That smooth penalises the
@@ -94,6 +95,9 @@ _PELVIS = ("spinebase", "hipcenter", "pelvis")
 _CUTOFFS = np.geomspace(0.7, 12.0, 8)
 #: GCV chooses the smoothing on at most this many frames (the middle of a long file)
 _GCV_FRAMES = 3000
+#: a sample this far (m) from its joint's median position is no depth-sensor measurement
+#: (a corrupt field, a flipped exponent bit; sensors reach ~10 m)
+_GROSS_M = 100.0
 
 
 def _side_pairs(names: list[str], parts) -> list[tuple[int, int]]:
@@ -285,8 +289,15 @@ class KinectSkeleton(Cleaner):
 
         # 2-5. weights, noise model, GCV smoothing, outliers
         observed = ~np.isnan(P).any(axis=2)
-        inferred = observed & (conf < 0.75)
-        tracked = observed & ~inferred
+        # gross errors are outliers from the start: left in, one 1e9 m value steered the
+        # first GCV smooth and moved its whole joint by 0.3 m (1e10 m: 2.4 m)
+        centre = np.zeros((J, 3))
+        seen = observed.any(axis=0)
+        centre[seen] = np.nanmedian(P[:, seen], axis=0)
+        with np.errstate(invalid="ignore", over="ignore"):
+            gross = observed & ~(_norm(P - centre) <= _GROSS_M)
+        inferred = observed & (conf < 0.75) & ~gross
+        tracked = observed & ~inferred & ~gross
         sig_inf = self.length("inferred_noise", motion) * mpu
         h = float(np.median(np.diff(t)))
         depth = P[..., 2]
@@ -423,7 +434,7 @@ class KinectSkeleton(Cleaner):
         info["inferred_debiased"] = int(debiased)
         sigma_inf = np.maximum(sigma, sig_inf)
         weights = np.where(tracked, 1.0 / sigma ** 2, np.where(inferred, 1.0 / sigma_inf ** 2, 0.0))
-        flagged = np.zeros((T, J), bool)
+        flagged = gross.copy()
         floor = self.length("min_outlier", motion) * mpu
         Z, cut = fit(weights, cut=cut0)
         for _ in range(self["passes"] + 1):
