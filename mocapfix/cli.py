@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import functools
 import json
+import re
 import sys
 
 import click
@@ -15,10 +16,20 @@ from mocapfix.errors import MocapfixError
 EXIT_OK, EXIT_SOME_FAILED, EXIT_USAGE, EXIT_UNREADABLE = 0, 1, 2, 3
 
 
+_CONTROL = re.compile("[\x00-\x08\x0b-\x1f\x7f-\x9f]")
+
+
+def printable(text: str) -> str:
+    """``text`` with control characters shown as ``\\xNN``: a file named with an escape
+    sequence (``"\\x1b[31m.bvh"``) must not recolour or rewrite the user's terminal, nor a
+    name with a carriage return hide the line before it."""
+    return _CONTROL.sub(lambda m: f"\\x{ord(m.group()):02x}", text)
+
+
 def _fail(message: str, debug: bool, exc: BaseException | None = None, code: int = EXIT_USAGE):
     if debug and exc is not None:
         raise exc
-    click.echo(f"mocapfix: error: {message}", err=True)
+    click.echo(printable(f"mocapfix: error: {message}"), err=True)
     sys.exit(code)
 
 
@@ -32,11 +43,11 @@ class Out:
 
     def line(self, text: str, level: int = 0, err: bool | None = None):
         if self.verbosity >= level:
-            click.echo(text, err=self.err if err is None else err)
+            click.echo(printable(text), err=self.err if err is None else err)
             (sys.stderr if (self.err if err is None else err) else sys.stdout).flush()
 
     def error(self, text: str):
-        click.echo(text, err=True)
+        click.echo(printable(text), err=True)
         sys.stderr.flush()
 
 
@@ -76,7 +87,7 @@ class _OneLineErrors(click.Group):
                 raise
             message = str(exc) if isinstance(exc, MocapfixError) else \
                 f"internal error {type(exc).__name__}: {exc} (--debug shows the traceback)"
-            click.echo(f"mocapfix: error: {message}", err=True)
+            click.echo(printable(f"mocapfix: error: {message}"), err=True)
             sys.exit(EXIT_SOME_FAILED)
 
 

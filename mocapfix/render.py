@@ -362,4 +362,11 @@ def check_junit(results: list[dict], seconds: float, suite: str = "mocapfix chec
             ET.SubElement(tc, "system-out").text = "\n".join(f"WARN {f['rule']}: {f['message']}"
                                                              for f in warns)
     ET.indent(root)
-    return '<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
+    text = ET.tostring(root, encoding="unicode")
+    # control characters (a file named "a\x01b.bvh", a reader quoting raw bytes) are not
+    # allowed in XML 1.0 even as references: written as \xNN text, or CI cannot parse it
+    text = _XML_INVALID.sub(lambda m: f"\\x{ord(m.group()):02x}", text)
+    return '<?xml version="1.0" encoding="UTF-8"?>\n' + text + "\n"
+
+
+_XML_INVALID = re.compile("[\x00-\x08\x0b\x0c\x0e-\x1f\ufffe\uffff]")

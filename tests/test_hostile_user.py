@@ -375,3 +375,28 @@ def test_one_absurd_kinect_coordinate_does_not_move_its_joint(tmp_path):
         error = np.linalg.norm(cleaned.positions - reference.positions, axis=-1)
         assert np.nanmax(error) < 0.02, (value, float(np.nanmax(error)))
         assert 20 in records[0].info["replaced_frames"]["SpineBase"]
+
+
+def test_control_characters_in_file_names_reach_neither_the_terminal_nor_the_junit(tmp_path):
+    # a file named "bad\x1b[31m.bvh" recoloured the terminal (any escape sequence went
+    # out raw, a "\r" could hide the start of a line) and made the JUnit XML unparsable
+    # ("not well-formed (invalid token)"), failing the whole CI report
+    import re
+    import xml.etree.ElementTree as ET
+
+    src = tmp_path / "in"
+    src.mkdir()
+    shutil.copy(BVH, src / "a\x01b.bvh")
+    (src / "bad\x1b[31mred\r.bvh").write_bytes(b"\x00\x06junk, not a BVH\n")
+    junit = tmp_path / "check.xml"
+    r = CliRunner().invoke(main, ["check", str(src), "--junit", str(junit)])
+    _no_traceback(r)
+    assert r.exit_code == 3, r.output
+    assert not re.search("[\x00-\x08\x0b-\x1f\x7f]", r.output), repr(r.output)
+    assert "a\\x01b.bvh" in r.output and "bad\\x1b[31mred\\x0d.bvh" in r.output
+    names = [case.get("name") for case in ET.parse(junit).getroot().iter("testcase")]
+    assert names == ["in/a\\x01b.bvh", "in/bad\\x1b[31mred\r.bvh"]       # CR is valid XML
+    r = CliRunner().invoke(main, ["clean", str(src), "-o", str(tmp_path / "out"), "-c", _cfg(tmp_path)])
+    _no_traceback(r)
+    assert r.exit_code == 1 and not re.search("[\x00-\x08\x0b-\x1f\x7f]", r.output), repr(r.output)
+    assert (tmp_path / "out" / "a\x01b.bvh").is_file()           # the file itself keeps its name
