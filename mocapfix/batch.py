@@ -9,8 +9,8 @@ default; any executor with ``submit`` can be injected) yielding results as they 
 Discovery in folders skips, with a note: hidden files, our own reports and temporary
 files, files whose suffix is no motion format, ``.csv``/``.txt``/``.tsv`` files whose content
 is not motion data (Nexus/QTM exports, notes), special files (FIFOs, devices, sockets),
-broken links and symlink loops, and names filtered out by ``include``/``exclude``
-patterns. Files named explicitly are always taken (and fail with a clear error if they
+broken links and symlink loops, folders that cannot be listed (named: their files are
+not processed), and names filtered out by ``include``/``exclude`` patterns. Files named explicitly are always taken (and fail with a clear error if they
 cannot be read). Input trees are never written to.
 """
 from __future__ import annotations
@@ -113,7 +113,12 @@ def discover_inputs(inputs, include=(), exclude=(), sniff: bool = True) -> Disco
             files.append(Found(Path(os.path.abspath(path))))
             continue
         root = path.resolve()
-        for dirpath, dirnames, filenames in os.walk(root):
+
+        def unlisted(exc: OSError):        # os.walk passes over a folder it cannot list
+            skipped.append((exc.filename or str(root), "cannot read this folder: "
+                            f"{exc.strerror or exc} (the files in it were not processed)"))
+
+        for dirpath, dirnames, filenames in os.walk(root, onerror=unlisted):
             here = Path(dirpath)
             dirnames[:] = sorted(d for d in dirnames if not d.startswith("."))
             for name in sorted(filenames):

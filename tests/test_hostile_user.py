@@ -400,3 +400,36 @@ def test_control_characters_in_file_names_reach_neither_the_terminal_nor_the_jun
     _no_traceback(r)
     assert r.exit_code == 1 and not re.search("[\x00-\x08\x0b-\x1f\x7f]", r.output), repr(r.output)
     assert (tmp_path / "out" / "a\x01b.bvh").is_file()           # the file itself keeps its name
+
+
+def test_a_folder_that_cannot_be_listed_is_named_not_passed_over(tmp_path, monkeypatch):
+    # os.walk skips a folder it cannot list without a word: the takes in it were silently
+    # left out of clean/check/info ("cleaned 2 of 2 files")
+    import errno
+    import os
+
+    src = tmp_path / "in"
+    (src / "locked").mkdir(parents=True)
+    shutil.copy(BVH, src / "ok.bvh")
+    shutil.copy(BVH, src / "locked" / "take.bvh")
+    locked = src / "locked"
+    locked.chmod(0)
+    if os.geteuid() == 0:                  # root lists anything: refuse as the OS would
+        real = os.scandir
+
+        def scandir(path="."):
+            if os.fspath(path) == str(locked):
+                raise PermissionError(errno.EACCES, "Permission denied", str(locked))
+            return real(path)
+
+        monkeypatch.setattr(os, "scandir", scandir)
+    try:
+        for args in (["clean", str(src), "-o", str(tmp_path / "out"), "-c", _cfg(tmp_path)],
+                     ["check", str(src)], ["info", str(src)]):
+            r = CliRunner().invoke(main, args)
+            _no_traceback(r)
+            skip = [line for line in r.output.splitlines() if line.startswith("SKIP")]
+            assert skip == [f"SKIP  {locked}: cannot read this folder: Permission denied "
+                            "(the files in it were not processed)"], (args[0], r.output)
+    finally:
+        locked.chmod(0o755)
