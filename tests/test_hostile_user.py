@@ -433,3 +433,45 @@ def test_a_folder_that_cannot_be_listed_is_named_not_passed_over(tmp_path, monke
                             "(the files in it were not processed)"], (args[0], r.output)
     finally:
         locked.chmod(0o755)
+
+
+def _six_channel_bvh(glitch: float | None) -> str:
+    """A 3-joint BVH whose every joint has 6 channels (as Bandai-Namco's files do),
+    120 frames of smooth motion; ``glitch`` goes into Chest.Xposition at frame 60."""
+    import numpy as np
+
+    hier = ("HIERARCHY\nROOT Hips\n{\n OFFSET 0 0 0\n CHANNELS 6 Xposition Yposition Zposition "
+            "Zrotation Xrotation Yrotation\n JOINT Chest\n {\n  OFFSET 0 20 0\n  CHANNELS 6 "
+            "Xposition Yposition Zposition Zrotation Xrotation Yrotation\n  JOINT Head\n  {\n"
+            "   OFFSET 0 20 0\n   CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation "
+            "Yrotation\n   End Site\n   {\n    OFFSET 0 10 0\n   }\n  }\n }\n}\n"
+            "MOTION\nFrames: 120\nFrame Time: 0.0083333\n")
+    rows = []
+    for f in range(120):
+        t = f / 120
+        vals = [10 * np.sin(3 * t), 90, 5 * t, 5 * np.sin(5 * t), 3 * np.cos(4 * t), 2 * t,
+                0, 20, 0, 4 * np.sin(6 * t), 2 * np.cos(5 * t), 1,
+                0, 20, 0, 3 * np.sin(7 * t), np.cos(3 * t), 0]
+        if f == 60 and glitch is not None:
+            vals[6] = glitch
+        rows.append(" ".join(f"{v:.6g}" for v in vals))
+    return hier + "\n".join(rows) + "\n"
+
+
+def test_a_joint_moved_beyond_the_float_range_is_reported_not_an_internal_error(tmp_path):
+    # 1e300 in a non-root joint's position channel: the report's largest correction
+    # overflowed to inf (written as null) and the comparison "max > 0" raised TypeError,
+    # so the file failed with "internal error TypeError" and no output
+    import json
+
+    src = tmp_path / "in"
+    src.mkdir()
+    (src / "glitch.bvh").write_text(_six_channel_bvh(1e300))
+    (src / "clean.bvh").write_text(_six_channel_bvh(None))
+    out = tmp_path / "out"
+    r = CliRunner().invoke(main, ["clean", str(src), "-o", str(out), "--report", "json,md,html"])
+    _no_traceback(r)
+    assert r.exit_code == 0 and "internal error" not in r.output, r.output
+    report = json.loads((out / "glitch.report.json").read_text())
+    assert any(j["correction_mm"]["max"] is None for j in report["joints"])
+    assert (out / "glitch.bvh").read_text().startswith("HIERARCHY")
