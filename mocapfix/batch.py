@@ -358,11 +358,20 @@ def _run_on(pool: Executor, task, items: list, window: int) -> Iterator[tuple[in
             fut.cancel()
 
 
+def internal_error(result: dict) -> dict:
+    """``result`` (an ERROR for an unforeseen exception, inside its ``except``) with the
+    traceback under ``"traceback"``, which the CLI prints with ``--debug``."""
+    import traceback
+
+    result["traceback"] = traceback.format_exc()
+    return result
+
+
 def _guarded(task, item) -> dict:
     try:
         return task(item)
     except Exception as exc:  # noqa: BLE001 — one bad file must not stop the batch
-        return error_result(item, f"internal error {type(exc).__name__}: {exc}")
+        return internal_error(error_result(item, f"internal error {type(exc).__name__}: {exc}"))
 
 
 @dataclass
@@ -387,7 +396,8 @@ class CleanTask:
         except MocapfixError as exc:
             return error_result(job, name_the_file(job.source, str(exc)))
         except Exception as exc:  # noqa: BLE001 — one bad file must not stop the batch
-            return error_result(job, f"{job.source}: internal error {type(exc).__name__}: {exc}")
+            return internal_error(error_result(
+                job, f"{job.source}: internal error {type(exc).__name__}: {exc}"))
 
 
 _PIPELINES: dict = {}

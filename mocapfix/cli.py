@@ -386,6 +386,8 @@ def clean(inputs, outdir, config_path, reports, jobs, as_json, fps, allow_inside
     def stream(r):
         out.line(_clean_line(r, obj["verbosity"] > 0), level=0 if r["status"] != "ERROR" else -1,
                  err=True if r["status"] == "ERROR" else None)
+        if debug and r.get("traceback"):
+            out.error(r["traceback"].rstrip())
         if r["status"] == "ERROR":
             # a failed file leaves nothing behind, not even an output of an earlier run
             remove_outputs(output_files(Path(r["output"])))
@@ -486,6 +488,8 @@ def check(inputs, rules_path, junit_path, as_json, fail_on, exit_zero, would_cle
             results[n] = r
             level = -1 if r["status"] in ("FAIL", "ERROR") else 0
             out.line(check_line(r, obj["verbosity"] > 0), level=level)
+            if debug and r.get("traceback"):
+                out.error(r["traceback"].rstrip())
     except MocapfixError as exc:        # e.g. the Dask scheduler cannot be reached
         _fail(str(exc), debug, exc)
     seconds = time.perf_counter() - started

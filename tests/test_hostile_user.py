@@ -475,3 +475,26 @@ def test_a_joint_moved_beyond_the_float_range_is_reported_not_an_internal_error(
     report = json.loads((out / "glitch.report.json").read_text())
     assert any(j["correction_mm"]["max"] is None for j in report["joints"])
     assert (out / "glitch.bvh").read_text().startswith("HIERARCHY")
+
+
+def test_debug_shows_the_traceback_of_a_file_that_failed_unexpectedly(tmp_path, monkeypatch):
+    # README: --debug gives "tracebacks instead of one-line errors"; a file that failed in
+    # clean's or check's batch showed only "internal error TYPE: ..." even with --debug,
+    # so the bug behind it could not be reported. Simulated failure (every known cause is
+    # fixed); without --debug the output stays one line
+    import mocapfix.check
+    import mocapfix.clean
+
+    def broken(*args, **kwargs):
+        raise ValueError("simulated")
+
+    monkeypatch.setattr(mocapfix.clean, "build_report", broken)
+    monkeypatch.setattr(mocapfix.check, "check_motion", broken)
+    runs = {"clean": ["clean", str(KIN), "-o", str(tmp_path / "out"), "-c", _cfg(tmp_path), "--overwrite"],
+            "check": ["check", str(KIN)]}
+    for name, args in runs.items():
+        r = CliRunner().invoke(main, args)
+        assert r.exit_code in (1, 3) and "internal error ValueError: simulated" in r.output
+        assert "Traceback" not in r.output, name
+        r = CliRunner().invoke(main, [*args, "--debug"])
+        assert "Traceback (most recent call last)" in r.output and "in broken" in r.output, name
