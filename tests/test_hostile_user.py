@@ -368,13 +368,18 @@ def test_one_absurd_kinect_coordinate_does_not_move_its_joint(tmp_path):
     motion = formats.read(KIN)
     reference, _ = pipeline.run(motion)
     j = motion.names.index("SpineBase")
-    for value in (1e9, 1e12, -1e15, 1e300):
+    for axis, value in ((0, 1e9), (0, 1e12), (0, -1e15), (0, 1e300), (2, -1e20)):
         positions = motion.positions.copy()
-        positions[20, j, 0] = value
+        positions[20, j, axis] = value
         cleaned, records = pipeline.run(motion.replace(positions=positions))
         error = np.linalg.norm(cleaned.positions - reference.positions, axis=-1)
         assert np.nanmax(error) < 0.02, (value, float(np.nanmax(error)))
         assert 20 in records[0].info["replaced_frames"]["SpineBase"]
+        # known answer: the same as that sample missing (a -1e20 m depth turned the depth
+        # model off for the whole file)
+        positions[20, j] = np.nan
+        as_missing, _ = pipeline.run(motion.replace(positions=positions))
+        np.testing.assert_array_equal(cleaned.positions, as_missing.positions)
 
 
 def test_control_characters_in_file_names_reach_neither_the_terminal_nor_the_junit(tmp_path):
