@@ -314,8 +314,9 @@ def markdown_to_html(md: str) -> str:
 def check_line(result: dict, verbose: bool = False) -> str:
     """One line per file (more with ``verbose``): status, path, the worst findings."""
     status, path = result["status"], result["path"]
-    if status == "ERROR":
-        return f"ERROR {path}: {result['error']}"
+    if status == "ERROR":                # the error names the file already (as clean's)
+        error = result["error"]
+        return f"ERROR {error}" if error.startswith(str(path)) else f"ERROR {path}: {error}"
     findings = result.get("findings", [])
     worst = [f for f in findings if f["level"] == status] or findings
     head = f"{status:<5} {path}"

@@ -503,3 +503,13 @@ def test_debug_shows_the_traceback_of_a_file_that_failed_unexpectedly(tmp_path, 
         assert "Traceback" not in r.output, name
         r = CliRunner().invoke(main, [*args, "--debug"])
         assert "Traceback (most recent call last)" in r.output and "in broken" in r.output, name
+
+
+def test_check_names_an_unreadable_file_once(tmp_path):
+    # "ERROR /x/bad.bvh: /x/bad.bvh:1: expected 'HIERARCHY'...": the path came twice
+    bad = tmp_path / "bad.bvh"
+    bad.write_text("not a bvh\n")
+    r = CliRunner().invoke(main, ["check", str(bad), str(BVH)])
+    assert r.exit_code == 3
+    line = next(x for x in r.output.splitlines() if x.startswith("ERROR"))
+    assert line.count(str(bad)) == 1 and line.startswith(f"ERROR {bad}:1: "), line
