@@ -83,5 +83,6 @@ def clean_file(source: Path, output: Path, pipeline: Pipeline, reports=("json",)
         "frames": f["frames"], "joints": f["joints"], "missing_before": f["missing_before"],
         "missing_after": f["missing_after"], "samples_filled": f["samples_filled"],
         "samples_flagged": f["samples_flagged"], "seconds": round(result.seconds, 4),
-        "reasons": sorted({r for j in report["joints"] for r in j["reasons"] if r.startswith(f["status"])})[:3],
+        "reasons": sorted({r for j in report["joints"] for r in j["reasons"] if r.startswith(f["status"])})[:3]
+        or f.get("reasons", []),
     }

@@ -513,3 +513,14 @@ def test_check_names_an_unreadable_file_once(tmp_path):
     assert r.exit_code == 3
     line = next(x for x in r.output.splitlines() if x.startswith("ERROR"))
     assert line.count(str(bad)) == 1 and line.startswith(f"ERROR {bad}:1: "), line
+
+
+def test_a_selection_that_matches_nothing_says_why_it_warns(tmp_path):
+    # markers: ["NoSuch*"] leaves nothing to clean: the file WARNs (report note), but the
+    # line gave no reason, even with -v
+    cfg = _cfg(tmp_path, "version: 1\nmarkers: [\"NoSuch*\"]\npipeline:\n  - cleaner: fill\n")
+    r = CliRunner().invoke(main, ["clean", str(C3D), "-o", str(tmp_path / "out"), "-c", cfg, "-v"])
+    assert r.exit_code == 0, r.output
+    lines = r.output.splitlines()
+    assert lines[0].startswith("WARN")
+    assert "leave none of this file's markers to clean" in lines[1], r.output
