@@ -301,15 +301,15 @@ def _clean_line(r: dict, verbose: bool) -> str:
 @click.option("--allow-inside-input", is_flag=True,
               help="Allow the output folder to lie inside an input folder.")
 @click.option("--dry-run", is_flag=True, help="Say what would be cleaned and written; write nothing.")
-@click.option("--overwrite", "policy", flag_value="overwrite",
+@click.option("--overwrite", is_flag=True,
               help="Replace outputs (and their reports) left by an earlier run.")
-@click.option("--skip-existing", "policy", flag_value="skip",
+@click.option("--skip-existing", is_flag=True,
               help="Leave files whose output exists alone (same config only).")
 @patterns
 @executors
 @common
 def clean(inputs, outdir, config_path, reports, jobs, as_json, fps, allow_inside_input, dry_run,
-          policy, include, exclude, scheduler, dask_workers):
+          overwrite, skip_existing, include, exclude, scheduler, dask_workers):
     """Clean INPUT files or folders with a pipeline of cleaners.
 
     Files an earlier run of the same config finished (recorded in the output folder's
@@ -331,6 +331,9 @@ def clean(inputs, outdir, config_path, reports, jobs, as_json, fps, allow_inside
     debug = obj["debug"]
     out = Out(obj["verbosity"], err=as_json)
     try:
+        if overwrite and skip_existing:   # (the last one given used to win silently)
+            raise click.BadParameter("--overwrite and --skip-existing exclude each other; give one")
+        policy = "overwrite" if overwrite else "skip" if skip_existing else None
         kinds = _parse_reports(reports)
         spec = _executor_spec(jobs, scheduler, dask_workers)
         pipeline = load_config(resolve_config(config_path or "default"))

@@ -524,3 +524,18 @@ def test_a_selection_that_matches_nothing_says_why_it_warns(tmp_path):
     lines = r.output.splitlines()
     assert lines[0].startswith("WARN")
     assert "leave none of this file's markers to clean" in lines[1], r.output
+
+
+def test_overwrite_and_skip_existing_together_are_a_usage_error(tmp_path):
+    # the two shared one option: given both, the last one silently decided whether the
+    # existing outputs were replaced or kept
+    out = tmp_path / "out"
+    cfg = _cfg(tmp_path)
+    assert CliRunner().invoke(main, ["clean", str(BVH), "-o", str(out), "-c", cfg]).exit_code == 0
+    before = _md5s(out)
+    for flags in (["--overwrite", "--skip-existing"], ["--skip-existing", "--overwrite"]):
+        r = CliRunner().invoke(main, ["clean", str(BVH), "-o", str(out), "-c", cfg, *flags])
+        assert r.exit_code == 2 and "exclude each other" in r.output, r.output
+    assert _md5s(out) == before
+    r = CliRunner().invoke(main, ["clean", str(BVH), "-o", str(out), "-c", cfg, "--overwrite"])
+    assert r.exit_code == 0 and "cleaned 1 of 1" in r.output
