@@ -539,3 +539,35 @@ def test_overwrite_and_skip_existing_together_are_a_usage_error(tmp_path):
     assert _md5s(out) == before
     r = CliRunner().invoke(main, ["clean", str(BVH), "-o", str(out), "-c", cfg, "--overwrite"])
     assert r.exit_code == 0 and "cleaned 1 of 1" in r.output
+
+
+def test_a_model_whose_array_header_lies_is_a_config_error(tmp_path):
+    # a model member whose .npy header declares 10^11 floats (a few bytes in the file):
+    # np.load first allocates what is declared -> MemoryError (745 GiB), a traceback;
+    # now a config error naming the model and the array, before any file is read
+    import io
+    import zipfile
+
+    import numpy as np
+
+    from mocapfix import models
+
+    shipped = models.shipped()["mssa-cmu"]
+    bomb = tmp_path / "bomb.npz"
+    with zipfile.ZipFile(shipped) as zin, zipfile.ZipFile(bomb, "w") as zout:
+        for name in zin.namelist():
+            data = zin.read(name)
+            if name == "bases.npy":
+                buf = io.BytesIO()
+                np.lib.format.write_array_header_1_0(
+                    buf, {"descr": "<f8", "fortran_order": False, "shape": (10 ** 11,)})
+                data = buf.getvalue() + bytes(64)
+            zout.writestr(name, data)
+    cfg = _cfg(tmp_path, "version: 1\npipeline:\n  - cleaner: mssa\n    model: bomb.npz\n")
+    r = CliRunner().invoke(main, ["clean", str(SAMPLE_DATA / "walker_01.amc"), "-o",
+                                  str(tmp_path / "out"), "-c", cfg])
+    _no_traceback(r)
+    assert r.exit_code == 2, r.output
+    assert "bomb.npz: corrupt model file" in r.output and "'bases' declares" in r.output
+    assert not (tmp_path / "out").exists()
+    models.load(shipped, "mssa")                        # a sound model still loads
