@@ -68,7 +68,8 @@ def read_header(path) -> dict:
         header = json.loads(np.load(io.BytesIO(raw), allow_pickle=False).tobytes().decode("utf-8"))
     except FileNotFoundError:
         raise ConfigError(f"{path}: no such model file") from None
-    except (OSError, KeyError, ValueError, zipfile.BadZipFile, UnicodeDecodeError) as exc:
+    except (OSError, KeyError, ValueError, zipfile.BadZipFile, UnicodeDecodeError,
+            RecursionError, MemoryError) as exc:      # (a header nested 100,000 deep)
         raise ConfigError(f"{path}: not a mocapfix model file ({type(exc).__name__}: {exc})") from None
     if not isinstance(header, dict) or header.get("schema") != SCHEMA:
         raise ConfigError(f"{path}: unsupported model schema {header.get('schema') if isinstance(header, dict) else None!r} "

@@ -571,3 +571,16 @@ def test_a_model_whose_array_header_lies_is_a_config_error(tmp_path):
     assert "bomb.npz: corrupt model file" in r.output and "'bases' declares" in r.output
     assert not (tmp_path / "out").exists()
     models.load(shipped, "mssa")                        # a sound model still loads
+
+
+def test_a_model_header_nested_too_deep_is_a_config_error(tmp_path):
+    # the JSON header "[[[[...]]]]" 100,000 deep: RecursionError, an internal error
+    import numpy as np
+
+    deep = ("[" * 100_000 + "]" * 100_000).encode()
+    np.savez(tmp_path / "deep.npz", __header__=np.frombuffer(deep, dtype=np.uint8))
+    cfg = _cfg(tmp_path, "version: 1\npipeline:\n  - cleaner: mssa\n    model: deep.npz\n")
+    r = CliRunner().invoke(main, ["clean", str(SAMPLE_DATA / "walker_01.amc"), "-o",
+                                  str(tmp_path / "out"), "-c", cfg])
+    _no_traceback(r)
+    assert r.exit_code == 2 and "deep.npz: not a mocapfix model file (RecursionError" in r.output, r.output
