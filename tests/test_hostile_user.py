@@ -584,3 +584,30 @@ def test_a_model_header_nested_too_deep_is_a_config_error(tmp_path):
                                   str(tmp_path / "out"), "-c", cfg])
     _no_traceback(r)
     assert r.exit_code == 2 and "deep.npz: not a mocapfix model file (RecursionError" in r.output, r.output
+
+
+def test_a_folder_where_a_report_goes_fails_that_file_only_and_keeps_shared_skeletons(tmp_path):
+    # out/walker_02.report.json is a folder: the report cannot be written. The cleanup
+    # then tried to unlink that folder (IsADirectoryError): the file became "internal
+    # error", the same error in the batch's own cleanup stopped the run (later files never
+    # cleaned), and the cleanup also deleted walker.asf, which walker_01.amc, cleaned
+    # fine just before, needs: that good output could no longer be read
+    from mocapfix import formats
+
+    src = tmp_path / "in"
+    src.mkdir()
+    shutil.copy(SAMPLE_DATA / "walker.asf", src / "walker.asf")
+    for n in ("01", "02"):
+        shutil.copy(SAMPLE_DATA / "walker_01.amc", src / f"walker_{n}.amc")
+    shutil.copy(KIN, src / "zz_last.csv")
+    out = tmp_path / "out"
+    (out / "walker_02.report.json").mkdir(parents=True)
+    r = CliRunner().invoke(main, ["clean", str(src), "-o", str(out), "-c", _cfg(tmp_path), "--overwrite"])
+    _no_traceback(r)
+    assert r.exit_code == 1, r.output
+    error = [line for line in r.output.splitlines() if line.startswith("ERROR")]
+    assert len(error) == 1 and "walker_02.report.json: cannot write: Is a directory" in error[0], r.output
+    assert (out / "zz_last.csv").is_file()                 # the batch went on
+    assert not (out / "walker_02.amc").exists()            # nothing left for the failed file
+    assert (out / "walker_02.report.json").is_dir()        # the folder is not ours to remove
+    assert formats.read(out / "walker_01.amc").n_frames > 0  # its skeleton is still there
