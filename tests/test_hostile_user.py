@@ -611,3 +611,16 @@ def test_a_folder_where_a_report_goes_fails_that_file_only_and_keeps_shared_skel
     assert not (out / "walker_02.amc").exists()            # nothing left for the failed file
     assert (out / "walker_02.report.json").is_dir()        # the folder is not ours to remove
     assert formats.read(out / "walker_01.amc").n_frames > 0  # its skeleton is still there
+
+
+def test_a_malformed_scheduler_address_is_refused_before_anything_is_written(tmp_path):
+    # "--scheduler foo" raised ValueError (a traceback) when the batch started, after the
+    # output folder and its manifest had been made; dask is in the dev extra
+    out = tmp_path / "out"
+    for address in ("foo", "tcp://host-without-port", "tcp://127.0.0.1:x"):
+        for args in (["clean", str(BVH), "-o", str(out), "-c", _cfg(tmp_path)], ["check", str(BVH)]):
+            r = CliRunner().invoke(main, [*args, "--scheduler", address])
+            _no_traceback(r)
+            assert r.exit_code == 2, r.output
+            assert f"--scheduler {address!r} is not a Dask scheduler address" in r.output
+    assert not out.exists()
