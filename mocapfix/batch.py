@@ -166,12 +166,16 @@ def check_output_folder(outdir) -> Path:
     return outdir
 
 
-def check_output_file(path, option: str) -> Path:
+def check_output_file(path, option: str, inputs=()) -> Path:
     """Make sure a single output file (``--junit``, ``bench --json``, a trained model) can
     be written before the work that produces it starts, creating nothing: its folder, or
-    the nearest folder above it that exists, must take a new file. A ConfigError naming
-    ``option`` and the path otherwise (exit 2, nothing processed)."""
+    the nearest folder above it that exists, must take a new file, and it must not be a
+    capture among ``inputs`` (a named input, or a motion or ASF file in an input folder
+    or beside a named input: ``check take.c3d --junit take.c3d`` replaced the capture
+    with XML). A ConfigError naming ``option`` and the path otherwise (exit 2, nothing
+    processed)."""
     path = Path(path)
+    _refuse_overwriting_inputs(path, option, inputs)
     folder = path.parent
     while not folder.exists() and folder != folder.parent:
         folder = folder.parent
@@ -186,6 +190,27 @@ def check_output_file(path, option: str) -> Path:
     except OSError as exc:
         raise ConfigError(f"{option} {path}: cannot write there: {exc.strerror or exc}") from None
     return path
+
+
+def _refuse_overwriting_inputs(path: Path, option: str, inputs) -> None:
+    if not path.exists():
+        return
+    real = Path(os.path.realpath(path))
+    suffix = real.suffix.lower()
+    # a capture as discovery sees one (text files only when their content is motion data)
+    capture = suffix in (*MOTION_SUFFIXES, ".asf") and (suffix not in _TEXT_SUFFIXES
+                                                          or _looks_like_motion(real))
+    for raw in inputs:
+        given = Path(os.path.realpath(raw))
+        if real == given:
+            what = f"the input {raw}"
+        elif capture and given.is_dir() and _under(real, given):
+            what = f"a capture in the input folder {raw}"
+        elif capture and not given.is_dir() and _under(real, given.parent):
+            what = f"a capture beside the input {raw}"
+        else:
+            continue
+        raise ConfigError(f"{option} {path}: would overwrite {what}; choose another path")
 
 
 def _under(path: Path, folder: Path) -> bool:

@@ -66,7 +66,7 @@ def bench(ctx, clean_files, protocol, methods, configs, seeds, settings, json_ou
     try:                      # before the work: a long run must not end on an unwritable path
         for option, path in (("--json", json_out), ("--markdown", md_out)):
             if path:
-                check_output_file(path, option)
+                check_output_file(path, option, clean_files)
     except MocapfixError as exc:
         if _debug(ctx):
             raise

@@ -470,7 +470,7 @@ def check(inputs, rules_path, junit_path, as_json, fail_on, exit_zero, would_cle
     try:
         spec = _executor_spec(jobs, scheduler, dask_workers)
         if junit_path:
-            check_output_file(junit_path, "--junit")
+            check_output_file(junit_path, "--junit", inputs)
         rules = load_rules(resolve_rules_path(rules_path or "default")).with_fail_on(list(fail_on))
         config = source = None
         if would_clean:
@@ -571,7 +571,7 @@ def train_dictionary(training, output, method, atoms, window, sample_rate, lam, 
     try:
         from mocapfix.batch import check_output_file
 
-        check_output_file(output, "-o")
+        check_output_file(output, "-o", training)
         summary = train(training, output, method, params, jobs, fps, progress,
                         spec=_executor_spec(jobs, scheduler, dask_workers))
     except MocapfixError as exc:

@@ -624,3 +624,33 @@ def test_a_malformed_scheduler_address_is_refused_before_anything_is_written(tmp
             assert r.exit_code == 2, r.output
             assert f"--scheduler {address!r} is not a Dask scheduler address" in r.output
     assert not out.exists()
+
+
+def test_report_files_never_overwrite_the_captures_they_are_about(tmp_path):
+    # "check take.c3d --junit take.c3d" replaced the capture with JUnit XML (exit 0); the
+    # same for a capture in an input folder, the ASF beside a named AMC, bench --json on
+    # its input and train-dictionary -o on a training file
+    src = tmp_path / "in"
+    src.mkdir()
+    for f in (BVH, C3D, SAMPLE_DATA / "walker.asf", SAMPLE_DATA / "walker_01.amc"):
+        shutil.copy(f, src / f.name)
+    (src / "notes.txt").write_text("session notes\n")
+    before = _md5s(src)
+    cases = [
+        (["check", str(src / "walk.bvh"), "--junit", str(src / "walk.bvh")], "the input"),
+        (["check", str(src), "--junit", str(src / "walk_markers.c3d")], "a capture in the input folder"),
+        (["check", str(src / "walker_01.amc"), "--junit", str(src / "walker.asf")], "a capture beside the input"),
+        (["bench", str(src / "walk_markers.c3d"), "--protocol", "occlusion", "--seeds", "1",
+          "--methods", "fill", "-q", "--json", str(src / "walk_markers.c3d")], "the input"),
+        (["train-dictionary", str(src / "walk.bvh"), "--method", "mssa", "-o", str(src / "walk.bvh")], "the input"),
+    ]
+    for args, what in cases:
+        r = CliRunner().invoke(main, args)
+        _no_traceback(r)
+        assert r.exit_code == 2 and f"would overwrite {what}" in r.output, (args[0], r.output)
+    assert _md5s(src) == before
+    # a report file that is not a capture may go beside them, also replacing a text file
+    # that is not motion data
+    r = CliRunner().invoke(main, ["check", str(src), "--junit", str(src / "notes.txt"), "--exit-zero"])
+    assert r.exit_code == 0, r.output
+    assert (src / "notes.txt").read_text().startswith("<?xml")
