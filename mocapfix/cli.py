@@ -159,13 +159,13 @@ def patterns(fn):
 
 from mocapfix.cli_options import executor_spec as _executor_spec  # noqa: E402
 from mocapfix.cli_options import executors  # noqa: E402,F401
-from mocapfix.cli_options import FPS  # noqa: E402
+from mocapfix.cli_options import FPS, GivenPath  # noqa: E402
 
 
 # -- info --------------------------------------------------------------------------------------
 
 @main.command()
-@click.argument("inputs", nargs=-1, required=True, type=click.Path())
+@click.argument("inputs", nargs=-1, required=True, type=GivenPath())
 @click.option("--json", "as_json", is_flag=True, help="Print a JSON list instead of text.")
 @click.option("--fps", type=FPS, default=None,
               help="Frame rate for formats that do not store one (AMC; default 120).")
@@ -286,8 +286,8 @@ def _clean_line(r: dict, verbose: bool) -> str:
 
 
 @main.command()
-@click.argument("inputs", nargs=-1, required=True, type=click.Path())
-@click.option("-o", "--output", "outdir", required=True, type=click.Path(file_okay=False),
+@click.argument("inputs", nargs=-1, required=True, type=GivenPath())
+@click.option("-o", "--output", "outdir", required=True, type=GivenPath(file_okay=False),
               help="Output folder; the input tree is mirrored inside it.")
 @click.option("-c", "--config", "config_path",
               help="Pipeline config: a YAML file or a shipped preset name (`mocapfix configs`). "
@@ -427,11 +427,11 @@ def _config_body(text: str) -> str:
 # -- check ---------------------------------------------------------------------------------
 
 @main.command()
-@click.argument("inputs", nargs=-1, required=True, type=click.Path())
+@click.argument("inputs", nargs=-1, required=True, type=GivenPath())
 @click.option("-r", "--rules", "rules_path", default=None,
               help="Rules: a YAML file or a shipped rule set (`mocapfix configs --rules`). "
                    "Default: default (per format).")
-@click.option("--junit", "junit_path", type=click.Path(dir_okay=False),
+@click.option("--junit", "junit_path", type=GivenPath(dir_okay=False),
               help="Write JUnit XML here (one testcase per file).")
 @click.option("--json", "as_json", is_flag=True, help="Print the results as JSON on stdout.")
 @click.option("--fail-on", "fail_on", multiple=True, metavar="RULE=VALUE",
@@ -513,8 +513,8 @@ def check(inputs, rules_path, junit_path, as_json, fail_on, exit_zero, would_cle
 # -- train-dictionary ----------------------------------------------------------------------
 
 @main.command("train-dictionary")
-@click.argument("training", nargs=-1, required=True, type=click.Path())
-@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False),
+@click.argument("training", nargs=-1, required=True, type=GivenPath())
+@click.option("-o", "--output", required=True, type=GivenPath(dir_okay=False),
               help="Model file to write (.npz).")
 @click.option("--method", default="partlet", show_default=True,
               type=click.Choice(["partlet", "ksvd", "mssa"]),

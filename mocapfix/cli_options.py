@@ -57,3 +57,15 @@ class FrameRate(click.ParamType):
 
 
 FPS = FrameRate()
+
+
+class GivenPath(click.Path):
+    """``click.Path`` that refuses an empty string: ``""`` (an unset shell variable in
+    ``-o "$OUT"`` or an input ``"$TAKES"``) meant the current folder, so ``clean`` wrote
+    its outputs there, and as an input the whole current tree was cleaned, checked or
+    listed; ``--junit ""`` silently wrote no report."""
+
+    def convert(self, value, param, ctx):
+        if isinstance(value, str) and not value.strip():
+            self.fail("is empty (an unset variable?); give a path", param, ctx)
+        return super().convert(value, param, ctx)

@@ -654,3 +654,22 @@ def test_report_files_never_overwrite_the_captures_they_are_about(tmp_path):
     r = CliRunner().invoke(main, ["check", str(src), "--junit", str(src / "notes.txt"), "--exit-zero"])
     assert r.exit_code == 0, r.output
     assert (src / "notes.txt").read_text().startswith("<?xml")
+
+
+def test_an_empty_path_is_a_usage_error_not_the_current_folder(tmp_path, monkeypatch):
+    # -o "" (an unset $OUT) wrote the outputs into the current folder; an input "" made
+    # the whole current tree the input; --junit "" silently wrote no report
+    work = tmp_path / "cwd"
+    work.mkdir()
+    shutil.copy(BVH, work / "take.bvh")
+    monkeypatch.chdir(work)
+    before = sorted(p.name for p in work.iterdir())
+    runs = [["clean", "take.bvh", "-o", ""], ["clean", "", "-o", str(tmp_path / "out")],
+            ["info", ""], ["check", ""], ["check", "take.bvh", "--junit", ""],
+            ["train-dictionary", "take.bvh", "--method", "mssa", "-o", ""],
+            ["bench", "", "--protocol", "rotations", "--seeds", "1"],
+            ["bench", "take.bvh", "--protocol", "rotations", "--seeds", "1", "--json", ""]]
+    for args in runs:
+        r = CliRunner().invoke(main, args)
+        assert r.exit_code == 2 and "is empty" in r.output, (args, r.output)
+    assert sorted(p.name for p in work.iterdir()) == before and not (tmp_path / "out").exists()
