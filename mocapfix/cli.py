@@ -159,7 +159,7 @@ def patterns(fn):
 
 from mocapfix.cli_options import executor_spec as _executor_spec  # noqa: E402
 from mocapfix.cli_options import executors  # noqa: E402,F401
-from mocapfix.cli_options import FPS, GivenPath  # noqa: E402
+from mocapfix.cli_options import FPS, GivenPath, not_empty  # noqa: E402
 
 
 # -- info --------------------------------------------------------------------------------------
@@ -289,7 +289,7 @@ def _clean_line(r: dict, verbose: bool) -> str:
 @click.argument("inputs", nargs=-1, required=True, type=GivenPath())
 @click.option("-o", "--output", "outdir", required=True, type=GivenPath(file_okay=False),
               help="Output folder; the input tree is mirrored inside it.")
-@click.option("-c", "--config", "config_path",
+@click.option("-c", "--config", "config_path", callback=not_empty,
               help="Pipeline config: a YAML file or a shipped preset name (`mocapfix configs`). "
                    "Default: default.")
 @click.option("--report", "reports", default="json", show_default=True,
@@ -428,7 +428,7 @@ def _config_body(text: str) -> str:
 
 @main.command()
 @click.argument("inputs", nargs=-1, required=True, type=GivenPath())
-@click.option("-r", "--rules", "rules_path", default=None,
+@click.option("-r", "--rules", "rules_path", default=None, callback=not_empty,
               help="Rules: a YAML file or a shipped rule set (`mocapfix configs --rules`). "
                    "Default: default (per format).")
 @click.option("--junit", "junit_path", type=GivenPath(dir_okay=False),
@@ -437,7 +437,7 @@ def _config_body(text: str) -> str:
 @click.option("--fail-on", "fail_on", multiple=True, metavar="RULE=VALUE",
               help="Set the fail threshold of a rule (or metric), e.g. --fail-on missing=20%; repeatable.")
 @click.option("--exit-zero", is_flag=True, help="Exit 0 even when rules fail or files are unreadable.")
-@click.option("--would-clean", "would_clean", metavar="CONFIG",
+@click.option("--would-clean", "would_clean", metavar="CONFIG", callback=not_empty,
               help="Also run this pipeline in memory and say what it would fill and leave uncertain.")
 @click.option("-j", "--jobs", default=1, show_default=True, type=click.IntRange(1, 256),
               help="Files checked in parallel.")

@@ -69,3 +69,12 @@ class GivenPath(click.Path):
         if isinstance(value, str) and not value.strip():
             self.fail("is empty (an unset variable?); give a path", param, ctx)
         return super().convert(value, param, ctx)
+
+
+def not_empty(ctx, param, value):
+    """Callback for a name-or-path option: ``-c ""`` (an unset variable) silently ran the
+    default config instead of the user's, ``-r ""`` the default rules, ``--would-clean ""``
+    nothing."""
+    if isinstance(value, str) and not value.strip():
+        raise click.BadParameter("is empty (an unset variable?); give a file or a preset name")
+    return value

@@ -673,3 +673,14 @@ def test_an_empty_path_is_a_usage_error_not_the_current_folder(tmp_path, monkeyp
         r = CliRunner().invoke(main, args)
         assert r.exit_code == 2 and "is empty" in r.output, (args, r.output)
     assert sorted(p.name for p in work.iterdir()) == before and not (tmp_path / "out").exists()
+
+
+def test_an_empty_config_or_rules_name_is_a_usage_error_not_the_default(tmp_path):
+    # -c "" ran the default config (and recorded it) instead of the user's, -r "" the
+    # default rules, --would-clean "" nothing: an unset variable went unnoticed
+    runs = [["clean", str(BVH), "-o", str(tmp_path / "out"), "-c", ""],
+            ["check", str(BVH), "-r", ""], ["check", str(BVH), "--would-clean", ""]]
+    for args in runs:
+        r = CliRunner().invoke(main, args)
+        assert r.exit_code == 2 and "is empty" in r.output, (args, r.output)
+    assert not (tmp_path / "out").exists()
