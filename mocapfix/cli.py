@@ -3,8 +3,10 @@ code; see README "Exit codes". Each command is one function registered on ``main
 options every command shares (``-q``, ``-v``, ``--debug``) come from :func:`common`."""
 from __future__ import annotations
 
+import contextlib
 import functools
 import json
+import os
 import re
 import sys
 
@@ -81,6 +83,12 @@ class _OneLineErrors(click.Group):
             return super().invoke(ctx)
         except (click.exceptions.ClickException, click.exceptions.Exit, click.exceptions.Abort):
             raise
+        except BrokenPipeError:
+            # the reader of our output went away (`mocapfix info DIR | head`): stop quietly,
+            # as the writer of a pipe does; stdout to devnull so the final flush is silent
+            with contextlib.suppress(OSError, ValueError):
+                os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+            sys.exit(EXIT_SOME_FAILED)
         except Exception as exc:  # noqa: BLE001
             obj = ctx.obj if isinstance(ctx.obj, dict) else {}
             if obj.get("debug"):
@@ -193,6 +201,8 @@ def info(inputs, as_json, fps, include, exclude):
             summaries.append(s)
             if not as_json:
                 out.line(format_text(s, verbose=obj["verbosity"] > 0) + "\n", level=-1)
+        except BrokenPipeError:
+            raise                         # our reader went away: not this file's fault
         except Exception as exc:  # noqa: BLE001 — one bad file must not stop the others
             if debug:
                 raise

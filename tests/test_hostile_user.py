@@ -684,3 +684,24 @@ def test_an_empty_config_or_rules_name_is_a_usage_error_not_the_default(tmp_path
         r = CliRunner().invoke(main, args)
         assert r.exit_code == 2 and "is empty" in r.output, (args, r.output)
     assert not (tmp_path / "out").exists()
+
+
+def test_a_closed_pipe_on_stdout_ends_the_run_quietly(tmp_path):
+    # `mocapfix info DIR | head -1`: every later file was reported as "internal error
+    # BrokenPipeError" (and before the last guard a traceback); now the run stops
+    # quietly as a pipe's writer does (exit 1)
+    import subprocess
+    import sys
+
+    src = tmp_path / "in"
+    src.mkdir()
+    for n in range(3):
+        shutil.copy(BVH, src / f"take{n}.bvh")
+    for args in (["info", str(src)], ["check", str(src)]):
+        proc = subprocess.Popen([sys.executable, "-m", "mocapfix.cli", *args],
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+        proc.stdout.close()                     # the reader is gone before the first line
+        _, err = proc.communicate(timeout=120)
+        err = err.decode()
+        assert proc.returncode == 1, (args[0], proc.returncode, err)
+        assert "Traceback" not in err and "internal error" not in err and "BrokenPipe" not in err, err
