@@ -705,3 +705,18 @@ def test_a_closed_pipe_on_stdout_ends_the_run_quietly(tmp_path):
         err = err.decode()
         assert proc.returncode == 1, (args[0], proc.returncode, err)
         assert "Traceback" not in err and "internal error" not in err and "BrokenPipe" not in err, err
+
+
+def test_version_true_is_not_version_1():
+    # YAML's true is Python's True, which equals 1: "version: true" passed as version 1
+    import pytest
+
+    from mocapfix.errors import ConfigError
+    from mocapfix.pipeline import loads_config
+    from mocapfix.rules import loads_rules
+
+    with pytest.raises(ConfigError, match="unsupported config version True"):
+        loads_config("version: true\npipeline: []\n", "c.yaml")
+    with pytest.raises(ConfigError, match="unsupported rules version True"):
+        loads_rules("version: true\nrules: []\n", "r.yaml")
+    assert loads_config("version: 1\npipeline: []\n").steps == []
