@@ -720,3 +720,14 @@ def test_version_true_is_not_version_1():
     with pytest.raises(ConfigError, match="unsupported rules version True"):
         loads_rules("version: true\nrules: []\n", "r.yaml")
     assert loads_config("version: 1\npipeline: []\n").steps == []
+
+
+def test_training_mssa_on_a_bvh_and_a_c3d_says_one_model_per_skeleton(tmp_path):
+    # the first file (BVH) made the model learn rotations; the C3D has none:
+    # "internal error AttributeError: 'NoneType' object has no attribute 'rot_axes'"
+    out = tmp_path / "m.npz"
+    r = CliRunner().invoke(main, ["train-dictionary", str(BVH), str(C3D), "--method", "mssa", "-o", str(out)])
+    _no_traceback(r)
+    assert r.exit_code == 2, r.output
+    assert f"{C3D}: has no rotation channels" in r.output and "one model per skeleton" in r.output
+    assert not out.exists()
