@@ -731,3 +731,17 @@ def test_training_mssa_on_a_bvh_and_a_c3d_says_one_model_per_skeleton(tmp_path):
     assert r.exit_code == 2, r.output
     assert f"{C3D}: has no rotation channels" in r.output and "one model per skeleton" in r.output
     assert not out.exists()
+
+
+def test_partlet_training_on_unusable_takes_is_one_clear_error(tmp_path):
+    # a Kinect take then an AMC (other joint names: no body frame) failed with "internal
+    # error ValueError: no frame has enough torso points"; takes shorter than one window
+    # (an ASF alone is a one-frame rest pose) with "need at least one array to concatenate"
+    asf, amc = SAMPLE_DATA / "walker.asf", SAMPLE_DATA / "walker_01.amc"
+    for files, message in (([KIN, amc], f"{amc}: lacks body-frame joints of {KIN}"),
+                           ([asf], "no training motion has a complete window of 16 samples")):
+        r = CliRunner().invoke(main, ["train-dictionary", *map(str, files), "--atoms", "4",
+                                      "--iterations", "1", "-o", str(tmp_path / "m.npz")])
+        _no_traceback(r)
+        assert r.exit_code == 2 and message in r.output, r.output
+    assert not (tmp_path / "m.npz").exists()
