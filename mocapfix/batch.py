@@ -9,8 +9,8 @@ default; any executor with ``submit`` can be injected) yielding results as they 
 Discovery in folders skips, with a note: hidden files, our own reports and temporary
 files, files whose suffix is no motion format, ``.csv``/``.txt``/``.tsv`` files whose content
 is not motion data (Nexus/QTM exports, notes), special files (FIFOs, devices, sockets),
-broken links and symlink loops, folders that cannot be listed (named: their files are
-not processed), and names filtered out by ``include``/``exclude`` patterns. Files named explicitly are always taken (and fail with a clear error if they
+broken links and symlink loops, folders that cannot be listed and links to folders (named:
+their files are not processed), and names filtered out by ``include``/``exclude`` patterns. Files named explicitly are always taken (and fail with a clear error if they
 cannot be read). Input trees are never written to.
 """
 from __future__ import annotations
@@ -121,6 +121,11 @@ def discover_inputs(inputs, include=(), exclude=(), sniff: bool = True) -> Disco
         for dirpath, dirnames, filenames in os.walk(root, onerror=unlisted):
             here = Path(dirpath)
             dirnames[:] = sorted(d for d in dirnames if not d.startswith("."))
+            for d in [d for d in dirnames if (here / d).is_symlink()]:
+                # os.walk does not follow it (a link to "/" or a loop would never end): say
+                # so, or the takes behind it are silently left out
+                skipped.append((str(here / d), "a link to a folder, not followed (name the "
+                                               "folder itself to include it)"))
             for name in sorted(filenames):
                 f = here / name
                 rel = f.relative_to(root).as_posix()
