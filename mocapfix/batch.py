@@ -9,8 +9,8 @@ default; any executor with ``submit`` can be injected) yielding results as they 
 Discovery in folders skips, with a note: hidden files, our own reports and temporary
 files, files whose suffix is no motion format, ``.csv``/``.txt``/``.tsv`` files whose content
 is not motion data (Nexus/QTM exports, notes), special files (FIFOs, devices, sockets),
-broken links and symlink loops, and names filtered out by ``include``/``exclude``
-patterns. Files named explicitly are always taken (and fail with a clear error if they
+broken links and symlink loops, folders that cannot be listed and links to folders (named:
+their files are not processed), and names filtered out by ``include``/``exclude`` patterns. Files named explicitly are always taken (and fail with a clear error if they
 cannot be read). Input trees are never written to.
 """
 from __future__ import annotations
@@ -113,9 +113,19 @@ def discover_inputs(inputs, include=(), exclude=(), sniff: bool = True) -> Disco
             files.append(Found(Path(os.path.abspath(path))))
             continue
         root = path.resolve()
-        for dirpath, dirnames, filenames in os.walk(root):
+
+        def unlisted(exc: OSError):        # os.walk passes over a folder it cannot list
+            skipped.append((exc.filename or str(root), "cannot read this folder: "
+                            f"{exc.strerror or exc} (the files in it were not processed)"))
+
+        for dirpath, dirnames, filenames in os.walk(root, onerror=unlisted):
             here = Path(dirpath)
             dirnames[:] = sorted(d for d in dirnames if not d.startswith("."))
+            for d in [d for d in dirnames if (here / d).is_symlink()]:
+                # os.walk does not follow it (a link to "/" or a loop would never end): say
+                # so, or the takes behind it are silently left out
+                skipped.append((str(here / d), "a link to a folder, not followed (name the "
+                                               "folder itself to include it)"))
             for name in sorted(filenames):
                 f = here / name
                 rel = f.relative_to(root).as_posix()
@@ -161,6 +171,53 @@ def check_output_folder(outdir) -> Path:
     return outdir
 
 
+def check_output_file(path, option: str, inputs=()) -> Path:
+    """Make sure a single output file (``--junit``, ``bench --json``, a trained model) can
+    be written before the work that produces it starts, creating nothing: its folder, or
+    the nearest folder above it that exists, must take a new file, and it must not be a
+    capture among ``inputs`` (a named input, or a motion or ASF file in an input folder
+    or beside a named input: ``check take.c3d --junit take.c3d`` replaced the capture
+    with XML). A ConfigError naming ``option`` and the path otherwise (exit 2, nothing
+    processed)."""
+    path = Path(path)
+    _refuse_overwriting_inputs(path, option, inputs)
+    folder = path.parent
+    while not folder.exists() and folder != folder.parent:
+        folder = folder.parent
+    if path.is_dir():
+        raise ConfigError(f"{option} {path}: is a folder, not a file")
+    if not folder.is_dir():
+        raise ConfigError(f"{option} {path}: cannot write there: part of the path is a file")
+    try:
+        fd, probe = tempfile.mkstemp(prefix=".mocapfix-probe.", dir=folder)
+        os.close(fd)
+        os.unlink(probe)
+    except OSError as exc:
+        raise ConfigError(f"{option} {path}: cannot write there: {exc.strerror or exc}") from None
+    return path
+
+
+def _refuse_overwriting_inputs(path: Path, option: str, inputs) -> None:
+    if not path.exists():
+        return
+    real = Path(os.path.realpath(path))
+    suffix = real.suffix.lower()
+    # a capture as discovery sees one (text files only when their content is motion data)
+    capture = suffix in (*MOTION_SUFFIXES, ".asf") and (suffix not in _TEXT_SUFFIXES
+                                                          or _looks_like_motion(real))
+    for raw in inputs:
+        given = Path(os.path.realpath(raw))
+        if real == given:
+            what = f"the input {raw}"
+        elif capture and given.is_dir() and _under(real, given):
+            what = f"a capture in the input folder {raw}"
+        elif capture and not given.is_dir() and _under(real, given.parent):
+            what = f"a capture beside the input {raw}"
+        else:
+            continue
+        raise ConfigError(f"{option} {path}: would overwrite {what}; choose another path")
+
+
 def _under(path: Path, folder: Path) -> bool:
     return path == folder or folder in path.parents
 
@@ -187,7 +244,36 @@ def plan_outputs(found: list, outdir, allow_inside_input: bool = False, inputs=(
         if job.output in seen:
             raise ConfigError(f"{job.source} and {seen[job.output]} would both be written to {job.output}")
         seen[job.output] = job.source
+    _check_shared_skeletons(jobs)
     return jobs
+
+
+def _check_shared_skeletons(jobs: list[Job]) -> None:
+    """An AMC is written beside a copy of its ASF; two AMCs from different folders whose
+    ASFs have one name but different content would overwrite each other's skeleton in the
+    output folder (files named one by one land side by side): a ConfigError naming both."""
+    from mocapfix.formats.asfamc import skeleton_output
+
+    skeletons: dict[Path, tuple[Path, Path]] = {}
+    for job in jobs:
+        if job.source.suffix.lower() != ".amc":
+            continue
+        found = skeleton_output(job.source, job.output)
+        if found is None:
+            continue
+        target, asf = found
+        first = skeletons.setdefault(target, (asf, job.source))
+        if first[0] != asf and not _same_bytes(first[0], asf):
+            raise ConfigError(f"{first[1]} and {job.source} would both write their skeleton to "
+                              f"{target}, but {first[0]} and {asf} differ; clean them into "
+                              "separate output folders (or name the folder above theirs)")
+
+
+def _same_bytes(a: Path, b: Path) -> bool:
+    try:
+        return a.stat().st_size == b.stat().st_size and a.read_bytes() == b.read_bytes()
+    except OSError:
+        return True                 # unreadable: reading the AMC reports it
 
 
 def discover(inputs, outdir, allow_inside_input: bool = False, include=(), exclude=()) -> list[Job]:
@@ -302,11 +388,20 @@ def _run_on(pool: Executor, task, items: list, window: int) -> Iterator[tuple[in
             fut.cancel()
 
 
+def internal_error(result: dict) -> dict:
+    """``result`` (an ERROR for an unforeseen exception, inside its ``except``) with the
+    traceback under ``"traceback"``, which the CLI prints with ``--debug``."""
+    import traceback
+
+    result["traceback"] = traceback.format_exc()
+    return result
+
+
 def _guarded(task, item) -> dict:
     try:
         return task(item)
     except Exception as exc:  # noqa: BLE001 — one bad file must not stop the batch
-        return error_result(item, f"internal error {type(exc).__name__}: {exc}")
+        return internal_error(error_result(item, f"internal error {type(exc).__name__}: {exc}"))
 
 
 @dataclass
@@ -331,7 +426,8 @@ class CleanTask:
         except MocapfixError as exc:
             return error_result(job, name_the_file(job.source, str(exc)))
         except Exception as exc:  # noqa: BLE001 — one bad file must not stop the batch
-            return error_result(job, f"{job.source}: internal error {type(exc).__name__}: {exc}")
+            return internal_error(error_result(
+                job, f"{job.source}: internal error {type(exc).__name__}: {exc}"))
 
 
 _PIPELINES: dict = {}

@@ -6,7 +6,7 @@ import sys
 
 import click
 
-from mocapfix.cli_options import executor_spec, executors
+from mocapfix.cli_options import GivenPath, executor_spec, executors
 from mocapfix.errors import MocapfixError
 
 EXIT_USAGE = 2
@@ -27,7 +27,7 @@ def _debug(ctx) -> bool:
 
 
 @click.command("bench")
-@click.argument("clean_files", nargs=-1, required=True, type=click.Path(dir_okay=False))
+@click.argument("clean_files", nargs=-1, required=True, type=GivenPath(dir_okay=False))
 @click.option("--protocol", required=True,
               type=click.Choice(["feng2015", "yang2019", "feng2014", "occlusion", "kinect", "rotations"]),
               help="Corruption protocol (see the README, 'Benchmarks').")
@@ -43,9 +43,9 @@ def _debug(ctx) -> bool:
               help="Number of seeds (0 … N−1); the same corruption is used for every method.")
 @click.option("--settings", default=None,
               help="Comma-separated subset of the protocol's settings (default: all).")
-@click.option("--json", "json_out", type=click.Path(dir_okay=False), default=None,
+@click.option("--json", "json_out", type=GivenPath(dir_okay=False), default=None,
               help="Write every run and the summary as JSON.")
-@click.option("--markdown", "md_out", type=click.Path(dir_okay=False), default=None,
+@click.option("--markdown", "md_out", type=GivenPath(dir_okay=False), default=None,
               help="Write the Markdown tables to this file.")
 @click.option("--per-file", is_flag=True, help="Also tabulate each file separately.")
 @click.option("--quiet", "-q", is_flag=True, help="Do not print the tables or progress.")
@@ -61,6 +61,17 @@ def bench(ctx, clean_files, protocol, methods, configs, seeds, settings, json_ou
     from mocapfix import bench as bench_lib
     from mocapfix.fileio import atomic_write_text
 
+    from mocapfix.batch import check_output_file
+
+    try:                      # before the work: a long run must not end on an unwritable path
+        for option, path in (("--json", json_out), ("--markdown", md_out)):
+            if path:
+                check_output_file(path, option, clean_files)
+    except MocapfixError as exc:
+        if _debug(ctx):
+            raise
+        click.echo(f"mocapfix: error: {exc}", err=True)
+        sys.exit(EXIT_USAGE)
     if protocol == "kinect":  # CMU captures made into Kinect v2 CSVs: its own runner
         from mocapfix.bench_kinect import main as kinect_main
 

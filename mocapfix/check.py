@@ -78,8 +78,10 @@ class CheckTask:
             text = str(exc) if str(path) in str(exc) else f"{path}: {exc}"
             result = {"path": str(path), "status": "ERROR", "error": text, "findings": []}
         except Exception as exc:  # noqa: BLE001 — one bad file must not stop the batch
-            result = {"path": str(path), "status": "ERROR", "findings": [],
-                      "error": f"{path}: internal error {type(exc).__name__}: {exc}"}
+            from mocapfix.batch import internal_error
+
+            result = internal_error({"path": str(path), "status": "ERROR", "findings": [],
+                                     "error": f"{path}: internal error {type(exc).__name__}: {exc}"})
         result["path"] = str(path)
         result["seconds"] = round(time.perf_counter() - started, 4)
         return result

@@ -43,9 +43,16 @@ def output_files(output: Path) -> list[Path]:
 
 
 def remove_outputs(paths) -> None:
+    """Remove the files at ``paths`` that exist. Never raises: it runs after a failure,
+    whose error is the one to report, and must not stop the batch. A folder where an
+    output would go is not an output (it is left); a file that cannot be removed stays."""
     for p in paths:
-        with contextlib.suppress(FileNotFoundError):
-            Path(p).unlink()
+        p = Path(p)
+        if p.is_dir() and not p.is_symlink():
+            continue
+        # not there: neither the file nor, when part of its folder path is a file, the folder
+        with contextlib.suppress(OSError):
+            p.unlink()
 
 
 def clean_file(source: Path, output: Path, pipeline: Pipeline, reports=("json",),
@@ -53,7 +60,8 @@ def clean_file(source: Path, output: Path, pipeline: Pipeline, reports=("json",)
     """Read, clean, write. Returns a JSON-able summary; raises MocapfixError on failure.
 
     Every report is rendered before anything is written, and a failure while writing
-    removes what this call wrote, so a failed file leaves nothing behind. Reports of kinds
+    removes the output and its reports, so a failed file leaves nothing behind (but the
+    ASF an AMC is written beside, which the subject's other AMCs there share). Reports of kinds
     not asked for this time are removed beside the new output (no stale reports)."""
     motion = formats.read(source, **(read_options or {}))
     if motion.n_frames == 0:
@@ -66,11 +74,15 @@ def clean_file(source: Path, output: Path, pipeline: Pipeline, reports=("json",)
     texts = {kind: writers[kind]() for kind in paths}
     written: list[Path] = []
     try:
-        written = list(formats.write(result.cleaned, output))
+        # in the format that was read, which the content decided, not the name: a BVH
+        # saved as .c3d stays a BVH (the output mirrors the input's name)
+        written = list(formats.write(result.cleaned, output, format=motion.format))
         for kind, path in paths.items():
             atomic_write_text(path, texts[kind])
     except BaseException:
-        remove_outputs(written + [p for p in paths.values()])
+        # the motion and this call's reports; never the skeleton an AMC is written beside,
+        # which the other AMCs of that subject in the folder use too
+        remove_outputs([output, *paths.values()])
         raise
     remove_outputs(p for k, p in report_paths(output, REPORT_KINDS).items() if k not in paths)
     f = report["file"]
@@ -80,5 +92,6 @@ def clean_file(source: Path, output: Path, pipeline: Pipeline, reports=("json",)
         "frames": f["frames"], "joints": f["joints"], "missing_before": f["missing_before"],
         "missing_after": f["missing_after"], "samples_filled": f["samples_filled"],
         "samples_flagged": f["samples_flagged"], "seconds": round(result.seconds, 4),
-        "reasons": sorted({r for j in report["joints"] for r in j["reasons"] if r.startswith(f["status"])})[:3],
+        "reasons": sorted({r for j in report["joints"] for r in j["reasons"] if r.startswith(f["status"])})[:3]
+        or f.get("reasons", []),
     }

@@ -3,8 +3,11 @@ code; see README "Exit codes". Each command is one function registered on ``main
 options every command shares (``-q``, ``-v``, ``--debug``) come from :func:`common`."""
 from __future__ import annotations
 
+import contextlib
 import functools
 import json
+import os
+import re
 import sys
 
 import click
@@ -15,10 +18,20 @@ from mocapfix.errors import MocapfixError
 EXIT_OK, EXIT_SOME_FAILED, EXIT_USAGE, EXIT_UNREADABLE = 0, 1, 2, 3
 
 
+_CONTROL = re.compile("[\x00-\x08\x0b-\x1f\x7f-\x9f]")
+
+
+def printable(text: str) -> str:
+    """``text`` with control characters shown as ``\\xNN``: a file named with an escape
+    sequence (``"\\x1b[31m.bvh"``) must not recolour or rewrite the user's terminal, nor a
+    name with a carriage return hide the line before it."""
+    return _CONTROL.sub(lambda m: f"\\x{ord(m.group()):02x}", text)
+
+
 def _fail(message: str, debug: bool, exc: BaseException | None = None, code: int = EXIT_USAGE):
     if debug and exc is not None:
         raise exc
-    click.echo(f"mocapfix: error: {message}", err=True)
+    click.echo(printable(f"mocapfix: error: {message}"), err=True)
     sys.exit(code)
 
 
@@ -32,11 +45,11 @@ class Out:
 
     def line(self, text: str, level: int = 0, err: bool | None = None):
         if self.verbosity >= level:
-            click.echo(text, err=self.err if err is None else err)
+            click.echo(printable(text), err=self.err if err is None else err)
             (sys.stderr if (self.err if err is None else err) else sys.stdout).flush()
 
     def error(self, text: str):
-        click.echo(text, err=True)
+        click.echo(printable(text), err=True)
         sys.stderr.flush()
 
 
@@ -60,7 +73,33 @@ def common(fn):
     return wrapper
 
 
-@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+class _OneLineErrors(click.Group):
+    """The last guard of "never a traceback": an exception that no command turned into its
+    one-line error (a bug, or an OS failure at an unforeseen place) is printed as one line
+    naming its type, with exit 1 as Python's own; ``--debug`` shows the traceback."""
+
+    def invoke(self, ctx):
+        try:
+            return super().invoke(ctx)
+        except (click.exceptions.ClickException, click.exceptions.Exit, click.exceptions.Abort):
+            raise
+        except BrokenPipeError:
+            # the reader of our output went away (`mocapfix info DIR | head`): stop quietly,
+            # as the writer of a pipe does; stdout to devnull so the final flush is silent
+            with contextlib.suppress(OSError, ValueError):
+                os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+            sys.exit(EXIT_SOME_FAILED)
+        except Exception as exc:  # noqa: BLE001
+            obj = ctx.obj if isinstance(ctx.obj, dict) else {}
+            if obj.get("debug"):
+                raise
+            message = str(exc) if isinstance(exc, MocapfixError) else \
+                f"internal error {type(exc).__name__}: {exc} (--debug shows the traceback)"
+            click.echo(printable(f"mocapfix: error: {message}"), err=True)
+            sys.exit(EXIT_SOME_FAILED)
+
+
+@click.group(cls=_OneLineErrors, context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(__version__, prog_name="mocapfix")
 @click.option("--debug", is_flag=True, help="Show tracebacks instead of one-line errors.")
 @click.pass_context
@@ -69,7 +108,21 @@ def main(ctx, debug):
     from mocapfix.memory import retain_freed_memory
 
     retain_freed_memory()
+    _printable_file_names()
     ctx.obj = {"debug": debug}
+
+
+def _printable_file_names():
+    """A file name that is not UTF-8 (bytes on Linux; ``\\udcff`` in Python) must not stop a
+    run when a line names it: under a UTF-8 locale Python's stdout/stderr refuse such
+    characters ('strict'), so they are printed escaped instead (the C/POSIX locale already
+    passes them through as the original bytes)."""
+    for stream in (sys.stdout, sys.stderr):
+        if getattr(stream, "errors", None) == "strict" and hasattr(stream, "reconfigure"):
+            try:
+                stream.reconfigure(errors="backslashreplace")
+            except (ValueError, OSError):       # a stream that cannot be reconfigured
+                pass
 
 
 def _ctx():
@@ -114,14 +167,15 @@ def patterns(fn):
 
 from mocapfix.cli_options import executor_spec as _executor_spec  # noqa: E402
 from mocapfix.cli_options import executors  # noqa: E402,F401
+from mocapfix.cli_options import FPS, GivenPath, not_empty  # noqa: E402
 
 
 # -- info --------------------------------------------------------------------------------------
 
 @main.command()
-@click.argument("inputs", nargs=-1, required=True, type=click.Path())
+@click.argument("inputs", nargs=-1, required=True, type=GivenPath())
 @click.option("--json", "as_json", is_flag=True, help="Print a JSON list instead of text.")
-@click.option("--fps", type=float, default=None,
+@click.option("--fps", type=FPS, default=None,
               help="Frame rate for formats that do not store one (AMC; default 120).")
 @patterns
 @common
@@ -135,6 +189,8 @@ def info(inputs, as_json, fps, include, exclude):
     debug, out = obj["debug"], Out(obj["verbosity"])
     try:
         found = _discover(inputs, include, exclude, out)
+        if not found.files:              # as clean and check: not a silent success
+            raise MocapfixError("no motion files found in " + ", ".join(inputs))
     except MocapfixError as exc:
         _fail(str(exc), debug, exc)
     summaries, failed = [], 0
@@ -145,12 +201,18 @@ def info(inputs, as_json, fps, include, exclude):
             summaries.append(s)
             if not as_json:
                 out.line(format_text(s, verbose=obj["verbosity"] > 0) + "\n", level=-1)
-        except MocapfixError as exc:
+        except BrokenPipeError:
+            raise                         # our reader went away: not this file's fault
+        except Exception as exc:  # noqa: BLE001 — one bad file must not stop the others
             if debug:
                 raise
             failed += 1
-            out.error(f"mocapfix: error: {exc}")
-            summaries.append({"path": str(f.path), "error": str(exc)})
+            from mocapfix.batch import name_the_file
+
+            message = str(exc) if isinstance(exc, MocapfixError) else \
+                name_the_file(f.path, f"internal error {type(exc).__name__}: {exc}")
+            out.error(f"mocapfix: error: {message}")
+            summaries.append({"path": str(f.path), "error": message})
     if as_json:
         click.echo(json.dumps(summaries, indent=2))
     if failed:
@@ -234,10 +296,10 @@ def _clean_line(r: dict, verbose: bool) -> str:
 
 
 @main.command()
-@click.argument("inputs", nargs=-1, required=True, type=click.Path())
-@click.option("-o", "--output", "outdir", required=True, type=click.Path(file_okay=False),
+@click.argument("inputs", nargs=-1, required=True, type=GivenPath())
+@click.option("-o", "--output", "outdir", required=True, type=GivenPath(file_okay=False),
               help="Output folder; the input tree is mirrored inside it.")
-@click.option("-c", "--config", "config_path",
+@click.option("-c", "--config", "config_path", callback=not_empty,
               help="Pipeline config: a YAML file or a shipped preset name (`mocapfix configs`). "
                    "Default: default.")
 @click.option("--report", "reports", default="json", show_default=True,
@@ -245,19 +307,19 @@ def _clean_line(r: dict, verbose: bool) -> str:
 @click.option("-j", "--jobs", default=1, show_default=True, type=click.IntRange(1, 256),
               help="Files cleaned in parallel (process pool).")
 @click.option("--json", "as_json", is_flag=True, help="Print a JSON summary on stdout (per-file lines go to stderr).")
-@click.option("--fps", type=float, default=None, help="Frame rate for files that store none (AMC).")
+@click.option("--fps", type=FPS, default=None, help="Frame rate for files that store none (AMC).")
 @click.option("--allow-inside-input", is_flag=True,
               help="Allow the output folder to lie inside an input folder.")
 @click.option("--dry-run", is_flag=True, help="Say what would be cleaned and written; write nothing.")
-@click.option("--overwrite", "policy", flag_value="overwrite",
+@click.option("--overwrite", is_flag=True,
               help="Replace outputs (and their reports) left by an earlier run.")
-@click.option("--skip-existing", "policy", flag_value="skip",
+@click.option("--skip-existing", is_flag=True,
               help="Leave files whose output exists alone (same config only).")
 @patterns
 @executors
 @common
 def clean(inputs, outdir, config_path, reports, jobs, as_json, fps, allow_inside_input, dry_run,
-          policy, include, exclude, scheduler, dask_workers):
+          overwrite, skip_existing, include, exclude, scheduler, dask_workers):
     """Clean INPUT files or folders with a pipeline of cleaners.
 
     Files an earlier run of the same config finished (recorded in the output folder's
@@ -279,6 +341,9 @@ def clean(inputs, outdir, config_path, reports, jobs, as_json, fps, allow_inside
     debug = obj["debug"]
     out = Out(obj["verbosity"], err=as_json)
     try:
+        if overwrite and skip_existing:   # (the last one given used to win silently)
+            raise click.BadParameter("--overwrite and --skip-existing exclude each other; give one")
+        policy = "overwrite" if overwrite else "skip" if skip_existing else None
         kinds = _parse_reports(reports)
         spec = _executor_spec(jobs, scheduler, dask_workers)
         pipeline = load_config(resolve_config(config_path or "default"))
@@ -307,6 +372,9 @@ def clean(inputs, outdir, config_path, reports, jobs, as_json, fps, allow_inside
                                 "or another output folder)")
         if not dry_run:
             check_output_folder(outdir)
+            if config_file.is_dir():
+                raise MocapfixError(f"{config_file}: is a folder; the run's config record "
+                                    "cannot be written there (move it away)")
     except click.BadParameter as exc:
         _fail(str(exc), debug, exc)
     except MocapfixError as exc:
@@ -331,6 +399,8 @@ def clean(inputs, outdir, config_path, reports, jobs, as_json, fps, allow_inside
     def stream(r):
         out.line(_clean_line(r, obj["verbosity"] > 0), level=0 if r["status"] != "ERROR" else -1,
                  err=True if r["status"] == "ERROR" else None)
+        if debug and r.get("traceback"):
+            out.error(r["traceback"].rstrip())
         if r["status"] == "ERROR":
             # a failed file leaves nothing behind, not even an output of an earlier run
             remove_outputs(output_files(Path(r["output"])))
@@ -367,21 +437,21 @@ def _config_body(text: str) -> str:
 # -- check ---------------------------------------------------------------------------------
 
 @main.command()
-@click.argument("inputs", nargs=-1, required=True, type=click.Path())
-@click.option("-r", "--rules", "rules_path", default=None,
+@click.argument("inputs", nargs=-1, required=True, type=GivenPath())
+@click.option("-r", "--rules", "rules_path", default=None, callback=not_empty,
               help="Rules: a YAML file or a shipped rule set (`mocapfix configs --rules`). "
                    "Default: default (per format).")
-@click.option("--junit", "junit_path", type=click.Path(dir_okay=False),
+@click.option("--junit", "junit_path", type=GivenPath(dir_okay=False),
               help="Write JUnit XML here (one testcase per file).")
 @click.option("--json", "as_json", is_flag=True, help="Print the results as JSON on stdout.")
 @click.option("--fail-on", "fail_on", multiple=True, metavar="RULE=VALUE",
               help="Set the fail threshold of a rule (or metric), e.g. --fail-on missing=20%; repeatable.")
 @click.option("--exit-zero", is_flag=True, help="Exit 0 even when rules fail or files are unreadable.")
-@click.option("--would-clean", "would_clean", metavar="CONFIG",
+@click.option("--would-clean", "would_clean", metavar="CONFIG", callback=not_empty,
               help="Also run this pipeline in memory and say what it would fill and leave uncertain.")
 @click.option("-j", "--jobs", default=1, show_default=True, type=click.IntRange(1, 256),
               help="Files checked in parallel.")
-@click.option("--fps", type=float, default=None, help="Frame rate for files that store none (AMC).")
+@click.option("--fps", type=FPS, default=None, help="Frame rate for files that store none (AMC).")
 @patterns
 @executors
 @common
@@ -395,7 +465,7 @@ def check(inputs, rules_path, junit_path, as_json, fail_on, exit_zero, would_cle
     """
     import time
 
-    from mocapfix.batch import run_tasks
+    from mocapfix.batch import check_output_file, run_tasks
     from mocapfix.check import CheckTask, exit_code, summary
     from mocapfix.fileio import atomic_write_text
     from mocapfix.pipeline import load_config
@@ -409,6 +479,8 @@ def check(inputs, rules_path, junit_path, as_json, fail_on, exit_zero, would_cle
     started = time.perf_counter()
     try:
         spec = _executor_spec(jobs, scheduler, dask_workers)
+        if junit_path:
+            check_output_file(junit_path, "--junit", inputs)
         rules = load_rules(resolve_rules_path(rules_path or "default")).with_fail_on(list(fail_on))
         config = source = None
         if would_clean:
@@ -429,12 +501,17 @@ def check(inputs, rules_path, junit_path, as_json, fail_on, exit_zero, would_cle
             results[n] = r
             level = -1 if r["status"] in ("FAIL", "ERROR") else 0
             out.line(check_line(r, obj["verbosity"] > 0), level=level)
+            if debug and r.get("traceback"):
+                out.error(r["traceback"].rstrip())
     except MocapfixError as exc:        # e.g. the Dask scheduler cannot be reached
         _fail(str(exc), debug, exc)
     seconds = time.perf_counter() - started
     if junit_path:
-        atomic_write_text(junit_path, check_junit(
-            [{**r, "path": r["name"]} for r in results], seconds))
+        try:
+            atomic_write_text(junit_path, check_junit(
+                [{**r, "path": r["name"]} for r in results], seconds))
+        except MocapfixError as exc:     # the folder went away during the run
+            _fail(str(exc), debug, exc)
     s = summary(results)
     if as_json:
         click.echo(json.dumps({"summary": s, "rules": rules.describe(), "files": results}, indent=1))
@@ -446,8 +523,8 @@ def check(inputs, rules_path, junit_path, as_json, fail_on, exit_zero, would_cle
 # -- train-dictionary ----------------------------------------------------------------------
 
 @main.command("train-dictionary")
-@click.argument("training", nargs=-1, required=True, type=click.Path())
-@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False),
+@click.argument("training", nargs=-1, required=True, type=GivenPath())
+@click.option("-o", "--output", required=True, type=GivenPath(dir_okay=False),
               help="Model file to write (.npz).")
 @click.option("--method", default="partlet", show_default=True,
               type=click.Choice(["partlet", "ksvd", "mssa"]),
@@ -467,7 +544,7 @@ def check(inputs, rules_path, junit_path, as_json, fail_on, exit_zero, would_cle
               help="mssa: energy the bases keep (default 0.99).")
 @click.option("-j", "--jobs", default=1, show_default=True, type=click.IntRange(1, 256),
               help="Files read in parallel.")
-@click.option("--fps", type=float, default=None, help="Frame rate for files that store none (AMC).")
+@click.option("--fps", type=FPS, default=None, help="Frame rate for files that store none (AMC).")
 @executors
 @common
 def train_dictionary(training, output, method, atoms, window, sample_rate, lam, beta,
@@ -502,6 +579,9 @@ def train_dictionary(training, output, method, atoms, window, sample_rate, lam, 
               "beta": beta, "train_iterations": iterations, "max_windows": max_windows, "seed": seed,
               "bases": bases, "energy": energy}
     try:
+        from mocapfix.batch import check_output_file
+
+        check_output_file(output, "-o", training)
         summary = train(training, output, method, params, jobs, fps, progress,
                         spec=_executor_spec(jobs, scheduler, dask_workers))
     except MocapfixError as exc:

@@ -4,6 +4,8 @@ the work runs. A module of its own so that ``bench_cli`` can use them without im
 ``cli`` (which registers ``bench``)."""
 from __future__ import annotations
 
+import math
+
 import click
 
 
@@ -28,3 +30,51 @@ def executor_spec(jobs, scheduler, dask_workers):
     from mocapfix.executors import ExecutorSpec
 
     return ExecutorSpec(jobs, scheduler, dask_workers).check()
+
+
+class FrameRate(click.ParamType):
+    """``--fps``: a frame rate in Hz, finite and within the range the readers accept
+    (:data:`mocapfix.quantity.MIN_FRAME_RATE_HZ` – ``MAX_FRAME_RATE_HZ``). A bad value is
+    a usage error (exit 2) before any file is read, not one error per file — and never
+    ``nan``, ``inf`` or ``0`` taken silently."""
+
+    name = "fps"
+
+    def convert(self, value, param, ctx):
+        from mocapfix.quantity import MAX_FRAME_RATE_HZ, MIN_FRAME_RATE_HZ
+
+        if isinstance(value, float):
+            rate = value
+        else:
+            try:
+                rate = float(value)
+            except (TypeError, ValueError):
+                self.fail(f"{value!r} is not a number of frames per second", param, ctx)
+        if not (math.isfinite(rate) and MIN_FRAME_RATE_HZ <= rate <= MAX_FRAME_RATE_HZ):
+            self.fail(f"{value!r} is not a frame rate (a number of Hz from "
+                      f"{MIN_FRAME_RATE_HZ:g} to {MAX_FRAME_RATE_HZ:g})", param, ctx)
+        return rate
+
+
+FPS = FrameRate()
+
+
+class GivenPath(click.Path):
+    """``click.Path`` that refuses an empty string: ``""`` (an unset shell variable in
+    ``-o "$OUT"`` or an input ``"$TAKES"``) meant the current folder, so ``clean`` wrote
+    its outputs there, and as an input the whole current tree was cleaned, checked or
+    listed; ``--junit ""`` silently wrote no report."""
+
+    def convert(self, value, param, ctx):
+        if isinstance(value, str) and not value.strip():
+            self.fail("is empty (an unset variable?); give a path", param, ctx)
+        return super().convert(value, param, ctx)
+
+
+def not_empty(ctx, param, value):
+    """Callback for a name-or-path option: ``-c ""`` (an unset variable) silently ran the
+    default config instead of the user's, ``-r ""`` the default rules, ``--would-clean ""``
+    nothing."""
+    if isinstance(value, str) and not value.strip():
+        raise click.BadParameter("is empty (an unset variable?); give a file or a preset name")
+    return value

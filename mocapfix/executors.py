@@ -47,7 +47,24 @@ class ExecutorSpec:
                               "workers run the files")
         if self.dask:
             import_distributed()
+        if self.scheduler:
+            _check_address(self.scheduler)
         return self
+
+
+def _check_address(address: str) -> None:
+    """A malformed --scheduler ('foo', 'tcp://host' without a port) was found only when
+    the batch started (after the output folder and its manifest were made) and raised
+    ValueError; refuse it with the options, before anything is written."""
+    from distributed.comm import parse_address, parse_host_port
+
+    try:
+        scheme, location = parse_address(address)
+        if scheme in ("tcp", "tls"):
+            parse_host_port(location)
+    except ValueError as exc:
+        raise ConfigError(f"--scheduler {address!r} is not a Dask scheduler address ({exc}); "
+                          "give tcp://HOST:PORT") from None
 
 
 def import_distributed():
@@ -90,7 +107,7 @@ def open_executor(spec: ExecutorSpec, n_items: int):
         if spec.scheduler:
             try:
                 client = stack.enter_context(distributed.Client(spec.scheduler, timeout="10s"))
-            except (OSError, TimeoutError) as exc:
+            except (OSError, TimeoutError, ValueError) as exc:
                 raise ConfigError(f"cannot reach the Dask scheduler {spec.scheduler}: {exc}") from None
             where = f"Dask scheduler {spec.scheduler}"
         else:

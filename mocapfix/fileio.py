@@ -13,21 +13,67 @@ from pathlib import Path
 
 @contextlib.contextmanager
 def atomic_open(path, mode: str = "wb"):
-    """Open a temporary sibling of ``path`` for writing; rename it over ``path`` on success."""
+    """Open a temporary sibling of ``path`` for writing; rename it over ``path`` on success.
+
+    An OS failure of our own (the folder cannot be made or written, the disk is full, the
+    rename fails) is a :class:`~mocapfix.errors.WriteError` naming ``path``."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part", dir=path.parent)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(prefix=f".{_temp_stem(path.name)}.", suffix=".part",
+                                   dir=path.parent)
+    except OSError as exc:
+        raise _write_error(path, exc) from None
     try:
         with os.fdopen(fd, mode, **({} if "b" in mode else {"encoding": "utf-8", "newline": ""})) as fh:
             yield fh
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.chmod(tmp, 0o666 & ~current_umask())   # mkstemp made it 0600: honour the umask
-        os.replace(tmp, path)
+            try:
+                fh.flush()
+                os.fsync(fh.fileno())
+            except OSError as exc:
+                raise _write_error(path, exc) from None
+        try:
+            os.chmod(tmp, 0o666 & ~current_umask())   # mkstemp made it 0600: honour the umask
+            os.replace(tmp, path)
+        except OSError as exc:
+            raise _write_error(path, exc) from None
     except BaseException:
         with contextlib.suppress(OSError):
             os.unlink(tmp)
         raise
+
+
+#: the longest file name (bytes) of common Linux, macOS and Windows file systems
+NAME_MAX = 255
+_TEMP_EXTRA = len("..XXXXXXXX.part")          # the dots, mkstemp's 8 characters, .part
+
+
+def _temp_stem(name: str) -> str:
+    """The part of ``name`` in its temporary's name ``.STEM.XXXXXXXX.part``: the whole name,
+    or as much of it as keeps the temporary within :data:`NAME_MAX` bytes (a legal output
+    name of 241-255 bytes must not fail on its temporary's length)."""
+    raw, room = os.fsencode(name), NAME_MAX - _TEMP_EXTRA
+    if len(raw) <= room:
+        return name
+    cut = raw[:room]
+    while cut:                                 # do not split a UTF-8 character
+        try:
+            cut.decode("utf-8")
+            break
+        except UnicodeDecodeError as exc:
+            if exc.start < len(cut) - 3:       # not UTF-8 before the cut: bytes as they are
+                break
+            cut = cut[:exc.start]
+    return os.fsdecode(cut)
+
+
+def _write_error(path: Path, exc: OSError):
+    from mocapfix.errors import WriteError
+
+    why = exc.strerror or str(exc)
+    if isinstance(exc, (FileExistsError, NotADirectoryError)):
+        why = "part of the folder path is a file"
+    return WriteError(path, f"cannot write: {why}")
 
 
 def remove_stale_temporaries(paths) -> int:
@@ -37,7 +83,7 @@ def remove_stale_temporaries(paths) -> int:
     these paths, are touched; each folder is listed once. Returns how many were removed."""
     by_folder: dict[Path, set[str]] = {}
     for p in map(Path, paths):
-        by_folder.setdefault(p.parent, set()).add(p.name)
+        by_folder.setdefault(p.parent, set()).add(_temp_stem(p.name))
     removed = 0
     for folder, names in by_folder.items():
         try:
@@ -69,7 +115,10 @@ def atomic_write_bytes(path, data: bytes) -> Path:
 
 
 def atomic_write_text(path, text: str) -> Path:
-    return atomic_write_bytes(path, text.encode("utf-8"))
+    """Write ``text`` as UTF-8. A file name that is not UTF-8 (bytes on Linux, decoded by
+    Python to lone surrogates such as ``\\udcff``) is written as that escape, so reports
+    and JUnit XML that quote it stay valid UTF-8 text."""
+    return atomic_write_bytes(path, text.encode("utf-8", errors="backslashreplace"))
 
 
 def read_input_bytes(path) -> bytes:

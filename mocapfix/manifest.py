@@ -50,7 +50,14 @@ class Manifest:
         self.records: dict[str, dict] = {}
         self._fd: int | None = None
         if self.path.exists():
-            for line in self.path.read_text(encoding="utf-8", errors="replace").splitlines():
+            try:
+                text = self.path.read_text(encoding="utf-8", errors="replace")
+            except OSError as exc:
+                from mocapfix.errors import ConfigError
+
+                raise ConfigError(f"{self.path}: cannot read the output folder's manifest: "
+                                  f"{exc.strerror or exc}") from None
+            for line in text.splitlines():
                 try:
                     rec = json.loads(line)
                 except ValueError:
@@ -68,7 +75,10 @@ class Manifest:
             return False
         if rec.get("output") != self._rel(job.output):
             return False
-        if not all((self.outdir / f).is_file() for f in rec.get("files", [])):
+        files = rec.get("files", [])
+        if not isinstance(files, list) or not all(isinstance(f, str) for f in files):
+            return False                          # a damaged record: redo the file
+        if not all((self.outdir / f).is_file() for f in files):
             return False
         try:
             return file_sha256(job.source) == rec.get("input_sha256")

@@ -332,7 +332,7 @@ def measure_cleaning(result: CleanResult) -> dict:
         has_mv = np.isfinite(mv).any()
         correction = {"mean": finite(np.nanmean(mv)) if has_mv else 0.0,
                       "max": finite(np.nanmax(mv)) if has_mv else 0.0}
-        if has_mv and correction["max"] > 0:
+        if has_mv and (correction["max"] is None or correction["max"] > 0):   # None: overflow
             frame = int(np.nanargmax(mv))
             correction["frame"] = frame
             cause = _correction_cause(flagged, own, parents, before.names, frame, j)

@@ -68,7 +68,8 @@ def read_header(path) -> dict:
         header = json.loads(np.load(io.BytesIO(raw), allow_pickle=False).tobytes().decode("utf-8"))
     except FileNotFoundError:
         raise ConfigError(f"{path}: no such model file") from None
-    except (OSError, KeyError, ValueError, zipfile.BadZipFile, UnicodeDecodeError) as exc:
+    except (OSError, KeyError, ValueError, zipfile.BadZipFile, UnicodeDecodeError,
+            RecursionError, MemoryError) as exc:      # (a header nested 100,000 deep)
         raise ConfigError(f"{path}: not a mocapfix model file ({type(exc).__name__}: {exc})") from None
     if not isinstance(header, dict) or header.get("schema") != SCHEMA:
         raise ConfigError(f"{path}: unsupported model schema {header.get('schema') if isinstance(header, dict) else None!r} "
@@ -76,13 +77,33 @@ def read_header(path) -> dict:
     return header
 
 
+def _check_declared_sizes(path: str) -> None:
+    """Each array's header declares its shape; one that declares more bytes than its
+    archive member holds is corrupt, and loading it would first allocate what it
+    declares (a few bytes can ask for hundreds of GiB: MemoryError)."""
+    with zipfile.ZipFile(path) as zf:
+        for info in zf.infolist():
+            if not info.filename.endswith(".npy"):
+                continue
+            with zf.open(info) as fh:
+                version = np.lib.format.read_magic(fh)
+                read = (np.lib.format.read_array_header_1_0 if version == (1, 0)
+                        else np.lib.format.read_array_header_2_0)
+                shape, _, dtype = read(fh)
+            declared = int(np.prod(shape, dtype=object)) * dtype.itemsize
+            if declared > info.file_size:
+                raise ValueError(f"array {info.filename[:-4]!r} declares {declared:,} bytes, "
+                                 f"its member holds {info.file_size:,}")
+
+
 @lru_cache(maxsize=16)
 def _load_cached(path: str, size: int, mtime_ns: int) -> tuple[dict, dict]:
     header = read_header(path)
     try:
+        _check_declared_sizes(path)
         with np.load(path, allow_pickle=False) as z:
             arrays = {k: z[k] for k in z.files if k != HEADER_KEY}
-    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
+    except (OSError, ValueError, zipfile.BadZipFile, EOFError, MemoryError) as exc:
         raise ConfigError(f"{path}: corrupt model file ({type(exc).__name__}: {exc})") from None
     for a in arrays.values():
         a.setflags(write=False)

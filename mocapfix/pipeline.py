@@ -215,7 +215,7 @@ def parse_config(data, source: str = "<config>") -> Pipeline:
         raise ConfigError(f"{source}: unknown top-level key(s) {', '.join(map(repr, unknown))} "
                           f"(known: {', '.join(sorted(_TOP_KEYS))})")
     version = data.get("version", CONFIG_VERSION)
-    if version != CONFIG_VERSION:
+    if isinstance(version, bool) or version != CONFIG_VERSION:   # (True == 1 in Python)
         raise ConfigError(f"{source}: unsupported config version {version!r} (this mocapfix reads {CONFIG_VERSION})")
     steps_data = data.get("pipeline")
     if not isinstance(steps_data, list):

@@ -314,8 +314,9 @@ def markdown_to_html(md: str) -> str:
 def check_line(result: dict, verbose: bool = False) -> str:
     """One line per file (more with ``verbose``): status, path, the worst findings."""
     status, path = result["status"], result["path"]
-    if status == "ERROR":
-        return f"ERROR {path}: {result['error']}"
+    if status == "ERROR":                # the error names the file already (as clean's)
+        error = result["error"]
+        return f"ERROR {error}" if error.startswith(str(path)) else f"ERROR {path}: {error}"
     findings = result.get("findings", [])
     worst = [f for f in findings if f["level"] == status] or findings
     head = f"{status:<5} {path}"
@@ -362,4 +363,11 @@ def check_junit(results: list[dict], seconds: float, suite: str = "mocapfix chec
             ET.SubElement(tc, "system-out").text = "\n".join(f"WARN {f['rule']}: {f['message']}"
                                                              for f in warns)
     ET.indent(root)
-    return '<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
+    text = ET.tostring(root, encoding="unicode")
+    # control characters (a file named "a\x01b.bvh", a reader quoting raw bytes) are not
+    # allowed in XML 1.0 even as references: written as \xNN text, or CI cannot parse it
+    text = _XML_INVALID.sub(lambda m: f"\\x{ord(m.group()):02x}", text)
+    return '<?xml version="1.0" encoding="UTF-8"?>\n' + text + "\n"
+
+
+_XML_INVALID = re.compile("[\x00-\x08\x0b\x0c\x0e-\x1f\ufffe\uffff]")

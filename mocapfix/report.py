@@ -59,6 +59,7 @@ def build_report(result: CleanResult, thresholds: dict | None = None) -> dict:
         # a markers:/exclude: that selects nothing (a typo?) must not read as a clean pass
         file["notes"].append("the config's markers:/exclude: leave none of this file's "
                              "markers to clean: nothing was cleaned or graded")
+        file["reasons"] = ["WARN: " + file["notes"][-1]]      # the line's -v says why
         if STATUS_ORDER[file["status"]] < STATUS_ORDER["WARN"]:
             file["status"] = "WARN"
     file["joints_by_status"] = {k: sum(j["status"] == k for j in measured["joints"])

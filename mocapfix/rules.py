@@ -483,7 +483,7 @@ def parse_rules(data, source: str = "<rules>", stage: str = "input", _depth: int
         raise ConfigError(f"{source}{_key_line(data, unknown[0])}: unknown top-level key(s) "
                           f"{', '.join(map(repr, unknown))} (known: {', '.join(sorted(_TOP_KEYS))})")
     version = data.get("version", RULES_VERSION)
-    if version != RULES_VERSION:
+    if isinstance(version, bool) or version != RULES_VERSION:    # (True == 1 in Python)
         raise ConfigError(f"{source}: unsupported rules version {version!r} (this mocapfix reads {RULES_VERSION})")
     rules: list[Rule] = []
     extends = data.get("extends") or []

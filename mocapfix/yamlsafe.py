@@ -17,6 +17,9 @@ anything is composed or constructed, and turns every failure into one
   names, aliases inside it included) must stay within ``alias_budget``; an alias to a
   collection that is still open (a recursive structure) or to an undefined anchor is
   refused;
+* a key may appear only once in a mapping (YAML requires it; PyYAML would silently keep
+  the last value, so ``max_gap: 0.5 s`` followed by ``max_gap: 5 s``, or a second
+  ``pipeline:``, would change the run without a word); merge keys ``<<`` are exempt;
 * only the safe tags are constructed (``yaml.SafeLoader`` or a subclass).
 """
 from __future__ import annotations
@@ -66,20 +69,29 @@ def check_events(text: str, source: str, *, max_depth: int = MAX_DEPTH,
         raise ConfigError(f"{source} (line {line}): nested deeper than {max_depth} levels "
                           "(a config is a few levels deep)")
     sizes: dict[str, int] = {}      # anchor -> expanded node count (None while still open)
-    stack: list[list] = []          # open collections: [anchor, expanded node count]
+    # open collections: [anchor, expanded node count, keys seen (mappings: key -> line;
+    # sequences: None), whether the next node of a mapping is a key]
+    stack: list[list] = []
     expanded_by_aliases = 0
     try:
         for event in yaml.parse(text, Loader=yaml.SafeLoader):
+            if stack and stack[-1][2] is not None and isinstance(event, (*_OPEN, yaml.ScalarEvent,
+                                                                          yaml.AliasEvent)):
+                top = stack[-1]
+                if top[3] and isinstance(event, yaml.ScalarEvent):
+                    _check_key(event, top[2], source)
+                top[3] = not top[3]
             if isinstance(event, _OPEN):
                 if len(stack) >= max_depth:
                     raise ConfigError(f"{source}{_line(event)}: nested deeper than {max_depth} "
                                       "levels (a config is a few levels deep)")
                 if event.anchor is not None:
                     sizes[event.anchor] = None
-                stack.append([event.anchor, 1])
+                mapping = isinstance(event, yaml.MappingStartEvent)
+                stack.append([event.anchor, 1, {} if mapping else None, True])
                 continue
             if isinstance(event, _CLOSE):
-                anchor, size = stack.pop()
+                anchor, size = stack.pop()[:2]
                 if anchor is not None:
                     sizes[anchor] = size
                 if stack:
@@ -108,6 +120,25 @@ def check_events(text: str, source: str, *, max_depth: int = MAX_DEPTH,
                     stack[-1][1] += size
     except yaml.YAMLError as exc:
         raise _yaml_error(exc, source) from None
+
+
+_RESOLVER = yaml.resolver.Resolver()
+
+
+def _check_key(event, seen: dict, source: str) -> None:
+    """Refuse a scalar key already in this mapping (``seen``: key -> line). Keys are
+    compared as YAML types them: ``1`` and ``"1"`` differ, ``a`` and ``"a"`` do not."""
+    if event.value == "<<" and event.implicit[0]:
+        return                                  # merge keys may repeat
+    tag = event.tag or (_RESOLVER.resolve(yaml.ScalarNode, event.value, event.implicit)
+                        if event.implicit[0] else "tag:yaml.org,2002:str")
+    key = (tag, event.value)
+    line = event.start_mark.line + 1
+    if key in seen:
+        raise ConfigError(f"{source} (line {line}): key {event.value!r} appears twice in one "
+                          f"mapping (first on line {seen[key]}); YAML would keep only the last "
+                          "value: remove one")
+    seen[key] = line
 
 
 def load_yaml(data, source: str = "<config>", *, loader: type = yaml.SafeLoader,

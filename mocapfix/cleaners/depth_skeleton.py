@@ -37,7 +37,9 @@ Written for mocapfix (issue 12); each stage cites the method it uses:
 5. **Outliers.** Samples whose residual exceeds ``max(outlier_k max(σ, σ_local),
    min_outlier)`` (σ_local: median residual over ±3 samples / 1.5382, Hampel's local
    scale, so a stretch the smooth cannot follow is not called an outlier) get weight 0 and the joint is refitted (``passes`` rounds): tracked is trusted unless the
-   geometry says otherwise. Their fitted value replaces them.
+   geometry says otherwise. Their fitted value replaces them. A sample more than 100 m
+   from its joint's median position (a corrupt field) is taken out before step 1, as if
+   missing, and reported as an outlier.
 6. **Untrusted samples from the parent** (``limb_frame``): missing and outlier samples
    become the parent's estimate plus the smooth of the joint's offset to it, parents
    first (an occluded hand follows the tracked elbow). That smooth penalises the
@@ -94,6 +96,9 @@ _PELVIS = ("spinebase", "hipcenter", "pelvis")
 _CUTOFFS = np.geomspace(0.7, 12.0, 8)
 #: GCV chooses the smoothing on at most this many frames (the middle of a long file)
 _GCV_FRAMES = 3000
+#: a sample this far (m) from its joint's median position is no depth-sensor measurement
+#: (a corrupt field, a flipped exponent bit; sensors reach ~10 m)
+_GROSS_M = 100.0
 
 
 def _side_pairs(names: list[str], parts) -> list[tuple[int, int]]:
@@ -272,6 +277,17 @@ class KinectSkeleton(Cleaner):
             t = t + step * np.cumsum(np.r_[0.0, dt == 0])
         parents = motion.skeleton.parents if motion.skeleton is not None else None
         names = list(motion.names)
+
+        # gross errors are outliers from the start, taken out before anything looks at the
+        # samples: left in, one 1e9 m value steered the first GCV smooth and moved its
+        # whole joint by 0.3 m (1e10 m: 2.4 m), a -1e20 m depth turned the depth model off
+        # for the whole file and the leg-swap test saw swaps that were not there
+        seen = ~np.isnan(P).any(axis=2)
+        centre = np.zeros((J, 3))
+        centre[seen.any(axis=0)] = np.nanmedian(P[:, seen.any(axis=0)], axis=0)
+        with np.errstate(invalid="ignore", over="ignore"):
+            gross = seen & ~(_norm(P - centre) <= _GROSS_M)
+        P[gross] = np.nan
 
         # 1. leg confusion
         swapped = np.zeros(T, bool)
@@ -477,10 +493,10 @@ class KinectSkeleton(Cleaner):
                 rows = ~(tracked | inferred)[:, j] | flagged[:, j]
                 rows &= ~np.isnan(Zr[:, j]).any(axis=1)
                 Z[rows, j] = Z[rows, pj] + Zr[rows, j]
-        replaced = flagged & observed
+        replaced = flagged & observed | gross
         info[REPLACED_FRAMES] = {names[j]: np.flatnonzero(replaced[:, j]).tolist()
                                  for j in np.flatnonzero(replaced.any(axis=0))}
-        info.update(outliers=int(flagged.sum()), depth_exponent=round(p_exp, 3),
+        info.update(outliers=int((flagged | gross).sum()), depth_exponent=round(p_exp, 3),
                     noise_mm={names[j]: round(float(scale[j]) * 1e3, 2) for j in range(J)},
                     cutoff_hz={names[j]: round(float(c), 2) for j, c in enumerate(cut)
                                if np.isfinite(c)})

@@ -157,6 +157,10 @@ class MSSA(FittedCleaner):
         m = self.values["window"]
         feats = []
         for mo in motions:
+            if space == "rotations" and _space(mo, "auto") != "rotations":
+                raise MocapfixError(f"{mo.path or 'training motion'}: has no rotation channels, but "
+                                    f"the model learns the rotations of {first.path or 'the first'} "
+                                    "(BVH/AMC); train one model per skeleton")
             if _signature(mo, space) != layout:
                 raise MocapfixError(f"{mo.path or 'training motion'}: its channel layout differs from "
                                     f"{first.path or 'the first training motion'}'s; train one model per "

@@ -386,9 +386,21 @@ class PartletDictionary(FittedCleaner):
         pts = []
         for mo in motions:
             P = self._model_positions(mo, joints)
+            if (~np.isnan(P[:, frame]).any(axis=2)).sum(axis=1).max(initial=0) < 3:
+                # a motion of another skeleton (the names do not map) cannot fix the body
+                # frame (3 of its joints in a frame): it failed deep inside with "internal
+                # error ValueError: no frame has enough torso points"
+                raise MocapfixError(
+                    f"{mo.path or 'training motion'}: lacks body-frame joints of "
+                    f"{first.path or 'the first training motion'} "
+                    f"({', '.join(joints[j] for j in frame if np.isnan(P[:, j]).all())}); "
+                    "train one model per skeleton")
             pts.append(P[:: max(1, len(P) // 400), frame])
         pool = np.concatenate(pts)
         pool = pool[~np.isnan(pool).any(axis=(1, 2))]
+        if not len(pool):
+            raise MocapfixError("no training frame holds every body-frame joint "
+                                f"({', '.join(joints[j] for j in frame)})")
         ref = pool[0] - pool[0].mean(axis=0)
         for _ in range(5):
             Rr, cs, ct = kabsch(pool, np.broadcast_to(ref, pool.shape), np.ones(pool.shape[:2]))
@@ -420,6 +432,9 @@ class PartletDictionary(FittedCleaner):
                     W = _windows(Xp, m, dil, starts)
                     W = W[:, ~np.isnan(W).any(axis=0)]
                     data[k][p].append(W)
+        if not all(data[0].values()):
+            raise MocapfixError(f"no training motion has a complete window of {m} samples at "
+                                f"{rate:g} Hz ({m / rate:.2f} s); give longer takes or a shorter --window")
         K = self.values["atoms"]
         total = len(bodyparts.PARTLETS) * len(scales)
         with blas_single_thread():

@@ -722,8 +722,8 @@ def _motion(source: AsfAmcSource, channels: np.ndarray, fps, notes: list[str]) -
         fps = DEFAULT_FPS
         if source.values is not None:
             notes.append("AMC files store no frame rate; assumed 120 Hz (CMU default)")
-    elif fps <= 0:
-        raise UnreadableFileError(source.asf_path, f"frame rate must be positive, got {fps}")
+    elif not (np.isfinite(float(fps)) and float(fps) > 0):
+        raise UnreadableFileError(source.asf_path, f"frame rate must be a positive number, got {fps}")
     scale = asf.length_scale
     units = "in" if scale == 1.0 else f"in/{scale:g}"
     return Motion(
@@ -762,8 +762,35 @@ def write(motion: Motion, path, **options) -> list[Path]:
     if asf_target.resolve() == path.resolve():
         raise WriteError(path, f"the AMC would overwrite its skeleton {source.asf_name}")
     text = _amc_text(source, channels)
+    _refuse_other_skeleton(asf_target, source, path)
     atomic_write_bytes(path, text.encode("latin-1"))
     return [path, _write_asf(asf_target, source)]
+
+
+def skeleton_output(amc: Path, output: Path) -> tuple[Path, Path] | None:
+    """(the ASF the AMC ``amc`` is read with, the copy of it written beside ``output``), or
+    None when no ASF is found (reading the AMC will say so). For batch planning: two
+    AMCs whose skeletons would land on one name must share the skeleton."""
+    try:
+        asf = find_asf(Path(amc))
+    except (UnreadableFileError, OSError):
+        return None
+    return Path(output).with_name(asf.name), asf
+
+
+def _refuse_other_skeleton(target: Path, source: AsfAmcSource, amc: Path) -> None:
+    """An ASF of the same name already beside the output with other content belongs to
+    other AMCs there (an earlier file of the batch from another folder, an earlier run):
+    replacing it would pair them with the wrong skeleton, keeping it would pair this AMC
+    with the wrong one. Refused before anything is written."""
+    try:
+        if not target.exists() or target.read_bytes() == source.asf_bytes:
+            return
+    except OSError:
+        return                      # unreadable or not a file: writing it reports the cause
+    raise WriteError(amc, f"its skeleton cannot be written: {target} holds another ASF "
+                          f"(not {source.asf_path}), which other AMC files there use; clean "
+                          "this file into another folder, or remove that ASF")
 
 
 def _write_asf(target: Path, source: AsfAmcSource) -> Path:

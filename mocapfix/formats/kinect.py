@@ -86,6 +86,7 @@ import numpy as np
 from mocapfix.errors import UnreadableFileError, UnsupportedFeatureError, WriteError
 from mocapfix.fileio import atomic_write_bytes, read_input_bytes
 from mocapfix.formats import suffixes
+from mocapfix.quantity import MAX_FRAME_RATE_HZ, MIN_FRAME_RATE_HZ
 from mocapfix.formats import kinect_layouts as kl
 from mocapfix.motion import Motion, Skeleton
 from mocapfix.units import METRES_PER_UNIT, normalise_unit_name
@@ -313,6 +314,12 @@ def read(path, fps: float | None = None, units: str | None = None, **options) ->
         raise UnreadableFileError(path, f"fps must be a positive number, got {fps}")
     notes: list[str] = []
     parts = reader(path, lines, idx, notes, layout=layout, fps=fps, units=units)
+    if not MIN_FRAME_RATE_HZ <= parts.file_fps <= MAX_FRAME_RATE_HZ:
+        # time stamps 1e300 apart gave "90 frames at 0 fps", and cleaning overflowed
+        # (internal error OverflowError); the BVH reader refuses such rates too
+        raise UnreadableFileError(path, f"the time column gives {parts.file_fps:.4g} frames per "
+                                        f"second, outside {MIN_FRAME_RATE_HZ:g}-"
+                                        f"{MAX_FRAME_RATE_HZ:g} Hz (a corrupt time column?)")
     motion = _assemble(parts, layout, bom, lines, endings, notes, fps)
     motion.path = str(path)
     return motion
