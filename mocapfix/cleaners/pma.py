@@ -76,12 +76,10 @@ class PMA(Cleaner):
               "the other markers' interior fills counted as seen, each interior gap of 0.2 s "
               "or more during which one of its marker's most rigid neighbours is missing "
               "too; those fills join the members (0: none)", low=0, high=5),
-        Param("max_step", "float", 0.0, "a member whose fill (joined to the data at the gap's "
-              "borders) moves further from one frame to the next than this many times the "
-              "marker's largest observed step is left out of the gap's average when that average "
-              "jumps so too, unless no member or every member does (0: every member kept)",
-              low=0.0,
-              high=1e6),
+        Param("max_step", "float", 0.0, "a gap whose fill (joined to the data at its borders) "
+              "moves further from one frame to the next than this many times the marker's "
+              "largest observed step is averaged again without the members that do, if some "
+              "do not (0: never)", low=0.0, high=1e6),
         Param("validation_copies", "int", 2, "weights: validation/best — synthetic gaps per "
               "real gap", low=1, high=20),
         Param("confidence_scale", "length", "10 mm", "member spread at which a filled "
