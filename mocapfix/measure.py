@@ -24,6 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from mocapfix.cleaners.base import REJECTED_FILLS
 from mocapfix.gaps import runs
 from mocapfix.metrics import bone_lengths, rms_acceleration
 from mocapfix.motion import Motion
@@ -241,6 +242,19 @@ def who_filled(records, T: int, J: int) -> np.ndarray:
 LONG_FILL_S = 0.5
 
 
+def _rejected_fills(records, names) -> dict:
+    """Per point index, the fills steps made and did not write (their ``info``'s
+    :data:`~mocapfix.cleaners.base.REJECTED_FILLS`): ``[(start, length, step, why), ...]``."""
+    index = {n: i for i, n in enumerate(names)}
+    out: dict = {}
+    for rec in records:
+        for name, entries in ((rec.info or {}).get(REJECTED_FILLS) or {}).items():
+            if name in index:
+                out.setdefault(index[name], []).extend(
+                    (int(a), int(m), rec.step, str(why)) for a, m, why in entries)
+    return out
+
+
 def _mean_confidence(after: Motion, start: int, length: int, joint: int) -> float | None:
     """Mean per-sample fill confidence over one filled gap (None: the filler gives none)."""
     conf = after.confidence
@@ -312,6 +326,7 @@ def measure_cleaning(result: CleanResult) -> dict:
     counted = graded[col]
     col, start, length = col[counted], start[counted], length[counted]
     labels = [r.step for r in records]
+    refused = _rejected_fills(records, before.names)
     joints = []
     for j in np.flatnonzero(graded):
         sel = col == j
@@ -326,8 +341,13 @@ def measure_cleaning(result: CleanResult) -> dict:
                                     "confidence": _mean_confidence(after, s, n, j),
                                     "filled_by": ", ".join(labels[k] for k in steps)})
             else:
-                gaps_left.append({"start": int(s), "length": int(n),
-                                  "filled_frames": int((span_who >= 0).sum())})
+                left = {"start": int(s), "length": int(n),
+                        "filled_frames": int((span_who >= 0).sum())}
+                refusals = [{"step": step, "why": reason}
+                            for a, m, step, reason in refused.get(j, ()) if a < s + n and s < a + m]
+                if refusals:
+                    left["rejected_by"] = refusals
+                gaps_left.append(left)
         mv = moved[:, j]
         has_mv = np.isfinite(mv).any()
         correction = {"mean": finite(np.nanmean(mv)) if has_mv else 0.0,

@@ -7,7 +7,7 @@ JSON schema ``mocapfix.report/1``::
      "thresholds": {...}, "rules": [...], "joints": [{"name", "status", "reasons",
      "missing_before", "missing_after", "uncertain", "gaps": {"count", "longest_frames",
      "filled": [{"start", "length", "seconds", "long", "confidence", "filled_by"}],
-     "unfilled": [...]}, "outliers_flagged",
+     "unfilled": [{"start", "length", "filled_frames", "rejected_by"}]}, "outliers_flagged",
      "correction_mm": {"mean", "max", "frame", "cause"}, "jitter_before", "jitter_after" (RMS acceleration,
      m/s²), "bone_variation_before", "bone_variation_after",
      "writeback_residual_mm": {"mean", "max"} }], "bones": [...],
@@ -22,6 +22,9 @@ both absent when every point was cleaned).
 A filled gap is ``long`` when it spans more than ``measure.LONG_FILL_S`` (0.5 s); its
 ``confidence`` is the mean per-sample fill confidence (``None`` when the filler gives
 none); the file summary counts ``long_fills``, and the Markdown/HTML report lists them.
+An unfilled gap has ``rejected_by`` (``[{"step", "why"}]``) when a step filled it but did
+not write the fill (it left the capture volume, or jumped further in one frame than the
+marker's own data: a step's ``info["rejected_fills"]``).
 ``uncertain`` is the fraction of a joint's frames that rest on no measurement (missing in
 the input; weighted by the cleaned motion's per-sample confidence where it has one).
 ``outliers_flagged`` counts the samples a step made missing as outliers or rebuilt in

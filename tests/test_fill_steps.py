@@ -134,3 +134,21 @@ def test_fill_ensemble_refills_without_the_member_that_jumped_on_a_real_capture(
 
     assert ratio(build("fill_ensemble")) <= 1.0
     assert ratio(build("fill_ensemble", max_step=0.0)) > 5.0
+
+
+def test_the_report_says_which_step_refused_a_gaps_fill_and_why(tmp_path):
+    """c3d.org s09: tsmc's fill of the right foot's trailing gaps jumped; the gap is left,
+    and the report says so under it."""
+    from mocapfix.clean import clean_file
+    import json
+
+    out = tmp_path / "s09.c3d"
+    clean_file(shared("c3d/c3dorg_s09_PlugInC3D.c3d"), out, load_config(default_config_path()))
+    report = json.loads((tmp_path / "s09.report.json").read_text())
+    rfoa = next(j for j in report["joints"] if j["name"] == "RFOA")
+    left = [g for g in rfoa["gaps"]["unfilled"] if g["start"] == 185]
+    assert left and left[0]["rejected_by"] == [
+        {"step": "step 4 (tsmc)",
+         "why": "its fill jumped more than 3x the marker's largest measured step in one frame"}]
+    refused = [g for j in report["joints"] for g in j["gaps"]["unfilled"] if "rejected_by" in g]
+    assert all(g["filled_frames"] < g["length"] for g in refused)

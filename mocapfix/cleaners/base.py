@@ -29,6 +29,9 @@ _PHYSICAL = {"length", "time", "frequency"}
 #: the info key of the samples a step judged wrong and rebuilt in place:
 #: ``{name: [frame, ...]}`` (JSON-able, so the report keeps it)
 REPLACED_FRAMES = "replaced_frames"
+#: the info key of the fills a step made and did not write, with why:
+#: ``{name: [[start, length, why], ...]}`` (the report says why such a gap is left)
+REJECTED_FILLS = "rejected_fills"
 
 
 @dataclass(frozen=True)

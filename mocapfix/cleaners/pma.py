@@ -23,7 +23,7 @@ import dataclasses
 import numpy as np
 
 from mocapfix.cleaners import build, register
-from mocapfix.cleaners.base import Cleaner, Param
+from mocapfix.cleaners.base import REJECTED_FILLS, Cleaner, Param
 from mocapfix.errors import ConfigError
 from mocapfix.motion import Motion, missing_samples
 from mocapfix.solvers import pma
@@ -158,6 +158,7 @@ class PMA(Cleaner):
             combined = self._refill(work, observed, gaps, local, mu, sd, floor, box,
                                     members, validated, combined, info, references, top)
         info["rejected_samples"] = 0
+        info[REJECTED_FILLS] = {}
         for (j, s, e), result in zip(gaps, combined):
             n = e - s
             if result is None:
@@ -167,6 +168,8 @@ class PMA(Cleaner):
                 # outside the capture volume: the members do not know this marker; leave
                 # the gap for the next step and the report (as fill_pca and tsmc do)
                 info["rejected_samples"] += int(n)
+                info[REJECTED_FILLS].setdefault(motion.names[j], []).append(
+                    [int(s), int(n), "its fill left the capture volume"])
                 continue
             out[s:e, j] = avg
             # confidence: the members' agreement, the distance to the nearest observed

@@ -80,7 +80,7 @@ from __future__ import annotations
 import numpy as np
 
 from mocapfix.cleaners import register
-from mocapfix.cleaners.base import Cleaner, Param
+from mocapfix.cleaners.base import REJECTED_FILLS, Cleaner, Param
 from mocapfix.motion import Motion, missing_samples
 from mocapfix.solvers import dct, segments
 from mocapfix.solvers.lowrank import leave_block_out_residual, ppca_fit, svt
@@ -450,10 +450,10 @@ class TSMC(Cleaner):
         frame_ok = trusted[:, rows].sum(axis=1) >= max(3, self["min_observed"] * seen)
         written = ~trusted & rows[None, :] & frame_ok[:, None]
         out[~trusted & rows[None, :] & ~frame_ok[:, None]] = np.nan   # too few markers seen
-        rejected = implausible_runs(out, written, pos[trusted])
-        rejected |= segments.discontinuous_runs(out, written & ~rejected,
-                                                segments.largest_steps(pos, trusted),
-                                                self["max_step"])
+        outside = implausible_runs(out, written, pos[trusted])
+        jumped = segments.discontinuous_runs(out, written & ~outside,
+                                             segments.largest_steps(pos, trusted), self["max_step"])
+        rejected = outside | jumped
         out[rejected] = np.nan
         untrusted = observed & ~trusted
         per = untrusted.sum(axis=0)
@@ -464,6 +464,10 @@ class TSMC(Cleaner):
             "untrusted_per_joint": {motion.names[j]: int(per[j]) for j in np.flatnonzero(per)},
             "filled": int((written & ~rejected).sum()),
             "rejected_samples": int(rejected.sum()),
+            REJECTED_FILLS: segments.rejected_fills(motion.names, {
+                "its fill left the capture volume": outside,
+                f"its fill jumped more than {self['max_step']:g}x the marker's largest measured "
+                "step in one frame": jumped}),
             "smoothed_channels": smoothed_channels,
             "correction_mm_max": round(float(np.nanmax(np.abs(
                 np.where(np.repeat(trusted, 3, axis=1)[:, cols], est - x, 0.0)), initial=0.0))

@@ -427,3 +427,14 @@ def discontinuous_runs(filled: np.ndarray, write: np.ndarray, top: np.ndarray,
         if seg.size and np.nanmax(seg, initial=0.0) > factor * top[c]:
             rejected[s:s + n, c] = True
     return rejected
+
+
+def rejected_fills(names, masks: dict) -> dict:
+    """``{name: [[start, length, why], ...]}`` of the runs of each (T, J) mask of ``masks``
+    (``{why: mask}``), for a step's ``info``
+    (:data:`mocapfix.cleaners.base.REJECTED_FILLS`)."""
+    out: dict = {}
+    for why, mask in masks.items():
+        for c, s, n in zip(*runs(mask)):
+            out.setdefault(names[c], []).append([int(s), int(n), why])
+    return out
