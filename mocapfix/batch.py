@@ -163,12 +163,17 @@ def check_output_folder(outdir) -> Path:
     except OSError as exc:
         raise ConfigError(f"{outdir}: cannot create the output folder: {exc.strerror or exc}") from None
     try:
-        fd, probe = tempfile.mkstemp(prefix=".mocapfix-probe.", dir=outdir)
-        os.close(fd)
-        os.unlink(probe)
+        _probe_write(outdir)
     except OSError as exc:
         raise ConfigError(f"{outdir}: cannot write to the output folder: {exc.strerror or exc}") from None
     return outdir
+
+
+def _probe_write(folder) -> None:
+    """Create and remove a hidden file in ``folder``; an OSError when it cannot take one."""
+    fd, probe = tempfile.mkstemp(prefix=".mocapfix-probe.", dir=folder)
+    os.close(fd)
+    os.unlink(probe)
 
 
 def check_output_file(path, option: str, inputs=()) -> Path:
@@ -189,9 +194,7 @@ def check_output_file(path, option: str, inputs=()) -> Path:
     if not folder.is_dir():
         raise ConfigError(f"{option} {path}: cannot write there: part of the path is a file")
     try:
-        fd, probe = tempfile.mkstemp(prefix=".mocapfix-probe.", dir=folder)
-        os.close(fd)
-        os.unlink(probe)
+        _probe_write(folder)
     except OSError as exc:
         raise ConfigError(f"{option} {path}: cannot write there: {exc.strerror or exc}") from None
     return path

@@ -395,14 +395,13 @@ def largest_steps(positions: np.ndarray, seen: np.ndarray) -> np.ndarray:
 
 def steepest_step(fill: np.ndarray, before: np.ndarray | None, after: np.ndarray | None) -> float:
     """The largest frame-to-frame step of ``fill`` (n, 3), joined to the data sample
-    ``before`` its first frame and ``after`` its last (None at the capture's ends)."""
+    ``before`` its first frame and ``after`` its last (None at the capture's ends); steps
+    to or from a NaN sample do not count (0 when none is left)."""
     parts = ([before[None]] if before is not None else []) + [fill] + \
         ([after[None]] if after is not None else [])
     seg = np.concatenate(parts) if len(parts) > 1 else fill
-    if len(seg) < 2:
-        return 0.0
     d = np.diff(seg, axis=0)
-    return float(np.sqrt((d * d).sum(axis=1)).max())
+    return float(np.nanmax(np.sqrt((d * d).sum(axis=1)), initial=0.0))
 
 
 def discontinuous_runs(filled: np.ndarray, write: np.ndarray, top: np.ndarray,
@@ -415,16 +414,13 @@ def discontinuous_runs(filled: np.ndarray, write: np.ndarray, top: np.ndarray,
     gap left for the report. Points with ``top`` 0 (never seen on two frames in a row) are
     not judged."""
     rejected = np.zeros_like(write)
-    if factor <= 0 or not write.any():
+    if factor <= 0:
         return rejected
     T = filled.shape[0]
-    d = np.diff(filled, axis=0)
-    step = np.sqrt(np.einsum("tjk,tjk->tj", d, d, optimize=False))      # (T-1, J)
     for c, s, n in zip(*runs(write)):
-        if top[c] <= 0:
-            continue
-        seg = step[max(s - 1, 0):min(s + n, T - 1), c]
-        if seg.size and np.nanmax(seg, initial=0.0) > factor * top[c]:
+        before = filled[s - 1, c] if s > 0 else None
+        after = filled[s + n, c] if s + n < T else None
+        if top[c] > 0 and steepest_step(filled[s:s + n, c], before, after) > factor * top[c]:
             rejected[s:s + n, c] = True
     return rejected
 
