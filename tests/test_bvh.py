@@ -421,10 +421,45 @@ def test_partial_last_line_read_on_request(tmp_path):
     assert any("8 of 9 values" in note for note in motion.notes)
 
 
-def test_more_lines_than_frames_is_noted(tmp_path):
-    motion = bvh.read(_write(tmp_path, TINY.replace("Frames: 3", "Frames: 2")))
-    assert motion.n_frames == 2
-    assert any("1 line(s) after the 2 declared frames" in note for note in motion.notes)
+def test_frames_beyond_an_under_counted_header_are_read_and_declared(tmp_path):
+    """An exporter that writes too small a ``Frames:`` count: every frame line in the file is
+    read (a cleaner must not drop 290 of 300 frames), and the written file declares them."""
+    path = _write(tmp_path, TINY.replace("Frames: 3", "Frames: 2"))
+    motion = bvh.read(path)
+    assert motion.n_frames == 3
+    np.testing.assert_allclose(motion.positions, TINY_POSITIONS, atol=1e-12)
+    assert any("'Frames: 2' but the file holds 3 frame lines" in note for note in motion.notes)
+    out = tmp_path / "out.bvh"
+    bvh.write(motion, out)
+    assert out.read_text() == TINY          # the count corrected, every other byte as read
+
+
+def test_lines_after_the_frames_that_are_not_frames_are_ignored_with_a_note(tmp_path):
+    for extra in ("0 0 0\n", "end of take\n", "1 2 3 4 5 6 7 8 nan\n"):
+        path = _write(tmp_path, TINY.replace("Frames: 3", "Frames: 2") + extra)
+        motion = bvh.read(path)
+        assert motion.n_frames == 2
+        assert any("2 line(s) after the 2 declared frames (from line 21) are not frames"
+                   in note for note in motion.notes), extra
+        out = tmp_path / "out.bvh"
+        bvh.write(motion, out)
+        assert out.read_text() == TINY.replace("Frames: 3", "Frames: 2").rsplit("0 0 0 0 0 0 90", 1)[0]
+
+
+def test_a_truncated_file_read_on_request_is_written_with_its_real_count(tmp_path):
+    path = _write(tmp_path, TINY.replace("Frames: 3", "Frames: 1000"))
+    motion = bvh.read(path, allow_truncated=True)
+    out = tmp_path / "out.bvh"
+    bvh.write(motion, out)
+    assert out.read_text() == TINY
+    assert bvh.read(out).n_frames == 3
+
+
+def test_frames_count_spelt_oddly_round_trips_byte_identical(tmp_path):
+    path = _write(tmp_path, TINY.replace("Frames: 3", "Frames:   003  "))
+    out = tmp_path / "out.bvh"
+    bvh.write(bvh.read(path), out)
+    assert out.read_bytes() == path.read_bytes()
 
 
 @pytest.mark.parametrize("change, message", [

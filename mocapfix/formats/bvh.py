@@ -38,7 +38,9 @@ No loop runs longer than the file has tokens or lines, so nothing can hang.
 A truncated motion block (``Frames: N`` but fewer complete frame lines) is REFUSED by
 default — a silently shortened clip is worse than a clear error in a batch cleaner. Pass
 ``allow_truncated=True`` to read the complete frames instead (a note says how many were
-missing). Lines after the declared frames are ignored with a note (and not written back).
+missing). Lines after the declared frames that are frames of the hierarchy (one finite
+number per channel each: an exporter that under-counts) are read, and the written file
+declares them; other lines there are ignored with a note (and not written back).
 
 Writing
 -------
@@ -406,29 +408,36 @@ def _parse_motion(path, data: bytes, motion_start: int, n_channels: int,
     frame_lines: list[bytes] = []
     frame_line_numbers: list[int] = []
     pending: list[bytes] = []  # blank lines waiting for the next frame line
-    extra = 0
-    tail_start = len(lines)
     for k in range(index, len(lines)):
         raw = lines[k]
         if not raw.strip():
             pending.append(raw)
             continue
-        if len(frame_lines) == declared:
-            extra = sum(1 for rest in lines[k:] if rest.strip())
-            tail_start = k
-            break
         frame_lines.append(b"".join(pending) + raw if pending else raw)
         frame_line_numbers.append(first_line + k)
         pending = []
-    tail = b"".join(pending) if extra == 0 else b""
-    if extra:
-        notes.append(f"{extra} line(s) after the {declared} declared frames (from line "
-                     f"{first_line + tail_start}) were ignored and will not be written back")
+    tail = b"".join(pending)
+    ignored = False
+    if len(frame_lines) > declared:
+        over = frame_lines[declared:]
+        if _all_frames(over, n_channels):
+            # an exporter that under-counts: the frames are in the file, so none is dropped
+            notes.append(f"'Frames: {declared}' but the file holds {len(frame_lines)} frame "
+                         f"lines: all {len(frame_lines)} read (the cleaned file declares "
+                         f"{len(frame_lines)})")
+        else:
+            notes.append(f"{len(over)} line(s) after the {declared} declared frames (from line "
+                         f"{frame_line_numbers[declared]}) are not frames of this hierarchy "
+                         f"({n_channels} numbers): ignored, and not written back")
+            frame_lines = frame_lines[:declared]
+            frame_line_numbers = frame_line_numbers[:declared]
+            tail = b""
+            ignored = True
 
     token_lists = [line.split() for line in frame_lines]
     bad = next((i for i, toks in enumerate(token_lists) if len(toks) != n_channels), None)
     complete = len(frame_lines) if bad is None else bad
-    cut_short = (bad is not None and bad == len(frame_lines) - 1 and extra == 0
+    cut_short = (bad is not None and bad == len(frame_lines) - 1 and not ignored
                  and len(token_lists[bad]) < n_channels)  # the file ends inside a frame
     if bad is not None and not cut_short:
         raise UnreadableFileError(
@@ -488,6 +497,18 @@ def _frame_time(path, word: bytes, line: int) -> float:
                                         f"{MIN_FRAME_RATE_HZ:g}-{MAX_FRAME_RATE_HZ:g} Hz "
                                         "(a corrupt field?)", line=line)
     return value
+
+
+def _all_frames(lines: list[bytes], n_channels: int) -> bool:
+    """Whether every line holds ``n_channels`` finite numbers (a frame of this hierarchy)."""
+    tokens = [line.split() for line in lines]
+    if any(len(t) != n_channels for t in tokens):
+        return False
+    try:
+        values = np.array(list(itertools.chain.from_iterable(tokens)), dtype=np.float64)
+    except ValueError:
+        return False
+    return bool(np.isfinite(values).all())
 
 
 def _to_float(path, token_lists, line_numbers, n_channels: int) -> np.ndarray:
@@ -690,8 +711,9 @@ def write(motion: Motion, path, **options) -> list[Path]:
 
 
 def _frames_line(source: BvhSource, n_frames: int) -> bytes:
-    if n_frames == len(source.values):
-        return source.frames_line
+    match = _FRAMES_LINE.match(source.frames_line)
+    if match is not None and match.group(2).isdigit() and int(match.group(2)) == n_frames:
+        return source.frames_line       # the count as spelt in the file
     return _replace_number(source.frames_line, _FRAMES_LINE, str(n_frames).encode())
 
 
