@@ -519,8 +519,10 @@ def test_non_numeric_value_is_refused_with_its_line(tmp_path):
 def test_missing_asf_is_refused_naming_the_amc(tmp_path):
     amc, asf = cmu_copy(tmp_path)
     asf.unlink()
-    with pytest.raises(UnreadableFileError, match=r"05_01\.amc: cannot find the ASF skeleton"):
+    with pytest.raises(UnreadableFileError, match=r"05_01\.amc: cannot find the ASF skeleton") as err:
         formats.read(amc)
+    # what a command-line user can do (the CLI has no asf= option)
+    assert "put the skeleton beside the AMC as 05.asf" in str(err.value)
 
 
 def test_hierarchy_bone_missing_from_bonedata_is_refused(tmp_path):

@@ -675,7 +675,8 @@ def find_asf(amc_path: Path, asf_option=None) -> Path:
     tried = " or ".join(f"{s}.asf" for s in dict.fromkeys(stems))
     why = f"{len(in_folder)} .asf files there" if in_folder else "no .asf file there"
     raise UnreadableFileError(
-        amc_path, f"cannot find the ASF skeleton: no {tried} in {folder} ({why}); pass asf=PATH")
+        amc_path, f"cannot find the ASF skeleton: no {tried} in {folder} ({why}); put the "
+                  f"skeleton beside the AMC as {stems[-1]}.asf (from Python: read(..., asf=PATH))")
 
 
 def read(path, fps: float | None = None, **options) -> Motion:
