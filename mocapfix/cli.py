@@ -370,6 +370,8 @@ def clean(inputs, outdir, config_path, reports, jobs, as_json, fps, allow_inside
             raise MocapfixError(f"{config_file}: the outputs there were made with another config; "
                                 "--skip-existing would mix two configs in one folder (use --overwrite "
                                 "or another output folder)")
+        # the folders this run makes (taken back if nothing runs)
+        made = [p for p in (Path(outdir), *Path(outdir).parents) if not os.path.lexists(p)]
         if not dry_run:
             check_output_folder(outdir)
             if config_file.is_dir():
@@ -396,7 +398,10 @@ def clean(inputs, outdir, config_path, reports, jobs, as_json, fps, allow_inside
                  f"{len(skipped)} skipped; nothing written", level=-1, err=True)
         sys.exit(EXIT_OK)
 
+    finished_here: list[str] = []
+
     def stream(r):
+        finished_here.append(r["input"])
         out.line(_clean_line(r, obj["verbosity"] > 0), level=0 if r["status"] != "ERROR" else -1,
                  err=True if r["status"] == "ERROR" else None)
         if debug and r.get("traceback"):
@@ -411,6 +416,11 @@ def clean(inputs, outdir, config_path, reports, jobs, as_json, fps, allow_inside
         results = run_batch(todo, pipeline.config(), str(pipeline.source), kinds, jobs,
                             {"fps": fps} if fps else None, on_result=stream, spec=spec)
     except MocapfixError as exc:        # e.g. the Dask scheduler cannot be reached
+        if not finished_here:           # nothing ran: leave the folder as it was
+            manifest.abandon()
+            for folder in made:
+                with contextlib.suppress(OSError):
+                    folder.rmdir()      # only if empty, innermost first
         _fail(str(exc), debug, exc)
     manifest.close()
     failed = [r for r in results if r["status"] == "ERROR"]

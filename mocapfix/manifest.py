@@ -49,6 +49,7 @@ class Manifest:
         self.key = key
         self.records: dict[str, dict] = {}
         self._fd: int | None = None
+        self._size_before: int | None = None     # the file's size before this run wrote
         if self.path.exists():
             try:
                 text = self.path.read_text(encoding="utf-8", errors="replace")
@@ -104,6 +105,7 @@ class Manifest:
             return
         if self._fd is None:
             self.outdir.mkdir(parents=True, exist_ok=True)
+            self._size_before = self.path.stat().st_size if self.path.exists() else None
             self._fd = os.open(self.path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o666)
         data = "".join(json.dumps(r, sort_keys=True) + "\n" for r in records).encode("utf-8")
         os.write(self._fd, data)
@@ -116,6 +118,18 @@ class Manifest:
         now = _now()
         self._append([{"input": str(j.source), "output": self._rel(j.output), "status": "started",
                        "time": now, **self.key} for j in jobs])
+
+    def abandon(self) -> None:
+        """Take back what this run wrote (nothing ran: the Dask scheduler could not be
+        reached): the file as it was before, or no file if this run made it."""
+        if self._fd is None:
+            return
+        os.close(self._fd)
+        self._fd = None
+        if self._size_before is None:
+            self.path.unlink(missing_ok=True)
+        else:
+            os.truncate(self.path, self._size_before)
 
     def record(self, result: dict) -> None:
         """Record one finished file from its batch result (call as each finishes)."""

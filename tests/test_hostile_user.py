@@ -626,6 +626,30 @@ def test_a_malformed_scheduler_address_is_refused_before_anything_is_written(tmp
     assert not out.exists()
 
 
+def test_an_unreachable_scheduler_leaves_the_output_folder_as_it_was(tmp_path, monkeypatch):
+    # a well-formed address nobody answers: the run used to leave the folders it made and
+    # a manifest of "started" records behind (or append them to an existing manifest)
+    import distributed                                     # the dev extra has it
+
+    def refuse(*args, **kwargs):
+        raise OSError("Timed out trying to connect to tcp://10.0.0.1:8786 after 10 s")
+    monkeypatch.setattr(distributed, "Client", refuse)
+    fresh = tmp_path / "new" / "out"
+    r = CliRunner().invoke(main, ["clean", str(BVH), "-o", str(fresh), "-c", _cfg(tmp_path),
+                                  "--scheduler", "tcp://10.0.0.1:8786"])
+    _no_traceback(r)
+    assert r.exit_code == 2 and "cannot reach the Dask scheduler" in r.output, r.output
+    assert not (tmp_path / "new").exists()
+    used = tmp_path / "used"
+    r = CliRunner().invoke(main, ["clean", str(BVH), "-o", str(used), "-c", _cfg(tmp_path)])
+    assert r.exit_code == 0, r.output
+    before = _md5s(used)
+    r = CliRunner().invoke(main, ["clean", str(SAMPLE_DATA), "-o", str(used), "-c", _cfg(tmp_path),
+                                  "--overwrite", "--scheduler", "tcp://10.0.0.1:8786"])
+    assert r.exit_code == 2, r.output
+    assert _md5s(used) == before                           # the manifest as it was
+
+
 def test_report_files_never_overwrite_the_captures_they_are_about(tmp_path):
     # "check take.c3d --junit take.c3d" replaced the capture with JUnit XML (exit 0); the
     # same for a capture in an input folder, the ASF beside a named AMC, bench --json on
