@@ -326,7 +326,7 @@ def check_line(result: dict, verbose: bool = False) -> str:
         if wc:
             lines.append(f"      would clean: fill {wc['samples_filled']} samples, flag "
                          f"{wc['samples_flagged']}, leave {_pct(wc['missing_after'])} missing and "
-                         f"{_pct(wc['uncertain'])} rebuilt rather than measured")
+                         f"{_pct(wc['uncertain'])} not measured (rebuilt, or still missing)")
         return "\n".join(lines)
     if not worst:
         return head

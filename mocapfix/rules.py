@@ -113,7 +113,7 @@ METRICS = {m.name: m for m in (
     # what a pipeline left (clean's report)
     Metric("missing_after", "cleaned", "fraction", "{v} still missing",
            "fraction of samples still missing after cleaning", "mean"),
-    Metric("uncertain", "cleaned", "fraction", "{v} rebuilt rather than measured",
+    Metric("uncertain", "cleaned", "fraction", "{v} not measured (rebuilt, or still missing)",
            "fraction of frames not measured in the input (weighted by fill confidence)", "mean"),
     Metric("correction", "cleaned", "length", "a sample moved {v}",
            "largest move of a measured sample", "max"),
