@@ -54,9 +54,24 @@ class CleanResult:
 
 
 def bones_of(motion: Motion) -> np.ndarray:
-    if motion.skeleton is not None and motion.skeleton.bones:
-        return motion.skeleton.bone_array
-    return np.zeros((0, 2), dtype=np.intp)
+    """The bones whose length the report judges: the skeleton's, less those whose child
+    joint has translation channels that change over the take — there the file animates
+    the bone's vector by design (a root-motion node at the floor with the hips moving
+    about it, as in the Bandai BVH files: "varies by 45 %"), so its length is data, not
+    a segment that should keep its length."""
+    if motion.skeleton is None or not motion.skeleton.bones:
+        return np.zeros((0, 2), dtype=np.intp)
+    bones = motion.skeleton.bone_array
+    rig, channels = motion.rig, motion.channels
+    if rig is None or channels is None or not len(channels):
+        return bones
+    cols = np.asarray(rig.trans_columns)
+    animated = np.zeros(len(cols), dtype=bool)
+    for j in np.flatnonzero((cols >= 0).any(axis=1)):
+        c = cols[j][cols[j] >= 0]
+        if c.max() < channels.shape[1]:
+            animated[j] = bool((np.ptp(channels[:, c], axis=0) > 0).any())
+    return bones[~animated[bones[:, 1]]] if animated.any() else bones
 
 
 def bone_variation(positions: np.ndarray, bones: np.ndarray) -> np.ndarray:

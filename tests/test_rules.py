@@ -128,3 +128,64 @@ def test_uncertain_rule_grades_a_marker_rebuilt_from_little_data():
     result.cleaned.confidence = conf
     assert build_report(result)["joints"][1]["uncertain"] == pytest.approx(0.097)
     assert math.isfinite(b["uncertain"])
+
+
+ROOT_MOTION_BVH = """HIERARCHY
+ROOT Ground
+{
+  OFFSET 0 0 0
+  CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation
+  JOINT Hips
+  {
+    OFFSET 0 90 0
+    CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation
+    JOINT Spine
+    {
+      OFFSET 0 10 0
+      CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation
+      End Site
+      {
+        OFFSET 0 40 0
+      }
+    }
+  }
+}
+MOTION
+Frames: 4
+Frame Time: 0.01
+0 0 0 0 0 0 0 90 0 0 0 0 0 10 0 0 0 0
+0 0 0 0 0 0 50 92 0 0 0 0 0 10 0 30 0 0
+0 0 0 0 0 0 100 90 0 0 0 0 0 10 0 60 0 0
+0 0 0 0 0 0 150 88 0 0 0 0 0 10 0 90 0 0
+"""
+
+
+def test_bones_a_file_animates_by_translation_are_not_judged(tmp_path):
+    # a root-motion node at the floor with the hips travelling 1.5 m about it (the Bandai
+    # BVH files): the "bone" from it to the hips grew 90 -> 175 cm and the check WARNed
+    # "Hips: bone length varies by 45 %"; the spine, whose position channels hold still,
+    # is a segment and is judged
+    from mocapfix import formats
+    from mocapfix.measure import bone_variation, bones_of
+
+    path = tmp_path / "root_motion.bvh"
+    path.write_text(ROOT_MOTION_BVH)
+    motion = formats.read(path)
+    names = motion.names
+    judged = {(names[a], names[b]) for a, b in bones_of(motion)}
+    assert ("Ground", "Hips") not in judged
+    assert ("Hips", "Spine") in judged and ("Spine", "Spine_End") in judged
+    assert np.nanmax(bone_variation(motion.positions, motion.skeleton.bone_array)) > 0.2
+    assert np.nanmax(bone_variation(motion.positions, bones_of(motion))) < 1e-9
+    result = measure_input(motion)
+    assert not (result["file"].get("bone_variation") or 0.0) > 1e-9
+
+
+def test_bandai_root_motion_is_not_a_varying_bone():
+    from conftest import shared
+    from mocapfix import formats
+
+    for name in ("bandai_dataset-1_walk_normal_001.bvh", "bandai_dataset-2_run_normal_001.bvh"):
+        motion = formats.read(shared(f"bvh/{name}"))
+        verdict = default_rules().judge(measure_input(motion))
+        assert [f for f in verdict.findings if f.rule == "bone_variation"] == [], name
