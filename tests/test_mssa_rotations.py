@@ -162,6 +162,56 @@ def test_rotation_outliers_remove_spikes_and_keep_fast_real_motion(name):
     assert (cleaned.channels != spiked.channels).mean() < 0.01
 
 
+def _gait_channel(T=200, period=32, seed=0):
+    """A 30 Hz toe angle: a slow swing plus, once per gait cycle, a toe-off flick two
+    frames wide (30 degrees), each cycle a little different; light noise."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(T)
+    x = 20 * np.sin(2 * np.pi * t / period)
+    for k, c in enumerate(range(10, T - 5, period)):
+        x[c:c + 2] += 30 * (1 + 0.05 * rng.standard_normal()) * np.array([0.8, 1.0])
+    return x + 0.2 * rng.standard_normal(T)
+
+
+def test_a_deviation_that_recurs_every_cycle_is_motion_and_a_lone_one_a_glitch():
+    x = _gait_channel()
+    X = np.stack([x, x.copy(), x.copy()], axis=1)
+    X[101, 1] += 25.0                    # one glitch between two toe-offs
+    X[60, 2] += 25.0                     # two alike glitches in one channel
+    X[122, 2] += 25.0
+    found = glitches.glitches(X, width=7, k=16, floor=5.0)
+    toe_offs = np.zeros(len(x), bool)
+    for c in range(10, len(x) - 5, 32):
+        toe_offs[c:c + 2] = True
+    # the flicks are not flagged in any column; every glitch is, alone or alike
+    assert not found[toe_offs].any()
+    assert found[101, 1] and found[60, 2] and found[122, 2]
+    assert found.sum() == 3
+    # without the recurrence test the flicks were flagged (this is what it changes)
+    plain = glitches.confirm(X, found | toe_offs[:, None], threshold=np.full(3, 5.0),
+                             max_run=3)
+    assert plain[toe_offs].any()
+
+
+def test_glitches_at_the_ends_are_checked_against_the_cubic_beyond_them():
+    t = np.arange(120) / 30.0
+    fast = np.stack([40 * np.sin(2 * np.pi * 1.5 * t)] * 2, axis=1)   # fast, smooth, real
+    fast[1, 1] += 30.0                                                    # a glitch at frame 1
+    found = glitches.glitches(fast, width=7, k=16, floor=5.0)
+    assert not found[:, 0].any()                     # the real motion at both ends is kept
+    assert found[1, 1] and not found[5:, 1].any()
+
+
+def test_bandai_walk_toe_offs_are_kept_by_rotation_outliers():
+    # 30 Hz walk: one of its toes was re-made at every toe-off (27 joint-frames)
+    m = formats.read(shared("bvh/bandai_dataset-1_walk_normal_001.bvh"))
+    out, info = build("rotation_outliers", threshold=16).apply(m)
+    assert info.get("joint_frames_replaced", 0) <= 2
+    spiked, _ = br.corrupt(m, "spikes", 0)
+    cleaned, _ = build("rotation_outliers", threshold=16).apply(spiked)
+    assert br.evaluate(m, cleaned)["pos_err_pct"] < 0.05 * br.evaluate(m, spiked)["pos_err_pct"]
+
+
 @pytest.mark.parametrize("name", ["asfamc/13_39.amc", "bvh/cmu_cgspeed_131_01.bvh",
                                   "bvh/bandai_dataset-1_walk_normal_001.bvh"])
 def test_rotation_denoise_beats_the_gaussian_on_euler_curves(name):
