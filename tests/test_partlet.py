@@ -229,6 +229,23 @@ def test_kinect_skeleton_uses_the_kinect_model():
     assert info["model_joints"] == 25 and out.positions.shape == k.positions.shape
 
 
+def test_one_cleaner_picks_the_model_for_each_file_of_a_mixed_batch():
+    # the pipeline is built once per process: the cleaner kept the first file's shipped
+    # model and failed every later file of another skeleton ("the model's torso joints
+    # are not in walker_01.amc")
+    from conftest import SAMPLE_DATA
+
+    cleaner = build("partlet_dictionary")
+    kinect = formats.read(shared("kinect/kv2_laban_Ges01_wavehand.csv"))
+    amc = formats.read(SAMPLE_DATA / "walker_01.amc")
+    for motion in (kinect, amc, kinect):
+        out, info = cleaner.apply(motion)
+        # the Kinect model's 25 joints, or the CMU model's (the sample ASF maps 22 of 31)
+        assert info["model_joints"] == (25 if motion is kinect else 22)
+        assert out.positions.shape == motion.positions.shape
+    assert not cleaner.is_fitted                       # apply never changes the cleaner
+
+
 def test_unknown_skeleton_says_a_model_must_be_trained():
     m = Motion(np.random.default_rng(0).normal(size=(200, 5, 3)), list("ABCDE"), 100.0)
     with pytest.raises(ConfigError, match="train-dictionary"):

@@ -572,9 +572,12 @@ class PartletDictionary(FittedCleaner):
             raise ValueError("template does not match the frame joints")
         return self
 
-    def _ensure_model(self, motion: Motion):
-        if self.is_fitted:
-            return
+    def _shipped_for(self, motion: Motion) -> "PartletDictionary":
+        """A cleaner with this one's parameters and the shipped model for ``motion``'s
+        skeleton (by its joint names, :data:`AUTO_MODELS`), chosen per file: a batch may
+        mix CMU and Kinect skeletons, and ``apply`` never changes the configured cleaner
+        (it used to keep the first file's model for the whole run). Model files are read
+        once per process (:func:`mocapfix.models.load`)."""
         from mocapfix import models
 
         canon = set(bodyparts.canonical_names(motion.names))
@@ -583,8 +586,7 @@ class PartletDictionary(FittedCleaner):
                 if name not in models.shipped():
                     break
                 header, arrays = models.load(models.shipped()[name], cleaner=self.name)
-                self.load_state(header, arrays)
-                return
+                return type(self)(step=self.step, **self.config()).load_state(header, arrays)
         raise ConfigError(
             f"{self.step}: no partlet model for this skeleton ({motion.path or 'motion'}: joints "
             f"{', '.join(motion.names[:6])}…); train one with `mocapfix train-dictionary` and name it "
@@ -592,7 +594,8 @@ class PartletDictionary(FittedCleaner):
 
     # -- apply -------------------------------------------------------------------------------
     def _apply(self, motion: Motion):
-        self._ensure_model(motion)
+        if not self.is_fitted:
+            return self._shipped_for(motion)._apply(motion)
         idx = self._map_joints(motion.names)
         if (idx[self.frame_] < 0).sum() > len(self.frame_) - 3:
             raise ConfigError(f"{self.step}: the model's torso joints are not in "
