@@ -196,7 +196,7 @@ def info(inputs, as_json, fps, include, exclude):
     summaries, failed = [], 0
     for f in found.files:
         try:
-            options = {"fps": fps} if fps else {}
+            options = {"default_fps": fps} if fps else {}
             s = summarise(read(f.path, **options))
             summaries.append(s)
             if not as_json:
@@ -414,7 +414,7 @@ def clean(inputs, outdir, config_path, reports, jobs, as_json, fps, allow_inside
     manifest.start(todo)
     try:
         results = run_batch(todo, pipeline.config(), str(pipeline.source), kinds, jobs,
-                            {"fps": fps} if fps else None, on_result=stream, spec=spec)
+                            {"default_fps": fps} if fps else None, on_result=stream, spec=spec)
     except MocapfixError as exc:        # e.g. the Dask scheduler cannot be reached
         if not finished_here:           # nothing ran: leave the folder as it was
             manifest.abandon()
@@ -502,7 +502,7 @@ def check(inputs, rules_path, junit_path, as_json, fail_on, exit_zero, would_cle
             raise MocapfixError("no motion files found in " + ", ".join(inputs))
     except MocapfixError as exc:
         _fail(str(exc), debug, exc)
-    task = CheckTask(rules, config, source, {"fps": fps} if fps else None)
+    task = CheckTask(rules, config, source, {"default_fps": fps} if fps else None)
     names = [str(f.relative if f.root is None else f.root.name / f.relative) for f in found.files]
     results: list = [None] * len(found.files)
     try:

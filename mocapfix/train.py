@@ -49,7 +49,7 @@ class ReadTask:
 
     def __call__(self, path):
         try:
-            return formats.read(path, **({"fps": self.fps} if self.fps else {}))
+            return formats.read(path, **({"default_fps": self.fps} if self.fps else {}))
         except MocapfixError as exc:
             return {"input": str(path), "status": "ERROR", "error": str(exc)}
 

@@ -818,3 +818,36 @@ def test_a_kinect_time_column_of_absurd_steps_is_refused_by_the_reader(tmp_path)
     assert len(error) == 1 and error[0].startswith(f"ERROR {src / 'absurd.csv'}: the time column gives ")
     assert error[0].endswith("frames per second, outside 0.001-100000 Hz (a corrupt time column?)")
     assert (tmp_path / "out" / "fine.csv").is_file() and not list((tmp_path / "out").glob("absurd*"))
+
+
+def test_fps_sets_the_rate_of_files_that_store_none_and_leaves_stored_rates_alone(tmp_path):
+    # --fps 60 meant for the AMC files of a mixed folder rewrote the C3D file's rate, the
+    # BVH file's Frame Time and the Kinect CSV's time base as well
+    import json
+
+    from conftest import shared
+    from mocapfix import formats
+
+    src = tmp_path / "in"
+    src.mkdir()
+    for f in (BVH, C3D, KIN, SAMPLE_DATA / "walker.asf", SAMPLE_DATA / "walker_01.amc",
+              shared("kinect/kv1_msr3d_a01_s01_e01_skeleton3D.txt")):
+        shutil.copy(f, src / f.name)
+    out = tmp_path / "out"
+    r = CliRunner().invoke(main, ["clean", str(src), "-o", str(out), "-c", _cfg(tmp_path),
+                                  "--fps", "60"])
+    _no_traceback(r)
+    assert r.exit_code in (0, 1), r.output
+    rates = {p.name.split(".")[0]: json.loads(p.read_text())["file"]["fps"]
+             for p in out.glob("*.report.json")}
+    stored = {f.stem: formats.read(f).fps for f in (BVH, C3D, KIN)}
+    assert rates["walker_01"] == 60.0                       # AMC: no stored rate
+    assert rates["kv1_msr3d_a01_s01_e01_skeleton3D"] == 60.0  # MSR text: no timing
+    for stem, fps in stored.items():
+        assert abs(rates[stem] - fps) < 1e-9 * fps, stem      # stored rates are kept
+        assert abs(formats.read(out / (stem + {"walk": ".bvh", "walk_markers": ".c3d",
+                                               "walk_kinect_v2": ".csv"}[stem])).fps - fps) < 1e-6 * fps
+    note = json.loads((out / "walk_markers.report.json").read_text())["file"]["notes"]
+    assert any("--fps 60 not used: the file stores its rate" in n for n in note)
+    r = CliRunner().invoke(main, ["info", str(src / "walker_01.amc"), "--fps", "60"])
+    assert "at 60 fps" in r.output, r.output

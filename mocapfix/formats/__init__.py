@@ -63,8 +63,15 @@ def detect(path) -> str:
                                     "or Kinect skeleton .csv/.txt)")
 
 
-def read(path, format: str | None = None, **options) -> Motion:
+def read(path, format: str | None = None, *, default_fps: float | None = None,
+         **options) -> Motion:
     """Read any supported file into a :class:`Motion`.
+
+    ``fps`` (an option of every reader) overrides the file's rate; ``default_fps`` (the
+    command line's ``--fps``) is the rate of a file that stores none — AMC, and Kinect
+    text without time stamps — and leaves a stored rate alone (a note says it was not
+    used where it differs: a batch of AMC and C3D files given ``--fps 60`` for the AMC
+    files rewrote the C3D files' rate).
 
     Any failure is a :class:`UnreadableFileError` naming the file and the cause.
     """
@@ -74,6 +81,16 @@ def read(path, format: str | None = None, **options) -> Motion:
     if path.is_dir():
         raise UnreadableFileError(path, "is a directory, not a file")
     name = format or detect(path)
+    if default_fps is not None and options.get("fps") is None:
+        if name == "asfamc":                       # AMC files never store a rate
+            return read(path, name, fps=default_fps, **options)
+        motion = read(path, name, **options)
+        if name == "kinect" and motion.source is not None and motion.source.extra.get("rate_assumed"):
+            return read(path, name, fps=default_fps, **options)
+        if abs(float(default_fps) - motion.fps) > 1e-6 * motion.fps:
+            motion.notes.append(f"--fps {float(default_fps):g} not used: the file stores its "
+                                f"rate ({motion.fps:g} Hz)")
+        return motion
     mod = module(name)
     try:
         motion = mod.read(path, **options)

@@ -320,9 +320,16 @@ def read(path, fps: float | None = None, units: str | None = None, **options) ->
         raise UnreadableFileError(path, f"the time column gives {parts.file_fps:.4g} frames per "
                                         f"second, outside {MIN_FRAME_RATE_HZ:g}-"
                                         f"{MAX_FRAME_RATE_HZ:g} Hz (a corrupt time column?)")
+    # the layout readers note when the file gives no rate and they assume one
+    parts.extra["rate_assumed"] = any(_RATE_ASSUMED.search(n) for n in notes)
     motion = _assemble(parts, layout, bom, lines, endings, notes, fps)
     motion.path = str(path)
     return motion
+
+
+#: the notes of a layout reader that found no rate in the file ("… 30 fps assumed",
+#: "… assumed 30 fps")
+_RATE_ASSUMED = re.compile(r"fps assumed|assumed [0-9.]+ fps")
 
 
 def _why_unknown(first: str) -> str:
