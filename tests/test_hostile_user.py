@@ -849,5 +849,8 @@ def test_fps_sets_the_rate_of_files_that_store_none_and_leaves_stored_rates_alon
                                                "walk_kinect_v2": ".csv"}[stem])).fps - fps) < 1e-6 * fps
     note = json.loads((out / "walk_markers.report.json").read_text())["file"]["notes"]
     assert any("--fps 60 not used: the file stores its rate" in n for n in note)
+    note = json.loads((out / "kv1_msr3d_a01_s01_e01_skeleton3D.report.json").read_text())["file"]["notes"]
+    assert any("fps 60 given by the user (the file stores no rate)" in n for n in note)
+    assert not any("assumed" in n for n in note), note
     r = CliRunner().invoke(main, ["info", str(src / "walker_01.amc"), "--fps", "60"])
     assert "at 60 fps" in r.output, r.output

@@ -322,6 +322,8 @@ def read(path, fps: float | None = None, units: str | None = None, **options) ->
                                         f"{MAX_FRAME_RATE_HZ:g} Hz (a corrupt time column?)")
     # the layout readers note when the file gives no rate and they assume one
     parts.extra["rate_assumed"] = any(_RATE_ASSUMED.search(n) for n in notes)
+    if fps is not None and parts.extra["rate_assumed"]:
+        notes[:] = [n for n in notes if not _RATE_ASSUMED.search(n)]
     motion = _assemble(parts, layout, bom, lines, endings, notes, fps)
     motion.path = str(path)
     return motion
@@ -368,7 +370,9 @@ def _assemble(p: _Parsed, layout, bom, lines, endings, notes, fps) -> Motion:
     motion_fps = p.file_fps
     if fps is not None:
         fps = float(fps)
-        if abs(fps - p.file_fps) > 0.01 * p.file_fps:
+        if p.extra.get("rate_assumed"):
+            notes.append(f"fps {fps:g} given by the user (the file stores no rate)")
+        elif abs(fps - p.file_fps) > 0.01 * p.file_fps:
             notes.append(f"fps {fps:g} given by the user overrides the file's {p.file_fps:.4g} fps")
         motion_fps = fps
     source = KinectSource(
