@@ -176,9 +176,10 @@ class RotationOutliers(Cleaner):
     spread (1.4826 · MAD) of its channel's median residuals, and at least ``min_angle``
     (Hampel identifier) and stands off the cubic through the frames around it
     (:func:`mocapfix.solvers.glitches.glitches`; at the ends of the take, off the cubic
-    beyond it), unless the same deviation recurs at least twice more in its channel (a
-    toe-off in every gait cycle, two frames wide at 30 Hz, is motion; a glitch does not
-    repeat itself). A running median follows
+    beyond it), unless the same deviation recurs at least twice more in its channel with
+    the motion around it (a toe-off in every gait cycle, two frames wide at 30 Hz, is
+    motion; glitches alike in size do not come with alike surroundings). A running
+    median follows
     monotonic motion exactly, however fast, and only clips turning points, so fast real
     motion (acrobatics, toes) leaves residuals far below a 10° glitch; a glitch of up to
     (width − 1) / 2 frames is removed entirely by the median. A joint with any spiking
