@@ -208,3 +208,26 @@ def test_refill_skips_edge_and_short_gaps():
         two, info = build("fill_ensemble", refill=2).apply(m.replace(positions=pos))
         assert info["refilled_gaps"] == 0, label
         assert np.array_equal(one.positions, two.positions, equal_nan=True), label
+
+
+def test_grnn_is_the_gaussian_weighted_mean_of_the_training_targets():
+    # Specht 1991: y(x) = Σ y_i exp(−|z − z_i|² / 2s²) / Σ exp(…), z standardised by the
+    # training mean and spread; written out directly here (cdist) against the in-place
+    # kernel of pma._grnn (solvers), including far queries whose weights all underflow without
+    # the shift by the nearest distance
+    from scipy.spatial.distance import cdist
+
+    rng = np.random.default_rng(3)
+    X = rng.normal(size=(300, 9)) * rng.uniform(0.5, 50, size=9)
+    Y = rng.normal(size=(300, 3))
+    Xn = np.vstack([rng.normal(size=(40, 9)) * 20, X[:5] + 1e3])
+    predict = kernels._grnn(X, Y)
+    mx, sx = X.mean(axis=0), X.std(axis=0)
+    Z, Zn = (X - mx) / sx, (Xn - mx) / sx
+    d2 = cdist(Zn, Z, "sqeuclidean")
+    k = np.sort(cdist(Z[np.linspace(0, 299, kernels.SPREAD_POINTS).astype(int)], Z,
+                      "sqeuclidean"), axis=1)[:, 5]
+    s2 = np.median(k)
+    w = np.exp(-0.5 * (d2 - d2.min(axis=1, keepdims=True)) / s2)
+    np.testing.assert_allclose(predict(Xn), (w @ Y) / w.sum(axis=1, keepdims=True),
+                               rtol=1e-9, atol=1e-9)
