@@ -3,6 +3,7 @@ formats, write the output and its reports."""
 from __future__ import annotations
 
 import contextlib
+import os
 import time
 from pathlib import Path
 
@@ -32,8 +33,17 @@ def clean_motion(motion: Motion, pipeline: Pipeline) -> CleanResult:
 
 
 def report_paths(output: Path, kinds) -> dict[str, Path]:
-    stem = output.name[: -len(output.suffix)] if output.suffix else output.name
-    return {k: output.with_name(f"{stem}.report.{k}") for k in kinds}
+    """``take.c3d`` → ``take.c3d.report.json`` (``.md``, ``.html``): named after the whole
+    output name, so that ``take.c3d`` and ``take.bvh`` in one folder do not share reports
+    (named after the stem, one overwrote the others — which one depended on ``-j`` — and
+    a failed file's cleanup removed the report of its namesake). A name too long for that
+    (over 243 bytes) keeps the stem only, as the file system allows no more."""
+    from mocapfix.fileio import NAME_MAX
+
+    base = output.name
+    if len(os.fsencode(f"{base}.report.html")) > NAME_MAX and output.suffix:
+        base = output.name[: -len(output.suffix)]
+    return {k: output.with_name(f"{base}.report.{k}") for k in kinds}
 
 
 def output_files(output: Path) -> list[Path]:

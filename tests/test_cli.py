@@ -79,7 +79,7 @@ def test_clean_sample_folder_end_to_end(tmp_path):
         original = read(src / name)
         assert cleaned.positions.shape == original.positions.shape
         assert cleaned.missing.sum() <= original.missing.sum()
-        stem = name.rsplit(".", 1)[0]
+        stem = name                           # reports: take.c3d.report.json
         report = json.loads((out / f"{stem}.report.json").read_text())
         assert report["schema"] == "mocapfix.report/1"
         assert len(report["joints"]) == original.n_joints
@@ -88,7 +88,7 @@ def test_clean_sample_folder_end_to_end(tmp_path):
     assert (out / "walker.asf").exists()
     assert not list(out.rglob("*.part"))
     # the gaps of the sample C3D were filled and their filler named
-    rep = json.loads((out / "walk_markers.report.json").read_text())
+    rep = json.loads((out / "walk_markers.c3d.report.json").read_text())
     wrist = next(j for j in rep["joints"] if j["name"] == "LEFTWRIST")
     assert wrist["missing_before"] > 0 and wrist["missing_after"] == 0
     assert wrist["gaps"]["filled"] and wrist["gaps"]["filled"][0]["filled_by"]

@@ -77,7 +77,7 @@ def test_outputs_honour_the_umask(tmp_path, mask, mode):
     finally:
         os.umask(old)
     assert r.exit_code == 0, r.output
-    for name in ("walk_markers.c3d", "walk_markers.report.json", "walk_markers.report.md",
+    for name in ("walk_markers.c3d", "walk_markers.c3d.report.json", "walk_markers.c3d.report.md",
                  "mocapfix-config.yaml"):
         assert stat.S_IMODE((tmp_path / "o" / name).stat().st_mode) == mode, name
 
@@ -95,7 +95,7 @@ def test_non_motion_text_is_skipped_and_patterns_filter(tmp_path):
     r = CliRunner().invoke(main, ["clean", str(src), "-o", str(tmp_path / "p"), "-c", _cfg(tmp_path),
                                   "--include", "*.c3d"])
     assert r.exit_code == 0 and sorted(p.name for p in (tmp_path / "p").glob("walk*")) == [
-        "walk_markers.c3d", "walk_markers.report.json"]
+        "walk_markers.c3d", "walk_markers.c3d.report.json"]
     r = CliRunner().invoke(main, ["clean", str(src), "-o", str(tmp_path / "x"), "-c", _cfg(tmp_path),
                                   "--exclude", "*.c3d"])
     assert r.exit_code == 0 and not (tmp_path / "x" / "walk_markers.c3d").exists()
@@ -140,7 +140,7 @@ def test_dry_run_overwrite_policy_and_true_provenance(tmp_path):
     assert "ERROR" in r.output and "walk_markers.c3d" in r.output and "FAILED" not in r.output
     assert (out / "mocapfix-config.yaml").read_text() == first_config
     # …and the failed file's earlier output is gone with it (no output the record denies)
-    assert not (out / "walk_markers.c3d").exists() and not (out / "walk_markers.report.json").exists()
+    assert not (out / "walk_markers.c3d").exists() and not (out / "walk_markers.c3d.report.json").exists()
     # --report none replaces and removes the old reports beside the new output
     r = CliRunner().invoke(main, ["clean", str(src), "-o", str(out), "-c", good, "--overwrite",
                                   "--report", "none"])

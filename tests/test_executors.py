@@ -52,7 +52,7 @@ def test_dask_local_cluster_gives_byte_identical_outputs(tmp_path):
     for rel in a:
         assert a[rel] == b[rel], rel
     # and the reports do carry real content (not two empty dicts compared)
-    assert a["walk_markers.report.json"]["file"]["frames"] > 100
+    assert a["walk_markers.c3d.report.json"]["file"]["frames"] > 100
 
 
 def test_cli_dask_workers_match_local(tmp_path):

@@ -144,7 +144,7 @@ def test_the_report_says_which_step_refused_a_gaps_fill_and_why(tmp_path):
 
     out = tmp_path / "s09.c3d"
     clean_file(shared("c3d/c3dorg_s09_PlugInC3D.c3d"), out, load_config(default_config_path()))
-    report = json.loads((tmp_path / "s09.report.json").read_text())
+    report = json.loads((tmp_path / "s09.c3d.report.json").read_text())
     rfoa = next(j for j in report["joints"] if j["name"] == "RFOA")
     left = [g for g in rfoa["gaps"]["unfilled"] if g["start"] == 185]
     assert left and left[0]["rejected_by"] == [

@@ -136,9 +136,10 @@ def test_a_file_name_that_is_not_utf8_is_cleaned_and_reported(tmp_path):
     _no_traceback(r)
     assert r.exit_code == 0, r.output
     names = sorted(os.listdir(os.fsencode(out)))
-    for name in (b"take\xff.bvh", b"take\xff.report.json", b"take\xff.report.md", b"take\xff.report.html"):
+    for name in (b"take\xff.bvh", b"take\xff.bvh.report.json", b"take\xff.bvh.report.md",
+                 b"take\xff.bvh.report.html"):
         assert name in names, names
-    md = (out / os.fsdecode(b"take\xff.report.md")).read_bytes()
+    md = (out / os.fsdecode(b"take\xff.bvh.report.md")).read_bytes()
     md.decode("utf-8")                                   # the reports stay UTF-8 text
     junit = tmp_path / "check.xml"
     r = CliRunner().invoke(main, ["check", str(src), "--junit", str(junit), "--exit-zero"])
@@ -225,6 +226,7 @@ def test_a_long_but_legal_file_name_is_cleaned_and_its_stale_temporary_removed(t
     _no_traceback(r)
     assert r.exit_code == 0, r.output
     assert (out / f"{stem}.bvh").read_bytes().startswith(b"HIERARCHY")
+    # its report keeps the stem only: "<name>.bvh.report.json" would pass the 255 bytes
     assert (out / f"{stem}.report.json").is_file()
     # the temporary a killed run leaves for that name is found and removed by the next run
     from mocapfix.fileio import NAME_MAX
@@ -477,7 +479,7 @@ def test_a_joint_moved_beyond_the_float_range_is_reported_not_an_internal_error(
     r = CliRunner().invoke(main, ["clean", str(src), "-o", str(out), "--report", "json,md,html"])
     _no_traceback(r)
     assert r.exit_code == 0 and "internal error" not in r.output, r.output
-    report = json.loads((out / "glitch.report.json").read_text())
+    report = json.loads((out / "glitch.bvh.report.json").read_text())
     assert any(j["correction_mm"]["max"] is None for j in report["joints"])
     assert (out / "glitch.bvh").read_text().startswith("HIERARCHY")
 
@@ -587,7 +589,7 @@ def test_a_model_header_nested_too_deep_is_a_config_error(tmp_path):
 
 
 def test_a_folder_where_a_report_goes_fails_that_file_only_and_keeps_shared_skeletons(tmp_path):
-    # out/walker_02.report.json is a folder: the report cannot be written. The cleanup
+    # out/walker_02.amc.report.json is a folder: the report cannot be written. The cleanup
     # then tried to unlink that folder (IsADirectoryError): the file became "internal
     # error", the same error in the batch's own cleanup stopped the run (later files never
     # cleaned), and the cleanup also deleted walker.asf, which walker_01.amc, cleaned
@@ -601,15 +603,15 @@ def test_a_folder_where_a_report_goes_fails_that_file_only_and_keeps_shared_skel
         shutil.copy(SAMPLE_DATA / "walker_01.amc", src / f"walker_{n}.amc")
     shutil.copy(KIN, src / "zz_last.csv")
     out = tmp_path / "out"
-    (out / "walker_02.report.json").mkdir(parents=True)
+    (out / "walker_02.amc.report.json").mkdir(parents=True)
     r = CliRunner().invoke(main, ["clean", str(src), "-o", str(out), "-c", _cfg(tmp_path), "--overwrite"])
     _no_traceback(r)
     assert r.exit_code == 1, r.output
     error = [line for line in r.output.splitlines() if line.startswith("ERROR")]
-    assert len(error) == 1 and "walker_02.report.json: cannot write: Is a directory" in error[0], r.output
+    assert len(error) == 1 and "walker_02.amc.report.json: cannot write: Is a directory" in error[0], r.output
     assert (out / "zz_last.csv").is_file()                 # the batch went on
     assert not (out / "walker_02.amc").exists()            # nothing left for the failed file
-    assert (out / "walker_02.report.json").is_dir()        # the folder is not ours to remove
+    assert (out / "walker_02.amc.report.json").is_dir()        # the folder is not ours to remove
     assert formats.read(out / "walker_01.amc").n_frames > 0  # its skeleton is still there
 
 
@@ -847,10 +849,34 @@ def test_fps_sets_the_rate_of_files_that_store_none_and_leaves_stored_rates_alon
         assert abs(rates[stem] - fps) < 1e-9 * fps, stem      # stored rates are kept
         assert abs(formats.read(out / (stem + {"walk": ".bvh", "walk_markers": ".c3d",
                                                "walk_kinect_v2": ".csv"}[stem])).fps - fps) < 1e-6 * fps
-    note = json.loads((out / "walk_markers.report.json").read_text())["file"]["notes"]
+    note = json.loads((out / "walk_markers.c3d.report.json").read_text())["file"]["notes"]
     assert any("--fps 60 not used: the file stores its rate" in n for n in note)
-    note = json.loads((out / "kv1_msr3d_a01_s01_e01_skeleton3D.report.json").read_text())["file"]["notes"]
+    note = json.loads((out / "kv1_msr3d_a01_s01_e01_skeleton3D.txt.report.json").read_text())["file"]["notes"]
     assert any("fps 60 given by the user (the file stores no rate)" in n for n in note)
     assert not any("assumed" in n for n in note), note
     r = CliRunner().invoke(main, ["info", str(src / "walker_01.amc"), "--fps", "60"])
     assert "at 60 fps" in r.output, r.output
+
+
+def test_files_that_share_a_name_but_not_a_format_keep_their_own_reports(tmp_path):
+    # take.bvh, take.c3d and take.csv in one folder all wrote take.report.json: two of
+    # the three reports were lost (which one survived depended on -j), and a failed
+    # file's cleanup removed the report of a namesake that had been cleaned
+    import json
+
+    src = tmp_path / "in"
+    src.mkdir()
+    for f, name in ((BVH, "take.bvh"), (C3D, "take.c3d"), (KIN, "take.csv")):
+        shutil.copy(f, src / name)
+    (src / "take.amc").write_text("not an AMC\n")           # fails to read
+    for jobs in ("1", "2"):
+        out = tmp_path / f"out{jobs}"
+        r = CliRunner().invoke(main, ["clean", str(src), "-o", str(out), "-c", _cfg(tmp_path),
+                                      "-j", jobs, "--report", "json,md"])
+        _no_traceback(r)
+        assert r.exit_code == 1, r.output                   # take.amc failed
+        for name in ("take.bvh", "take.c3d", "take.csv"):
+            report = json.loads((out / f"{name}.report.json").read_text())
+            assert report["file"]["path"] == str(src / name)
+            assert (out / f"{name}.report.md").is_file()
+        assert not (out / "take.amc").exists() and not (out / "take.amc.report.json").exists()

@@ -74,7 +74,7 @@ def test_report_page_in_headless_chromium(tmp_path, sample):
     out = tmp_path / "out"
     r = CliRunner().invoke(main, ["clean", str(SAMPLE_DATA / sample), "-o", str(out), "--report", "html"])
     assert r.exit_code == 0, r.output
-    report = out / (sample.rsplit(".", 1)[0] + ".report.html")
+    report = out / (sample + ".report.html")
     probed = tmp_path / report.name
     probed.write_text(report.read_text().replace("<head>", "<head>" + PROBE, 1))
     shot, dom = _render(browser, probed, tmp_path)
