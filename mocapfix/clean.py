@@ -9,7 +9,7 @@ from pathlib import Path
 
 from mocapfix import formats
 from mocapfix.errors import UnreadableFileError
-from mocapfix.fileio import atomic_write_text
+from mocapfix.fileio import NAME_MAX, atomic_write_text
 from mocapfix.motion import Motion
 from mocapfix.pipeline import Pipeline
 from mocapfix.report import CleanResult, build_report, to_html, to_json, to_markdown
@@ -38,8 +38,6 @@ def report_paths(output: Path, kinds) -> dict[str, Path]:
     (named after the stem, one overwrote the others — which one depended on ``-j`` — and
     a failed file's cleanup removed the report of its namesake). A name too long for that
     (over 243 bytes) keeps the stem only, as the file system allows no more."""
-    from mocapfix.fileio import NAME_MAX
-
     base = output.name
     if len(os.fsencode(f"{base}.report.html")) > NAME_MAX and output.suffix:
         base = output.name[: -len(output.suffix)]

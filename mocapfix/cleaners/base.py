@@ -245,6 +245,11 @@ class FittedCleaner(Cleaner):
         """Set the learned state from a model file's header and arrays; returns self."""
         raise NotImplementedError
 
+    def with_state(self, header: dict, arrays: dict) -> "FittedCleaner":
+        """A new cleaner with this one's parameters and the given learned state (a model
+        chosen per file; ``apply`` never changes the configured cleaner)."""
+        return type(self)(step=self.step, **self.config()).load_state(header, arrays)
+
     def model_header_fields(self) -> dict:
         """What a model file records besides the state: the cleaner and its parameters."""
         return {"cleaner": self.name, "parameters": self.config()}

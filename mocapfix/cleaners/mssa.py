@@ -256,8 +256,7 @@ class MSSA(FittedCleaner):
                     header, arrays = models.load(ships[name], cleaner=self.name)
                     st = header["state"]
                     if fits([list(x) for x in st["layout"]], float(st["fps"]), st["space"]):
-                        other = type(self)(step=self.step, **self.config())
-                        other.load_state(header, arrays)
+                        other = self.with_state(header, arrays)
                         return other.bases_, other.mean_, other.unexplained_, name, other.window_
         return None
 

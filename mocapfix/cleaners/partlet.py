@@ -586,7 +586,7 @@ class PartletDictionary(FittedCleaner):
                 if name not in models.shipped():
                     break
                 header, arrays = models.load(models.shipped()[name], cleaner=self.name)
-                return type(self)(step=self.step, **self.config()).load_state(header, arrays)
+                return self.with_state(header, arrays)
         raise ConfigError(
             f"{self.step}: no partlet model for this skeleton ({motion.path or 'motion'}: joints "
             f"{', '.join(motion.names[:6])}…); train one with `mocapfix train-dictionary` and name it "
