@@ -13,7 +13,7 @@ import sys
 import click
 
 from mocapfix import __version__
-from mocapfix.errors import MocapfixError
+from mocapfix.errors import MocapfixError, UnreadableFileError
 
 EXIT_OK, EXIT_SOME_FAILED, EXIT_USAGE, EXIT_UNREADABLE = 0, 1, 2, 3
 
@@ -594,6 +594,8 @@ def train_dictionary(training, output, method, atoms, window, sample_rate, lam, 
         check_output_file(output, "-o", training)
         summary = train(training, output, method, params, jobs, fps, progress,
                         spec=_executor_spec(jobs, scheduler, dask_workers))
+    except UnreadableFileError as exc:
+        _fail(str(exc), debug, exc, code=EXIT_UNREADABLE)
     except MocapfixError as exc:
         _fail(str(exc), debug, exc)
     finally:
@@ -601,6 +603,8 @@ def train_dictionary(training, output, method, atoms, window, sample_rate, lam, 
             bar.close()
     for path, why in summary["skipped"]:
         out.line(f"skipped {path}: {why}", level=0)
+    for path, why in summary["unread"]:
+        out.line(f"ERROR {why} (left out of the training)", level=-1, err=True)
     t = summary["training"]
     st = summary["state"]
     if method == "mssa":
@@ -608,11 +612,13 @@ def train_dictionary(training, output, method, atoms, window, sample_rate, lam, 
                  f"{len(st['layout'])} {st['space']} channels at {st['fps']:g} Hz; trained on "
                  f"{len(t['files'])} files, {t['frames']} frames in {t['seconds']:.1f} s; "
                  f"unexplained energy {100 * st['unexplained']:.3f} %", level=-1)
-        return
+        sys.exit(EXIT_SOME_FAILED if summary["unread"] else EXIT_OK)
     out.line(f"wrote {output}: {summary['cleaner']} ({st['method']}), {len(st['joints'])} joints in "
                f"{len(st['partlets'])} partlets, window {st['window']} at {st['sample_rate']:g} Hz; "
                f"trained on {len(t['files'])} files, {t['frames']} frames in {t['seconds']:.1f} s; "
                "unexplained energy " + ", ".join(f"{p} {100 * f:.2f} %" for p, f in st["unexplained"].items()), level=-1)
+    if summary["unread"]:
+        sys.exit(EXIT_SOME_FAILED)
 
 
 def _register_bench():

@@ -2,6 +2,11 @@
 forward kinematics for BVH/AMC), fit a cleaner's model and write it as a model file
 (:mod:`mocapfix.models`) with its training provenance.
 
+A file that cannot be read does not stop the training: it is named, left out, listed in
+the model's provenance (``training.unread``) and makes the command exit 1, as ``clean`` does
+for a file it could not clean — one damaged take in a corpus of hundreds costs that take,
+not the run.
+
 A training method names a fitted cleaner and the parameters that select its training
 algorithm (:data:`METHODS`); other options are that cleaner's parameters.
 """
@@ -14,7 +19,7 @@ from pathlib import Path
 from mocapfix import formats, models
 from mocapfix.cleaners import build
 from mocapfix.cleaners.base import FittedCleaner
-from mocapfix.errors import MocapfixError
+from mocapfix.errors import MocapfixError, UnreadableFileError
 
 #: --method → (cleaner, parameters that choose its training algorithm)
 METHODS: dict[str, tuple[str, dict]] = {
@@ -54,18 +59,24 @@ class ReadTask:
             return {"input": str(path), "status": "ERROR", "error": str(exc)}
 
 
-def read_all(paths, jobs: int = 1, fps: float | None = None, progress=None, spec=None):
+def read_all(paths, jobs: int = 1, fps: float | None = None, progress=None, spec=None,
+             unread: list | None = None):
     """Read every training file (in ``jobs`` local processes, or on the executor ``spec``
-    names: :class:`mocapfix.executors.ExecutorSpec`); a file that cannot be read is an
-    error naming it — a model must not silently miss part of its training set."""
+    names: :class:`mocapfix.executors.ExecutorSpec`). A file that cannot be read is an error
+    naming it; with an ``unread`` list it is appended there as ``(path, message)`` instead
+    and left out of the result (``None`` in its place)."""
     from mocapfix.batch import run_tasks
 
     out: list = [None] * len(paths)
     for done, (n, motion) in enumerate(run_tasks(ReadTask(fps), list(paths), jobs, spec=spec), 1):
         if isinstance(motion, dict):
-            raise MocapfixError(motion["error"] if str(paths[n]) in motion["error"]
-                                else f"{paths[n]}: {motion['error']}")
-        out[n] = motion
+            message = (motion["error"] if str(paths[n]) in motion["error"]
+                       else f"{paths[n]}: {motion['error']}")
+            if unread is None:
+                raise MocapfixError(message)
+            unread.append((paths[n], message))
+        else:
+            out[n] = motion
         if progress:
             progress(done, len(paths))
     return out
@@ -84,12 +95,21 @@ def train(inputs, output, method: str = "partlet", params: dict | None = None, j
         raise MocapfixError(f"{cleaner_name} is not a trained cleaner")
     skipped: list = []
     paths = discover_training(inputs, skipped)
+    unread: list = []
     motions = read_all(paths, jobs, fps, progress=(lambda n, t: progress("read", n, t)) if progress else None,
-                       spec=spec)
+                       spec=spec, unread=unread)
+    if unread:
+        paths = [p for p, m in zip(paths, motions) if m is not None]
+        motions = [m for m in motions if m is not None]
+        if not motions:
+            raise UnreadableFileError(unread[0][0], f"none of the {len(unread)} training files "
+                                      f"could be read (this one: {unread[0][1]})")
     cleaner.fit(motions, progress=(lambda n, t: progress("fit", n, t)) if progress else None)
     header, arrays = cleaner.state()
     header.update(cleaner.model_header_fields())
     header["training"] = models.provenance(paths, [m.n_frames for m in motions],
                                            time.perf_counter() - started)
+    if unread:
+        header["training"]["unread"] = [{"path": str(p), "error": e} for p, e in unread]
     models.save(output, header, arrays)
-    return {"output": str(output), "skipped": skipped, **header}
+    return {"output": str(output), "skipped": skipped, "unread": unread, **header}

@@ -4,6 +4,8 @@ classical filter per case), its use on other conventions (CMU BVH, Kinect), the
 out-of-sample warning, and the train-dictionary command end to end."""
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 from click.testing import CliRunner
@@ -296,12 +298,34 @@ def test_train_dictionary_command_and_a_config_that_uses_the_model(tmp_path):
     assert res.exit_code == 0, res.output
 
 
-def test_train_dictionary_refuses_unreadable_training_files(tmp_path):
+def test_train_dictionary_with_no_readable_file_writes_no_model(tmp_path):
     bad = tmp_path / "broken.bvh"
     bad.write_text("HIERARCHY\nROOT x {\n")
     res = CliRunner().invoke(main, ["train-dictionary", str(bad), "-o", str(tmp_path / "m.npz")])
-    assert res.exit_code == 2 and "broken.bvh" in res.output
+    assert res.exit_code == 3 and "broken.bvh" in res.output
     assert not (tmp_path / "m.npz").exists()
+
+
+def test_one_unreadable_training_file_is_named_left_out_and_recorded(tmp_path):
+    """A damaged take in a training folder costs that take, not the run: the others are
+    trained on, the take is named, the model's provenance lists it, and the exit is 1."""
+    import shutil
+
+    takes = tmp_path / "takes"
+    takes.mkdir()
+    for name in ("05.asf", "05_01.amc", "05_02.amc"):
+        shutil.copy(shared(f"asfamc/{name}"), takes / name)
+    good = (takes / "05_02.amc").read_text().splitlines(keepends=True)
+    (takes / "05_03.amc").write_text("".join(good[:40]) + "12\nroot 1.0 oops\n")
+    out = tmp_path / "m.npz"
+    res = CliRunner().invoke(main, ["train-dictionary", str(takes), "-o", str(out),
+                                    "--atoms", "16", "--iterations", "2", "--max-windows", "400"])
+    assert res.exit_code == 1, res.output
+    assert "05_03.amc" in res.output and "left out of the training" in res.output
+    assert "trained on 2 files" in res.output
+    training = models.read_header(out)["training"]
+    assert sorted(Path(f["path"]).name for f in training["files"]) == ["05_01.amc", "05_02.amc"]
+    assert [Path(u["path"]).name for u in training["unread"]] == ["05_03.amc"]
 
 
 def test_kinect_v1_v2_azure_and_msr_names_map_to_the_kinect_model_joints():
