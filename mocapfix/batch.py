@@ -147,7 +147,22 @@ def discover_inputs(inputs, include=(), exclude=(), sniff: bool = True) -> Disco
                     skipped.append((str(f), "not motion data (no known layout)"))
                     continue
                 files.append(Found(f, root))
-    return Discovery(files, skipped)
+    return Discovery(*_once(files, skipped))
+
+
+def _once(files: list, skipped: list) -> tuple[list, list]:
+    """Drop a file named a second time with the same output name (``clean in in/walk.bvh``,
+    or one file given twice): it is processed once, and the skip says why."""
+    seen: set = set()
+    kept = []
+    for f in files:
+        key = (os.path.realpath(f.path), f.relative)
+        if key in seen:
+            skipped.append((str(f.path), "given more than once (processed once)"))
+            continue
+        seen.add(key)
+        kept.append(f)
+    return kept, skipped
 
 
 def check_output_folder(outdir) -> Path:

@@ -880,3 +880,25 @@ def test_files_that_share_a_name_but_not_a_format_keep_their_own_reports(tmp_pat
             assert report["file"]["path"] == str(src / name)
             assert (out / f"{name}.report.md").is_file()
         assert not (out / "take.amc").exists() and not (out / "take.amc.report.json").exists()
+
+
+def test_a_file_named_again_inside_its_folder_is_cleaned_once(tmp_path):
+    """``clean in in/walk.bvh`` (or one file named twice) cleans that file once and says so;
+    two different files that would write one output are still refused."""
+    src = tmp_path / "in"
+    shutil.copytree(SAMPLE_DATA, src)
+    take = next(p for p in sorted(src.iterdir()) if p.suffix == ".bvh")
+    out = tmp_path / "out"
+    r = CliRunner().invoke(main, ["clean", str(src), str(take), str(take), "-o", str(out),
+                                  "-c", _cfg(tmp_path)])
+    _no_traceback(r)
+    assert r.exit_code == 0, r.output
+    assert r.output.count(f"SKIP  {take}: given more than once") == 2
+    assert r.output.count(f"{take} ->") == 1
+    sub = src / "sub"
+    sub.mkdir()
+    shutil.copy(take, sub / take.name)
+    r = CliRunner().invoke(main, ["clean", str(src), str(sub / take.name), "-o", str(tmp_path / "o2"),
+                                  "-c", _cfg(tmp_path)])
+    assert r.exit_code == 2 and "would both be written" in r.output, r.output
+    assert not (tmp_path / "o2" / take.name).exists()
