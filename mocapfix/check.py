@@ -1,8 +1,9 @@
 """``mocapfix check``: measure capture files as read and judge them against rules, without
 changing anything (a CI gate for capture archives).
 
-Per file the result is ``OK``/``WARN``/``FAIL`` (quality, from the rules) or ``ERROR`` (the
-file could not be read). Exit codes: 0 every file passed (WARN passes), 1 a rule failed,
+Per file the result is ``OK``/``WARN``/``FAIL`` (quality, from the rules; with
+``--would-clean``, a pipeline that cannot clean the file is a ``FAIL`` too) or ``ERROR``
+(the file could not be read). Exit codes: 0 every file passed (WARN passes), 1 a rule failed,
 2 usage or config error, 3 an input could not be read (takes precedence over 1).
 """
 from __future__ import annotations
@@ -26,7 +27,18 @@ def check_motion(motion, rules: RuleSet, pipeline=None) -> dict:
               "findings": [f.as_dict() for f in verdict.findings],
               "file": measured["file"], "joints": measured["joints"]}
     if pipeline is not None:
-        result["would_clean"] = would_clean(motion, pipeline)
+        try:
+            result["would_clean"] = would_clean(motion, pipeline)
+        except MocapfixError as exc:
+            # the file was read and judged; the pipeline the gate asked about cannot clean
+            # it (a trained cleaner with no model for this skeleton, ...): a failed check,
+            # not an unreadable input
+            message = f"the --would-clean pipeline cannot clean this file: {exc}"
+            result["status"] = "FAIL"
+            result["findings"].insert(0, {"rule": "would_clean", "metric": "pipeline",
+                                          "level": "FAIL", "value": None, "threshold": "",
+                                          "message": message})
+            result["would_clean"] = {"error": str(exc)}
     return result
 
 

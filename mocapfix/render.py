@@ -323,7 +323,7 @@ def check_line(result: dict, verbose: bool = False) -> str:
     if verbose:
         lines = [head] + [f"      {f['level']}: {f['message']}" for f in findings]
         wc = result.get("would_clean")
-        if wc:
+        if wc and "error" not in wc:
             lines.append(f"      would clean: fill {wc['samples_filled']} samples, flag "
                          f"{wc['samples_flagged']}, leave {_pct(wc['missing_after'])} missing and "
                          f"{_pct(wc['uncertain'])} not measured (rebuilt, or still missing)")

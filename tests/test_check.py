@@ -95,6 +95,31 @@ def test_exit_codes_pass_fail_unreadable_usage(tmp_path):
     assert r.exit_code == 2 and "RULE=VALUE" in r.output
 
 
+def test_a_would_clean_pipeline_that_cannot_clean_a_file_fails_it_not_errors(tmp_path):
+    """The marker C3D is readable; a partlet pipeline has no model for a marker set. The
+    gate reports a failed check (exit 1, a JUnit failure naming the cause), not an
+    unreadable input (exit 3), and the other file is judged as usual."""
+    src = tmp_path / "in"
+    src.mkdir()
+    shutil.copy(SAMPLE_DATA / "walk_markers.c3d", src / "walk.c3d")
+    shutil.copy(SAMPLE_DATA / "walk_kinect_v2.csv", src / "kinect.csv")
+    cfg = tmp_path / "partlet.yaml"
+    cfg.write_text("version: 1\npipeline:\n  - cleaner: partlet_dictionary\n")
+    junit = tmp_path / "out.xml"
+    r = CliRunner().invoke(main, ["check", str(src), "--junit", str(junit), "--json", "--exit-zero",
+                                  "--would-clean", str(cfg)])
+    assert r.exit_code == 0, r.output
+    files = {f["name"]: f for f in json.loads(r.stdout)["files"]}
+    c3d = files["in/walk.c3d"]
+    assert c3d["status"] == "FAIL" and c3d["findings"][0]["rule"] == "would_clean"
+    assert "train" in c3d["findings"][0]["message"] and "error" in c3d["would_clean"]
+    assert "samples_filled" in files["in/kinect.csv"]["would_clean"]
+    cases = {c.name: c for suite in junitparser.JUnitXml.fromfile(str(junit)) for c in suite}
+    assert isinstance(cases["in/walk.c3d"].result[0], junitparser.Failure)
+    r = CliRunner().invoke(main, ["check", str(src / "walk.c3d"), "-v", "--would-clean", str(cfg)])
+    assert r.exit_code == 1 and "FAIL" in r.output and "cannot clean this file" in r.output, r.output
+
+
 def test_junit_error_for_unreadable_and_would_clean(tmp_path):
     src = tmp_path / "in"
     src.mkdir()
