@@ -697,3 +697,31 @@ def test_bulk_csv_writer_matches_on_real_files(name):
     new[::11, 3] = np.nan
     cleaned = motion.replace(positions=new)
     assert kinect._fast_csv_text(motion.source, cleaned) == kinect._edited_text(motion.source, cleaned)
+
+
+@pytest.mark.parametrize("name, text", [
+    ("long.csv", "frame,joint,x,y,z\n0,Head,0,1,2\n0,Neck,0,0.8,2\n1,Head,0,1.01,2\n1,Neck,0,0.81,2\n"
+                 "2,Head,0,1.02,2\n2,Neck,0,0.82,2\n"),
+    ("wide.csv", "Head_X,Head_Y,Head_Z,Neck_X,Neck_Y,Neck_Z\n0,1,2,0,0.8,2\n0,1.01,2,0,0.81,2\n"
+                 "0,1.02,2,0,0.82,2\n"),
+])
+def test_every_layout_without_a_rate_takes_the_given_default_and_says_so(tmp_path, name, text):
+    """A layout that stores no rate notes the one it assumed; ``default_fps`` (--fps)
+    replaces it and its note, while a file with a time column keeps its own rate."""
+    path = _write(tmp_path, name, text)
+    assumed = formats.read(path)
+    assert assumed.fps == pytest.approx(kinect.DEFAULT_FPS) and assumed.source.extra["rate_assumed"]
+    assert any("assumed" in n for n in assumed.notes)
+    given = formats.read(path, default_fps=45)
+    assert given.fps == 45 and not any("assumed" in n for n in given.notes)
+    assert any("fps 45 given by the user (the file stores no rate)" in n for n in given.notes)
+    header, *rows = text.splitlines()
+    if name == "wide.csv":                          # a time column in seconds, 50 Hz
+        rows = [f"{k / 50:.2f},{row}" for k, row in enumerate(rows)]
+        header = "time," + header
+    else:                                           # the frame column becomes seconds
+        rows = [f"{int(row.split(',')[0]) / 50:.2f},{row.split(',', 1)[1]}" for row in rows]
+        header = header.replace("frame,", "time_s,")
+    timed = _write(tmp_path, "timed_" + name, "\n".join([header, *rows]) + "\n")
+    kept = formats.read(timed, default_fps=45)
+    assert kept.fps == pytest.approx(50) and not kept.source.extra["rate_assumed"]

@@ -320,18 +320,19 @@ def read(path, fps: float | None = None, units: str | None = None, **options) ->
         raise UnreadableFileError(path, f"the time column gives {parts.file_fps:.4g} frames per "
                                         f"second, outside {MIN_FRAME_RATE_HZ:g}-"
                                         f"{MAX_FRAME_RATE_HZ:g} Hz (a corrupt time column?)")
-    # the layout readers note when the file gives no rate and they assume one
-    parts.extra["rate_assumed"] = any(_RATE_ASSUMED.search(n) for n in notes)
+    parts.extra["rate_assumed"] = any(isinstance(n, RateAssumed) for n in notes)
     if fps is not None and parts.extra["rate_assumed"]:
-        notes[:] = [n for n in notes if not _RATE_ASSUMED.search(n)]
+        notes[:] = [n for n in notes if not isinstance(n, RateAssumed)]
     motion = _assemble(parts, layout, bom, lines, endings, notes, fps)
     motion.path = str(path)
     return motion
 
 
-#: the notes of a layout reader that found no rate in the file ("… 30 fps assumed",
-#: "… assumed 30 fps")
-_RATE_ASSUMED = re.compile(r"fps assumed|assumed [0-9.]+ fps")
+class RateAssumed(str):
+    """The note of a layout reader that found no rate in the file and assumed one (made
+    whether or not ``fps`` was given, so every such layout is known to store none): its
+    type, not its wording, tells :func:`read` the file stores no rate (``--fps`` then sets
+    it) and lets a given ``fps`` drop the note."""
 
 
 def _why_unknown(first: str) -> str:
@@ -463,7 +464,7 @@ def _read_kinect_csv(path, lines, idx, notes, layout, fps, units) -> _Parsed:
 def _or_default(value: float, default: float, notes: list[str]) -> float:
     if np.isfinite(value) and value > 0:
         return float(value)
-    notes.append(f"frame rate unknown; assumed {default:g} fps")
+    notes.append(RateAssumed(f"frame rate unknown; assumed {default:g} fps"))
     return default
 
 
@@ -537,7 +538,7 @@ def _read_msr(path, lines, idx, notes, layout, fps, units) -> _Parsed:
     low = int(np.sum((conf == 0) & ~missing))
     if low:
         notes.append(f"{low} samples with confidence 0 kept as low-confidence (not missing)")
-    notes.append(f"MSR Action3D files hold no timing; nominal {MSR_FPS:g} fps assumed")
+    notes.append(RateAssumed(f"MSR Action3D files hold no timing; nominal {MSR_FPS:g} fps assumed"))
     confidence = conf.copy()
     confidence[missing] = 0.0
     T = block.shape[0]
@@ -602,8 +603,7 @@ def _times_from_column(values: np.ndarray, kind: str, fps: float | None, notes) 
     rel = values - values[0]
     if kind == "frame":
         rate = fps or DEFAULT_FPS
-        if fps is None:
-            notes.append(f"frame numbers but no time column: {DEFAULT_FPS:g} fps assumed")
+        notes.append(RateAssumed(f"frame numbers but no time column: {DEFAULT_FPS:g} fps assumed"))
         return rel / rate
     scale = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ticks": 1e-7}.get(kind)
     if scale is None:
@@ -741,8 +741,7 @@ def _wide_states(rows, idx, joints, names, path, missing):
 def _wide_times(rows, idx, time_col, fps, path, notes):
     if time_col is None:
         rate = fps or DEFAULT_FPS
-        if fps is None:
-            notes.append(f"no time column: {DEFAULT_FPS:g} fps assumed")
+        notes.append(RateAssumed(f"no time column: {DEFAULT_FPS:g} fps assumed"))
         return None, rate
     col, kind = time_col
     values = _column_values(rows, idx, [col], path)
