@@ -89,7 +89,9 @@ def test_fill_ensemble_drops_the_jumping_members_only_when_the_average_jumps():
 def test_default_clean_fills_no_run_that_jumps_three_times_the_markers_largest_step(name):
     """On these captures a group of markers leaves the volume at once and the PCA prior of
     ``tsmc`` changed its mind there: a foot marker was filled 558 / 622 mm from its last
-    sample, 11–12× the largest step its own data makes (and 29 cm under the floor)."""
+    sample, 11–12× the largest step its own data makes (and 29 cm under the floor). On
+    s09 the prior still does without ``max_step``; on s04 it did while its iteration
+    stopped at the fit cap, and no longer does converged (2.96×)."""
     motion = read(shared(f"c3d/{name}"))
     P0 = motion.positions
     missing = np.isnan(P0).any(axis=2)
@@ -114,7 +116,8 @@ def test_default_clean_fills_no_run_that_jumps_three_times_the_markers_largest_s
     for step in data["pipeline"]:
         if step["cleaner"] == "tsmc":
             step["max_step"] = 0
-    assert worst_ratio(parse_config(data)) > 10.0
+    if "s09" in name:
+        assert worst_ratio(parse_config(data)) > 10.0
 
 
 def test_fill_ensemble_refills_without_the_member_that_jumped_on_a_real_capture():

@@ -277,19 +277,22 @@ def test_gap_edge_bridge_helps_on_isolated_missing_samples(amc_random_missing, m
 # and the ±3 sd distance constraint):
 #                               / best interpolation          / PCA pipeline
 #                               mean   worst                  mean   worst
-#   85_02  gaps                 0.041  0.072                  0.212  0.371
-#   85_02  mixed                0.041  0.050                  0.226  0.278
+#   85_02  gaps                 0.041  0.071                  0.235  0.446
+#   85_02  mixed                0.038  0.047                  0.204  0.222
 #   85_02  noise                0.980  0.987                  0.959  0.971
 #   HDM05  gaps                 0.028  0.040                  0.292  0.314
 #   HDM05  mixed                0.057  0.066                  0.586  0.596
 #   HDM05  noise                0.880  0.882                  0.865  0.868
 # (With swaps → trust → tsmc the 85_02 ratios to the PCA pipeline were 0.97–0.99: level.)
+# The 85_02 PCA ratios were 0.212 / 0.371 and 0.226 / 0.278 while fill_pca's iteration
+# stopped at its 300-fit cap short of convergence; with SQUAREM it converges (the default's
+# own RMSE did not change), which made the PCA pipeline better on gaps and worse on mixed.
 # In the noise scenario nothing is missing before ``trust``: those rows test trust
 # (outlier removal) and the GCV smoothing of observed samples, not the fill. Swap cases
 # are in test_default_accuracy (exact repair by ``swaps``; 0 vs 0 here).
 RATIO_BOUNDS = {  # (capture, scenario): {baseline: (mean, worst seed)}
-    ("85_02", "gaps"): {"classical": (0.046, 0.080), "pca": (0.234, 0.409)},
-    ("85_02", "mixed"): {"classical": (0.045, 0.055), "pca": (0.249, 0.306)},
+    ("85_02", "gaps"): {"classical": (0.046, 0.080), "pca": (0.26, 0.49)},
+    ("85_02", "mixed"): {"classical": (0.045, 0.055), "pca": (0.225, 0.245)},
     ("85_02", "noise"): {"classical": (0.99, 0.995), "pca": (0.975, 0.98)},
     ("hdm05", "gaps"): {"classical": (0.031, 0.044), "pca": (0.321, 0.346)},
     ("hdm05", "mixed"): {"classical": (0.063, 0.073), "pca": (0.645, 0.656)},

@@ -22,7 +22,7 @@ class PCAFill(Cleaner):
         Param("weight_scale", "length", "300 mm",
               "distance scale of the per-marker refinement weights (null: global PCA only)",
               unit="mm", low=0.0, low_open=True, nullable=True),
-        Param("max_iter", "int", 300, "iteration cap of the imputation loop", low=1, high=10000),
+        Param("max_iter", "int", 300, "cap on the model fits of the imputation loop (SQUAREM-accelerated)", low=1, high=10000),
         Param("tol", "length", "0.05 mm", "stop when no filled sample moves more than this",
               unit="mm", low=0.0),
         Param("max_gap", "time", None, "longest gap filled (null: all)", unit="s",

@@ -300,30 +300,50 @@ class _Moments:
         return self.mean.copy(), self.cov.copy()
 
 
+#: a SQUAREM step is kept unless its residual grows beyond this many times the last one
+_SQUAREM_LEASH = 100.0
+
+
 def impute_lowrank(X, missing, variance: float = 0.99, rank: int | None = None,
-                   max_iter: int = 100, tol: float = 0.0):
+                   max_iter: int = 100, tol: float = 0.0, accelerate: bool = True):
     """Iterative low-rank imputation of the ``missing`` entries of ``X`` (T, C).
 
-    Loop: fit :func:`ppca_fit` on the current completed matrix; replace every missing
-    entry by its conditional mean given the observed entries of its row
-    (:func:`conditional_mean_rows`); stop when the largest change of a missing entry is
-    <= ``tol`` or after ``max_iter`` fits. Observed entries never change. Each iteration
-    costs one C x C eigen-decomposition, one k x k inverse per missing pattern, a few
-    (T, C) x (C, k) products and the covariance of the columns with missing entries
-    against all (:class:`_Moments`: the rest of the covariance does not change).
+    The map ``F``: fit :func:`ppca_fit` on the matrix completed with the current fill;
+    predict every missing entry by its conditional mean given the observed entries of its
+    row (:func:`conditional_mean_rows`). The fill is iterated to a fixed point of ``F``:
+    stop when ``F`` moves no missing entry by more than ``tol``, or after ``max_iter``
+    evaluations of ``F`` (fits). Observed entries never change. One evaluation costs one
+    C x C eigen-decomposition, one k x k inverse per missing pattern, a few (T, C) x (C, k)
+    products and the covariance of the columns with missing entries against all
+    (:class:`_Moments`: the rest of the covariance does not change).
+
+    ``accelerate`` (default): SQUAREM (Varadhan & Roland 2008, "Simple and globally
+    convergent methods for accelerating the convergence of any EM algorithm", Scand. J.
+    Stat. 35:335-353; scheme S3, step ``alpha = -|r| / |v|`` with ``r = F(x) - x``,
+    ``v = F(F(x)) - 2 F(x) + x``, new point ``x - 2 alpha r + alpha^2 v`` followed by one
+    ``F``). Plain iteration creeps where markers with gaps are strongly correlated: on
+    CMU 85_02 (1,200 frames, a quarter of the markers with 1-3 gaps of 0.1-1.5 s) it
+    needed 300-1,300 fits, and the 300-fit cap stopped it up to 45 mm from its fixed
+    point; SQUAREM reaches the same fixed point in 55-160 fits. Safeguards: a step whose
+    residual ``|F(x') - x'|`` is more than ``_SQUAREM_LEASH`` times the residual it started
+    from (or not finite) is dropped for the two plain steps already taken; stopped by
+    ``max_iter``, the fill returned is the one with the smallest residual seen. EM
+    residuals can jump and then fall: a leash of 10 threw away useful steps (tsmc's prior
+    on 500 frames of 85_02: 1,043 fits against 195 with 100; plain iteration 1,636).
 
     Parameters
     ----------
     X : ndarray (T, C); missing entries hold an initial guess (e.g. interpolation).
     missing : bool ndarray (T, C).
     variance, rank : see :func:`ppca_fit`.
-    max_iter : int >= 1.
+    max_iter : int >= 1, evaluations of ``F``.
     tol : float, in the unit of ``X``.
+    accelerate : bool, SQUAREM (True) or plain iteration.
 
     Returns
     -------
-    completed (T, C), info dict (iterations, rank, last_change, converged, model=(mean,
-    W, sigma2) of the last fit).
+    completed (T, C), info dict (iterations = fits, rank, last_change, converged,
+    model=(mean, W, sigma2) of the fit on the completed matrix).
     """
     X = np.array(X, dtype=np.float64)
     missing = np.asarray(missing, dtype=bool)
@@ -331,19 +351,48 @@ def impute_lowrank(X, missing, variance: float = 0.99, rank: int | None = None,
     rows = grouping[0]
     hole_row, hole_col = np.nonzero(missing[rows])          # the holes, by row of ``rows``
     hole_x = rows[hole_row]                                 # ... and by row of X
-    change = 0.0
     moments = _Moments(X, np.unique(hole_col))
     model = ppca_from_moments(*moments.update(X), variance, rank)
-    iterations = 0
-    for iterations in range(1, max_iter + 1):
-        if not len(rows):
-            break
-        predicted = conditional_mean_rows(X, grouping, *model[:3], at=(hole_row, hole_col))
-        change = float(np.max(np.abs(predicted - X[hole_x, hole_col])))
-        X[hole_x, hole_col] = predicted
+    fits = 0
+
+    def step(x):
+        """F(x): the model fitted with the holes at ``x``, and its prediction of them."""
+        nonlocal model, fits
+        if x is not None:
+            X[hole_x, hole_col] = x
+            model = ppca_from_moments(*moments.update(X), variance, rank)
+        fits += 1
+        return conditional_mean_rows(X, grouping, *model[:3], at=(hole_row, hole_col))
+
+    change = 0.0
+    if len(rows):
+        x = X[hole_x, hole_col].copy()
+        fx = step(None)                                     # the model of X is fitted already
+        change = float(np.max(np.abs(fx - x)))
+        best = (float(np.linalg.norm(fx - x)), fx, change)
+        while change > tol and fits < max_iter:
+            if not accelerate or fits + 2 > max_iter:
+                x, fx = fx, step(fx)
+            else:
+                ffx = step(fx)
+                r, v = fx - x, ffx - 2 * fx + x
+                vv = float(v @ v)
+                alpha = min(-np.sqrt(float(r @ r) / vv), -1.0) if vv > 0 else -1.0
+                trial = x - 2 * alpha * r + alpha * alpha * v
+                f_trial = step(trial)
+                if (np.isfinite(f_trial).all()
+                        and np.linalg.norm(f_trial - trial) <= _SQUAREM_LEASH * np.linalg.norm(r)):
+                    x, fx = trial, f_trial
+                else:                                       # thrown far: keep the plain steps
+                    x, fx = fx, ffx
+            change = float(np.max(np.abs(fx - x)))
+            residual = float(np.linalg.norm(fx - x))
+            if residual < best[0]:
+                best = (residual, fx, change)
+        if change > tol:                                    # stopped by max_iter
+            _, fx, change = best
+        X[hole_x, hole_col] = fx
         model = ppca_from_moments(*moments.update(X), variance, rank)
-        if change <= tol:
-            break
-    info = dict(iterations=iterations, rank=int(model[3]), last_change=change,
+    info = dict(iterations=fits, rank=int(model[3]), last_change=change,
                 converged=bool(change <= tol), model=model[:3])
     return X, info
