@@ -12,6 +12,7 @@ algorithm (:data:`METHODS`); other options are that cleaner's parameters.
 """
 from __future__ import annotations
 
+import re
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -102,8 +103,11 @@ def train(inputs, output, method: str = "partlet", params: dict | None = None, j
         paths = [p for p, m in zip(paths, motions) if m is not None]
         motions = [m for m in motions if m is not None]
         if not motions:
-            raise UnreadableFileError(unread[0][0], f"none of the {len(unread)} training files "
-                                      f"could be read (this one: {unread[0][1]})")
+            first, why = unread[0]
+            if why.startswith(str(first)):              # "PATH:LINE: cause" -> "line LINE: cause"
+                why = re.sub(r"^:(\d+):", r"line \1:", why[len(str(first)):]).lstrip(": ")
+            raise UnreadableFileError(first, f"none of the {len(unread)} training files could "
+                                             f"be read; this one: {why}")
     cleaner.fit(motions, progress=(lambda n, t: progress("fit", n, t)) if progress else None)
     header, arrays = cleaner.state()
     header.update(cleaner.model_header_fields())
