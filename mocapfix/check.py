@@ -11,7 +11,7 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass
 from mocapfix.errors import MocapfixError
-from mocapfix.rules import RuleSet
+from mocapfix.rules import Finding, RuleSet
 
 EXIT_PASS, EXIT_FAILED, EXIT_USAGE, EXIT_UNREADABLE = 0, 1, 2, 3
 
@@ -35,9 +35,8 @@ def check_motion(motion, rules: RuleSet, pipeline=None) -> dict:
             # not an unreadable input
             message = f"the --would-clean pipeline cannot clean this file: {exc}"
             result["status"] = "FAIL"
-            result["findings"].insert(0, {"rule": "would_clean", "metric": "pipeline",
-                                          "level": "FAIL", "value": None, "threshold": "",
-                                          "message": message})
+            result["findings"].insert(0, Finding("would_clean", "pipeline", "FAIL", None, "",
+                                                 message).as_dict())
             result["would_clean"] = {"error": str(exc)}
     return result
 

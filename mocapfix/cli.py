@@ -612,11 +612,11 @@ def train_dictionary(training, output, method, atoms, window, sample_rate, lam, 
                  f"{len(st['layout'])} {st['space']} channels at {st['fps']:g} Hz; trained on "
                  f"{len(t['files'])} files, {t['frames']} frames in {t['seconds']:.1f} s; "
                  f"unexplained energy {100 * st['unexplained']:.3f} %", level=-1)
-        sys.exit(EXIT_SOME_FAILED if summary["unread"] else EXIT_OK)
-    out.line(f"wrote {output}: {summary['cleaner']} ({st['method']}), {len(st['joints'])} joints in "
-               f"{len(st['partlets'])} partlets, window {st['window']} at {st['sample_rate']:g} Hz; "
-               f"trained on {len(t['files'])} files, {t['frames']} frames in {t['seconds']:.1f} s; "
-               "unexplained energy " + ", ".join(f"{p} {100 * f:.2f} %" for p, f in st["unexplained"].items()), level=-1)
+    else:
+        out.line(f"wrote {output}: {summary['cleaner']} ({st['method']}), {len(st['joints'])} joints in "
+                 f"{len(st['partlets'])} partlets, window {st['window']} at {st['sample_rate']:g} Hz; "
+                 f"trained on {len(t['files'])} files, {t['frames']} frames in {t['seconds']:.1f} s; "
+                 "unexplained energy " + ", ".join(f"{p} {100 * f:.2f} %" for p, f in st["unexplained"].items()), level=-1)
     if summary["unread"]:
         sys.exit(EXIT_SOME_FAILED)
 
