@@ -705,15 +705,23 @@ def test_bulk_csv_writer_matches_on_real_files(name):
     ("wide.csv", "Head_X,Head_Y,Head_Z,Neck_X,Neck_Y,Neck_Z\n0,1,2,0,0.8,2\n0,1.01,2,0,0.81,2\n"
                  "0,1.02,2,0,0.82,2\n"),
 ])
-def test_every_layout_without_a_rate_takes_the_given_default_and_says_so(tmp_path, name, text):
+def test_every_layout_without_a_rate_takes_the_given_default_and_says_so(tmp_path, monkeypatch,
+                                                                         name, text):
     """A layout that stores no rate notes the one it assumed; ``default_fps`` (--fps)
-    replaces it and its note, while a file with a time column keeps its own rate."""
+    replaces it and its note, while a file with a time column keeps its own rate; either
+    way the file is read once."""
     path = _write(tmp_path, name, text)
     assumed = formats.read(path)
     assert assumed.fps == pytest.approx(kinect.DEFAULT_FPS) and assumed.source.extra["rate_assumed"]
     assert any("assumed" in n for n in assumed.notes)
+    reads = []
+    monkeypatch.setattr(kinect, "read_input_bytes",
+                        lambda p, _read=kinect.read_input_bytes: reads.append(p) or _read(p))
     given = formats.read(path, default_fps=45)
+    assert reads == [path]
     assert given.fps == 45 and not any("assumed" in n for n in given.notes)
+    if name == "long.csv":                          # times from the frame column, at 45 Hz
+        assert np.allclose(np.diff(given.times), 1 / 45)
     assert any("fps 45 given by the user (the file stores no rate)" in n for n in given.notes)
     header, *rows = text.splitlines()
     if name == "wide.csv":                          # a time column in seconds, 50 Hz
@@ -724,4 +732,5 @@ def test_every_layout_without_a_rate_takes_the_given_default_and_says_so(tmp_pat
         header = header.replace("frame,", "time_s,")
     timed = _write(tmp_path, "timed_" + name, "\n".join([header, *rows]) + "\n")
     kept = formats.read(timed, default_fps=45)
+    assert reads == [path, timed]
     assert kept.fps == pytest.approx(50) and not kept.source.extra["rate_assumed"]

@@ -81,16 +81,24 @@ def read(path, format: str | None = None, *, default_fps: float | None = None,
     if path.is_dir():
         raise UnreadableFileError(path, "is a directory, not a file")
     name = format or detect(path)
-    if default_fps is not None and options.get("fps") is None:
-        if name == "asfamc":                       # AMC files never store a rate
-            return read(path, name, fps=default_fps, **options)
-        motion = read(path, name, **options)
-        if name == "kinect" and motion.source is not None and motion.source.extra.get("rate_assumed"):
-            return read(path, name, fps=default_fps, **options)
-        if abs(float(default_fps) - motion.fps) > 1e-6 * motion.fps:
-            motion.notes.append(f"--fps {float(default_fps):g} not used: the file stores its "
-                                f"rate ({motion.fps:g} Hz)")
-        return motion
+    if default_fps is None or options.get("fps") is not None:
+        return _read_as(path, name, options)
+    if name == "asfamc":                           # AMC files never store a rate
+        return _read_as(path, name, {**options, "fps": default_fps})
+    if name == "kinect":                           # the reader knows which layouts store none
+        motion = _read_as(path, name, {**options, "default_fps": default_fps})
+        if motion.source is not None and motion.source.extra.get("rate_assumed"):
+            return motion
+    else:
+        motion = _read_as(path, name, options)
+    if abs(float(default_fps) - motion.fps) > 1e-6 * motion.fps:
+        motion.notes.append(f"--fps {float(default_fps):g} not used: the file stores its "
+                            f"rate ({motion.fps:g} Hz)")
+    return motion
+
+
+def _read_as(path: Path, name: str, options: dict) -> Motion:
+    """The format module's reader, its failures made :class:`UnreadableFileError`."""
     mod = module(name)
     try:
         motion = mod.read(path, **options)

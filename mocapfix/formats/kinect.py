@@ -294,8 +294,14 @@ def sniff(head: bytes) -> bool:
 # ---------------------------------------------------------------------------------------
 # reading
 # ---------------------------------------------------------------------------------------
-def read(path, fps: float | None = None, units: str | None = None, **options) -> Motion:
-    """Read any of the layouts (see the module docstring) into a :class:`Motion`."""
+def read(path, fps: float | None = None, units: str | None = None,
+         default_fps: float | None = None, **options) -> Motion:
+    """Read any of the layouts (see the module docstring) into a :class:`Motion`.
+
+    ``fps`` overrides the file's rate; ``default_fps`` (the command line's ``--fps``) is the
+    rate of a file that stores none (its :class:`RateAssumed` layouts) and leaves a stored
+    rate alone. Each layout uses the rate it is given only where it would assume one, so
+    one parse serves both cases."""
     path = Path(path)
     raw = read_input_bytes(path)
     bom, text = _decode(raw, path)
@@ -310,10 +316,12 @@ def read(path, fps: float | None = None, units: str | None = None, **options) ->
     if layout is None:
         raise UnreadableFileError(path, _why_unknown(lines[idx[0]]), line=idx[0] + 1)
     reader = _READERS[layout]
-    if fps is not None and not (np.isfinite(float(fps)) and float(fps) > 0):
-        raise UnreadableFileError(path, f"fps must be a positive number, got {fps}")
+    for rate in (fps, default_fps):
+        if rate is not None and not (np.isfinite(float(rate)) and float(rate) > 0):
+            raise UnreadableFileError(path, f"fps must be a positive number, got {rate}")
+    given = fps if fps is not None else default_fps
     notes: list[str] = []
-    parts = reader(path, lines, idx, notes, layout=layout, fps=fps, units=units)
+    parts = reader(path, lines, idx, notes, layout=layout, fps=given, units=units)
     if not MIN_FRAME_RATE_HZ <= parts.file_fps <= MAX_FRAME_RATE_HZ:
         # time stamps 1e300 apart gave "90 frames at 0 fps", and cleaning overflowed
         # (internal error OverflowError); the BVH reader refuses such rates too
@@ -321,8 +329,9 @@ def read(path, fps: float | None = None, units: str | None = None, **options) ->
                                         f"second, outside {MIN_FRAME_RATE_HZ:g}-"
                                         f"{MAX_FRAME_RATE_HZ:g} Hz (a corrupt time column?)")
     parts.extra["rate_assumed"] = any(isinstance(n, RateAssumed) for n in notes)
-    if fps is not None and parts.extra["rate_assumed"]:
+    if given is not None and parts.extra["rate_assumed"]:
         notes[:] = [n for n in notes if not isinstance(n, RateAssumed)]
+        fps = given
     motion = _assemble(parts, layout, bom, lines, endings, notes, fps)
     motion.path = str(path)
     return motion
