@@ -140,8 +140,9 @@ def test_fill_ensemble_refills_without_the_member_that_jumped_on_a_real_capture(
 
 
 def test_the_report_says_which_step_refused_a_gaps_fill_and_why(tmp_path):
-    """c3d.org s09: tsmc's fill of the right foot's trailing gaps jumped; the gap is left,
-    and the report says so under it."""
+    """c3d.org s09: no other marker is seen through the right foot's trailing gap, so the
+    ensemble has no member for it, and tsmc's fill jumped; the gap is left, and the report
+    says both under it."""
     from mocapfix.clean import clean_file
     import json
 
@@ -151,6 +152,7 @@ def test_the_report_says_which_step_refused_a_gaps_fill_and_why(tmp_path):
     rfoa = next(j for j in report["joints"] if j["name"] == "RFOA")
     left = [g for g in rfoa["gaps"]["unfilled"] if g["start"] == 185]
     assert left and left[0]["rejected_by"] == [
+        {"step": "step 3 (fill_ensemble)", "why": "no other marker is seen through it"},
         {"step": "step 4 (tsmc)",
          "why": "its fill jumped more than 3x the marker's largest measured step in one frame"}]
     refused = [g for j in report["joints"] for g in j["gaps"]["unfilled"] if "rejected_by" in g]

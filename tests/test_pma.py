@@ -231,3 +231,52 @@ def test_grnn_is_the_gaussian_weighted_mean_of_the_training_targets():
     w = np.exp(-0.5 * (d2 - d2.min(axis=1, keepdims=True)) / s2)
     np.testing.assert_allclose(predict(Xn), (w @ Y) / w.sum(axis=1, keepdims=True),
                                rtol=1e-9, atol=1e-9)
+
+
+def test_gaps_no_other_marker_is_seen_through_get_no_members_and_a_reason(monkeypatch):
+    """PhoeniX dance with interior gaps in six markers and its last 60 frames empty (every
+    marker gone, as OptiTrack exports end): the empty frames are left missing, each with the
+    reason in ``rejected_fills``; no member is fitted for them or for their validation
+    windows (only the six 50-frame gaps' windows are predicted), and the six gaps get the same
+    fills as when every gap goes through the members."""
+    m = read(shared("c3d/c3dorg_s13_Dance.c3d"))
+    pos = m.positions.copy()
+    T = len(pos)
+    for k, j in enumerate(range(0, 36, 6)):
+        pos[100 + 40 * k:150 + 40 * k, j] = np.nan
+    pos[T - 60:] = np.nan
+    work = m.replace(positions=pos)
+    predicted = []
+
+    def counting(pos_, observed, j, windows, *args, **kw):
+        predicted.extend(windows)
+        return window_fills(pos_, observed, j, windows, *args, **kw)
+
+    window_fills = kernels.window_fills
+    monkeypatch.setattr(kernels, "window_fills", counting)
+    out, info = build("fill_ensemble").apply(work)
+    empty = np.zeros(pos.shape[:2], bool)
+    empty[T - 60:] = True
+    assert np.isnan(out.positions[empty]).all()
+    assert not np.isnan(out.positions[~empty]).any()
+    assert sorted(info["rejected_fills"]) == sorted(m.names)
+    assert all(r == [[T - 60, 60, "no other marker is seen through it"]]
+               for r in info["rejected_fills"].values())
+    assert predicted and all(e - s == 50 for s, e in predicted)     # no 60-frame window
+    # the shortcut against every gap through the members (same windows, same fills)
+    cleaner = build("fill_ensemble")
+    observed = ~work.missing
+    mu, sd = kernels.distance_stats(pos, observed)
+    gaps = kernels.gap_list(observed)
+    local = tuple(cleaner["members"])
+    quick = cleaner._validated_fills(work, observed, gaps, {}, local, mu, sd, skip_unsupported=True)
+    full = cleaner._validated_fills(work, observed, gaps, {}, local, mu, sd)
+    hopeless = [not len(kernels.candidates(observed, sd, *g)) for g in gaps]
+    assert sum(hopeless) == m.n_joints and sum(not h for h in hopeless) == 6
+    for h, (cand_q, fills_q), (cand_f, fills_f), err_q, err_f in zip(hopeless, quick[0], full[0],
+                                                                     quick[1], full[1]):
+        if h:
+            assert not fills_q and not fills_f and not err_q and not len(cand_q)
+        else:
+            assert fills_q.keys() == fills_f.keys() and err_q == err_f
+            assert all(np.array_equal(fills_q[k], fills_f[k]) for k in fills_q)

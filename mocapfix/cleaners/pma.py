@@ -145,7 +145,8 @@ class PMA(Cleaner):
             # orientation)
             references: dict = {}
             members, validated = self._validated_fills(work, observed, gaps, external, local,
-                                                       mu, sd, references=references)
+                                                       mu, sd, references=references,
+                                                       skip_unsupported=not external)
         expected = len(pma.member_names(local, self["neighbours"])) + len(external)
         seen_points = motion.positions[~motion.missing]
         lo, hi = seen_points.min(axis=0), seen_points.max(axis=0)
@@ -159,9 +160,12 @@ class PMA(Cleaner):
                                     members, validated, combined, info, references, top)
         info["rejected_samples"] = 0
         info[REJECTED_FILLS] = {}
-        for (j, s, e), result in zip(gaps, combined):
+        for (j, s, e), result, (cand, _) in zip(gaps, combined, members):
             n = e - s
             if result is None:
+                if not len(cand):
+                    info[REJECTED_FILLS].setdefault(motion.names[j], []).append(
+                        [int(s), int(n), "no other marker is seen through it"])
                 continue
             avg, spread, names, w = result
             if avg is None:
@@ -415,22 +419,36 @@ class PMA(Cleaner):
         return out
 
     def _validated_fills(self, motion, observed, gaps, external, local, mu, sd, copies=None,
-                         references=None):
+                         references=None, skip_unsupported=False):
         """Every member's fill of every gap and, per gap, member name → mean squared error
         on the gap's validation windows (:meth:`_validation_windows`;
         :func:`mocapfix.solvers.pma.validated_member_fills`); the external members are
-        rerun on each copy with its windows cut."""
+        rerun on each copy with its windows cut. ``skip_unsupported``: a gap through which
+        no other marker is seen (no local member can fill it: a whole-body dropout, the
+        empty frames at the end of an export) gets no members, and its validation windows
+        are cut but not filled — the members fitted for them were thrown away
+        (btk_mocap36_optitrack, whose 36 gaps are its last 229 frames with no marker at
+        all: 4.9 → 0.05 s); the other gaps' windows and fills stay as they were."""
         pos = motion.positions
+        windows = self._validation_windows(observed, gaps, copies)
+        keep = np.ones(len(gaps), bool)
+        if skip_unsupported:
+            keep = np.array([len(pma.candidates(observed, sd, *g)) > 0 for g in gaps], bool)
+            if not keep.all():
+                index = np.cumsum(keep) - 1             # a kept gap's place among the kept
+                windows = [(cut, [(int(index[g]), u, v) for g, u, v in synth if keep[g]])
+                           for cut, synth in windows]
 
         def copy_external(cut):
             return self._external(motion.replace(positions=np.where(cut[..., None], pos, np.nan),
                                                  confidence=None))
 
-        rows = pma.validated_member_fills(pos, observed, gaps, self._validation_windows(observed, gaps, copies),
-                                          external, local=local, neighbours=self["neighbours"], mu=mu,
-                                          sd=sd, weight_scale=self.length("weight_scale", motion),
-                                          copy_external=copy_external if external else None,
-                                          references=references)
+        rows = iter(pma.validated_member_fills(
+            pos, observed, [g for g, k in zip(gaps, keep) if k], windows, external, local=local,
+            neighbours=self["neighbours"], mu=mu, sd=sd,
+            weight_scale=self.length("weight_scale", motion),
+            copy_external=copy_external if external else None, references=references))
+        rows = [next(rows) if k else (np.array([], dtype=np.intp), {}, {}) for k in keep]
         return [(cand, fills) for cand, fills, _ in rows], [errs for _, _, errs in rows]
 
 

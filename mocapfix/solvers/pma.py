@@ -413,7 +413,7 @@ def member_fills(pos, observed, gaps, external, *, local=LOCAL_FILLERS, neighbou
         mu, sd = distance_stats(pos, observed)
     T = pos.shape[0]
     sizes = (neighbours,) if np.isscalar(neighbours) else tuple(neighbours)
-    cands = [_candidates(observed, sd, j, s, e) for j, s, e in gaps]
+    cands = [candidates(observed, sd, j, s, e) for j, s, e in gaps]
     # one job per (marker, member set, neighbour count, markers used): the gaps it fills
     jobs: dict = {}
     for g, ((j, s, e), cand) in enumerate(zip(gaps, cands)):
@@ -501,9 +501,10 @@ def validated_member_fills(pos, observed, gaps, copies, external, *, local=LOCAL
             for (cand, f), err in zip(real, errors)]
 
 
-def _candidates(observed, sd, j, s, e):
+def candidates(observed, sd, j, s, e):
     """The markers observed on frames ``s-1 .. e`` (the gap ``s..e-1`` of ``j`` and its
-    borders) with a known distance deviation to ``j``, most rigid first."""
+    borders) with a known distance deviation to ``j``, most rigid first: the neighbours
+    every local filler draws on (none: no local filler can fill the gap)."""
     T = observed.shape[0]
     seen = observed[max(s - 1, 0):min(e + 1, T)].all(axis=0)
     seen[j] = False
