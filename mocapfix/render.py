@@ -72,6 +72,29 @@ def _long_fills(report: dict) -> list[str]:
     return out
 
 
+def _gaps_left(report: dict, shown: int = 12) -> list[str]:
+    """Markdown section listing the gaps no step filled completely, with the reasons the
+    steps gave for refusing their fills (``rejected_by``); gaps of one span and one reason
+    share a row (a whole-body dropout is one row, not one per marker). None: no section."""
+    fps = report["file"].get("fps") or 0
+    rows: dict[tuple, list[str]] = {}
+    for j in report["joints"]:
+        for g in j["gaps"]["unfilled"]:
+            why = "; ".join(f"{r['step']}: {r['why']}" for r in g.get("rejected_by", ()))
+            rows.setdefault((g["start"], g["length"], g["filled_frames"], why), []).append(j["name"])
+    if not rows:
+        return []
+    out = ["", "## Gaps left unfilled", "",
+           "| frames | s | joints | why |", "|---|---:|---|---|"]
+    for (start, length, filled, why), names in sorted(rows.items(), key=lambda r: (-r[0][1], r[0][0])):
+        more = f", … (+{len(names) - shown})" if len(names) > shown else ""
+        part = f" ({filled} filled)" if filled else ""
+        secs = f"{length / fps:.2f}" if fps else "–"
+        out.append(f"| {start}–{start + length - 1}{part} | {secs} | {len(names)}: "
+                   f"{', '.join(names[:shown])}{more} | {why or 'no step could fill it'} |")
+    return out
+
+
 def _not_cleaned(report: dict, shown: int = 12) -> list[str]:
     """Markdown section naming the points left alone by design, grouped by reason."""
     by_why: dict[str, list[str]] = {}
@@ -130,6 +153,7 @@ def to_markdown(report: dict) -> str:
             f"| {_num(j['jitter_before'], '{:.2f}')} → {_num(j['jitter_after'], '{:.2f}')} "
             f"| {'; '.join(j['reasons']) or '–'} |")
     out += _long_fills(report)
+    out += _gaps_left(report)
     out += _not_cleaned(report)
     rules = report.get("rules") or []
     if rules:

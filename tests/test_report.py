@@ -102,3 +102,26 @@ def test_long_fills_are_listed_with_their_confidence():
     assert report["file"]["long_fills"] == 1
     md = to_markdown(report)
     assert "## Long fills" in md and "| M2 | 100–179 | 0.80 |" in md and "| M4 | 300" not in md
+
+
+def test_gaps_left_are_listed_once_per_span_with_the_reasons():
+    """Six markers on a rigid body at 100 fps: a 0.1 s gap in one marker (filled) and the
+    last 50 frames empty for every marker (nothing is seen: left). The Markdown lists the
+    empty span once for the six markers with the ensemble's reason, not the filled gap."""
+    T, fps = 600, 100.0
+    t = np.arange(T) / fps
+    rng = np.random.default_rng(3)
+    base = np.stack([400 * np.sin(t), 300 * np.cos(0.7 * t), 900 + 50 * np.sin(2 * t)], axis=1)
+    pos = base[:, None, :] + rng.normal(0, 150, size=(6, 3))[None]
+    pos[300:310, 4] = np.nan
+    pos[T - 50:] = np.nan
+    motion = Motion(pos, [f"M{k}" for k in range(6)], fps, units="mm", metres_per_unit=0.001,
+                    format="c3d")
+    report = build_report(clean_motion(motion, loads_config("pipeline:\n  - cleaner: fill_ensemble\n")))
+    assert report["file"]["gaps_unfilled"] == 6
+    md = to_markdown(report)
+    section = md.split("## Gaps left unfilled", 1)[1].split("\n\n", 2)[1]
+    rows = [line for line in section.splitlines() if line.startswith("| 5")]
+    assert rows == ["| 550–599 | 0.50 | 6: M0, M1, M2, M3, M4, M5 | step 1 (fill_ensemble): no "
+                    "other marker is seen through it |"]
+    assert "| 300" not in section
