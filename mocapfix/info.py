@@ -72,6 +72,7 @@ def summarise(motion: Motion) -> dict:
         "longest_gap_frames": f["longest_gap_frames"],
         "longest_gap_s": f["longest_gap_s"],
         "never_observed": f["never_seen"],
+        "empty_frames": f["empty_frames"],
         "notes": list(motion.notes),
     }
     if motion.format == "kinect":
@@ -108,6 +109,13 @@ def format_text(summary: dict, verbose: bool = False) -> str:
     ]
     if s["never_observed"]:
         lines.append(f"  never seen  {_list(s['never_observed'], 8 if not verbose else limit)}")
+    if s["empty_frames"]:
+        spans = [f"{a}–{a + n - 1}" + (f" ({n / s['fps']:.2f} s)" if s["fps"] else "")
+                 for a, n in s["empty_frames"]]
+        total = sum(n for _, n in s["empty_frames"])
+        lines.append(f"  empty       {total} frames with no "
+                     f"{'marker' if s['format'] == 'c3d' else 'joint'} seen: "
+                     f"{_list(spans, 4 if not verbose else limit)}")
     if "analog" in s:
         a = s["analog"]
         rate = f" at {a['rate']:g} Hz" if a.get("rate") else ""

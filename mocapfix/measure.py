@@ -221,6 +221,7 @@ def measure_input(motion: Motion, *, swaps: bool = True, outliers: bool = True) 
         "longest_gap_s": finite(length.max() / fps) if len(length) else 0.0,
         "longest_gap_frames": int(length.max()) if len(length) else 0,
         "never_seen": [names[j] for j in range(len(names)) if T and observed[j] == 0],
+        "empty_frames": _empty_frames(missing, observed),
         "outliers": finite(flags.sum() / max(int(observed.sum()), 1)),
         "jitter": finite(np.nanmedian(jit)) if np.isfinite(jit).any() else None,
         "bone_variation": finite(np.nanmax(bvar)) if np.isfinite(bvar).any() else None,
@@ -306,6 +307,17 @@ def _correction_cause(outliers: np.ndarray, own: np.ndarray, parents: np.ndarray
             return f"where {names[up]} was judged an outlier and rebuilt"
         up, seen = parents[up], seen + 1
     return None
+
+
+def _empty_frames(missing: np.ndarray, observed: np.ndarray) -> list[list[int]]:
+    """``[start, length]`` of every run of frames on which none of the points seen at some
+    time is seen (a whole-body dropout, an export's empty first or last frames: nothing
+    there to fill from); none when no point is ever seen."""
+    seen_somewhere = observed > 0
+    if not seen_somewhere.any():
+        return []
+    _, start, length = runs(missing[:, seen_somewhere].all(axis=1)[:, None])
+    return [[int(s), int(n)] for s, n in zip(start, length)]
 
 
 def measure_cleaning(result: CleanResult) -> dict:

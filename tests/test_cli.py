@@ -13,7 +13,7 @@ from click.testing import CliRunner
 
 from mocapfix.cli import main
 from mocapfix.formats import read
-from conftest import SAMPLE_DATA, need, shared_files
+from conftest import SAMPLE_DATA, need, shared, shared_files
 
 ALL_SHARED = [p for sub in ("c3d", "bvh", "asfamc", "kinect")
               for p in shared_files(sub, "*.amc" if sub == "asfamc" else "*")]
@@ -52,6 +52,18 @@ def test_info_text_and_unreadable_exit_code(tmp_path):
     assert result.exit_code == 3            # unreadable input (README "Exit codes")
     assert "walk.bvh" in result.output and "broken.bvh" in result.output
     assert "Traceback" not in result.output
+
+
+def test_info_names_the_frames_where_no_marker_is_seen():
+    """The OptiTrack export ends with 229 frames holding no marker (frames 1151-1379 at
+    100 Hz) and c3d.org s06 starts and ends with such runs: info lists them, the JSON as
+    [start, length]; a capture seen throughout (CMU 85_02) has none."""
+    files = [shared(f"c3d/{name}") for name in
+             ("btk_mocap36_optitrack.c3d", "c3dorg_s06_MACsample.c3d", "cmu_85_02.c3d")]
+    rows = json.loads(CliRunner().invoke(main, ["info", "--json", *map(str, files)]).stdout)
+    assert [r["empty_frames"] for r in rows] == [[[1151, 229]], [[0, 16], [111, 69]], []]
+    text = CliRunner().invoke(main, ["info", str(files[0])]).output
+    assert "empty       229 frames with no marker seen: 1151–1379 (2.29 s)" in text
 
 
 @pytest.mark.parametrize("path", ALL_SHARED)
