@@ -76,11 +76,13 @@ def _gaps_left(report: dict, shown: int = 12) -> list[str]:
     """Markdown section listing the gaps no step filled completely, with the reasons the
     steps gave for refusing their fills (``rejected_by``); gaps of one span and one reason
     share a row (a whole-body dropout is one row, not one per marker). None: no section."""
-    fps = report["file"].get("fps") or 0
+    fps, frames = report["file"].get("fps") or 0, report["file"]["frames"]
     rows: dict[tuple, list[str]] = {}
     for j in report["joints"]:
         for g in j["gaps"]["unfilled"]:
             why = "; ".join(f"{r['step']}: {r['why']}" for r in g.get("rejected_by", ()))
+            if not why and g["length"] == frames:
+                why = "never seen in the input"
             rows.setdefault((g["start"], g["length"], g["filled_frames"], why), []).append(j["name"])
     if not rows:
         return []

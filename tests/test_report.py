@@ -106,8 +106,9 @@ def test_long_fills_are_listed_with_their_confidence():
 
 def test_gaps_left_are_listed_once_per_span_with_the_reasons():
     """Six markers on a rigid body at 100 fps: a 0.1 s gap in one marker (filled) and the
-    last 50 frames empty for every marker (nothing is seen: left). The Markdown lists the
-    empty span once for the six markers with the ensemble's reason, not the filled gap."""
+    last 50 frames empty for every marker (nothing is seen: left), and a seventh marker
+    never seen. The Markdown lists the empty span once for the six markers with the
+    ensemble's reason, the never-seen marker as such, and not the filled gap."""
     T, fps = 600, 100.0
     t = np.arange(T) / fps
     rng = np.random.default_rng(3)
@@ -115,13 +116,15 @@ def test_gaps_left_are_listed_once_per_span_with_the_reasons():
     pos = base[:, None, :] + rng.normal(0, 150, size=(6, 3))[None]
     pos[300:310, 4] = np.nan
     pos[T - 50:] = np.nan
-    motion = Motion(pos, [f"M{k}" for k in range(6)], fps, units="mm", metres_per_unit=0.001,
+    pos = np.concatenate([pos, np.full((T, 1, 3), np.nan)], axis=1)      # M6: never seen
+    motion = Motion(pos, [f"M{k}" for k in range(7)], fps, units="mm", metres_per_unit=0.001,
                     format="c3d")
     report = build_report(clean_motion(motion, loads_config("pipeline:\n  - cleaner: fill_ensemble\n")))
-    assert report["file"]["gaps_unfilled"] == 6
+    assert report["file"]["gaps_unfilled"] == 7
     md = to_markdown(report)
     section = md.split("## Gaps left unfilled", 1)[1].split("\n\n", 2)[1]
     rows = [line for line in section.splitlines() if line.startswith("| 5")]
     assert rows == ["| 550–599 | 0.50 | 6: M0, M1, M2, M3, M4, M5 | step 1 (fill_ensemble): no "
                     "other marker is seen through it |"]
     assert "| 300" not in section
+    assert "| 0–599 | 6.00 | 1: M6 | never seen in the input |" in section
