@@ -432,9 +432,12 @@ def clean(inputs, outdir, config_path, reports, jobs, as_json, fps, allow_inside
                                "failed": len(failed), "skipped": [str(j.source) for j in skipped],
                                "config": str(pipeline.source)}, indent=1))
     else:
+        graded = [r["status"] for r in results if r["status"] != "ERROR"]
         out.line(f"cleaned {len(results) - len(failed)} of {len(results)} files"
                  + (f" ({len(skipped)} skipped: {'finished earlier' if finished else 'output exists'})"
                     if skipped else "")
+                 + (" — " + ", ".join(f"{graded.count(s)} {s}" for s in ("OK", "WARN", "FAIL")
+                                      if s in graded) if graded else "")
                  + (f"; {len(failed)} failed (ERROR): " + ", ".join(r["input"] for r in failed)
                     if failed else ""), level=-1, err=bool(failed))
     sys.exit(EXIT_SOME_FAILED if failed else EXIT_OK)

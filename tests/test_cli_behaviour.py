@@ -260,3 +260,18 @@ def test_nan_report_threshold_is_refused_before_anything_is_written(tmp_path):
     r = CliRunner().invoke(main, ["clean", str(BVH), "-o", str(tmp_path / "o"), "-c", cfg])
     assert r.exit_code == 2 and "line 5" in r.output and "finite" in r.output
     assert not (tmp_path / "o").exists()
+
+
+def test_the_summary_counts_the_files_by_status(tmp_path):
+    """The last line adds up the per-file lines: as many OK, WARN and FAIL as were printed
+    (the sample data plus the shared OptiTrack export, which FAILs on its empty last 2.3 s)."""
+    src = tmp_path / "in"
+    shutil.copytree(SAMPLE_DATA, src)
+    shutil.copy(shared("c3d/btk_mocap36_optitrack.c3d"), src)
+    r = CliRunner().invoke(main, ["clean", str(src), "-o", str(tmp_path / "out")])
+    assert r.exit_code == 0, r.output
+    lines = r.stdout.strip().splitlines()
+    statuses = [line.split()[0] for line in lines if line.startswith(("OK", "WARN", "FAIL"))]
+    assert len(statuses) == 5 and "FAIL" in statuses
+    counts = ", ".join(f"{statuses.count(s)} {s}" for s in ("OK", "WARN", "FAIL") if s in statuses)
+    assert lines[-1] == f"cleaned 5 of 5 files — {counts}"
