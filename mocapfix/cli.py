@@ -436,7 +436,7 @@ def clean(inputs, outdir, config_path, reports, jobs, as_json, fps, allow_inside
         out.line(f"cleaned {len(results) - len(failed)} of {len(results)} files"
                  + (f" ({len(skipped)} skipped: {'finished earlier' if finished else 'output exists'})"
                     if skipped else "")
-                 + (" — " + ", ".join(f"{graded.count(s)} {s}" for s in ("OK", "WARN", "FAIL")
+                 + (": " + ", ".join(f"{graded.count(s)} {s}" for s in ("OK", "WARN", "FAIL")
                                       if s in graded) if graded else "")
                  + (f"; {len(failed)} failed (ERROR): " + ", ".join(r["input"] for r in failed)
                     if failed else ""), level=-1, err=bool(failed))

@@ -274,4 +274,4 @@ def test_the_summary_counts_the_files_by_status(tmp_path):
     statuses = [line.split()[0] for line in lines if line.startswith(("OK", "WARN", "FAIL"))]
     assert len(statuses) == 5 and "FAIL" in statuses
     counts = ", ".join(f"{statuses.count(s)} {s}" for s in ("OK", "WARN", "FAIL") if s in statuses)
-    assert lines[-1] == f"cleaned 5 of 5 files — {counts}"
+    assert lines[-1] == f"cleaned 5 of 5 files: {counts}"
