@@ -27,6 +27,7 @@ from pathlib import Path
 from typing import Callable, Iterator
 
 from mocapfix.errors import ConfigError, MocapfixError
+from mocapfix.fileio import is_stream
 from mocapfix.formats import MOTION_SUFFIXES, suffixes
 
 _SKIP_SUFFIXES = (".report.json", ".report.md", ".report.html")
@@ -208,6 +209,8 @@ def check_output_file(path, option: str, inputs=()) -> Path:
         raise ConfigError(f"{option} {path}: is a folder, not a file")
     if not folder.is_dir():
         raise ConfigError(f"{option} {path}: cannot write there: part of the path is a file")
+    if is_stream(path):             # /dev/null, /dev/stdout: written in place, no folder needed
+        return path
     try:
         _probe_write(folder)
     except OSError as exc:

@@ -1,0 +1,49 @@
+"""Findings of an adversarial review through the command line: each test fails without
+its fix (a named pipe replaced by a regular file, misleading messages, …)."""
+from __future__ import annotations
+
+import os
+import stat
+import threading
+
+from click.testing import CliRunner
+
+from mocapfix.cli import main
+from conftest import SAMPLE_DATA
+
+KIN = SAMPLE_DATA / "walk_kinect_v2.csv"
+
+
+def _no_traceback(r):
+    assert "Traceback" not in r.output
+    assert r.exception is None or isinstance(r.exception, SystemExit), repr(r.exception)
+
+
+def test_junit_into_a_pipe_is_written_into_it_not_replaced(tmp_path):
+    # `--junit /dev/null` or `--junit /dev/stdout` in a CI container run as root replaced
+    # the device (the link) with a regular XML file: the temporary-then-rename of an
+    # atomic write renamed over it. A pipe (here a FIFO with a reader) is written into.
+    fifo = tmp_path / "junit.pipe"
+    os.mkfifo(fifo)
+    got = []
+    reader = threading.Thread(target=lambda: got.append(fifo.read_bytes()), daemon=True)
+    reader.start()
+    r = CliRunner().invoke(main, ["check", str(KIN), "--junit", str(fifo), "-q"])
+    if reader.is_alive():           # without the fix nobody opens the pipe to write
+        with open(fifo, "wb"):
+            pass
+    reader.join(10)
+    _no_traceback(r)
+    assert r.exit_code in (0, 1), r.output
+    assert stat.S_ISFIFO(os.stat(fifo).st_mode), "the pipe was replaced by a file"
+    assert got and got[0].startswith(b"<?xml") and b"walk_kinect_v2.csv" in got[0]
+
+
+def test_junit_into_a_pipe_nobody_reads_is_an_error_not_a_hang(tmp_path):
+    fifo = tmp_path / "junit.pipe"
+    os.mkfifo(fifo)
+    r = CliRunner().invoke(main, ["check", str(KIN), "--junit", str(fifo), "-q"])
+    _no_traceback(r)
+    assert r.exit_code == 2, r.output
+    assert f"{fifo}: cannot write: a named pipe (FIFO) that nothing reads" in r.output
+    assert stat.S_ISFIFO(os.stat(fifo).st_mode)
