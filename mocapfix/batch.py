@@ -257,6 +257,10 @@ def plan_outputs(found: list, outdir, allow_inside_input: bool = False, inputs=(
                     "output folder or pass --allow-inside-input")
     jobs = [Job(f.path, outdir / f.relative) for f in found
             if not _under(f.path, real_out) or f.root is None]
+    if found and not jobs:          # (it said "no motion files found in IN")
+        raise ConfigError(f"every motion file found in {', '.join(map(str, inputs))} is inside the "
+                          f"output folder {outdir}, whose files are not cleaned again; choose "
+                          "another output folder")
     sources = {os.path.realpath(j.source) for j in jobs}
     seen: dict[Path, Path] = {}
     for job in jobs:

@@ -47,3 +47,20 @@ def test_junit_into_a_pipe_nobody_reads_is_an_error_not_a_hang(tmp_path):
     assert r.exit_code == 2, r.output
     assert f"{fifo}: cannot write: a named pipe (FIFO) that nothing reads" in r.output
     assert stat.S_ISFIFO(os.stat(fifo).st_mode)
+
+
+def test_output_folder_equal_to_the_input_folder_says_so(tmp_path):
+    # `clean in -o in --allow-inside-input` said "no motion files found in in" although
+    # the folder holds captures: they are all inside the output folder, and that is why
+    src = tmp_path / "in"
+    src.mkdir()
+    (src / "walk.csv").write_bytes(KIN.read_bytes())
+    before = (src / "walk.csv").read_bytes()
+    r = CliRunner().invoke(main, ["clean", str(src), "-o", str(src), "--allow-inside-input",
+                                  "-c", "kinect"])
+    _no_traceback(r)
+    assert r.exit_code == 2, r.output
+    assert "no motion files found" not in r.output
+    assert f"inside the output folder {src}" in r.output
+    assert (src / "walk.csv").read_bytes() == before
+    assert sorted(p.name for p in src.iterdir()) == ["walk.csv"]
