@@ -34,7 +34,9 @@ def config_summary(path: Path, width: int = 90) -> str:
 def resolve_config(name_or_path) -> Path:
     """A pipeline config by path, or a shipped one by preset name."""
     path = Path(name_or_path)
-    if path.is_file():
+    if path.is_dir():
+        raise ConfigError(f"{name_or_path}: is a folder, not a config file")
+    if path.exists():                   # a file, or a pipe: -c <(…)
         return path
     text = str(name_or_path)
     stem = text[:-5] if text.endswith(".yaml") else text

@@ -64,3 +64,33 @@ def test_output_folder_equal_to_the_input_folder_says_so(tmp_path):
     assert f"inside the output folder {src}" in r.output
     assert (src / "walk.csv").read_bytes() == before
     assert sorted(p.name for p in src.iterdir()) == ["walk.csv"]
+
+
+def test_config_or_rules_path_that_is_a_folder_says_so(tmp_path):
+    # a folder given to -c / -r / --would-clean was "no such config file or preset"
+    folder = tmp_path / "my.yaml"
+    folder.mkdir()
+    for args, what in ((["clean", str(KIN), "-o", str(tmp_path / "out"), "-c", str(folder)], "config"),
+                       (["check", str(KIN), "--would-clean", str(folder)], "config"),
+                       (["check", str(KIN), "-r", str(folder)], "rules")):
+        r = CliRunner().invoke(main, args)
+        _no_traceback(r)
+        assert r.exit_code == 2, (args, r.output)
+        assert f"{folder}: is a folder, not a {what} file" in r.output, (args, r.output)
+    assert not (tmp_path / "out").exists()
+
+
+def test_config_from_a_pipe_is_read(tmp_path):
+    # `-c <(…)` (a pipe, not a regular file) was "no such config file or preset"
+    fifo = tmp_path / "cfg.pipe"
+    os.mkfifo(fifo)
+    text = b"version: 1\npipeline:\n  - cleaner: fill\n    max_gap: 0.5 s\n"
+    writer = threading.Thread(target=lambda: fifo.write_bytes(text), daemon=True)
+    writer.start()
+    r = CliRunner().invoke(main, ["clean", str(KIN), "-o", str(tmp_path / "out"), "-c", str(fifo)])
+    if writer.is_alive():           # without the fix nobody opens the pipe to read
+        fifo.read_bytes()
+    writer.join(10)
+    _no_traceback(r)
+    assert r.exit_code == 0, r.output
+    assert "max_gap: 0.5 s" in (tmp_path / "out" / "mocapfix-config.yaml").read_text()
