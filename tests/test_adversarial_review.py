@@ -131,3 +131,17 @@ def test_bench_occlusion_on_a_three_frame_take_says_why(tmp_path):
     assert r.exit_code == 2, r.output
     assert "low >= high" not in r.output
     assert f"{short}: occlusion/" in r.output and "3 frames; the occlusion protocol needs at least 4" in r.output
+
+
+def test_truncated_bvh_message_gives_no_python_only_advice(tmp_path):
+    # the CLI said "(pass allow_truncated=True to read them)": no option of mocapfix does
+    text = (SAMPLE_DATA / "walk.bvh").read_text()
+    cut = tmp_path / "cut.bvh"
+    cut.write_text(text[: len(text) - len(text.splitlines()[-1]) * 5 // 2])
+    before = cut.read_bytes()
+    r = CliRunner().invoke(main, ["info", str(cut)])
+    _no_traceback(r)
+    assert r.exit_code == 3, r.output
+    assert f"{cut}" in r.output and "truncated: 'Frames:" in r.output
+    assert "allow_truncated" not in r.output and "cut short" in r.output
+    assert cut.read_bytes() == before
