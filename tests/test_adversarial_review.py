@@ -145,3 +145,26 @@ def test_truncated_bvh_message_gives_no_python_only_advice(tmp_path):
     assert f"{cut}" in r.output and "truncated: 'Frames:" in r.output
     assert "allow_truncated" not in r.output and "cut short" in r.output
     assert cut.read_bytes() == before
+
+
+def test_kinect_stamps_a_tick_apart_are_a_readable_error(tmp_path):
+    # rows stamped 100 ns apart made kinect_skeleton's banded Cholesky fail: "internal
+    # error LinAlgError: 34th leading minor not positive definite"
+    lines = KIN.read_text().split("\n")
+    head = next(i for i, line in enumerate(lines) if line[:1].isdigit())
+    for i in range(head + 10, head + 100, 3):
+        tick = int(lines[i - 1].split(",")[0])
+        lines[i] = ",".join([str(tick + 1)] + lines[i].split(",")[1:])
+    bad = tmp_path / "in" / "ticks.csv"
+    bad.parent.mkdir()
+    bad.write_text("\n".join(lines))
+    (tmp_path / "in" / "walk.csv").write_bytes(KIN.read_bytes())
+    out = tmp_path / "out"
+    r = CliRunner().invoke(main, ["clean", str(bad.parent), "-o", str(out), "-c", "kinect"])
+    _no_traceback(r)
+    assert r.exit_code == 1, r.output
+    error = [line for line in r.output.splitlines() if line.startswith("ERROR")]
+    assert len(error) == 1 and str(bad) in error[0], r.output
+    assert "internal error" not in error[0] and "kinect_skeleton" in error[0]
+    assert "shortest time step 1e-07 s" in error[0]
+    assert (out / "walk.csv").is_file() and not (out / "ticks.csv").exists()
