@@ -168,3 +168,39 @@ def test_kinect_stamps_a_tick_apart_are_a_readable_error(tmp_path):
     assert "internal error" not in error[0] and "kinect_skeleton" in error[0]
     assert "shortest time step 1e-07 s" in error[0]
     assert (out / "walk.csv").is_file() and not (out / "ticks.csv").exists()
+
+
+def test_trust_one_absurd_sample_costs_only_itself():
+    # one sample 1 km off (a corrupt field) steered trust's first robust smooth and every
+    # sample of its marker came out untrusted and was deleted (CMU 85_02: 810 of 810;
+    # 100 m: 731 of 810); now it alone is untrusted and the rest is as without it
+    import numpy as np
+
+    from mocapfix.formats import read
+    from mocapfix.pipeline import loads_config
+
+    motion = read(SAMPLE_DATA / "walk_markers.c3d")
+    trust = loads_config("version: 1\npipeline:\n  - cleaner: trust\n")
+    plain, _ = trust.run(motion)
+    for offset_mm in (1e5, 1e6, 1e30):
+        pos = motion.positions.copy()
+        pos[300, 4] += offset_mm * 1e-3 / motion.metres_per_unit
+        out, records = trust.run(motion.replace(positions=pos))
+        lost = np.isnan(out.positions).any(axis=2) & ~np.isnan(plain.positions).any(axis=2)
+        assert lost.sum() == 1 and lost[300, 4], (offset_mm, int(lost.sum()))
+        same = np.ones(lost.shape, bool)
+        same[300, 4] = False
+        np.testing.assert_array_equal(out.positions[same], plain.positions[same])
+        assert records[0].info["untrusted_gross"] == 1
+
+
+def test_trust_gross_screen_ignores_mislabelled_units():
+    # the gross-error screen is relative to the capture's extent: millimetre data labelled
+    # as metres is not one big gross error (an absolute 100 m screen took every sample)
+    from mocapfix.formats import read
+    from mocapfix.pipeline import loads_config
+
+    motion = read(SAMPLE_DATA / "walk_markers.c3d")
+    wrong = motion.replace(metres_per_unit=1.0)
+    _, records = loads_config("version: 1\npipeline:\n  - cleaner: trust\n").run(wrong)
+    assert records[0].info["untrusted_gross"] == 0
