@@ -588,6 +588,12 @@ def train_dictionary(training, output, method, atoms, window, sample_rate, lam, 
     params = {"atoms": atoms, "window": window, "sample_rate": sample_rate, "train_lambda": lam,
               "beta": beta, "train_iterations": iterations, "max_windows": max_windows, "seed": seed,
               "bases": bases, "energy": energy}
+    # an option of the other methods was "unknown parameter(s) 'train_iterations', … for
+    # cleaner 'mssa'": the cleaner's internal names, not the options the user gave
+    foreign = [opt for opt, key in _TRAIN_OPTIONS[method == "mssa"] if params[key] is not None]
+    if foreign:
+        _fail(f"{', '.join(foreign)} {'does' if len(foreign) == 1 else 'do'} not apply to --method "
+              f"{method} (only to " + ("partlet and ksvd)" if method == "mssa" else "mssa)"), debug)
     try:
         from mocapfix.batch import check_output_file
 
@@ -619,6 +625,13 @@ def train_dictionary(training, output, method, atoms, window, sample_rate, lam, 
                  "unexplained energy " + ", ".join(f"{p} {100 * f:.2f} %" for p, f in st["unexplained"].items()), level=-1)
     if summary["unread"]:
         sys.exit(EXIT_SOME_FAILED)
+
+
+#: train-dictionary options that do not apply: [False] to partlet/ksvd, [True] to mssa
+_TRAIN_OPTIONS = {False: (("--bases", "bases"), ("--energy", "energy")),
+                  True: (("--atoms", "atoms"), ("--sample-rate", "sample_rate"), ("--lambda", "train_lambda"),
+                         ("--beta", "beta"), ("--iterations", "train_iterations"),
+                         ("--max-windows", "max_windows"), ("--seed", "seed"))}
 
 
 def _register_bench():

@@ -231,3 +231,19 @@ def _fill_config(tmp_path) -> str:
     path = tmp_path / "fill.yaml"
     path.write_text("version: 1\npipeline:\n  - cleaner: fill\n    max_gap: 0.5 s\n")
     return str(path)
+
+
+def test_train_dictionary_names_the_option_that_does_not_apply(tmp_path):
+    # --iterations / --max-windows with --method mssa said "unknown parameter(s)
+    # 'max_windows', 'train_iterations' for cleaner 'mssa'": names no option has
+    model = tmp_path / "m.npz"
+    for args, message in (
+            (["--method", "mssa", "--iterations", "2", "--max-windows", "200"],
+             "--iterations, --max-windows do not apply to --method mssa (only to partlet and ksvd)"),
+            (["--method", "partlet", "--bases", "5"], "--bases does not apply to --method partlet (only to mssa)")):
+        r = CliRunner().invoke(main, ["train-dictionary", str(SAMPLE_DATA / "walk.bvh"), "-o", str(model),
+                                      *args])
+        _no_traceback(r)
+        assert r.exit_code == 2, r.output
+        assert message in r.output and "train_iterations" not in r.output, r.output
+        assert not model.exists()
