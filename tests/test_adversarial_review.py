@@ -247,3 +247,23 @@ def test_train_dictionary_names_the_option_that_does_not_apply(tmp_path):
         assert r.exit_code == 2, r.output
         assert message in r.output and "train_iterations" not in r.output, r.output
         assert not model.exists()
+
+
+def test_a_255_byte_file_name_fails_alone_with_a_readable_error(tmp_path):
+    # its report name passes the 255-byte limit: the WriteError was replaced by an OSError
+    # of the clean-up (Path.is_dir on the too-long name), "internal error", and the same
+    # clean-up in the CLI then ended the whole batch (files after it were never cleaned)
+    src = tmp_path / "in"
+    src.mkdir()
+    long_name = "a" * 251 + ".csv"
+    (src / long_name).write_bytes(KIN.read_bytes())
+    (src / "b.csv").write_bytes(KIN.read_bytes())
+    out = tmp_path / "out"
+    r = CliRunner().invoke(main, ["clean", str(src), "-o", str(out), "-c", _fill_config(tmp_path)])
+    _no_traceback(r)
+    assert r.exit_code == 1, r.output
+    error = [line for line in r.output.splitlines() if line.startswith("ERROR")]
+    assert len(error) == 1 and long_name in error[0] and "internal error" not in error[0], r.output
+    assert "File name too long" in error[0]
+    assert (out / "b.csv").is_file() and not (out / long_name).exists()
+    assert "cleaned 1 of 2 files" in r.output
