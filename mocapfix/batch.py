@@ -192,16 +192,20 @@ def _probe_write(folder) -> None:
     os.unlink(probe)
 
 
-def check_output_file(path, option: str, inputs=()) -> Path:
+def check_output_file(path, option: str, inputs=(), configs=()) -> Path:
     """Make sure a single output file (``--junit``, ``bench --json``, a trained model) can
     be written before the work that produces it starts, creating nothing: its folder, or
     the nearest folder above it that exists, must take a new file, and it must not be a
     capture among ``inputs`` (a named input, or a motion or ASF file in an input folder
     or beside a named input: ``check take.c3d --junit take.c3d`` replaced the capture
     with XML). A ConfigError naming ``option`` and the path otherwise (exit 2, nothing
-    processed)."""
+    processed). Nor may it be one of ``configs``, the config and rules files the run reads
+    (``check -r rules.yaml --junit rules.yaml`` replaced the rules with XML)."""
     path = Path(path)
     _refuse_overwriting_inputs(path, option, inputs)
+    for given in configs:
+        if given and path.exists() and os.path.realpath(path) == os.path.realpath(given):
+            raise ConfigError(f"{option} {path}: would overwrite the config {given}; choose another path")
     folder = path.parent
     while not folder.exists() and folder != folder.parent:
         folder = folder.parent

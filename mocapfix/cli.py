@@ -490,7 +490,7 @@ def check(inputs, rules_path, junit_path, as_json, fail_on, exit_zero, would_cle
     try:
         spec = _executor_spec(jobs, scheduler, dask_workers)
         if junit_path:
-            check_output_file(junit_path, "--junit", inputs)
+            check_output_file(junit_path, "--junit", inputs, configs=(rules_path, would_clean))
         rules = load_rules(resolve_rules_path(rules_path or "default")).with_fail_on(list(fail_on))
         config = source = None
         if would_clean:

@@ -267,3 +267,31 @@ def test_a_255_byte_file_name_fails_alone_with_a_readable_error(tmp_path):
     assert "File name too long" in error[0]
     assert (out / "b.csv").is_file() and not (out / long_name).exists()
     assert "cleaned 1 of 2 files" in r.output
+
+
+def test_report_outputs_never_replace_the_configs_the_run_reads(tmp_path):
+    # check -r R --junit R, check --would-clean C --junit C and bench --configs C --json C
+    # replaced the user's rules or config with the report; --json F --markdown F kept
+    # only the Markdown
+    config = tmp_path / "my.yaml"
+    config.write_text("version: 1\npipeline:\n  - cleaner: fill\n    max_gap: 0.5 s\n")
+    rules = tmp_path / "rules.yaml"
+    rules.write_text("version: 1\nrules:\n  - metric: missing\n    warn: 10%\n")
+    before = {p: p.read_bytes() for p in (config, rules)}
+    runs = [
+        (["check", str(KIN), "-r", str(rules), "--junit", str(rules)], f"would overwrite the config {rules}"),
+        (["check", str(KIN), "--would-clean", str(config), "--junit", str(config)],
+         f"would overwrite the config {config}"),
+        (["bench", str(KIN), "--protocol", "occlusion", "--seeds", "1", "--configs", str(config),
+          "--json", str(config), "-q"], f"would overwrite the config {config}"),
+        (["bench", str(KIN), "--protocol", "occlusion", "--seeds", "1", "--methods", "fill",
+          "--json", str(tmp_path / "r.out"), "--markdown", str(tmp_path / "r.out"), "-q"],
+         "--json and --markdown both name"),
+    ]
+    for args, message in runs:
+        r = CliRunner().invoke(main, args)
+        _no_traceback(r)
+        assert r.exit_code == 2, (args, r.output)
+        assert message in r.output, (args, r.output)
+    assert {p: p.read_bytes() for p in (config, rules)} == before
+    assert not (tmp_path / "r.out").exists()
