@@ -396,6 +396,11 @@ def clean(inputs, outdir, config_path, reports, jobs, as_json, fps, allow_inside
             out.line(f"WOULD {j.source} -> {j.output}{note}", level=-1)
         out.line(f"dry run: {len(todo)} file(s) would be cleaned with {pipeline.source}, "
                  f"{len(skipped)} skipped; nothing written", level=-1, err=True)
+        if as_json:                     # (stdout stayed empty: `--json --dry-run | jq` failed)
+            click.echo(json.dumps({"dry_run": True, "config": str(pipeline.source),
+                                   "files": [{"input": str(j.source), "output": str(j.output),
+                                              "replaces": j.output.exists()} for j in todo],
+                                   "skipped": [str(j.source) for j in skipped]}, indent=1))
         sys.exit(EXIT_OK)
 
     finished_here: list[str] = []

@@ -295,3 +295,17 @@ def test_report_outputs_never_replace_the_configs_the_run_reads(tmp_path):
         assert message in r.output, (args, r.output)
     assert {p: p.read_bytes() for p in (config, rules)} == before
     assert not (tmp_path / "r.out").exists()
+
+
+def test_clean_json_dry_run_prints_json(tmp_path):
+    # --json --dry-run printed nothing on stdout (the WOULD lines go to stderr with --json)
+    import json
+
+    out = tmp_path / "out"
+    r = CliRunner().invoke(main, ["clean", str(KIN), "-o", str(out), "--json", "--dry-run"])
+    _no_traceback(r)
+    assert r.exit_code == 0, r.output
+    data = json.loads(r.stdout)
+    assert data["dry_run"] is True
+    assert data["files"] == [{"input": str(KIN), "output": str(out / KIN.name), "replaces": False}]
+    assert not out.exists()
