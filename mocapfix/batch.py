@@ -449,8 +449,18 @@ class CleanTask:
             from mocapfix.fileio import file_sha256
 
             pipeline = _pipeline(self.config, self.source)
+            try:
+                before = file_sha256(job.source)
+            except OSError:
+                before = None           # unreadable: clean_file names the cause
             result = clean_file(job.source, job.output, pipeline, self.reports, self.read_options)
-            result["input_sha256"] = file_sha256(job.source)      # for the manifest
+            # for the manifest: the hash of what was cleaned. Taken after the clean alone, a
+            # file still being written (copied, synced) was recorded with its new content
+            # against an output of the old one, and the next run skipped it as finished
+            result["input_sha256"] = file_sha256(job.source)
+            if before is not None and result["input_sha256"] != before:
+                return error_result(job, f"{job.source}: the file changed while it was being "
+                                         "cleaned (is it still being written?); run again")
             return result
         except MocapfixError as exc:
             return error_result(job, name_the_file(job.source, str(exc)))

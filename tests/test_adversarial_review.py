@@ -309,3 +309,34 @@ def test_clean_json_dry_run_prints_json(tmp_path):
     assert data["dry_run"] is True
     assert data["files"] == [{"input": str(KIN), "output": str(out / KIN.name), "replaces": False}]
     assert not out.exists()
+
+
+def test_an_input_that_changes_while_it_is_cleaned_is_not_recorded_as_finished(tmp_path, monkeypatch):
+    # the manifest took the input's sha256 after the clean: a file still being written
+    # was recorded with its new content against an output of the old one, and the next
+    # run skipped it as "finished earlier", keeping the stale output
+    import mocapfix.clean as clean_module
+
+    src = tmp_path / "in"
+    src.mkdir()
+    take = src / "walk.csv"
+    take.write_bytes(KIN.read_bytes())
+    real = clean_module.clean_motion
+
+    def clean_while_the_file_grows(motion, pipeline):
+        with open(take, "ab") as fh:            # the recorder appends a frame meanwhile
+            fh.write(KIN.read_bytes().splitlines(keepends=True)[-1])
+        return real(motion, pipeline)
+
+    monkeypatch.setattr(clean_module, "clean_motion", clean_while_the_file_grows)
+    out = tmp_path / "out"
+    args = ["clean", str(src), "-o", str(out), "-c", _fill_config(tmp_path)]
+    r = CliRunner().invoke(main, args)
+    _no_traceback(r)
+    assert r.exit_code == 1, r.output
+    assert f"ERROR {take}: the file changed while it was being cleaned" in r.output
+    assert not (out / "walk.csv").exists()
+    monkeypatch.setattr(clean_module, "clean_motion", real)
+    r = CliRunner().invoke(main, args)
+    assert r.exit_code == 0 and "finished earlier" not in r.output, r.output
+    assert (out / "walk.csv").is_file()
