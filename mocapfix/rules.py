@@ -464,13 +464,13 @@ def preset_names() -> list[str]:
 def resolve_rules_path(name_or_path) -> Path:
     """A rules file by path, or a shipped preset by name (``optical-gait``)."""
     path = Path(name_or_path)
-    if path.is_dir():
-        raise ConfigError(f"{name_or_path}: is a folder, not a rules file")
-    if path.exists():                   # a file, or a pipe: -r <(…)
+    if path.exists() and not path.is_dir():     # a file, or a pipe: -r <(…)
         return path
     preset = RULES_DIR / f"{name_or_path}.yaml"
     if "/" not in str(name_or_path) and preset.is_file():
-        return preset
+        return preset               # (also when a folder of that name is here: -r kinect)
+    if path.is_dir():
+        raise ConfigError(f"{name_or_path}: is a folder, not a rules file")
     raise ConfigError(f"{name_or_path}: no such rules file or preset "
                       f"(presets: {', '.join(preset_names())})")
 

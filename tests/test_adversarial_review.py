@@ -340,3 +340,16 @@ def test_an_input_that_changes_while_it_is_cleaned_is_not_recorded_as_finished(t
     r = CliRunner().invoke(main, args)
     assert r.exit_code == 0 and "finished earlier" not in r.output, r.output
     assert (out / "walk.csv").is_file()
+
+
+def test_a_folder_named_like_a_preset_does_not_hide_the_preset(tmp_path, monkeypatch):
+    # `mocapfix clean kinect -c kinect` beside a data folder named kinect keeps the preset
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "kinect").mkdir()
+    (tmp_path / "kinect" / "walk.csv").write_bytes(KIN.read_bytes())
+    r = CliRunner().invoke(main, ["clean", "kinect", "-c", "kinect", "-o", "out", "--dry-run"])
+    _no_traceback(r)
+    assert r.exit_code == 0 and "configs/kinect.yaml" in r.output, r.output
+    r = CliRunner().invoke(main, ["check", "kinect", "-r", "kinect", "--exit-zero"])
+    _no_traceback(r)
+    assert r.exit_code == 0 and "is a folder" not in r.output, r.output
