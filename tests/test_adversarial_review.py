@@ -353,3 +353,21 @@ def test_a_folder_named_like_a_preset_does_not_hide_the_preset(tmp_path, monkeyp
     r = CliRunner().invoke(main, ["check", "kinect", "-r", "kinect", "--exit-zero"])
     _no_traceback(r)
     assert r.exit_code == 0 and "is a folder" not in r.output, r.output
+
+
+def test_glitch_screen_on_a_take_of_eight_frames_warns_nothing():
+    # rotation_outliers on a take of <= 8 frames printed NumPy's "RuntimeWarning: Mean of
+    # empty slice" (twice, naming no file) into the terminal
+    import warnings
+
+    import numpy as np
+
+    from mocapfix.solvers.glitches import glitches
+
+    x = np.cumsum(np.random.default_rng(0).normal(size=(8, 6)), axis=0)
+    x[4, 2] += 50.0
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        found = glitches(x)
+    assert not [w for w in caught if issubclass(w.category, RuntimeWarning)], [str(w.message) for w in caught]
+    assert found.shape == x.shape and found[4, 2]
