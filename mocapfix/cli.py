@@ -360,7 +360,7 @@ def clean(inputs, outdir, config_path, reports, jobs, as_json, fps, allow_inside
                     and not manifest.interrupted(j)]
         if existing and policy is None and not dry_run:
             shown = ", ".join(str(j.output) for j in existing[:3]) + (" …" if len(existing) > 3 else "")
-            other = any(str(j.source) in manifest.records for j in existing)
+            other = any(manifest.knows(j.source) for j in existing)
             raise MocapfixError(f"{len(existing)} output(s) exist already ({shown}); pass --overwrite "
                                 "to replace them or --skip-existing to keep them"
                                 + ("; the folder's manifest records them made with another config, "

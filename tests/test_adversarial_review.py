@@ -371,3 +371,21 @@ def test_glitch_screen_on_a_take_of_eight_frames_warns_nothing():
         found = glitches(x)
     assert not [w for w in caught if issubclass(w.category, RuntimeWarning)], [str(w.message) for w in caught]
     assert found.shape == x.shape and found[4, 2]
+
+
+def test_one_file_found_through_two_given_paths_resumes(tmp_path):
+    # `clean in in/sub/x.csv -o out` writes out/sub/x.csv and out/x.csv; the manifest kept
+    # one record per input, so the same command run again stopped with exit 2, "1 output(s)
+    # exist already … made with another config, report kinds, --fps, version or input"
+    src = tmp_path / "in"
+    (src / "sub").mkdir(parents=True)
+    (src / "sub" / "x.csv").write_bytes(KIN.read_bytes())
+    out = tmp_path / "out"
+    args = ["clean", str(src), str(src / "sub" / "x.csv"), "-o", str(out), "-c", _fill_config(tmp_path)]
+    r = CliRunner().invoke(main, args)
+    assert r.exit_code == 0, r.output
+    assert (out / "sub" / "x.csv").is_file() and (out / "x.csv").is_file()
+    r = CliRunner().invoke(main, args)
+    _no_traceback(r)
+    assert r.exit_code == 0, r.output
+    assert r.output.count("finished earlier") >= 2 and "exist already" not in r.output, r.output
