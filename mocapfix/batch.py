@@ -99,8 +99,12 @@ def _matches(rel: str, patterns) -> bool:
     return any(fnmatch.fnmatch(rel, p) or fnmatch.fnmatch(name, p) for p in patterns)
 
 
-def discover_inputs(inputs, include=(), exclude=(), sniff: bool = True) -> Discovery:
-    """Files to process from files and folders (folders recursed in sorted order)."""
+def discover_inputs(inputs, include=(), exclude=(), sniff: bool = True,
+                    once_per_file: bool = False) -> Discovery:
+    """Files to process from files and folders (folders recursed in sorted order).
+    ``once_per_file``: a file found through two given paths is kept once even when its
+    output names would differ (``check``, ``info``: it was checked, listed and counted
+    twice, with two JUnit testcases)."""
     files: list[Found] = []
     skipped: list[tuple[str, str]] = []
     for raw in inputs:
@@ -148,16 +152,16 @@ def discover_inputs(inputs, include=(), exclude=(), sniff: bool = True) -> Disco
                     skipped.append((str(f), "not motion data (no known layout)"))
                     continue
                 files.append(Found(f, root))
-    return Discovery(*_once(files, skipped))
+    return Discovery(*_once(files, skipped, once_per_file))
 
 
-def _once(files: list, skipped: list) -> tuple[list, list]:
+def _once(files: list, skipped: list, by_file: bool = False) -> tuple[list, list]:
     """Drop a file named a second time with the same output name (``clean in in/walk.bvh``,
     or one file given twice): it is processed once, and the skip says why."""
     seen: set = set()
     kept = []
     for f in files:
-        key = (os.path.realpath(f.path), f.relative)
+        key = (os.path.realpath(f.path), None if by_file else f.relative)
         if key in seen:
             skipped.append((str(f.path), "given more than once (processed once)"))
             continue

@@ -137,10 +137,10 @@ def _print_warnings(out: Out):
     UNIT_WARNINGS.clear()
 
 
-def _discover(inputs, include, exclude, out: Out):
+def _discover(inputs, include, exclude, out: Out, once_per_file: bool = False):
     from mocapfix.batch import discover_inputs
 
-    found = discover_inputs(inputs, include, exclude)
+    found = discover_inputs(inputs, include, exclude, once_per_file=once_per_file)
     for path, why in found.skipped:
         out.line(f"SKIP  {path}: {why}", level=0 if "not motion" not in why else 1, err=True)
     if found.skipped and out.verbosity == 0:
@@ -188,7 +188,7 @@ def info(inputs, as_json, fps, include, exclude):
     obj = _ctx()
     debug, out = obj["debug"], Out(obj["verbosity"])
     try:
-        found = _discover(inputs, include, exclude, out)
+        found = _discover(inputs, include, exclude, out, once_per_file=True)
         if not found.files:              # as clean and check: not a silent success
             raise MocapfixError("no motion files found in " + ", ".join(inputs))
     except MocapfixError as exc:
@@ -502,7 +502,7 @@ def check(inputs, rules_path, junit_path, as_json, fail_on, exit_zero, would_cle
             pipeline = load_config(resolve_config(would_clean))
             _print_warnings(out)
             config, source = pipeline.config(), str(pipeline.source)
-        found = _discover(inputs, include, exclude, out)
+        found = _discover(inputs, include, exclude, out, once_per_file=True)
         if not found.files:
             raise MocapfixError("no motion files found in " + ", ".join(inputs))
     except MocapfixError as exc:

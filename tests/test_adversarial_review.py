@@ -389,3 +389,24 @@ def test_one_file_found_through_two_given_paths_resumes(tmp_path):
     _no_traceback(r)
     assert r.exit_code == 0, r.output
     assert r.output.count("finished earlier") >= 2 and "exist already" not in r.output, r.output
+
+
+def test_check_counts_a_file_found_through_two_given_paths_once(tmp_path):
+    # `check in in/sub/x.csv` checked x.csv twice: "checked 2 files" for one, two JUnit
+    # testcases (info listed it twice, train-dictionary trained on it twice)
+    import json
+    import xml.etree.ElementTree as ET
+
+    src = tmp_path / "in"
+    (src / "sub").mkdir(parents=True)
+    (src / "sub" / "x.csv").write_bytes(KIN.read_bytes())
+    junit = tmp_path / "j.xml"
+    r = CliRunner().invoke(main, ["check", str(src), str(src / "sub" / "x.csv"), "--junit", str(junit),
+                                  "--exit-zero"])
+    _no_traceback(r)
+    assert r.exit_code == 0, r.output
+    assert "checked 1 files" in r.output and "given more than once" in r.output, r.output
+    assert len(ET.parse(junit).getroot().findall(".//testcase")) == 1
+    r = CliRunner().invoke(main, ["info", str(src), str(src / "sub" / "x.csv"), "--json"])
+    assert r.exit_code == 0, r.output
+    assert len(json.loads(r.stdout)) == 1
