@@ -356,7 +356,9 @@ def clean(inputs, outdir, config_path, reports, jobs, as_json, fps, allow_inside
         config_text = f"# effective config of this run (from {pipeline.source})\n" + pipeline.dump()
         manifest = Manifest(outdir, run_key(config_text, kinds, {"fps": fps} if fps else None))
         finished = set() if policy == "overwrite" else {j for j in jobs_list if manifest.finished(j)}
-        existing = [j for j in jobs_list if j.output.exists() and j not in finished
+        # a folder where an output would go is not an earlier output: that file fails
+        # ("cannot write: Is a directory"); --skip-existing skipped it as "output exists"
+        existing = [j for j in jobs_list if _output_there(j) and j not in finished
                     and not manifest.interrupted(j)]
         if existing and policy is None and not dry_run:
             shown = ", ".join(str(j.output) for j in existing[:3]) + (" …" if len(existing) > 3 else "")
@@ -381,7 +383,7 @@ def clean(inputs, outdir, config_path, reports, jobs, as_json, fps, allow_inside
         _fail(str(exc), debug, exc)
     except MocapfixError as exc:
         _fail(str(exc), debug, exc)
-    todo = [j for j in jobs_list if j not in finished and not (policy == "skip" and j.output.exists())]
+    todo = [j for j in jobs_list if j not in finished and not (policy == "skip" and _output_there(j))]
     skipped = [j for j in jobs_list if j not in todo]
     if not dry_run:
         # a killed run leaves its half-written temporaries; the files this run writes
@@ -443,6 +445,11 @@ def clean(inputs, outdir, config_path, reports, jobs, as_json, fps, allow_inside
                  + (f"; {len(failed)} failed (ERROR): " + ", ".join(r["input"] for r in failed)
                     if failed else ""), level=-1, err=bool(failed))
     sys.exit(EXIT_SOME_FAILED if failed else EXIT_OK)
+
+
+def _output_there(job) -> bool:
+    """An earlier output (or anything but a folder) is at ``job.output``."""
+    return job.output.exists() and not job.output.is_dir()
 
 
 def _config_body(text: str) -> str:

@@ -410,3 +410,20 @@ def test_check_counts_a_file_found_through_two_given_paths_once(tmp_path):
     r = CliRunner().invoke(main, ["info", str(src), str(src / "sub" / "x.csv"), "--json"])
     assert r.exit_code == 0, r.output
     assert len(json.loads(r.stdout)) == 1
+
+
+def test_skip_existing_does_not_take_a_folder_for_an_output(tmp_path):
+    # a folder at out/walk.csv made --skip-existing say "SKIP … output exists" and exit 0
+    # with nothing cleaned; without it, "output(s) exist already … pass --overwrite"
+    src = tmp_path / "in"
+    src.mkdir()
+    (src / "walk.csv").write_bytes(KIN.read_bytes())
+    out = tmp_path / "out"
+    (out / "walk.csv").mkdir(parents=True)
+    for extra in (["--skip-existing"], []):
+        r = CliRunner().invoke(main, ["clean", str(src), "-o", str(out), "-c", _fill_config(tmp_path), *extra])
+        _no_traceback(r)
+        assert r.exit_code == 1, (extra, r.output)
+        assert "output exists" not in r.output and "exist already" not in r.output, r.output
+        assert f"ERROR {src / 'walk.csv'}" in r.output and "Is a directory" in r.output, r.output
+        assert (out / "walk.csv").is_dir()
