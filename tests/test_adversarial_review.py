@@ -427,3 +427,28 @@ def test_skip_existing_does_not_take_a_folder_for_an_output(tmp_path):
         assert "output exists" not in r.output and "exist already" not in r.output, r.output
         assert f"ERROR {src / 'walk.csv'}" in r.output and "Is a directory" in r.output, r.output
         assert (out / "walk.csv").is_dir()
+
+
+def test_trust_gross_screen_keeps_a_wand_moving_over_a_static_rig():
+    # a screen on the capture-wide extent alone took every sample of the one marker that
+    # moves (a wand, 1.6 m) when the other 20 stand still: its extent is its own
+    import numpy as np
+
+    from mocapfix.formats import read
+    from mocapfix.pipeline import loads_config
+
+    base = read(SAMPLE_DATA / "walk_markers.c3d")
+    T = base.n_frames
+    rng = np.random.default_rng(0)
+    pos = np.zeros((T, 21, 3))
+    pos[:, :20] = rng.uniform(-500, 500, (1, 20, 3)) + rng.normal(0, 0.1, (T, 20, 3))
+    t = np.arange(T) / base.fps
+    pos[:, 20] = np.stack([800 * np.sin(t), 800 * np.cos(t), 500 + 0 * t], axis=1)
+    rig = base.replace(positions=pos, names=[f"M{i}" for i in range(21)], confidence=None)
+    trust = loads_config("version: 1\npipeline:\n  - cleaner: trust\n")
+    _, records = trust.run(rig)
+    assert records[0].info["untrusted_gross"] == 0
+    pos = pos.copy()
+    pos[300, 20] += 1e6                 # 1 km: still a gross error
+    _, records = trust.run(rig.replace(positions=pos))
+    assert records[0].info["untrusted_gross"] == 1

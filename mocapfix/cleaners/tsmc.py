@@ -11,8 +11,8 @@ p is θ. The paper's fixed θ = 6 cm, p = 5 cm (kept as the cap) caught 284 of 6
 2–10 cm on CMU 85_02 with 2 mm jitter (``occlusion`` noise, seed 0); the defaults catch
 all 664 with 3 false alarms (HDM05: 3511 of 3511, 15 false). Untrusted samples are made
 missing (default), replaced by the smooth (eq. 20) or only reported. A sample further from
-its marker's median position than 20 times the capture's extent (:data:`GROSS_EXTENT`) is
-untrusted before the smoothing starts: left in, one such value (a corrupt field) steered
+its marker's median position than 20 times its marker's or the capture's extent, and than
+10 m (:data:`GROSS_EXTENT`), is untrusted before the smoothing starts: left in, one such value (a corrupt field) steered
 the first robust smooth and its whole marker came out untrusted.
 
 ``tsmc`` (Algorithm 2): with the channels as rows and scaled to cm,
@@ -105,28 +105,33 @@ def _confident(motion: Motion, min_confidence: float) -> np.ndarray:
     return np.nan_to_num(motion.confidence, nan=0.0) >= min_confidence
 
 
-#: a sample further from its marker's median position than this many times the capture's
-#: extent (the 90th percentile of every sample's distance to its marker's median) is no
-#: measurement (a corrupt field, a flipped exponent bit). Scale-free, so a file whose
-#: units are mislabelled is not mistaken for one big gross error; the shared captures
+#: a sample further from its marker's median position than this many times the larger of
+#: its marker's and the capture's extent (90th percentile of the distances to the marker's
+#: median: its own samples', every sample's), and than GROSS_FLOOR_M, is no measurement (a
+#: corrupt field, a flipped exponent bit). Relative, so a file whose units are mislabelled
+#: is not taken for one big gross error, and per marker, so a wand moving over a static rig
+#: is not either (a capture-wide extent alone took the whole wand); the shared captures
 #: reach 2.2x (C3D) and 11x (Kinect) their extent
 GROSS_EXTENT = 20.0
+GROSS_FLOOR_M = 10.0
 
 
 def _gross(motion: Motion) -> np.ndarray:
-    """(T, J) True for observed samples further than :data:`GROSS_EXTENT` times the
-    capture's extent from their marker's median position."""
+    """(T, J) True for observed samples that are gross errors (:data:`GROSS_EXTENT`)."""
     pos = motion.positions
     seen = ~np.isnan(pos).any(axis=2)
     if not seen.any():
         return seen
-    centre = np.zeros((pos.shape[1], 3))
     has = seen.any(axis=0)
+    centre = np.zeros((pos.shape[1], 3))
     centre[has] = np.nanmedian(pos[:, has], axis=0)
     with np.errstate(invalid="ignore", over="ignore"):
         dist = np.linalg.norm(pos - centre, axis=2)
-        extent = float(np.quantile(dist[seen], 0.9))
-        return seen & ~(dist <= GROSS_EXTENT * extent) if extent > 0 else np.zeros_like(seen)
+        own = np.zeros(pos.shape[1])
+        own[has] = np.nanquantile(np.where(seen, dist, np.nan)[:, has], 0.9, axis=0)
+        extent = np.maximum(own, float(np.quantile(dist[seen], 0.9)))
+        limit = np.maximum(GROSS_EXTENT * extent, GROSS_FLOOR_M / motion.metres_per_unit)
+        return seen & ~(dist <= limit[None, :])
 
 
 def _pad_frames(cleaner: Cleaner, motion: Motion) -> int:
