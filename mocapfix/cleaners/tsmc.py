@@ -12,7 +12,7 @@ p is θ. The paper's fixed θ = 6 cm, p = 5 cm (kept as the cap) caught 284 of 6
 all 664 with 3 false alarms (HDM05: 3511 of 3511, 15 false). Untrusted samples are made
 missing (default), replaced by the smooth (eq. 20) or only reported. A sample further from
 its marker's median position than 20 times its marker's or the capture's extent, and than
-10 m (:data:`GROSS_EXTENT`), is untrusted before the smoothing starts: left in, one such value (a corrupt field) steered
+100 m (:data:`GROSS_EXTENT`), is untrusted before the smoothing starts: left in, one such value (a corrupt field) steered
 the first robust smooth and its whole marker came out untrusted.
 
 ``tsmc`` (Algorithm 2): with the channels as rows and scaled to cm,
@@ -113,7 +113,7 @@ def _confident(motion: Motion, min_confidence: float) -> np.ndarray:
 #: is not either (a capture-wide extent alone took the whole wand); the shared captures
 #: reach 2.2x (C3D) and 11x (Kinect) their extent
 GROSS_EXTENT = 20.0
-GROSS_FLOOR_M = 10.0
+GROSS_FLOOR_M = 100.0     # no capture volume is that large (kinect_skeleton's screen: 100 m)
 
 
 def _gross(motion: Motion) -> np.ndarray:
