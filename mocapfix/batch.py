@@ -27,6 +27,7 @@ from pathlib import Path
 from typing import Callable, Iterator
 
 from mocapfix.errors import ConfigError, MocapfixError
+from mocapfix.fileio import is_stream
 from mocapfix.formats import MOTION_SUFFIXES, suffixes
 
 _SKIP_SUFFIXES = (".report.json", ".report.md", ".report.html")
@@ -98,8 +99,12 @@ def _matches(rel: str, patterns) -> bool:
     return any(fnmatch.fnmatch(rel, p) or fnmatch.fnmatch(name, p) for p in patterns)
 
 
-def discover_inputs(inputs, include=(), exclude=(), sniff: bool = True) -> Discovery:
-    """Files to process from files and folders (folders recursed in sorted order)."""
+def discover_inputs(inputs, include=(), exclude=(), sniff: bool = True,
+                    once_per_file: bool = False) -> Discovery:
+    """Files to process from files and folders (folders recursed in sorted order).
+    ``once_per_file``: a file found through two given paths is kept once even when its
+    output names would differ (``check``, ``info``: it was checked, listed and counted
+    twice, with two JUnit testcases)."""
     files: list[Found] = []
     skipped: list[tuple[str, str]] = []
     for raw in inputs:
@@ -147,16 +152,16 @@ def discover_inputs(inputs, include=(), exclude=(), sniff: bool = True) -> Disco
                     skipped.append((str(f), "not motion data (no known layout)"))
                     continue
                 files.append(Found(f, root))
-    return Discovery(*_once(files, skipped))
+    return Discovery(*_once(files, skipped, once_per_file))
 
 
-def _once(files: list, skipped: list) -> tuple[list, list]:
+def _once(files: list, skipped: list, by_file: bool = False) -> tuple[list, list]:
     """Drop a file named a second time with the same output name (``clean in in/walk.bvh``,
     or one file given twice): it is processed once, and the skip says why."""
     seen: set = set()
     kept = []
     for f in files:
-        key = (os.path.realpath(f.path), f.relative)
+        key = (os.path.realpath(f.path), None if by_file else f.relative)
         if key in seen:
             skipped.append((str(f.path), "given more than once (processed once)"))
             continue
@@ -191,16 +196,20 @@ def _probe_write(folder) -> None:
     os.unlink(probe)
 
 
-def check_output_file(path, option: str, inputs=()) -> Path:
+def check_output_file(path, option: str, inputs=(), configs=()) -> Path:
     """Make sure a single output file (``--junit``, ``bench --json``, a trained model) can
     be written before the work that produces it starts, creating nothing: its folder, or
     the nearest folder above it that exists, must take a new file, and it must not be a
     capture among ``inputs`` (a named input, or a motion or ASF file in an input folder
     or beside a named input: ``check take.c3d --junit take.c3d`` replaced the capture
     with XML). A ConfigError naming ``option`` and the path otherwise (exit 2, nothing
-    processed)."""
+    processed). Nor may it be one of ``configs``, the config and rules files the run reads
+    (``check -r rules.yaml --junit rules.yaml`` replaced the rules with XML)."""
     path = Path(path)
     _refuse_overwriting_inputs(path, option, inputs)
+    for given in configs:
+        if given and path.exists() and os.path.realpath(path) == os.path.realpath(given):
+            raise ConfigError(f"{option} {path}: would overwrite the config {given}; choose another path")
     folder = path.parent
     while not folder.exists() and folder != folder.parent:
         folder = folder.parent
@@ -208,6 +217,8 @@ def check_output_file(path, option: str, inputs=()) -> Path:
         raise ConfigError(f"{option} {path}: is a folder, not a file")
     if not folder.is_dir():
         raise ConfigError(f"{option} {path}: cannot write there: part of the path is a file")
+    if is_stream(path):             # /dev/null, /dev/stdout: written in place, no folder needed
+        return path
     try:
         _probe_write(folder)
     except OSError as exc:
@@ -254,6 +265,10 @@ def plan_outputs(found: list, outdir, allow_inside_input: bool = False, inputs=(
                     "output folder or pass --allow-inside-input")
     jobs = [Job(f.path, outdir / f.relative) for f in found
             if not _under(f.path, real_out) or f.root is None]
+    if found and not jobs:          # (it said "no motion files found in IN")
+        raise ConfigError(f"every motion file found in {', '.join(map(str, inputs))} is inside the "
+                          f"output folder {outdir}, whose files are not cleaned again; choose "
+                          "another output folder")
     sources = {os.path.realpath(j.source) for j in jobs}
     seen: dict[Path, Path] = {}
     for job in jobs:
@@ -438,8 +453,18 @@ class CleanTask:
             from mocapfix.fileio import file_sha256
 
             pipeline = _pipeline(self.config, self.source)
+            try:
+                before = file_sha256(job.source)
+            except OSError:
+                before = None           # unreadable: clean_file names the cause
             result = clean_file(job.source, job.output, pipeline, self.reports, self.read_options)
-            result["input_sha256"] = file_sha256(job.source)      # for the manifest
+            # for the manifest: the hash of what was cleaned. Taken after the clean alone, a
+            # file still being written (copied, synced) was recorded with its new content
+            # against an output of the old one, and the next run skipped it as finished
+            result["input_sha256"] = file_sha256(job.source)
+            if before is not None and result["input_sha256"] != before:
+                return error_result(job, f"{job.source}: the file changed while it was being "
+                                         "cleaned (is it still being written?); run again")
             return result
         except MocapfixError as exc:
             return error_result(job, name_the_file(job.source, str(exc)))

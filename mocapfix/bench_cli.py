@@ -2,6 +2,7 @@
 ``main.add_command(bench)``). Thin: parses options and calls :func:`mocapfix.bench.run`."""
 from __future__ import annotations
 
+import os
 import sys
 
 import click
@@ -62,11 +63,17 @@ def bench(ctx, clean_files, protocol, methods, configs, seeds, settings, json_ou
     from mocapfix.fileio import atomic_write_text
 
     from mocapfix.batch import check_output_file
+    from mocapfix.fileio import is_stream
 
     try:                      # before the work: a long run must not end on an unwritable path
+        given = [c.strip() for c in (configs or "").split(",") if c.strip()]
         for option, path in (("--json", json_out), ("--markdown", md_out)):
             if path:
-                check_output_file(path, option, clean_files)
+                check_output_file(path, option, clean_files, configs=given)
+        if (json_out and md_out and os.path.realpath(json_out) == os.path.realpath(md_out)
+                and not is_stream(json_out)):
+            # the Markdown replaced the JSON without a word
+            raise MocapfixError(f"--json and --markdown both name {json_out}; give two files")
     except MocapfixError as exc:
         if _debug(ctx):
             raise

@@ -70,6 +70,8 @@ from mocapfix.solvers.realtime import holt_joint_filter, one_euro
 
 SCENARIOS = ("jitter", "inferred+occlusion", "mixed")
 KINECT_FPS = 30.0
+#: the shortest truth (frames at KINECT_FPS) the protocol runs on: 1 s
+MIN_FRAMES = 30
 TICKS_PER_S = 1e7
 
 #: CMU ASF bone (position = the bone's end) for each Kinect v2 joint
@@ -126,6 +128,9 @@ def kinect_truth(motion: Motion, rng: np.random.Generator, max_frames: int = 450
     idx = [motion.index(table[name]) for name in kl.KINECT_V2]
     P = motion.positions[::step, idx] * motion.metres_per_unit
     P = P[:max_frames]
+    if len(P) < MIN_FRAMES:         # the baselines' filters need a few frames of padding
+        raise ValueError(f"{len(P)} frames at {KINECT_FPS:g} fps; the kinect protocol needs at "
+                         f"least {MIN_FRAMES} ({MIN_FRAMES / KINECT_FPS:g} s of motion)")
     if np.isnan(P).any():
         raise ValueError("the capture has missing joints")
     root = P[:, _J["SpineBase"], [0, 2]]
@@ -171,8 +176,11 @@ def _leg_swap_frames(truth: np.ndarray, rng, count: int, lo: int, hi: int):
         cand = score.copy()
         cand[taken] = -np.inf
         cand[: 2] = cand[T - n - 2:] = -np.inf
+        finite = cand[np.isfinite(cand)]
+        if not finite.size:         # a short take: every frame taken or too near an end
+            break
         # among the best 10 % of frames, one at random
-        good = np.flatnonzero(cand >= np.quantile(cand[np.isfinite(cand)], 0.9))
+        good = np.flatnonzero(cand >= np.quantile(finite, 0.9))
         if not len(good):
             break
         start = int(rng.choice(good))
@@ -441,6 +449,11 @@ def run(files, configs=(), seeds=3, scenarios=None, max_frames: int = 450, progr
                                list(BASELINE_NAMES) + list(methods))
     bones = kl.skeleton_for("kinect_v2").bone_array
     sources = [(str(f), formats.read(f)) for f in files]
+    for label, src in sources:      # refuse a file before any work, naming it
+        try:
+            kinect_truth(src, np.random.default_rng(0), max_frames)
+        except ValueError as exc:
+            raise ValueError(f"{label}: {exc}") from None
     with tempfile.TemporaryDirectory(prefix="mocapfix-kbench-") as tmp:
         for seed in seed_list:
             for fi, (label, src) in enumerate(sources):

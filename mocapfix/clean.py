@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import stat
 import time
 from pathlib import Path
 
@@ -56,8 +57,11 @@ def remove_outputs(paths) -> None:
     output would go is not an output (it is left); a file that cannot be removed stays."""
     for p in paths:
         p = Path(p)
-        if p.is_dir() and not p.is_symlink():
-            continue
+        try:
+            if stat.S_ISDIR(os.lstat(p).st_mode):
+                continue
+        except OSError:     # not there, or a name the file system refuses (over 255 bytes:
+            continue        # Path.is_dir raised that, replacing the error and ending the batch)
         # not there: neither the file nor, when part of its folder path is a file, the folder
         with contextlib.suppress(OSError):
             p.unlink()

@@ -137,10 +137,10 @@ def _print_warnings(out: Out):
     UNIT_WARNINGS.clear()
 
 
-def _discover(inputs, include, exclude, out: Out):
+def _discover(inputs, include, exclude, out: Out, once_per_file: bool = False):
     from mocapfix.batch import discover_inputs
 
-    found = discover_inputs(inputs, include, exclude)
+    found = discover_inputs(inputs, include, exclude, once_per_file=once_per_file)
     for path, why in found.skipped:
         out.line(f"SKIP  {path}: {why}", level=0 if "not motion" not in why else 1, err=True)
     if found.skipped and out.verbosity == 0:
@@ -188,7 +188,7 @@ def info(inputs, as_json, fps, include, exclude):
     obj = _ctx()
     debug, out = obj["debug"], Out(obj["verbosity"])
     try:
-        found = _discover(inputs, include, exclude, out)
+        found = _discover(inputs, include, exclude, out, once_per_file=True)
         if not found.files:              # as clean and check: not a silent success
             raise MocapfixError("no motion files found in " + ", ".join(inputs))
     except MocapfixError as exc:
@@ -356,11 +356,13 @@ def clean(inputs, outdir, config_path, reports, jobs, as_json, fps, allow_inside
         config_text = f"# effective config of this run (from {pipeline.source})\n" + pipeline.dump()
         manifest = Manifest(outdir, run_key(config_text, kinds, {"fps": fps} if fps else None))
         finished = set() if policy == "overwrite" else {j for j in jobs_list if manifest.finished(j)}
-        existing = [j for j in jobs_list if j.output.exists() and j not in finished
+        # a folder where an output would go is not an earlier output: that file fails
+        # ("cannot write: Is a directory"); --skip-existing skipped it as "output exists"
+        existing = [j for j in jobs_list if _output_there(j) and j not in finished
                     and not manifest.interrupted(j)]
         if existing and policy is None and not dry_run:
             shown = ", ".join(str(j.output) for j in existing[:3]) + (" …" if len(existing) > 3 else "")
-            other = any(str(j.source) in manifest.records for j in existing)
+            other = any(manifest.knows(j.source) for j in existing)
             raise MocapfixError(f"{len(existing)} output(s) exist already ({shown}); pass --overwrite "
                                 "to replace them or --skip-existing to keep them"
                                 + ("; the folder's manifest records them made with another config, "
@@ -381,7 +383,7 @@ def clean(inputs, outdir, config_path, reports, jobs, as_json, fps, allow_inside
         _fail(str(exc), debug, exc)
     except MocapfixError as exc:
         _fail(str(exc), debug, exc)
-    todo = [j for j in jobs_list if j not in finished and not (policy == "skip" and j.output.exists())]
+    todo = [j for j in jobs_list if j not in finished and not (policy == "skip" and _output_there(j))]
     skipped = [j for j in jobs_list if j not in todo]
     if not dry_run:
         # a killed run leaves its half-written temporaries; the files this run writes
@@ -396,6 +398,11 @@ def clean(inputs, outdir, config_path, reports, jobs, as_json, fps, allow_inside
             out.line(f"WOULD {j.source} -> {j.output}{note}", level=-1)
         out.line(f"dry run: {len(todo)} file(s) would be cleaned with {pipeline.source}, "
                  f"{len(skipped)} skipped; nothing written", level=-1, err=True)
+        if as_json:                     # (stdout stayed empty: `--json --dry-run | jq` failed)
+            click.echo(json.dumps({"dry_run": True, "config": str(pipeline.source),
+                                   "files": [{"input": str(j.source), "output": str(j.output),
+                                              "replaces": j.output.exists()} for j in todo],
+                                   "skipped": [str(j.source) for j in skipped]}, indent=1))
         sys.exit(EXIT_OK)
 
     finished_here: list[str] = []
@@ -441,6 +448,11 @@ def clean(inputs, outdir, config_path, reports, jobs, as_json, fps, allow_inside
                  + (f"; {len(failed)} failed (ERROR): " + ", ".join(r["input"] for r in failed)
                     if failed else ""), level=-1, err=bool(failed))
     sys.exit(EXIT_SOME_FAILED if failed else EXIT_OK)
+
+
+def _output_there(job) -> bool:
+    """An earlier output (or anything but a folder) is at ``job.output``."""
+    return job.output.exists() and not job.output.is_dir()
 
 
 def _config_body(text: str) -> str:
@@ -493,14 +505,14 @@ def check(inputs, rules_path, junit_path, as_json, fail_on, exit_zero, would_cle
     try:
         spec = _executor_spec(jobs, scheduler, dask_workers)
         if junit_path:
-            check_output_file(junit_path, "--junit", inputs)
+            check_output_file(junit_path, "--junit", inputs, configs=(rules_path, would_clean))
         rules = load_rules(resolve_rules_path(rules_path or "default")).with_fail_on(list(fail_on))
         config = source = None
         if would_clean:
             pipeline = load_config(resolve_config(would_clean))
             _print_warnings(out)
             config, source = pipeline.config(), str(pipeline.source)
-        found = _discover(inputs, include, exclude, out)
+        found = _discover(inputs, include, exclude, out, once_per_file=True)
         if not found.files:
             raise MocapfixError("no motion files found in " + ", ".join(inputs))
     except MocapfixError as exc:
@@ -591,6 +603,12 @@ def train_dictionary(training, output, method, atoms, window, sample_rate, lam, 
     params = {"atoms": atoms, "window": window, "sample_rate": sample_rate, "train_lambda": lam,
               "beta": beta, "train_iterations": iterations, "max_windows": max_windows, "seed": seed,
               "bases": bases, "energy": energy}
+    # an option of the other methods was "unknown parameter(s) 'train_iterations', … for
+    # cleaner 'mssa'": the cleaner's internal names, not the options the user gave
+    foreign = [opt for opt, key in _TRAIN_OPTIONS[method == "mssa"] if params[key] is not None]
+    if foreign:
+        _fail(f"{', '.join(foreign)} {'does' if len(foreign) == 1 else 'do'} not apply to --method "
+              f"{method} (only to " + ("partlet and ksvd)" if method == "mssa" else "mssa)"), debug)
     try:
         from mocapfix.batch import check_output_file
 
@@ -622,6 +640,13 @@ def train_dictionary(training, output, method, atoms, window, sample_rate, lam, 
                  "unexplained energy " + ", ".join(f"{p} {100 * f:.2f} %" for p, f in st["unexplained"].items()), level=-1)
     if summary["unread"]:
         sys.exit(EXIT_SOME_FAILED)
+
+
+#: train-dictionary options that do not apply: [False] to partlet/ksvd, [True] to mssa
+_TRAIN_OPTIONS = {False: (("--bases", "bases"), ("--energy", "energy")),
+                  True: (("--atoms", "atoms"), ("--sample-rate", "sample_rate"), ("--lambda", "train_lambda"),
+                         ("--beta", "beta"), ("--iterations", "train_iterations"),
+                         ("--max-windows", "max_windows"), ("--seed", "seed"))}
 
 
 def _register_bench():

@@ -83,6 +83,8 @@ OCCLUSION_SCENARIOS = ("gaps", "noise", "mixed", "swap")
 
 def occlusion(motion: Motion, scenario: str, seed: int = 0):
     """One scenario of the ``occlusion`` protocol; returns (corrupted motion, mask)."""
+    if len(motion.positions) < 4:   # an interior gap or swap needs frames on both sides
+        raise ValueError(f"{len(motion.positions)} frames; the occlusion protocol needs at least 4")
     rng = np.random.default_rng(seed)
     if scenario == "gaps":
         return occlusion_gaps(motion, rng)

@@ -5,19 +5,31 @@ A crash or an error half-way leaves either the old file or no file, never a trun
 from __future__ import annotations
 
 import contextlib
+import errno
 import hashlib
 import os
+import stat
 import tempfile
 from pathlib import Path
 
 
 @contextlib.contextmanager
 def atomic_open(path, mode: str = "wb"):
-    """Open a temporary sibling of ``path`` for writing; rename it over ``path`` on success.
+    """Open a temporary sibling of ``path`` for writing; rename it over ``path`` on success
+    (a character device or a pipe, such as /dev/null, is written in place instead).
 
     An OS failure of our own (the folder cannot be made or written, the disk is full, the
     rename fails) is a :class:`~mocapfix.errors.WriteError` naming ``path``."""
     path = Path(path)
+    stream = _open_stream(path, mode)
+    if stream is not None:          # a device or pipe: written in place (see _open_stream)
+        try:
+            with stream as fh:
+                yield fh
+                fh.flush()
+        except OSError as exc:      # /dev/full, a pipe whose reader left
+            raise _write_error(path, exc) from None
+        return
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         fd, tmp = tempfile.mkstemp(prefix=f".{_temp_stem(path.name)}.", suffix=".part",
@@ -41,6 +53,46 @@ def atomic_open(path, mode: str = "wb"):
         with contextlib.suppress(OSError):
             os.unlink(tmp)
         raise
+
+
+def is_stream(path) -> bool:
+    """True when ``path`` exists and is a character device or a pipe (/dev/null, /dev/stdout
+    into a pipe, a FIFO): :func:`atomic_open` writes into it in place."""
+    try:
+        mode = os.stat(path).st_mode
+    except OSError:
+        return False
+    return stat.S_ISCHR(mode) or stat.S_ISFIFO(mode)
+
+
+def _open_stream(path: Path, mode: str):
+    """An existing ``path`` that is not a regular file or a folder, opened for writing in
+    place, or None. A character device or a pipe (``--junit /dev/null``, ``/dev/stdout``,
+    a FIFO with a reader) is written into: the temporary-then-rename of :func:`atomic_open`
+    would replace the device or link itself with a regular file (run as root, it did so to
+    /dev/null). A FIFO without a reader, a block device or a socket is a WriteError."""
+    try:
+        st = os.stat(path)
+    except OSError:
+        return None
+    if stat.S_ISREG(st.st_mode) or stat.S_ISDIR(st.st_mode):
+        return None
+    if not (stat.S_ISCHR(st.st_mode) or stat.S_ISFIFO(st.st_mode)):
+        from mocapfix.errors import WriteError
+        kind = "a block device" if stat.S_ISBLK(st.st_mode) else "not a file"
+        raise WriteError(path, f"cannot write: {kind}; give the path of a file")
+    fifo = stat.S_ISFIFO(st.st_mode)
+    try:
+        # a FIFO opened without O_NONBLOCK waits for a reader forever; with it, ENXIO
+        fd = os.open(path, os.O_WRONLY | (os.O_NONBLOCK if fifo else 0))
+    except OSError as exc:
+        if fifo and exc.errno == errno.ENXIO:
+            from mocapfix.errors import WriteError
+            raise WriteError(path, "cannot write: a named pipe (FIFO) that nothing reads") from None
+        raise _write_error(path, exc) from None
+    if fifo:
+        os.set_blocking(fd, True)
+    return os.fdopen(fd, mode, **({} if "b" in mode else {"encoding": "utf-8", "newline": ""}))
 
 
 #: the longest file name (bytes) of common Linux, macOS and Windows file systems

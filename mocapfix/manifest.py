@@ -3,7 +3,9 @@
 ``OUTDIR/mocapfix-manifest.jsonl`` is a journal, one JSON record per line, appended as each
 file finishes (one ``write`` of one line, then ``fsync``: a record is either whole or, after
 a crash mid-write, an unparsable last line that is ignored). The last record of an input
-wins. Fields: ``input`` (absolute path), ``input_sha256``, ``output`` and ``files``
+and output wins (one file found through two given paths, ``clean in in/sub/x.bvh``, has two
+outputs and two records: keyed by the input alone, the second replaced the first and the
+re-run of the same command stopped on "output(s) exist already"). Fields: ``input`` (absolute path), ``input_sha256``, ``output`` and ``files``
 (relative to the output folder), ``status`` (``done``, ``failed``, or ``started`` — written
 for every file of a run before it begins), ``quality`` (OK/WARN/FAIL), ``config_sha256``
 (of the effective config text), ``reports``, ``read_options``, ``version`` (mocapfix),
@@ -14,7 +16,7 @@ kinds, read options and mocapfix version, its input's sha256 is unchanged and it
 files all exist. A re-run skips finished files; an output whose last record is ``started``
 under the same run key was written by an interrupted run of this same config (killed
 between writing and recording) and may be replaced without ``--overwrite``. At the end of a
-run the journal is rewritten (atomically) with one record per input.
+run the journal is rewritten (atomically) with one record per input and output.
 """
 from __future__ import annotations
 
@@ -47,7 +49,7 @@ class Manifest:
         self.outdir = Path(os.path.abspath(outdir))
         self.path = self.outdir / MANIFEST_NAME
         self.key = key
-        self.records: dict[str, dict] = {}
+        self.records: dict[tuple, dict] = {}       # (input, output) -> last record
         self._fd: int | None = None
         self._size_before: int | None = None     # the file's size before this run wrote
         if self.path.exists():
@@ -64,14 +66,14 @@ class Manifest:
                 except ValueError:
                     continue                      # a torn last line after a crash
                 if isinstance(rec, dict) and isinstance(rec.get("input"), str):
-                    self.records[rec["input"]] = rec
+                    self.records[_key(rec)] = rec
 
     def _same_run(self, rec: dict) -> bool:
         return all(rec.get(f) == self.key[f] for f in _KEY_FIELDS)
 
     def finished(self, job) -> bool:
         """``job`` was cleaned by an earlier run of this config and nothing changed since."""
-        rec = self.records.get(str(job.source))
+        rec = self.records.get((str(job.source), self._rel(job.output)))
         if not rec or rec.get("status") != "done" or not self._same_run(rec):
             return False
         if rec.get("output") != self._rel(job.output):
@@ -88,8 +90,12 @@ class Manifest:
 
     def interrupted(self, job) -> bool:
         """``job`` was started by a run of this same config that did not record its end."""
-        rec = self.records.get(str(job.source))
+        rec = self.records.get((str(job.source), self._rel(job.output)))
         return bool(rec) and rec.get("status") == "started" and self._same_run(rec)
+
+    def knows(self, source) -> bool:
+        """Some record names ``source`` as its input."""
+        return any(key[0] == str(source) for key in self.records)
 
     def _rel(self, path) -> str:
         p = Path(path)
@@ -111,7 +117,7 @@ class Manifest:
         os.write(self._fd, data)
         os.fsync(self._fd)
         for r in records:
-            self.records[r["input"]] = r
+            self.records[_key(r)] = r
 
     def start(self, jobs) -> None:
         """Record that these jobs are about to run (one write for all)."""
@@ -151,6 +157,11 @@ class Manifest:
         if compact and self.records:
             atomic_write_text(self.path, "".join(json.dumps(r, sort_keys=True) + "\n"
                                                  for r in self.records.values()))
+
+
+def _key(rec: dict) -> tuple:
+    output = rec.get("output")
+    return rec["input"], output if isinstance(output, str) else None
 
 
 def _now() -> str:

@@ -289,12 +289,10 @@ def load_yaml(text, source: str = "<config>"):
 
 
 def load_config(path) -> Pipeline:
+    from mocapfix.yamlsafe import read_bounded
+
     path = Path(path)
-    try:
-        data = path.read_bytes()
-    except OSError as exc:
-        raise ConfigError(f"{path}: cannot read config: {exc.strerror or exc}") from None
-    return loads_config(data, str(path))
+    return loads_config(read_bounded(path, "config"), str(path))
 
 
 def loads_config(text: str | bytes, source: str = "<config>") -> Pipeline:

@@ -67,7 +67,7 @@ def _long_fills(report: dict) -> list[str]:
            "| joint | frames | s | confidence | filled by |", "|---|---|---:|---:|---|"]
     for name, g in sorted(rows, key=lambda r: -r[1]["length"]):
         conf = "–" if g.get("confidence") is None else f"{g['confidence']:.2f}"
-        out.append(f"| {name} | {g['start']}–{g['start'] + g['length'] - 1} "
+        out.append(f"| {_cell(name)} | {g['start']}–{g['start'] + g['length'] - 1} "
                    f"| {g['seconds']:.2f} | {conf} | {g['filled_by']} |")
     return out
 
@@ -111,6 +111,12 @@ def _not_cleaned(report: dict, shown: int = 12) -> list[str]:
     return out
 
 
+def _cell(text) -> str:
+    """A name in a Markdown table cell: its pipes escaped and line breaks made spaces (a
+    C3D label "a|b" split its row into one column too many, in the HTML report too)."""
+    return " ".join(str(text).splitlines()).replace("|", "\\|")
+
+
 def to_markdown(report: dict) -> str:
     f = report["file"]
     name = Path(f["path"]).name if f.get("path") else "motion"
@@ -148,12 +154,12 @@ def to_markdown(report: dict) -> str:
             "|---|---|---|---|---|---:|---|---|---|"]
     for j in ranked(report):
         out.append(
-            f"| {j['name']} | {j['status']} | {_pct(j['missing_before'])} → {_pct(j['missing_after'])} "
+            f"| {_cell(j['name'])} | {j['status']} | {_pct(j['missing_before'])} → {_pct(j['missing_after'])} "
             f"| {_pct(j.get('uncertain'))} "
             f"| {j['gaps']['count']} ({j['gaps']['longest_frames']}) | {j['outliers_flagged']} "
             f"| {_num(j['correction_mm']['mean'], '{:.2f}')} / {_num(j['correction_mm']['max'], '{:.1f}')} "
             f"| {_num(j['jitter_before'], '{:.2f}')} → {_num(j['jitter_after'], '{:.2f}')} "
-            f"| {'; '.join(j['reasons']) or '–'} |")
+            f"| {_cell('; '.join(j['reasons'])) or '–'} |")
     out += _long_fills(report)
     out += _gaps_left(report)
     out += _not_cleaned(report)
@@ -283,6 +289,7 @@ def to_html(report: dict, result, n_plots: int = 6) -> str:
 
 
 _INLINE = re.compile(r"`([^`]+)`|\*\*([^*]+)\*\*")
+_PIPE = re.compile(r"(?<!\\)\|")            # a cell border: a pipe not escaped as \|
 
 
 def _inline(text: str) -> str:
@@ -302,7 +309,7 @@ def markdown_to_html(md: str) -> str:
     out, in_table, in_list = [], False, False
     for line in md.splitlines():
         if line.startswith("|"):
-            cells = [c.strip() for c in line.strip("|").split("|")]
+            cells = [c.strip().replace("\\|", "|") for c in _PIPE.split(line.strip().strip("|"))]
             if set("".join(cells)) <= set("-:"):
                 continue
             tag = "th" if not in_table else "td"

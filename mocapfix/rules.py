@@ -464,11 +464,13 @@ def preset_names() -> list[str]:
 def resolve_rules_path(name_or_path) -> Path:
     """A rules file by path, or a shipped preset by name (``optical-gait``)."""
     path = Path(name_or_path)
-    if path.is_file():
+    if path.exists() and not path.is_dir():     # a file, or a pipe: -r <(…)
         return path
     preset = RULES_DIR / f"{name_or_path}.yaml"
     if "/" not in str(name_or_path) and preset.is_file():
-        return preset
+        return preset               # (also when a folder of that name is here: -r kinect)
+    if path.is_dir():
+        raise ConfigError(f"{name_or_path}: is a folder, not a rules file")
     raise ConfigError(f"{name_or_path}: no such rules file or preset "
                       f"(presets: {', '.join(preset_names())})")
 
@@ -516,12 +518,10 @@ def loads_rules(text: str, source: str = "<rules>", stage: str = "input") -> Rul
 def load_rules(path, stage: str = "input", _depth: int = 0) -> RuleSet:
     from mocapfix.pipeline import load_yaml
 
+    from mocapfix.yamlsafe import read_bounded
+
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ConfigError(f"{path}: cannot read rules: {getattr(exc, 'strerror', None) or exc}") from None
-    return parse_rules(load_yaml(text, str(path)), str(path), stage, _depth)
+    return parse_rules(load_yaml(read_bounded(path, "rules"), str(path)), str(path), stage, _depth)
 
 
 def default_rules(stage: str = "input") -> RuleSet:

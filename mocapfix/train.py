@@ -37,7 +37,7 @@ def discover_training(inputs, skipped: list | None = None) -> list[Path]:
     are passed over, each with its reason appended to ``skipped``."""
     from mocapfix.batch import discover_inputs
 
-    found = discover_inputs(inputs)
+    found = discover_inputs(inputs, once_per_file=True)     # (a file found twice was trained on twice)
     if skipped is not None:
         skipped.extend(found.skipped)
     files = [f.path for f in found.files]

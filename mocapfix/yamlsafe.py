@@ -40,6 +40,22 @@ _OPENERS = re.compile(r"[\[{](?:\s*[\[{]){64,}")
 _CLOSE = (yaml.SequenceEndEvent, yaml.MappingEndEvent)
 
 
+def read_bounded(path, what: str = "config", max_bytes: int = MAX_BYTES) -> bytes:
+    """The bytes of a config or rules file, reading at most ``max_bytes`` + 1 of them: a
+    larger file (or ``-c /dev/zero``) is refused without being read whole. A pipe
+    (``-c <(…)``) reads like a file. Every failure is a ConfigError naming ``path``."""
+    try:
+        with open(path, "rb") as fh:
+            data = fh.read(max_bytes + 1)
+    except IsADirectoryError:
+        raise ConfigError(f"{path}: is a folder, not a {what} file") from None
+    except OSError as exc:
+        raise ConfigError(f"{path}: cannot read {what}: {exc.strerror or exc}") from None
+    if len(data) > max_bytes:
+        raise ConfigError(f"{path}: {what} file is more than the {max_bytes:,} bytes allowed")
+    return data
+
+
 def decode_text(data: bytes, source: str, max_bytes: int = MAX_BYTES) -> str:
     """UTF-8 text of a config file (BOM dropped), or a ConfigError naming the bad byte."""
     if len(data) > max_bytes:

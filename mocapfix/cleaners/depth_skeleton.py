@@ -259,6 +259,24 @@ class KinectSkeleton(Cleaner):
     )
 
     def _apply(self, motion: Motion):
+        try:
+            return self._clean(motion)
+        except np.linalg.LinAlgError:
+            # the order-d penalty grows as 1 / step^(2d): at kilohertz rates, or with two
+            # stamps a tick apart, the banded Cholesky of the smoother fails (it was an
+            # "internal error LinAlgError: … not positive definite")
+            from mocapfix.errors import ConfigError
+            t = (np.asarray(motion.times, dtype=np.float64) if motion.times is not None
+                 else np.arange(len(motion.positions)) / motion.fps)
+            steps = np.diff(t)
+            shortest = float(steps[steps > 0].min()) if (steps > 0).any() else 1.0 / motion.fps
+            raise ConfigError(
+                f"{self.step}: its smoother's equations cannot be solved on this time axis "
+                f"(shortest time step {shortest:.3g} s, {motion.fps:g} fps; order {self['order']}): "
+                "it is made for depth-sensor rates (15-60 fps); check the frame rate (--fps) "
+                "and the file's time stamps, or give a lower order") from None
+
+    def _clean(self, motion: Motion):
         T, J, _ = motion.positions.shape
         info: dict = {}
         if T < 5 or J == 0:

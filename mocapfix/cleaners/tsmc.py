@@ -10,7 +10,10 @@ the marker's residual, clipped to [``min_threshold``, ``max_threshold``]; the We
 p is θ. The paper's fixed θ = 6 cm, p = 5 cm (kept as the cap) caught 284 of 664 spikes of
 2–10 cm on CMU 85_02 with 2 mm jitter (``occlusion`` noise, seed 0); the defaults catch
 all 664 with 3 false alarms (HDM05: 3511 of 3511, 15 false). Untrusted samples are made
-missing (default), replaced by the smooth (eq. 20) or only reported.
+missing (default), replaced by the smooth (eq. 20) or only reported. A sample further from
+its marker's median position than 20 times its marker's or the capture's extent, and than
+100 m (:data:`GROSS_EXTENT`), is untrusted before the smoothing starts: left in, one such value (a corrupt field) steered
+the first robust smooth and its whole marker came out untrusted.
 
 ``tsmc`` (Algorithm 2): with the channels as rows and scaled to cm,
 
@@ -100,6 +103,35 @@ def _confident(motion: Motion, min_confidence: float) -> np.ndarray:
     if motion.confidence is None:
         return np.ones(motion.positions.shape[:2], dtype=bool)
     return np.nan_to_num(motion.confidence, nan=0.0) >= min_confidence
+
+
+#: a sample further from its marker's median position than this many times the larger of
+#: its marker's and the capture's extent (90th percentile of the distances to the marker's
+#: median: its own samples', every sample's), and than GROSS_FLOOR_M, is no measurement (a
+#: corrupt field, a flipped exponent bit). Relative, so a file whose units are mislabelled
+#: is not taken for one big gross error, and per marker, so a wand moving over a static rig
+#: is not either (a capture-wide extent alone took the whole wand); the shared captures
+#: reach 2.2x (C3D) and 11x (Kinect) their extent
+GROSS_EXTENT = 20.0
+GROSS_FLOOR_M = 100.0     # no capture volume is that large (kinect_skeleton's screen: 100 m)
+
+
+def _gross(motion: Motion) -> np.ndarray:
+    """(T, J) True for observed samples that are gross errors (:data:`GROSS_EXTENT`)."""
+    pos = motion.positions
+    seen = ~np.isnan(pos).any(axis=2)
+    if not seen.any():
+        return seen
+    has = seen.any(axis=0)
+    centre = np.zeros((pos.shape[1], 3))
+    centre[has] = np.nanmedian(pos[:, has], axis=0)
+    with np.errstate(invalid="ignore", over="ignore"):
+        dist = np.linalg.norm(pos - centre, axis=2)
+        own = np.zeros(pos.shape[1])
+        own[has] = np.nanquantile(np.where(seen, dist, np.nan)[:, has], 0.9, axis=0)
+        extent = np.maximum(own, float(np.quantile(dist[seen], 0.9)))
+        limit = np.maximum(GROSS_EXTENT * extent, GROSS_FLOOR_M / motion.metres_per_unit)
+        return seen & ~(dist <= limit[None, :])
 
 
 def _pad_frames(cleaner: Cleaner, motion: Motion) -> int:
@@ -214,6 +246,11 @@ class Trust(Cleaner):
         confident = _confident(motion, self["min_confidence"])
         weights = np.where(confident & observed, 1.0 if motion.confidence is None else
                            np.clip(np.nan_to_num(motion.confidence), 0.0, 1.0), 0.0)
+        # gross errors are untrusted from the start: one sample 1 km off (1e6 mm) steered
+        # the first robust smooth and all 810 samples of its marker on CMU 85_02 came out
+        # untrusted (deleted, then refilled from the other markers; 100 m: 731 of 810)
+        gross = _gross(motion)
+        weights[gross] = 0.0
         welsch = None if self["welsch"] is None else self.length("welsch", motion)
         trusted, smooth, theta, mu = trust_mask(
             pos, weights, self["threshold"], self.length("min_threshold", motion),
@@ -230,6 +267,7 @@ class Trust(Cleaner):
         info = {
             "untrusted": int(per.sum()),
             "untrusted_low_confidence": int((observed & ~confident).sum()),
+            "untrusted_gross": int(gross.sum()),
             "untrusted_per_joint": {motion.names[j]: int(per[j]) for j in np.flatnonzero(per)},
             "threshold_mm": {"median": round(float(np.median(theta)) * mm, 3),
                              "max": round(float(np.max(theta)) * mm, 3)},

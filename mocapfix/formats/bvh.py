@@ -450,7 +450,7 @@ def _parse_motion(path, data: bytes, motion_start: int, n_channels: int,
         if not allow_truncated:
             raise UnreadableFileError(
                 path, f"truncated: 'Frames: {declared}' but only {complete} complete frame "
-                      f"lines{partial} (pass allow_truncated=True to read them)",
+                      f"lines{partial} (the file was cut short, or its Frames: count is wrong)",
                 line=first_line + len(lines) - 1 if lines else None)
         notes.append(f"file truncated: read {complete} of {declared} declared frames "
                      f"({missing} missing{partial})")
