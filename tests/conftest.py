@@ -9,6 +9,7 @@ from __future__ import annotations
 import contextlib
 import fnmatch
 import os
+import re
 import signal
 from pathlib import Path
 
@@ -133,3 +134,16 @@ def output_tree(folder) -> dict:
             out[rel] = drop_seconds(json.loads(p.read_text())) if p.name.endswith(".report.json") \
                 else p.read_bytes()
     return out
+
+
+def no_traceback(result) -> None:
+    """A CliRunner result printed no traceback and raised nothing but its exit."""
+    assert "Traceback" not in result.output
+    assert result.exception is None or isinstance(result.exception, SystemExit), repr(result.exception)
+
+
+def cut_amc(src: Path, dst: Path, frames: int) -> Path:
+    """``src`` AMC with its first ``frames`` frames only, written to ``dst``."""
+    parts = re.split(r"(?m)^(?=\d+\s*$)", src.read_text())
+    dst.write_text("".join(parts[:1 + frames]))
+    return dst

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import shutil
 import time
 from pathlib import Path
 
@@ -12,8 +13,11 @@ from click.testing import CliRunner
 
 from mocapfix import bench, corrupt, metrics
 from mocapfix.bench_cli import bench as bench_cmd
+from mocapfix.cli import main
 from mocapfix.gaps import runs
 from mocapfix.motion import Motion, Skeleton
+
+from conftest import SAMPLE_DATA, cut_amc, no_traceback
 
 SAMPLE = Path(__file__).resolve().parent.parent / "sample_data"
 
@@ -324,3 +328,15 @@ def test_time_budget_stops_a_method_after_whole_runs():
     assert set(counts.values()) == {1}                     # each ran once, then stopped
     assert any("CPU budget" in n and "ran 1 of 4" in n for n in res.notes)
     assert "[1/2 seeds]" in res.to_markdown()
+
+
+def test_bench_occlusion_on_a_three_frame_take_says_why(tmp_path):
+    # it said "occlusion/mixed: low >= high" (NumPy's message for an empty random range)
+    shutil.copy(SAMPLE_DATA / "walker.asf", tmp_path / "walker.asf")
+    short = cut_amc(SAMPLE_DATA / "walker_01.amc", tmp_path / "walker_02.amc", 3)
+    r = CliRunner().invoke(main, ["bench", str(short), "--protocol", "occlusion", "--seeds", "1",
+                                  "--methods", "fill", "-q"])
+    no_traceback(r)
+    assert r.exit_code == 2, r.output
+    assert "low >= high" not in r.output
+    assert f"{short}: occlusion/" in r.output and "3 frames; the occlusion protocol needs at least 4" in r.output

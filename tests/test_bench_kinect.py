@@ -2,14 +2,19 @@
 real-time baselines (known answers)."""
 from __future__ import annotations
 
+import shutil
+
 import numpy as np
 import pytest
+from click.testing import CliRunner
 
 from mocapfix import bench_kinect as bk
 from mocapfix import formats
+from mocapfix.cli import main
 from mocapfix.formats import kinect as kf
 from mocapfix.solvers.realtime import holt_joint_filter, one_euro
-from tests.conftest import shared
+
+from tests.conftest import cut_amc, no_traceback, shared
 
 
 def _truth(seed=0):
@@ -100,3 +105,19 @@ def test_protocol_runs_and_baselines_beat_raw(scenario):
     best = min(r["rmse_mm"][0] for r in rows.values())
     assert min(r["ratio_best"][0] for r in rows.values()) == pytest.approx(1.0)
     assert 3.0 < best < 80.0
+
+
+def test_bench_kinect_on_short_takes_names_the_file_or_runs(tmp_path):
+    # a 1.25 s CMU take crashed the kinect protocol (IndexError in the leg-swap placement:
+    # an internal error); a 0.67 s one failed with SciPy's "padlen" message naming no file
+    shutil.copy(shared("asfamc/05.asf"), tmp_path / "05.asf")
+    amc = shared("asfamc/05_01.amc")
+    ok = cut_amc(amc, tmp_path / "05_90.amc", 150)
+    short = cut_amc(amc, tmp_path / "05_91.amc", 80)
+    r = CliRunner().invoke(main, ["bench", str(ok), "--protocol", "kinect", "--seeds", "3", "-q"])
+    no_traceback(r)
+    assert r.exit_code == 0, r.output
+    r = CliRunner().invoke(main, ["bench", str(ok), str(short), "--protocol", "kinect", "-q"])
+    no_traceback(r)
+    assert r.exit_code == 2, r.output
+    assert f"{short}: 20 frames at 30 fps; the kinect protocol needs at least 30" in r.output

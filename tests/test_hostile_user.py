@@ -5,13 +5,17 @@ traceback (the developers' guide, "Bad input gets a clear error and loses nothin
 from __future__ import annotations
 
 import hashlib
+import os
 import shutil
+import stat
+import threading
 from pathlib import Path
 
 from click.testing import CliRunner
 
 from mocapfix.cli import main
-from conftest import SAMPLE_DATA
+
+from conftest import SAMPLE_DATA, no_traceback
 
 BVH, C3D, KIN = SAMPLE_DATA / "walk.bvh", SAMPLE_DATA / "walk_markers.c3d", SAMPLE_DATA / "walk_kinect_v2.csv"
 FAST = "version: 1\npipeline:\n  - cleaner: fill\n    max_gap: 0.5 s\n"
@@ -902,3 +906,259 @@ def test_a_file_named_again_inside_its_folder_is_cleaned_once(tmp_path):
                                   "-c", _cfg(tmp_path)])
     assert r.exit_code == 2 and "would both be written" in r.output, r.output
     assert not (tmp_path / "o2" / take.name).exists()
+
+
+
+def test_junit_into_a_pipe_is_written_into_it_not_replaced(tmp_path):
+    # `--junit /dev/null` or `--junit /dev/stdout` in a CI container run as root replaced
+    # the device (the link) with a regular XML file: the temporary-then-rename of an
+    # atomic write renamed over it. A pipe (here a FIFO with a reader) is written into.
+    fifo = tmp_path / "junit.pipe"
+    os.mkfifo(fifo)
+    got = []
+    reader = threading.Thread(target=lambda: got.append(fifo.read_bytes()), daemon=True)
+    reader.start()
+    r = CliRunner().invoke(main, ["check", str(KIN), "--junit", str(fifo), "-q"])
+    if reader.is_alive():           # without the fix nobody opens the pipe to write
+        with open(fifo, "wb"):
+            pass
+    reader.join(10)
+    no_traceback(r)
+    assert r.exit_code in (0, 1), r.output
+    assert stat.S_ISFIFO(os.stat(fifo).st_mode), "the pipe was replaced by a file"
+    assert got and got[0].startswith(b"<?xml") and b"walk_kinect_v2.csv" in got[0]
+
+
+def test_junit_into_a_pipe_nobody_reads_is_an_error_not_a_hang(tmp_path):
+    fifo = tmp_path / "junit.pipe"
+    os.mkfifo(fifo)
+    r = CliRunner().invoke(main, ["check", str(KIN), "--junit", str(fifo), "-q"])
+    no_traceback(r)
+    assert r.exit_code == 2, r.output
+    assert f"{fifo}: cannot write: a named pipe (FIFO) that nothing reads" in r.output
+    assert stat.S_ISFIFO(os.stat(fifo).st_mode)
+
+
+def test_output_folder_equal_to_the_input_folder_says_so(tmp_path):
+    # `clean in -o in --allow-inside-input` said "no motion files found in in" although
+    # the folder holds captures: they are all inside the output folder, and that is why
+    src = tmp_path / "in"
+    src.mkdir()
+    (src / "walk.csv").write_bytes(KIN.read_bytes())
+    before = (src / "walk.csv").read_bytes()
+    r = CliRunner().invoke(main, ["clean", str(src), "-o", str(src), "--allow-inside-input",
+                                  "-c", "kinect"])
+    no_traceback(r)
+    assert r.exit_code == 2, r.output
+    assert "no motion files found" not in r.output
+    assert f"inside the output folder {src}" in r.output
+    assert (src / "walk.csv").read_bytes() == before
+    assert sorted(p.name for p in src.iterdir()) == ["walk.csv"]
+
+
+def test_config_or_rules_path_that_is_a_folder_says_so(tmp_path):
+    # a folder given to -c / -r / --would-clean was "no such config file or preset"
+    folder = tmp_path / "my.yaml"
+    folder.mkdir()
+    for args, what in ((["clean", str(KIN), "-o", str(tmp_path / "out"), "-c", str(folder)], "config"),
+                       (["check", str(KIN), "--would-clean", str(folder)], "config"),
+                       (["check", str(KIN), "-r", str(folder)], "rules")):
+        r = CliRunner().invoke(main, args)
+        no_traceback(r)
+        assert r.exit_code == 2, (args, r.output)
+        assert f"{folder}: is a folder, not a {what} file" in r.output, (args, r.output)
+    assert not (tmp_path / "out").exists()
+
+
+def test_config_from_a_pipe_is_read(tmp_path):
+    # `-c <(…)` (a pipe, not a regular file) was "no such config file or preset"
+    fifo = tmp_path / "cfg.pipe"
+    os.mkfifo(fifo)
+    text = b"version: 1\npipeline:\n  - cleaner: fill\n    max_gap: 0.5 s\n"
+    writer = threading.Thread(target=lambda: fifo.write_bytes(text), daemon=True)
+    writer.start()
+    r = CliRunner().invoke(main, ["clean", str(KIN), "-o", str(tmp_path / "out"), "-c", str(fifo)])
+    if writer.is_alive():           # without the fix nobody opens the pipe to read
+        fifo.read_bytes()
+    writer.join(10)
+    no_traceback(r)
+    assert r.exit_code == 0, r.output
+    assert "max_gap: 0.5 s" in (tmp_path / "out" / "mocapfix-config.yaml").read_text()
+
+
+def test_train_dictionary_names_the_option_that_does_not_apply(tmp_path):
+    # --iterations / --max-windows with --method mssa said "unknown parameter(s)
+    # 'max_windows', 'train_iterations' for cleaner 'mssa'": names no option has
+    model = tmp_path / "m.npz"
+    for args, message in (
+            (["--method", "mssa", "--iterations", "2", "--max-windows", "200"],
+             "--iterations, --max-windows do not apply to --method mssa (only to partlet and ksvd)"),
+            (["--method", "partlet", "--bases", "5"], "--bases does not apply to --method partlet (only to mssa)")):
+        r = CliRunner().invoke(main, ["train-dictionary", str(SAMPLE_DATA / "walk.bvh"), "-o", str(model),
+                                      *args])
+        no_traceback(r)
+        assert r.exit_code == 2, r.output
+        assert message in r.output and "train_iterations" not in r.output, r.output
+        assert not model.exists()
+
+
+def test_a_255_byte_file_name_fails_alone_with_a_readable_error(tmp_path):
+    # its report name passes the 255-byte limit: the WriteError was replaced by an OSError
+    # of the clean-up (Path.is_dir on the too-long name), "internal error", and the same
+    # clean-up in the CLI then ended the whole batch (files after it were never cleaned)
+    src = tmp_path / "in"
+    src.mkdir()
+    long_name = "a" * 251 + ".csv"
+    (src / long_name).write_bytes(KIN.read_bytes())
+    (src / "b.csv").write_bytes(KIN.read_bytes())
+    out = tmp_path / "out"
+    r = CliRunner().invoke(main, ["clean", str(src), "-o", str(out), "-c", _cfg(tmp_path)])
+    no_traceback(r)
+    assert r.exit_code == 1, r.output
+    error = [line for line in r.output.splitlines() if line.startswith("ERROR")]
+    assert len(error) == 1 and long_name in error[0] and "internal error" not in error[0], r.output
+    assert "File name too long" in error[0]
+    assert (out / "b.csv").is_file() and not (out / long_name).exists()
+    assert "cleaned 1 of 2 files" in r.output
+
+
+def test_report_outputs_never_replace_the_configs_the_run_reads(tmp_path):
+    # check -r R --junit R, check --would-clean C --junit C and bench --configs C --json C
+    # replaced the user's rules or config with the report; --json F --markdown F kept
+    # only the Markdown
+    config = tmp_path / "my.yaml"
+    config.write_text("version: 1\npipeline:\n  - cleaner: fill\n    max_gap: 0.5 s\n")
+    rules = tmp_path / "rules.yaml"
+    rules.write_text("version: 1\nrules:\n  - metric: missing\n    warn: 10%\n")
+    before = {p: p.read_bytes() for p in (config, rules)}
+    runs = [
+        (["check", str(KIN), "-r", str(rules), "--junit", str(rules)], f"would overwrite the config {rules}"),
+        (["check", str(KIN), "--would-clean", str(config), "--junit", str(config)],
+         f"would overwrite the config {config}"),
+        (["bench", str(KIN), "--protocol", "occlusion", "--seeds", "1", "--configs", str(config),
+          "--json", str(config), "-q"], f"would overwrite the config {config}"),
+        (["bench", str(KIN), "--protocol", "occlusion", "--seeds", "1", "--methods", "fill",
+          "--json", str(tmp_path / "r.out"), "--markdown", str(tmp_path / "r.out"), "-q"],
+         "--json and --markdown both name"),
+    ]
+    for args, message in runs:
+        r = CliRunner().invoke(main, args)
+        no_traceback(r)
+        assert r.exit_code == 2, (args, r.output)
+        assert message in r.output, (args, r.output)
+    assert {p: p.read_bytes() for p in (config, rules)} == before
+    assert not (tmp_path / "r.out").exists()
+
+
+def test_clean_json_dry_run_prints_json(tmp_path):
+    # --json --dry-run printed nothing on stdout (the WOULD lines go to stderr with --json)
+    import json
+
+    out = tmp_path / "out"
+    r = CliRunner().invoke(main, ["clean", str(KIN), "-o", str(out), "--json", "--dry-run"])
+    no_traceback(r)
+    assert r.exit_code == 0, r.output
+    data = json.loads(r.stdout)
+    assert data["dry_run"] is True
+    assert data["files"] == [{"input": str(KIN), "output": str(out / KIN.name), "replaces": False}]
+    assert not out.exists()
+
+
+def test_an_input_that_changes_while_it_is_cleaned_is_not_recorded_as_finished(tmp_path, monkeypatch):
+    # the manifest took the input's sha256 after the clean: a file still being written
+    # was recorded with its new content against an output of the old one, and the next
+    # run skipped it as "finished earlier", keeping the stale output
+    import mocapfix.clean as clean_module
+
+    src = tmp_path / "in"
+    src.mkdir()
+    take = src / "walk.csv"
+    take.write_bytes(KIN.read_bytes())
+    real = clean_module.clean_motion
+
+    def clean_while_the_file_grows(motion, pipeline):
+        with open(take, "ab") as fh:            # the recorder appends a frame meanwhile
+            fh.write(KIN.read_bytes().splitlines(keepends=True)[-1])
+        return real(motion, pipeline)
+
+    monkeypatch.setattr(clean_module, "clean_motion", clean_while_the_file_grows)
+    out = tmp_path / "out"
+    args = ["clean", str(src), "-o", str(out), "-c", _cfg(tmp_path)]
+    r = CliRunner().invoke(main, args)
+    no_traceback(r)
+    assert r.exit_code == 1, r.output
+    assert f"ERROR {take}: the file changed while it was being cleaned" in r.output
+    assert not (out / "walk.csv").exists()
+    monkeypatch.setattr(clean_module, "clean_motion", real)
+    r = CliRunner().invoke(main, args)
+    assert r.exit_code == 0 and "finished earlier" not in r.output, r.output
+    assert (out / "walk.csv").is_file()
+
+
+def test_a_folder_named_like_a_preset_does_not_hide_the_preset(tmp_path, monkeypatch):
+    # `mocapfix clean kinect -c kinect` beside a data folder named kinect keeps the preset
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "kinect").mkdir()
+    (tmp_path / "kinect" / "walk.csv").write_bytes(KIN.read_bytes())
+    r = CliRunner().invoke(main, ["clean", "kinect", "-c", "kinect", "-o", "out", "--dry-run"])
+    no_traceback(r)
+    assert r.exit_code == 0 and "configs/kinect.yaml" in r.output, r.output
+    r = CliRunner().invoke(main, ["check", "kinect", "-r", "kinect", "--exit-zero"])
+    no_traceback(r)
+    assert r.exit_code == 0 and "is a folder" not in r.output, r.output
+
+
+def test_one_file_found_through_two_given_paths_resumes(tmp_path):
+    # `clean in in/sub/x.csv -o out` writes out/sub/x.csv and out/x.csv; the manifest kept
+    # one record per input, so the same command run again stopped with exit 2, "1 output(s)
+    # exist already … made with another config, report kinds, --fps, version or input"
+    src = tmp_path / "in"
+    (src / "sub").mkdir(parents=True)
+    (src / "sub" / "x.csv").write_bytes(KIN.read_bytes())
+    out = tmp_path / "out"
+    args = ["clean", str(src), str(src / "sub" / "x.csv"), "-o", str(out), "-c", _cfg(tmp_path)]
+    r = CliRunner().invoke(main, args)
+    assert r.exit_code == 0, r.output
+    assert (out / "sub" / "x.csv").is_file() and (out / "x.csv").is_file()
+    r = CliRunner().invoke(main, args)
+    no_traceback(r)
+    assert r.exit_code == 0, r.output
+    assert r.output.count("finished earlier") >= 2 and "exist already" not in r.output, r.output
+
+
+def test_check_counts_a_file_found_through_two_given_paths_once(tmp_path):
+    # `check in in/sub/x.csv` checked x.csv twice: "checked 2 files" for one, two JUnit
+    # testcases (info listed it twice, train-dictionary trained on it twice)
+    import json
+    import xml.etree.ElementTree as ET
+
+    src = tmp_path / "in"
+    (src / "sub").mkdir(parents=True)
+    (src / "sub" / "x.csv").write_bytes(KIN.read_bytes())
+    junit = tmp_path / "j.xml"
+    r = CliRunner().invoke(main, ["check", str(src), str(src / "sub" / "x.csv"), "--junit", str(junit),
+                                  "--exit-zero"])
+    no_traceback(r)
+    assert r.exit_code == 0, r.output
+    assert "checked 1 files" in r.output and "given more than once" in r.output, r.output
+    assert len(ET.parse(junit).getroot().findall(".//testcase")) == 1
+    r = CliRunner().invoke(main, ["info", str(src), str(src / "sub" / "x.csv"), "--json"])
+    assert r.exit_code == 0, r.output
+    assert len(json.loads(r.stdout)) == 1
+
+
+def test_skip_existing_does_not_take_a_folder_for_an_output(tmp_path):
+    # a folder at out/walk.csv made --skip-existing say "SKIP … output exists" and exit 0
+    # with nothing cleaned; without it, "output(s) exist already … pass --overwrite"
+    src = tmp_path / "in"
+    src.mkdir()
+    (src / "walk.csv").write_bytes(KIN.read_bytes())
+    out = tmp_path / "out"
+    (out / "walk.csv").mkdir(parents=True)
+    for extra in (["--skip-existing"], []):
+        r = CliRunner().invoke(main, ["clean", str(src), "-o", str(out), "-c", _cfg(tmp_path), *extra])
+        no_traceback(r)
+        assert r.exit_code == 1, (extra, r.output)
+        assert "output exists" not in r.output and "exist already" not in r.output, r.output
+        assert f"ERROR {src / 'walk.csv'}" in r.output and "Is a directory" in r.output, r.output
+        assert (out / "walk.csv").is_dir()

@@ -4,15 +4,20 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from click.testing import CliRunner
 
 from mocapfix import bench_kinect as bk
 from mocapfix import formats
 from mocapfix.cleaners import build
 from mocapfix.cleaners.depth_skeleton import leg_swap_frames
+from mocapfix.cli import main
 from mocapfix.formats import kinect as kf
 from mocapfix.solvers import run_offsets, svshrink, whittaker
 from mocapfix.solvers.bone_projection import project_lengths
-from tests.conftest import shared, shared_files
+
+from tests.conftest import SAMPLE_DATA, no_traceback, shared, shared_files
+
+KIN = SAMPLE_DATA / "walk_kinect_v2.csv"
 
 
 # -- solvers: known answers -------------------------------------------------------------
@@ -264,3 +269,27 @@ def test_report_status_separates_good_kinect_recordings_from_bad(config):
     assert len(status) == 12 and len(bad) == 4
     assert {n: s for n, s in status.items() if n in bad} == dict.fromkeys(bad, "WARN")
     assert {n: s for n, s in status.items() if n not in bad} == dict.fromkeys(set(status) - bad, "OK")
+
+
+
+def test_kinect_stamps_a_tick_apart_are_a_readable_error(tmp_path):
+    # rows stamped 100 ns apart made kinect_skeleton's banded Cholesky fail: "internal
+    # error LinAlgError: 34th leading minor not positive definite"
+    lines = KIN.read_text().split("\n")
+    head = next(i for i, line in enumerate(lines) if line[:1].isdigit())
+    for i in range(head + 10, head + 100, 3):
+        tick = int(lines[i - 1].split(",")[0])
+        lines[i] = ",".join([str(tick + 1)] + lines[i].split(",")[1:])
+    bad = tmp_path / "in" / "ticks.csv"
+    bad.parent.mkdir()
+    bad.write_text("\n".join(lines))
+    (tmp_path / "in" / "walk.csv").write_bytes(KIN.read_bytes())
+    out = tmp_path / "out"
+    r = CliRunner().invoke(main, ["clean", str(bad.parent), "-o", str(out), "-c", "kinect"])
+    no_traceback(r)
+    assert r.exit_code == 1, r.output
+    error = [line for line in r.output.splitlines() if line.startswith("ERROR")]
+    assert len(error) == 1 and str(bad) in error[0], r.output
+    assert "internal error" not in error[0] and "kinect_skeleton" in error[0]
+    assert "shortest time step 1e-07 s" in error[0]
+    assert (out / "walk.csv").is_file() and not (out / "ticks.csv").exists()

@@ -417,3 +417,21 @@ def test_rotation_denoise_does_not_smooth_across_steps_of_the_motion(name):
         err = {s: br.evaluate(m, build("rotation_denoise", local="0.3 s", steps=s).apply(noisy)[0])["pos_err_pct"]
                for s in (None, 6.0)}
         assert err[6.0] < 0.95 * err[None], err
+
+
+def test_glitch_screen_on_a_take_of_eight_frames_warns_nothing():
+    # rotation_outliers on a take of <= 8 frames printed NumPy's "RuntimeWarning: Mean of
+    # empty slice" (twice, naming no file) into the terminal
+    import warnings
+
+    import numpy as np
+
+    from mocapfix.solvers.glitches import glitches
+
+    x = np.cumsum(np.random.default_rng(0).normal(size=(8, 6)), axis=0)
+    x[4, 2] += 50.0
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        found = glitches(x)
+    assert not [w for w in caught if issubclass(w.category, RuntimeWarning)], [str(w.message) for w in caught]
+    assert found.shape == x.shape and found[4, 2]

@@ -6,11 +6,14 @@ import re
 
 import numpy as np
 import pytest
+from click.testing import CliRunner
 
-from malformed_corpus import c3d_bytes, small_c3d_points
+from mocapfix.cli import main
 from mocapfix.errors import UnreadableFileError
 from mocapfix.formats import read, write
-from conftest import SAMPLE_DATA, hang_guard
+
+from conftest import SAMPLE_DATA, hang_guard, no_traceback
+from malformed_corpus import c3d_bytes, small_c3d_points
 
 LABELS = ["LASI", "RASI", "LKNE", "RKNE", "C7"]
 
@@ -143,3 +146,17 @@ def test_bvh_absurd_frame_time_is_refused(tmp_path, frame_time):
     path.write_bytes(re.sub(rb"Frame Time:\s*\S+", b"Frame Time: " + frame_time, data))
     with pytest.raises(UnreadableFileError, match="rate outside 0.001-100000 Hz"):
         _read(path)
+
+
+def test_truncated_bvh_message_gives_no_python_only_advice(tmp_path):
+    # the CLI said "(pass allow_truncated=True to read them)": no option of mocapfix does
+    text = (SAMPLE_DATA / "walk.bvh").read_text()
+    cut = tmp_path / "cut.bvh"
+    cut.write_text(text[: len(text) - len(text.splitlines()[-1]) * 5 // 2])
+    before = cut.read_bytes()
+    r = CliRunner().invoke(main, ["info", str(cut)])
+    no_traceback(r)
+    assert r.exit_code == 3, r.output
+    assert f"{cut}" in r.output and "truncated: 'Frames:" in r.output
+    assert "allow_truncated" not in r.output and "cut short" in r.output
+    assert cut.read_bytes() == before

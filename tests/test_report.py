@@ -2,13 +2,18 @@
 from __future__ import annotations
 
 import json
+import re
 
 import numpy as np
+from click.testing import CliRunner
 
 from mocapfix.clean import clean_motion
+from mocapfix.cli import main
 from mocapfix.motion import Motion, Skeleton
 from mocapfix.pipeline import loads_config
 from mocapfix.report import build_report, to_html, to_json, to_markdown
+
+from conftest import no_traceback
 
 
 def _motion():
@@ -128,3 +133,30 @@ def test_gaps_left_are_listed_once_per_span_with_the_reasons():
                     "other marker is seen through it |"]
     assert "| 300" not in section
     assert "| 0–599 | 6.00 | 1: M6 | never seen in the input |" in section
+
+
+def _fill_config(tmp_path) -> str:
+    path = tmp_path / "fill.yaml"
+    path.write_text("version: 1\npipeline:\n  - cleaner: fill\n    max_gap: 0.5 s\n")
+    return str(path)
+
+
+def test_marker_name_with_a_pipe_keeps_its_report_row_whole(tmp_path):
+    # a C3D label "a|b" split its row of the Markdown and HTML joint tables in two cells
+    from malformed_corpus import c3d_bytes, small_c3d_points
+
+    src = tmp_path / "in" / "pipes.c3d"
+    src.parent.mkdir()
+    src.write_bytes(c3d_bytes(small_c3d_points(T=200, P=3), ["a|b", "C", "D"]))
+    out = tmp_path / "out"
+    r = CliRunner().invoke(main, ["clean", str(src), "-o", str(out), "--report", "md,html",
+                                  "-c", _fill_config(tmp_path)])
+    no_traceback(r)
+    assert r.exit_code == 0, r.output
+    md = (out / "pipes.c3d.report.md").read_text().splitlines()
+    header = next(line for line in md if line.startswith("| joint |"))
+    row = next(line for line in md if line.startswith("| a"))
+    border = re.compile(r"(?<!\\)\|")
+    assert len(border.findall(row)) == len(border.findall(header)), row
+    html_text = (out / "pipes.c3d.report.html").read_text()
+    assert "<td>a|b</td>" in html_text and "<td>a</td>" not in html_text

@@ -11,7 +11,7 @@ from mocapfix.solvers import dct
 from mocapfix.solvers.lowrank import svt
 from mocapfix.solvers.segments import linear_bridge
 
-from conftest import shared
+from conftest import SAMPLE_DATA, shared
 
 
 def _dense_O(n: int) -> np.ndarray:
@@ -401,3 +401,64 @@ def test_linear_bridge_and_fast_padding_known_answers():
                 while r % f == 0:
                     r //= f
             assert r != 1
+
+
+def test_trust_one_absurd_sample_costs_only_itself():
+    # one sample 1 km off (a corrupt field) steered trust's first robust smooth and every
+    # sample of its marker came out untrusted and was deleted (CMU 85_02: 810 of 810;
+    # 100 m: 731 of 810); now (beyond 100 m) it alone is untrusted, the rest as without it
+    import numpy as np
+
+    from mocapfix.formats import read
+    from mocapfix.pipeline import loads_config
+
+    motion = read(SAMPLE_DATA / "walk_markers.c3d")
+    trust = loads_config("version: 1\npipeline:\n  - cleaner: trust\n")
+    plain, _ = trust.run(motion)
+    for offset_mm in (2e5, 1e6, 1e30):
+        pos = motion.positions.copy()
+        pos[300, 4] += offset_mm * 1e-3 / motion.metres_per_unit
+        out, records = trust.run(motion.replace(positions=pos))
+        lost = np.isnan(out.positions).any(axis=2) & ~np.isnan(plain.positions).any(axis=2)
+        assert lost.sum() == 1 and lost[300, 4], (offset_mm, int(lost.sum()))
+        same = np.ones(lost.shape, bool)
+        same[300, 4] = False
+        np.testing.assert_array_equal(out.positions[same], plain.positions[same])
+        assert records[0].info["untrusted_gross"] == 1
+
+
+def test_trust_gross_screen_ignores_mislabelled_units():
+    # the gross-error screen is relative to the capture's extent: millimetre data labelled
+    # as metres is not one big gross error (an absolute 100 m screen took every sample)
+    from mocapfix.formats import read
+    from mocapfix.pipeline import loads_config
+
+    motion = read(SAMPLE_DATA / "walk_markers.c3d")
+    wrong = motion.replace(metres_per_unit=1.0)
+    _, records = loads_config("version: 1\npipeline:\n  - cleaner: trust\n").run(wrong)
+    assert records[0].info["untrusted_gross"] == 0
+
+
+def test_trust_gross_screen_keeps_a_wand_moving_over_a_static_rig():
+    # a screen on the capture-wide extent alone took every sample of the one marker that
+    # moves (a wand, 1.6 m) when the other 20 stand still: its extent is its own
+    import numpy as np
+
+    from mocapfix.formats import read
+    from mocapfix.pipeline import loads_config
+
+    base = read(SAMPLE_DATA / "walk_markers.c3d")
+    T = base.n_frames
+    rng = np.random.default_rng(0)
+    pos = np.zeros((T, 21, 3))
+    pos[:, :20] = rng.uniform(-500, 500, (1, 20, 3)) + rng.normal(0, 0.1, (T, 20, 3))
+    t = np.arange(T) / base.fps
+    pos[:, 20] = np.stack([800 * np.sin(t), 800 * np.cos(t), 500 + 0 * t], axis=1)
+    rig = base.replace(positions=pos, names=[f"M{i}" for i in range(21)], confidence=None)
+    trust = loads_config("version: 1\npipeline:\n  - cleaner: trust\n")
+    _, records = trust.run(rig)
+    assert records[0].info["untrusted_gross"] == 0
+    pos = pos.copy()
+    pos[300, 20] += 1e6                 # 1 km: still a gross error
+    _, records = trust.run(rig.replace(positions=pos))
+    assert records[0].info["untrusted_gross"] == 1
