@@ -205,6 +205,9 @@ def parse_threshold(raw, metric: Metric, where: str) -> Threshold:
     if factor is None:
         return Threshold(number, frames=True, text=f"{number:g} frames")
     value = number * factor
+    if kind == "fraction" and value > 1:
+        raise ConfigError(f"{where}: {raw!r} is above 100 % (a share cannot exceed it: the "
+                          f"rule could never fire)")
     return Threshold(value, text=show(kind, value))
 
 

@@ -93,6 +93,8 @@ def test_exit_codes_pass_fail_unreadable_usage(tmp_path):
     assert r.exit_code == 2 and "warn_missing" in r.output and "line 3" in r.output
     r = runner.invoke(main, ["check", str(good), "--fail-on", "missing"])
     assert r.exit_code == 2 and "RULE=VALUE" in r.output
+    r = runner.invoke(main, ["check", str(good), "--fail-on", "missing=200%"])
+    assert r.exit_code == 2 and "above 100 %" in r.output
 
 
 def test_a_would_clean_pipeline_that_cannot_clean_a_file_fails_it_not_errors(tmp_path):

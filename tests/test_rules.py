@@ -73,6 +73,7 @@ def test_file_scope_aggregates_selected_joints():
     ("rules:\n  - metric: longest_gap\n    warn: 5\n", r"needs a unit"),
     ("rules:\n  - metric: missing\n    warn: .nan\n", r"not a finite number"),
     ("rules:\n  - metric: missing\n    warn: 5\n", r"fraction above 1"),
+    ("rules:\n  - metric: missing\n    fail: 200 %\n", r"above 100 %.*could never fire"),
     ("rules:\n  - metric: dropped_frames\n    scope: joint\n    fail: 0\n", r"per file only"),
     ("rules:\n  - metric: missing_after\n    fail: 1 %\n", r"clean's report"),
     ("rules:\n  - metric: missing\n", r"needs 'warn' or 'fail'"),
