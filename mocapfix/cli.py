@@ -28,10 +28,16 @@ def printable(text: str) -> str:
     return _CONTROL.sub(lambda m: f"\\x{ord(m.group()):02x}", text)
 
 
+def one_line(text) -> str:
+    """``text`` (a path, a message naming one) with its line breaks shown as ``\\n``: a file
+    named ``"a\\nb.bvh"`` must not split its file's line in two."""
+    return str(text).replace("\n", "\\n")
+
+
 def _fail(message: str, debug: bool, exc: BaseException | None = None, code: int = EXIT_USAGE):
     if debug and exc is not None:
         raise exc
-    click.echo(printable(f"mocapfix: error: {message}"), err=True)
+    click.echo(printable(f"mocapfix: error: {one_line(message)}"), err=True)
     sys.exit(code)
 
 
@@ -142,7 +148,8 @@ def _discover(inputs, include, exclude, out: Out, once_per_file: bool = False):
 
     found = discover_inputs(inputs, include, exclude, once_per_file=once_per_file)
     for path, why in found.skipped:
-        out.line(f"SKIP  {path}: {why}", level=0 if "not motion" not in why else 1, err=True)
+        out.line(f"SKIP  {one_line(path)}: {one_line(why)}", level=0 if "not motion" not in why else 1,
+                 err=True)
     if found.skipped and out.verbosity == 0:
         quiet_skips = sum("not motion" in why for _, why in found.skipped)
         if quiet_skips:
@@ -211,7 +218,7 @@ def info(inputs, as_json, fps, include, exclude):
 
             message = str(exc) if isinstance(exc, MocapfixError) else \
                 name_the_file(f.path, f"internal error {type(exc).__name__}: {exc}")
-            out.error(f"mocapfix: error: {message}")
+            out.error(f"mocapfix: error: {one_line(message)}")
             summaries.append({"path": str(f.path), "error": message})
     if as_json:
         click.echo(json.dumps(summaries, indent=2))
@@ -284,14 +291,14 @@ def _parse_reports(value: str) -> tuple[str, ...]:
 
 def _clean_line(r: dict, verbose: bool) -> str:
     if r["status"] == "ERROR":
-        return f"ERROR {r['error']}"
-    text = (f"{r['status']:<5} {r['input']} -> {r['output']} "
+        return f"ERROR {one_line(r['error'])}"
+    text = (f"{r['status']:<5} {one_line(r['input'])} -> {one_line(r['output'])} "
             f"(missing {100 * r['missing_before']:.1f} % -> {100 * r['missing_after']:.1f} %, "
             f"{r['seconds']:.2f} s)")
     if r.get("skipped"):
-        return f"SKIP  {r['input']}: {r['skipped']}"
+        return f"SKIP  {one_line(r['input'])}: {r['skipped']}"
     if verbose and r.get("reasons"):
-        text += "\n      " + "\n      ".join(r["reasons"])
+        text += "\n      " + "\n      ".join(map(one_line, r["reasons"]))
     return text
 
 
@@ -391,11 +398,11 @@ def clean(inputs, outdir, config_path, reports, jobs, as_json, fps, allow_inside
         remove_stale_temporaries(f for j in todo for f in output_files(j.output))
     for j in skipped:
         why = "finished earlier" if j in finished else "output exists"
-        out.line(f"SKIP  {j.source}: {why} ({j.output})")
+        out.line(f"SKIP  {one_line(j.source)}: {why} ({one_line(j.output)})")
     if dry_run:
         for j in todo:
             note = " (replaces the existing output)" if j.output.exists() else ""
-            out.line(f"WOULD {j.source} -> {j.output}{note}", level=-1)
+            out.line(f"WOULD {one_line(j.source)} -> {one_line(j.output)}{note}", level=-1)
         out.line(f"dry run: {len(todo)} file(s) would be cleaned with {pipeline.source}, "
                  f"{len(skipped)} skipped; nothing written", level=-1, err=True)
         if as_json:                     # (stdout stayed empty: `--json --dry-run | jq` failed)
@@ -445,7 +452,7 @@ def clean(inputs, outdir, config_path, reports, jobs, as_json, fps, allow_inside
                     if skipped else "")
                  + (": " + ", ".join(f"{graded.count(s)} {s}" for s in ("OK", "WARN", "FAIL")
                                       if s in graded) if graded else "")
-                 + (f"; {len(failed)} failed (ERROR): " + ", ".join(r["input"] for r in failed)
+                 + (f"; {len(failed)} failed (ERROR): " + ", ".join(one_line(r["input"]) for r in failed)
                     if failed else ""), level=-1, err=bool(failed))
     sys.exit(EXIT_SOME_FAILED if failed else EXIT_OK)
 

@@ -95,7 +95,7 @@ def format_text(summary: dict, verbose: bool = False) -> str:
     s = summary
     limit = 10 ** 6 if verbose else 12
     lines = [
-        f"{s['path']}",
+        str(s["path"]).replace("\n", "\\n"),          # a line break in a name splits no line
         f"  format      {s['format']}",
         f"  frames      {s['frames']} at {s['fps']:g} fps ({s['duration_s']:.2f} s)",
         f"  {'markers' if s['format'] == 'c3d' else 'joints':<11} {s['joints']}"

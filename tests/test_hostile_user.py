@@ -1162,3 +1162,25 @@ def test_skip_existing_does_not_take_a_folder_for_an_output(tmp_path):
         assert "output exists" not in r.output and "exist already" not in r.output, r.output
         assert f"ERROR {src / 'walk.csv'}" in r.output and "Is a directory" in r.output, r.output
         assert (out / "walk.csv").is_dir()
+
+
+def test_a_line_break_in_a_file_name_does_not_split_its_line(tmp_path):
+    """Files named 'a<newline>b.bvh' (readable) and 'bad<newline>x.bvh' (not): clean, check
+    and info print each on one line, the break shown as \\n, and clean still writes the
+    readable one under its real name."""
+    src = tmp_path / "in"
+    src.mkdir()
+    shutil.copy(BVH, src / "a\nb.bvh")
+    (src / "bad\nx.bvh").write_text("garbage\n")
+    runs = {"clean": ["clean", str(src), "-o", str(tmp_path / "out"), "-c", _cfg(tmp_path)],
+            "check": ["check", str(src)], "info": ["info", str(src)]}
+    for what, args in runs.items():
+        r = CliRunner().invoke(main, args)
+        no_traceback(r)
+        lines = r.output.splitlines()
+        if what == "info":
+            lines = [line for line in lines if not line.startswith("  ")]
+        named = [line for line in lines if "a\\nb.bvh" in line or "bad\\nx.bvh" in line]
+        assert not [line for line in lines if line in ("b.bvh", "x.bvh") or line.startswith(("b.bvh", "x.bvh"))], (what, lines)
+        assert any("a\\nb.bvh" in line for line in named) and any("bad\\nx.bvh" in line for line in named), (what, lines)
+    assert (tmp_path / "out" / "a\nb.bvh").is_file()
