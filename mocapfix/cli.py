@@ -283,6 +283,8 @@ def _parse_reports(value: str) -> tuple[str, ...]:
     from mocapfix.clean import REPORT_KINDS
 
     kinds = tuple(k.strip().lower() for k in value.split(",") if k.strip())
+    if not kinds:                   # (--report "" meant no reports, silently)
+        raise click.BadParameter("--report is empty; use json, md, html (comma-separated) or none")
     bad = [k for k in kinds if k not in REPORT_KINDS and k != "none"]
     if bad:
         raise click.BadParameter(f"unknown report kind(s) {', '.join(bad)}; use json, md, html or none")

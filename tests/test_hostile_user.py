@@ -1184,3 +1184,17 @@ def test_a_line_break_in_a_file_name_does_not_split_its_line(tmp_path):
         assert not [line for line in lines if line in ("b.bvh", "x.bvh") or line.startswith(("b.bvh", "x.bvh"))], (what, lines)
         assert any("a\\nb.bvh" in line for line in named) and any("bad\\nx.bvh" in line for line in named), (what, lines)
     assert (tmp_path / "out" / "a\nb.bvh").is_file()
+
+
+def test_an_empty_report_list_is_a_usage_error_not_no_reports(tmp_path):
+    """`--report ""` (an unset shell variable) meant no reports, silently; 'none' says so.
+    Now it is refused like an unknown kind, and nothing is written."""
+    for value, message in (("", "--report is empty"), (" , ", "--report is empty"),
+                           ("pdf", "unknown report kind(s) pdf")):
+        out = tmp_path / f"out{len(value)}"
+        r = CliRunner().invoke(main, ["clean", str(BVH), "-o", str(out), "--report", value])
+        no_traceback(r)
+        assert r.exit_code == 2 and message in r.output, r.output
+        assert not out.exists()
+    r = CliRunner().invoke(main, ["clean", str(BVH), "-o", str(tmp_path / "none"), "--report", "none"])
+    assert r.exit_code == 0 and not list((tmp_path / "none").glob("*.report.*"))
