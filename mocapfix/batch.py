@@ -21,6 +21,7 @@ import os
 import stat
 import tempfile
 import threading
+import warnings
 from concurrent.futures import FIRST_COMPLETED, Executor, wait
 from dataclasses import dataclass
 from pathlib import Path
@@ -430,7 +431,19 @@ def internal_error(result: dict) -> dict:
     return result
 
 
+#: NumPy's floating-point warnings ("overflow encountered in multiply"): a file holding
+#: values near 1e300 printed a dozen of them naming no file; the code takes the inf and NaN
+#: they make for what they are (not finite: reported as missing or as no value)
+_FLOAT_NOISE = r"(overflow|invalid value|divide by zero|underflow) encountered"
+
+
+def quiet_float_warnings() -> None:
+    """Hide :data:`_FLOAT_NOISE` in this process (idempotent: one filter however often)."""
+    warnings.filterwarnings("ignore", message=_FLOAT_NOISE, category=RuntimeWarning)
+
+
 def _guarded(task, item) -> dict:
+    quiet_float_warnings()          # in the process that runs the task (pool, Dask worker)
     try:
         return task(item)
     except Exception as exc:  # noqa: BLE001 — one bad file must not stop the batch

@@ -200,6 +200,9 @@ def info(inputs, as_json, fps, include, exclude):
             raise MocapfixError("no motion files found in " + ", ".join(inputs))
     except MocapfixError as exc:
         _fail(str(exc), debug, exc)
+    from mocapfix.batch import quiet_float_warnings
+
+    quiet_float_warnings()              # (clean and check: in each task, batch._guarded)
     summaries, failed = [], 0
     for f in found.files:
         try:
