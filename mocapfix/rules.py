@@ -478,7 +478,9 @@ def resolve_rules_path(name_or_path) -> Path:
                       f"(presets: {', '.join(preset_names())})")
 
 
-def parse_rules(data, source: str = "<rules>", stage: str = "input", _depth: int = 0) -> RuleSet:
+def parse_rules(data, source: str = "<rules>", stage: str = "input", _chain: tuple = ()) -> RuleSet:
+    """The rules of ``data`` (a parsed rules file) after those of the files it ``extends``;
+    ``_chain``: the files being read that extend this one (a cycle is an error)."""
     if data is None:
         data = {}
     if not isinstance(data, dict):
@@ -496,12 +498,17 @@ def parse_rules(data, source: str = "<rules>", stage: str = "input", _depth: int
         extends = [extends]
     if not isinstance(extends, list):
         raise ConfigError(f"{source}: 'extends' must list preset names or paths")
-    if extends and _depth > 4:
-        raise ConfigError(f"{source}: 'extends' nests too deep")
+    chain = (*_chain, source)
+    if extends and len(chain) > 5:
+        raise ConfigError(f"{source}: 'extends' nests too deep ({' -> '.join(chain)})")
     for parent in extends:
         base = Path(source).parent / str(parent) if source and not str(parent).isidentifier() else None
         path = base if base is not None and base.is_file() else resolve_rules_path(str(parent))
-        rules += load_rules(path, stage, _depth + 1).rules
+        seen = [c for c in chain if c and Path(c).exists() and Path(c).resolve() == Path(path).resolve()]
+        if seen:
+            raise ConfigError(f"{source}: 'extends' goes round in a circle: "
+                              f"{' -> '.join((*chain[chain.index(seen[0]):], str(path)))}")
+        rules += load_rules(path, stage, chain).rules
     formats = _formats(data.get("formats"), source)
     include, exclude = _patterns(data, "include", source), _patterns(data, "exclude", source)
     items = data.get("rules") or []
@@ -518,13 +525,13 @@ def loads_rules(text: str, source: str = "<rules>", stage: str = "input") -> Rul
     return parse_rules(load_yaml(text, source), source, stage)
 
 
-def load_rules(path, stage: str = "input", _depth: int = 0) -> RuleSet:
+def load_rules(path, stage: str = "input", _chain: tuple = ()) -> RuleSet:
     from mocapfix.pipeline import load_yaml
 
     from mocapfix.yamlsafe import read_bounded
 
     path = Path(path)
-    return parse_rules(load_yaml(read_bounded(path, "rules"), str(path)), str(path), stage, _depth)
+    return parse_rules(load_yaml(read_bounded(path, "rules"), str(path)), str(path), stage, _chain)
 
 
 def default_rules(stage: str = "input") -> RuleSet:

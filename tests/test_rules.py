@@ -190,3 +190,27 @@ def test_bandai_root_motion_is_not_a_varying_bone():
         motion = formats.read(shared(f"bvh/{name}"))
         verdict = default_rules().judge(measure_input(motion))
         assert [f for f in verdict.findings if f.rule == "bone_variation"] == [], name
+
+
+def test_extends_adds_the_parent_rules_and_refuses_a_circle(tmp_path):
+    """'extends' puts a preset's or a file's rules before the file's own; a file that
+    extends itself, directly or through another, is an error naming the circle (it said
+    "nests too deep"), and so is a chain of more than five files."""
+    own = "rules:\n  - {metric: missing, fail: 90 %}\n"
+    (tmp_path / "child.yaml").write_text("version: 1\nextends: default\n" + own)
+    child = load_rules(tmp_path / "child.yaml")
+    assert len(child) == len(default_rules()) + 1
+    (tmp_path / "grandchild.yaml").write_text("version: 1\nextends: child.yaml\n" + own)
+    assert len(load_rules(tmp_path / "grandchild.yaml")) == len(child) + 1
+    (tmp_path / "self.yaml").write_text("version: 1\nextends: self.yaml\n" + own)
+    with pytest.raises(ConfigError, match=r"goes round in a circle: .*self.yaml -> .*self.yaml"):
+        load_rules(tmp_path / "self.yaml")
+    (tmp_path / "a.yaml").write_text("version: 1\nextends: b.yaml\n" + own)
+    (tmp_path / "b.yaml").write_text("version: 1\nextends: a.yaml\n" + own)
+    with pytest.raises(ConfigError, match=r"circle: .*a.yaml -> .*b.yaml -> .*a.yaml"):
+        load_rules(tmp_path / "a.yaml")
+    for k in range(7):
+        parent = f"extends: r{k + 1}.yaml\n" if k < 6 else ""
+        (tmp_path / f"r{k}.yaml").write_text(f"version: 1\n{parent}" + own)
+    with pytest.raises(ConfigError, match="nests too deep"):
+        load_rules(tmp_path / "r0.yaml")
