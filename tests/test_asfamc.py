@@ -578,3 +578,20 @@ def test_unknown_bone_in_amc_is_refused(tmp_path):
     path.write_text(path.read_text().replace("side 0 0\n2", "side 0 0\ntail 1\n2", 1))
     with pytest.raises(UnreadableFileError, match=r"tiny_01\.amc:8: bone 'tail' is not defined"):
         asfamc.read(path)
+
+
+def test_asf_mass_that_is_not_positive_is_noted_not_refused(tmp_path):
+    """':units mass 0' was refused as if the kinematics needed it; no position depends on
+    the mass, so the skeleton reads (the hand-checked positions) with a note, while a
+    length that is not positive is still refused naming its line."""
+    amc = write_tiny(tmp_path)
+    asf = tmp_path / "tiny.asf"
+    asf.write_text(asf.read_text().replace("  mass 1.0", "  mass 0"))
+    motion = asfamc.read(amc)
+    np.testing.assert_allclose(motion.positions, TINY_EXPECTED, atol=1e-12)
+    assert any("mass 0 is not positive" in n for n in motion.notes)
+    text = asf.read_text()
+    assert text.count("\n  length 1.0\n") == 1                 # the :units line
+    asf.write_text(text.replace("\n  length 1.0\n", "\n  length 0\n"))
+    with pytest.raises(UnreadableFileError, match=r"units length must be positive, got 0"):
+        asfamc.read(amc)

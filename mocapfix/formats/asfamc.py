@@ -253,10 +253,13 @@ class _AsfParser:
             self.asf.angle_unit = unit
         elif key in ("mass", "length"):
             value = _floats(self.path, tokens[1:], 1, f"units {key}", number)[0]
-            if value <= 0:
-                raise self.error(f"units {key} must be positive, got {tokens[1]}", number)
-            if key == "mass":
+            if key == "mass":               # no kinematics depends on it: kept, never refused
                 self.asf.mass = value
+                if not value > 0:
+                    self.asf.notes.append(f"ASF units mass {tokens[1]} is not positive "
+                                          f"(unused; line {number})")
+            elif value <= 0:
+                raise self.error(f"units {key} must be positive, got {tokens[1]}", number)
             else:
                 self.asf.length_scale = value
                 self.asf.length_declared = True
