@@ -462,3 +462,29 @@ def test_trust_gross_screen_keeps_a_wand_moving_over_a_static_rig():
     pos[300, 20] += 1e6                 # 1 km: still a gross error
     _, records = trust.run(rig.replace(positions=pos))
     assert records[0].info["untrusted_gross"] == 1
+
+
+def test_trust_one_sample_metres_off_costs_only_itself():
+    """CMU 85_02 (breakdance): a single sample 5-50 m off (and a run of three 10 m off)
+    made trust untrust 28-252 of its marker's samples around it (the screen at 100 m did
+    not reach them). The local screen (over 1 m from the marker's median within ±0.1 s)
+    takes those samples alone; every other output sample is as without them. The real
+    captures hold no such sample: 85_02, HDM05 and the 30 Hz PhaseSpace file lose none."""
+    from mocapfix.formats import read
+    from mocapfix.pipeline import loads_config
+
+    trust = loads_config("version: 1\npipeline:\n  - cleaner: trust\n")
+    for name in ("cmu_85_02.c3d", "hdm05_HDM_mm_01-02_03_120.c3d", "c3dorg_s20_phasespace_sample.c3d"):
+        assert trust.run(read(shared(f"c3d/{name}")))[1][0].info["untrusted_gross"] == 0, name
+    motion = read(shared("c3d/cmu_85_02.c3d"))
+    plain, _ = trust.run(motion)
+    for metres, frames in ((5, 1), (20, 1), (50, 1), (10, 3)):
+        pos = motion.positions.copy()
+        pos[300:300 + frames, 4, 0] += metres / motion.metres_per_unit
+        out, records = trust.run(motion.replace(positions=pos))
+        lost = np.isnan(out.positions).any(axis=2) & ~np.isnan(plain.positions).any(axis=2)
+        assert lost.sum() == frames and lost[300:300 + frames, 4].all(), (metres, int(lost.sum()))
+        same = np.ones(lost.shape, bool)
+        same[300:300 + frames, 4] = False
+        np.testing.assert_array_equal(out.positions[same], plain.positions[same])
+        assert records[0].info["untrusted_gross"] == frames
