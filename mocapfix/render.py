@@ -93,7 +93,7 @@ def _gaps_left(report: dict, shown: int = 12) -> list[str]:
         part = f" ({filled} filled)" if filled else ""
         secs = f"{length / fps:.2f}" if fps else "–"
         out.append(f"| {start}–{start + length - 1}{part} | {secs} | {len(names)}: "
-                   f"{', '.join(names[:shown])}{more} | {why or 'no step could fill it'} |")
+                   f"{_cell(', '.join(names[:shown]))}{more} | {_cell(why or 'no step could fill it')} |")
     return out
 
 

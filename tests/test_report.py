@@ -122,14 +122,15 @@ def test_gaps_left_are_listed_once_per_span_with_the_reasons():
     pos[300:310, 4] = np.nan
     pos[T - 50:] = np.nan
     pos = np.concatenate([pos, np.full((T, 1, 3), np.nan)], axis=1)      # M6: never seen
-    motion = Motion(pos, [f"M{k}" for k in range(7)], fps, units="mm", metres_per_unit=0.001,
-                    format="c3d")
+    names = [f"M{k}" for k in range(7)]
+    names[5] = "M|5"                                    # a pipe in a label stays in its cell
+    motion = Motion(pos, names, fps, units="mm", metres_per_unit=0.001, format="c3d")
     report = build_report(clean_motion(motion, loads_config("pipeline:\n  - cleaner: fill_ensemble\n")))
     assert report["file"]["gaps_unfilled"] == 7
     md = to_markdown(report)
     section = md.split("## Gaps left unfilled", 1)[1].split("\n\n", 2)[1]
     rows = [line for line in section.splitlines() if line.startswith("| 5")]
-    assert rows == ["| 550–599 | 0.50 | 6: M0, M1, M2, M3, M4, M5 | step 1 (fill_ensemble): no "
+    assert rows == ["| 550–599 | 0.50 | 6: M0, M1, M2, M3, M4, M\\|5 | step 1 (fill_ensemble): no "
                     "other marker is seen through it |"]
     assert "| 300" not in section
     assert "| 0–599 | 6.00 | 1: M6 | never seen in the input |" in section
