@@ -527,7 +527,6 @@ def loads_rules(text: str, source: str = "<rules>", stage: str = "input") -> Rul
 
 def load_rules(path, stage: str = "input", _chain: tuple = ()) -> RuleSet:
     from mocapfix.pipeline import load_yaml
-
     from mocapfix.yamlsafe import read_bounded
 
     path = Path(path)
