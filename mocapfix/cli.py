@@ -13,7 +13,7 @@ import sys
 import click
 
 from mocapfix import __version__
-from mocapfix.errors import MocapfixError, UnreadableFileError
+from mocapfix.errors import MocapfixError, UnreadableFileError, one_line
 
 EXIT_OK, EXIT_SOME_FAILED, EXIT_USAGE, EXIT_UNREADABLE = 0, 1, 2, 3
 
@@ -26,12 +26,6 @@ def printable(text: str) -> str:
     sequence (``"\\x1b[31m.bvh"``) must not recolour or rewrite the user's terminal, nor a
     name with a carriage return hide the line before it."""
     return _CONTROL.sub(lambda m: f"\\x{ord(m.group()):02x}", text)
-
-
-def one_line(text) -> str:
-    """``text`` (a path, a message naming one) with its line breaks shown as ``\\n``: a file
-    named ``"a\\nb.bvh"`` must not split its file's line in two."""
-    return str(text).replace("\n", "\\n")
 
 
 def _fail(message: str, debug: bool, exc: BaseException | None = None, code: int = EXIT_USAGE):
@@ -636,8 +630,8 @@ def train_dictionary(training, output, method, atoms, window, sample_rate, lam, 
             bar.close()
     for path, why in summary["skipped"]:
         out.line(f"skipped {path}: {why}", level=0)
-    for path, why in summary["unread"]:
-        out.line(f"ERROR {why} (left out of the training)", level=-1, err=True)
+    for u in summary["unread"]:
+        out.line(f"ERROR {u['error']} (left out of the training)", level=-1, err=True)
     t = summary["training"]
     st = summary["state"]
     if method == "mssa":

@@ -9,6 +9,12 @@ from __future__ import annotations
 from pathlib import Path
 
 
+def one_line(text) -> str:
+    """``text`` (a path, a message naming one) with its line breaks shown as ``\\n``: a file
+    named ``"a\\nb.bvh"`` must not split the line that names it in two."""
+    return str(text).replace("\n", "\\n")
+
+
 class MocapfixError(Exception):
     """Base class of every error mocapfix raises on purpose."""
 

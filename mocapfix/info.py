@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from mocapfix.errors import one_line
 from mocapfix.measure import measure_input
 from mocapfix.motion import Motion
 
@@ -95,7 +96,7 @@ def format_text(summary: dict, verbose: bool = False) -> str:
     s = summary
     limit = 10 ** 6 if verbose else 12
     lines = [
-        str(s["path"]).replace("\n", "\\n"),          # a line break in a name splits no line
+        one_line(s["path"]),
         f"  format      {s['format']}",
         f"  frames      {s['frames']} at {s['fps']:g} fps ({s['duration_s']:.2f} s)",
         f"  {'markers' if s['format'] == 'c3d' else 'joints':<11} {s['joints']}"

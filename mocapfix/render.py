@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
+from mocapfix.errors import one_line
 from mocapfix.gaps import runs
 from mocapfix.measure import LONG_FILL_S
 from mocapfix.rules import STATUS_ORDER
@@ -347,16 +348,15 @@ def markdown_to_html(md: str) -> str:
 def check_line(result: dict, verbose: bool = False) -> str:
     """One line per file (more with ``verbose``): status, path, the worst findings; a line
     break in a file name or message is shown as ``\\n`` (it would split the file's line)."""
-    status, path = result["status"], str(result["path"]).replace("\n", "\\n")
+    status, path = result["status"], one_line(result["path"])
     if status == "ERROR":                # the error names the file already (as clean's)
-        error = result["error"].replace("\n", "\\n")
+        error = one_line(result["error"])
         return f"ERROR {error}" if error.startswith(str(path)) else f"ERROR {path}: {error}"
     findings = result.get("findings", [])
     worst = [f for f in findings if f["level"] == status] or findings
     head = f"{status:<5} {path}"
     if verbose:
-        lines = [head] + [f"      {f['level']}: {f['message']}".replace("\n", "\\n")
-                          for f in findings]
+        lines = [head] + [f"      {f['level']}: {one_line(f['message'])}" for f in findings]
         wc = result.get("would_clean")
         if wc and "error" not in wc:
             lines.append(f"      would clean: fill {wc['samples_filled']} samples, flag "
@@ -366,7 +366,7 @@ def check_line(result: dict, verbose: bool = False) -> str:
     if not worst:
         return head
     more = f"; +{len(findings) - 1} more" if len(findings) > 1 else ""
-    return f"{head}  ({worst[0]['message']}{more})".replace("\n", "\\n")
+    return f"{head}  ({one_line(worst[0]['message'])}{more})"
 
 
 def check_junit(results: list[dict], seconds: float, suite: str = "mocapfix check") -> str:

@@ -12,7 +12,6 @@ algorithm (:data:`METHODS`); other options are that cleaner's parameters.
 """
 from __future__ import annotations
 
-import re
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -57,15 +56,19 @@ class ReadTask:
         try:
             return formats.read(path, **({"default_fps": self.fps} if self.fps else {}))
         except MocapfixError as exc:
-            return {"input": str(path), "status": "ERROR", "error": str(exc)}
+            # the cause without the file name, for a message that names the file itself
+            cause = (f"line {exc.line}: " if getattr(exc, "line", None) is not None else "") + \
+                getattr(exc, "reason", str(exc))
+            return {"input": str(path), "status": "ERROR", "error": str(exc), "cause": cause}
 
 
 def read_all(paths, jobs: int = 1, fps: float | None = None, progress=None, spec=None,
              unread: list | None = None):
     """Read every training file (in ``jobs`` local processes, or on the executor ``spec``
     names: :class:`mocapfix.executors.ExecutorSpec`). A file that cannot be read is an error
-    naming it; with an ``unread`` list it is appended there as ``(path, message)`` instead
-    and left out of the result (``None`` in its place)."""
+    naming it; with an ``unread`` list it is appended there instead, as ``{"path", "error",
+    "cause"}`` (the message, and its cause without the file name), and left out of the
+    result (``None`` in its place)."""
     from mocapfix.batch import run_tasks
 
     out: list = [None] * len(paths)
@@ -75,7 +78,8 @@ def read_all(paths, jobs: int = 1, fps: float | None = None, progress=None, spec
                        else f"{paths[n]}: {motion['error']}")
             if unread is None:
                 raise MocapfixError(message)
-            unread.append((paths[n], message))
+            unread.append({"path": str(paths[n]), "error": message,
+                           "cause": motion.get("cause", message)})
         else:
             out[n] = motion
         if progress:
@@ -103,17 +107,15 @@ def train(inputs, output, method: str = "partlet", params: dict | None = None, j
         paths = [p for p, m in zip(paths, motions) if m is not None]
         motions = [m for m in motions if m is not None]
         if not motions:
-            first, why = unread[0]
-            if why.startswith(str(first)):              # "PATH:LINE: cause" -> "line LINE: cause"
-                why = re.sub(r"^:(\d+):", r"line \1:", why[len(str(first)):]).lstrip(": ")
-            raise UnreadableFileError(first, f"none of the {len(unread)} training files could "
-                                             f"be read; this one: {why}")
+            raise UnreadableFileError(unread[0]["path"], f"none of the {len(unread)} training "
+                                                         f"files could be read; this one: "
+                                                         f"{unread[0]['cause']}")
     cleaner.fit(motions, progress=(lambda n, t: progress("fit", n, t)) if progress else None)
     header, arrays = cleaner.state()
     header.update(cleaner.model_header_fields())
     header["training"] = models.provenance(paths, [m.n_frames for m in motions],
                                            time.perf_counter() - started)
     if unread:
-        header["training"]["unread"] = [{"path": str(p), "error": e} for p, e in unread]
+        header["training"]["unread"] = [{"path": u["path"], "error": u["error"]} for u in unread]
     models.save(output, header, arrays)
     return {"output": str(output), "skipped": skipped, "unread": unread, **header}

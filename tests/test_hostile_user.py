@@ -33,11 +33,6 @@ def _md5s(folder: Path) -> dict:
     return {p: hashlib.md5(p.read_bytes()).hexdigest() for p in sorted(folder.rglob("*")) if p.is_file()}
 
 
-def _no_traceback(r):
-    assert "Traceback" not in r.output
-    assert r.exception is None or isinstance(r.exception, SystemExit), repr(r.exception)
-
-
 def test_output_subfolder_blocked_by_a_file_fails_that_file_only(tmp_path):
     # in/a/x.bvh must go to out/a/x.bvh, but out/a is a file: that one file fails, the
     # rest of the batch is written and the run ends normally (config record, exit 1)
@@ -50,7 +45,7 @@ def test_output_subfolder_blocked_by_a_file_fails_that_file_only(tmp_path):
     (out / "a").write_text("not a folder")
     before = _md5s(src)
     r = CliRunner().invoke(main, ["clean", str(src), "-o", str(out), "-c", _cfg(tmp_path)])
-    _no_traceback(r)
+    no_traceback(r)
     assert r.exit_code == 1, r.output
     error = [line for line in r.output.splitlines() if line.startswith("ERROR")]
     assert len(error) == 1 and "x.bvh" in error[0] and "internal error" not in error[0]
@@ -76,7 +71,7 @@ def test_unwritable_report_files_are_refused_before_any_work(tmp_path):
     }
     for option, args in runs.items():
         r = CliRunner().invoke(main, args)
-        _no_traceback(r)
+        no_traceback(r)
         assert r.exit_code == 2, (option, r.output)
         lines = r.output.strip().splitlines()
         assert len(lines) == 1 and option in lines[0] and str(blocker) in lines[0], r.output
@@ -100,7 +95,7 @@ def test_absurd_fps_is_a_usage_error_for_every_command(tmp_path):
                      ["clean", str(amc), "-o", str(tmp_path / "out"), "-c", _cfg(tmp_path)],
                      ["train-dictionary", str(amc), "--method", "mssa", "-o", str(tmp_path / "m.npz")]):
             r = CliRunner().invoke(main, [*args, "--fps", value])
-            _no_traceback(r)
+            no_traceback(r)
             assert r.exit_code == 2, (args[0], value, r.output)
             assert "--fps" in r.output and "is not a frame rate" in r.output
     assert not (tmp_path / "out").exists() and not (tmp_path / "m.npz").exists()
@@ -139,7 +134,7 @@ def test_a_file_name_that_is_not_utf8_is_cleaned_and_reported(tmp_path):
     out = tmp_path / "out"
     r = CliRunner().invoke(main, ["clean", str(src), "-o", str(out), "-c", _cfg(tmp_path),
                                   "--report", "json,md,html"])
-    _no_traceback(r)
+    no_traceback(r)
     assert r.exit_code == 0, r.output
     names = sorted(os.listdir(os.fsencode(out)))
     for name in (b"take\xff.bvh", b"take\xff.bvh.report.json", b"take\xff.bvh.report.md",
@@ -149,7 +144,7 @@ def test_a_file_name_that_is_not_utf8_is_cleaned_and_reported(tmp_path):
     md.decode("utf-8")                                   # the reports stay UTF-8 text
     junit = tmp_path / "check.xml"
     r = CliRunner().invoke(main, ["check", str(src), "--junit", str(junit), "--exit-zero"])
-    _no_traceback(r)
+    no_traceback(r)
     assert r.exit_code == 0, r.output
     case = ET.parse(junit).getroot().find(".//testcase")
     assert case is not None and "take" in case.get("name")
@@ -168,7 +163,7 @@ def test_a_file_whose_content_is_another_format_is_written_back_in_that_format(t
     before = _md5s(src)
     out = tmp_path / "out"
     r = CliRunner().invoke(main, ["clean", str(src), "-o", str(out), "-c", _cfg(tmp_path)])
-    _no_traceback(r)
+    no_traceback(r)
     assert r.exit_code == 0, r.output
     assert (out / "bvh_inside.c3d").read_bytes().startswith(b"HIERARCHY")
     assert (out / "c3d_inside.bvh").read_bytes()[1:2] == b"\x50"        # the C3D key
@@ -185,7 +180,7 @@ def test_a_key_given_twice_in_a_config_or_rules_file_is_refused(tmp_path):
     twice = FAST + "    max_gap: 5 s\n"
     r = CliRunner().invoke(main, ["clean", str(BVH), "-o", str(tmp_path / "out"),
                                   "-c", _cfg(tmp_path, twice, "twice.yaml")])
-    _no_traceback(r)
+    no_traceback(r)
     assert r.exit_code == 2, r.output
     assert "twice.yaml (line 5): key 'max_gap' appears twice" in r.output and "line 4" in r.output
     assert not (tmp_path / "out").exists()
@@ -216,7 +211,7 @@ def test_info_on_a_folder_without_motion_files_says_so(tmp_path):
     for args in (["info", str(tmp_path)], ["info", str(tmp_path), "--json"],
                  ["check", str(tmp_path)], ["info", str(SAMPLE_DATA), "--include", "*.nothing"]):
         r = CliRunner().invoke(main, args)
-        _no_traceback(r)
+        no_traceback(r)
         assert r.exit_code == 2 and "no motion files found in" in r.output, (args, r.output)
 
 
@@ -229,7 +224,7 @@ def test_a_long_but_legal_file_name_is_cleaned_and_its_stale_temporary_removed(t
     shutil.copy(BVH, src / f"{stem}.bvh")
     out = tmp_path / "out"
     r = CliRunner().invoke(main, ["clean", str(src), "-o", str(out), "-c", _cfg(tmp_path)])
-    _no_traceback(r)
+    no_traceback(r)
     assert r.exit_code == 0, r.output
     assert (out / f"{stem}.bvh").read_bytes().startswith(b"HIERARCHY")
     # its report keeps the stem only: "<name>.bvh.report.json" would pass the 255 bytes
@@ -261,7 +256,7 @@ def test_a_damaged_manifest_or_config_record_in_the_output_folder(tmp_path):
         manifest.write_text(json.dumps({**record, "files": damaged}) + "\n")
         for policy in ([], ["--skip-existing"]):
             r = CliRunner().invoke(main, ["clean", str(BVH), "-o", str(out), "-c", cfg, *policy])
-            _no_traceback(r)
+            no_traceback(r)
             if policy:             # the existing output is kept, as the option says
                 assert r.exit_code == 0 and "output exists" in r.output, r.output
             else:                  # no trustworthy record: an existing output, refused
@@ -270,7 +265,7 @@ def test_a_damaged_manifest_or_config_record_in_the_output_folder(tmp_path):
         bad = tmp_path / f"bad_{name}"
         (bad / name).mkdir(parents=True)
         r = CliRunner().invoke(main, ["clean", str(BVH), "-o", str(bad), "-c", cfg])
-        _no_traceback(r)
+        no_traceback(r)
         assert r.exit_code == 2 and name in r.output, r.output
         assert not (bad / "walk.bvh").exists()
 
@@ -304,13 +299,13 @@ def test_two_amcs_never_share_an_output_skeleton_they_do_not_have_in_common(tmp_
     cfg = _cfg(tmp_path, "version: 1\npipeline: []\n", "none.yaml")
     out = tmp_path / "out"
     r = CliRunner().invoke(main, ["clean", str(x), str(y), "-o", str(out), "-c", cfg])
-    _no_traceback(r)
+    no_traceback(r)
     assert r.exit_code == 2 and "walker.asf" in r.output and "differ" in r.output, r.output
     assert not out.exists()
     # one at a time into one folder: the second is refused, the first keeps its skeleton
     assert CliRunner().invoke(main, ["clean", str(x), "-o", str(out), "-c", cfg]).exit_code == 0
     r = CliRunner().invoke(main, ["clean", str(y), "-o", str(out), "-c", cfg])
-    _no_traceback(r)
+    no_traceback(r)
     assert r.exit_code == 1 and "holds another ASF" in r.output, r.output
     assert (out / "walker.asf").read_bytes() == (x.parent / "walker.asf").read_bytes()
     assert not list(out.glob("y_01*"))
@@ -343,7 +338,7 @@ def test_an_unforeseen_failure_is_one_line_and_the_other_files_go_on(tmp_path, m
 
     monkeypatch.setattr(mocapfix.info, "summarise", flaky)
     r = CliRunner().invoke(main, ["info", str(BVH), str(KIN), "--json"])
-    _no_traceback(r)
+    no_traceback(r)
     assert r.exit_code == 3, r.output
     assert "walk.bvh: internal error ValueError: simulated" in r.output
     assert '"frames"' in r.output                        # the Kinect file still summarised
@@ -354,7 +349,7 @@ def test_an_unforeseen_failure_is_one_line_and_the_other_files_go_on(tmp_path, m
     monkeypatch.setattr(mocapfix.manifest.Manifest, "close", broken_close)
     args = ["clean", str(KIN), "-o", str(tmp_path / "out"), "-c", _cfg(tmp_path)]
     r = CliRunner().invoke(main, args)
-    _no_traceback(r)
+    no_traceback(r)
     assert r.exit_code == 1
     assert r.output.strip().splitlines()[-1] == ("mocapfix: error: internal error OSError: [Errno 28] "
                                                  "No space left on device (--debug shows the traceback)")
@@ -403,14 +398,14 @@ def test_control_characters_in_file_names_reach_neither_the_terminal_nor_the_jun
     (src / "bad\x1b[31mred\r.bvh").write_bytes(b"\x00\x06junk, not a BVH\n")
     junit = tmp_path / "check.xml"
     r = CliRunner().invoke(main, ["check", str(src), "--junit", str(junit)])
-    _no_traceback(r)
+    no_traceback(r)
     assert r.exit_code == 3, r.output
     assert not re.search("[\x00-\x08\x0b-\x1f\x7f]", r.output), repr(r.output)
     assert "a\\x01b.bvh" in r.output and "bad\\x1b[31mred\\x0d.bvh" in r.output
     names = [case.get("name") for case in ET.parse(junit).getroot().iter("testcase")]
     assert names == ["in/a\\x01b.bvh", "in/bad\\x1b[31mred\r.bvh"]       # CR is valid XML
     r = CliRunner().invoke(main, ["clean", str(src), "-o", str(tmp_path / "out"), "-c", _cfg(tmp_path)])
-    _no_traceback(r)
+    no_traceback(r)
     assert r.exit_code == 1 and not re.search("[\x00-\x08\x0b-\x1f\x7f]", r.output), repr(r.output)
     assert (tmp_path / "out" / "a\x01b.bvh").is_file()           # the file itself keeps its name
 
@@ -440,7 +435,7 @@ def test_a_folder_that_cannot_be_listed_is_named_not_passed_over(tmp_path, monke
         for args in (["clean", str(src), "-o", str(tmp_path / "out"), "-c", _cfg(tmp_path)],
                      ["check", str(src)], ["info", str(src)]):
             r = CliRunner().invoke(main, args)
-            _no_traceback(r)
+            no_traceback(r)
             skip = [line for line in r.output.splitlines() if line.startswith("SKIP")]
             assert skip == [f"SKIP  {locked}: cannot read this folder: Permission denied "
                             "(the files in it were not processed)"], (args[0], r.output)
@@ -483,7 +478,7 @@ def test_a_joint_moved_beyond_the_float_range_is_reported_not_an_internal_error(
     (src / "clean.bvh").write_text(_six_channel_bvh(None))
     out = tmp_path / "out"
     r = CliRunner().invoke(main, ["clean", str(src), "-o", str(out), "--report", "json,md,html"])
-    _no_traceback(r)
+    no_traceback(r)
     assert r.exit_code == 0 and "internal error" not in r.output, r.output
     report = json.loads((out / "glitch.bvh.report.json").read_text())
     assert any(j["correction_mm"]["max"] is None for j in report["joints"])
@@ -574,7 +569,7 @@ def test_a_model_whose_array_header_lies_is_a_config_error(tmp_path):
     cfg = _cfg(tmp_path, "version: 1\npipeline:\n  - cleaner: mssa\n    model: bomb.npz\n")
     r = CliRunner().invoke(main, ["clean", str(SAMPLE_DATA / "walker_01.amc"), "-o",
                                   str(tmp_path / "out"), "-c", cfg])
-    _no_traceback(r)
+    no_traceback(r)
     assert r.exit_code == 2, r.output
     assert "bomb.npz: corrupt model file" in r.output and "'bases' declares" in r.output
     assert not (tmp_path / "out").exists()
@@ -590,7 +585,7 @@ def test_a_model_header_nested_too_deep_is_a_config_error(tmp_path):
     cfg = _cfg(tmp_path, "version: 1\npipeline:\n  - cleaner: mssa\n    model: deep.npz\n")
     r = CliRunner().invoke(main, ["clean", str(SAMPLE_DATA / "walker_01.amc"), "-o",
                                   str(tmp_path / "out"), "-c", cfg])
-    _no_traceback(r)
+    no_traceback(r)
     assert r.exit_code == 2 and "deep.npz: not a mocapfix model file (RecursionError" in r.output, r.output
 
 
@@ -611,7 +606,7 @@ def test_a_folder_where_a_report_goes_fails_that_file_only_and_keeps_shared_skel
     out = tmp_path / "out"
     (out / "walker_02.amc.report.json").mkdir(parents=True)
     r = CliRunner().invoke(main, ["clean", str(src), "-o", str(out), "-c", _cfg(tmp_path), "--overwrite"])
-    _no_traceback(r)
+    no_traceback(r)
     assert r.exit_code == 1, r.output
     error = [line for line in r.output.splitlines() if line.startswith("ERROR")]
     assert len(error) == 1 and "walker_02.amc.report.json: cannot write: Is a directory" in error[0], r.output
@@ -628,7 +623,7 @@ def test_a_malformed_scheduler_address_is_refused_before_anything_is_written(tmp
     for address in ("foo", "tcp://host-without-port", "tcp://127.0.0.1:x"):
         for args in (["clean", str(BVH), "-o", str(out), "-c", _cfg(tmp_path)], ["check", str(BVH)]):
             r = CliRunner().invoke(main, [*args, "--scheduler", address])
-            _no_traceback(r)
+            no_traceback(r)
             assert r.exit_code == 2, r.output
             assert f"--scheduler {address!r} is not a Dask scheduler address" in r.output
     assert not out.exists()
@@ -645,7 +640,7 @@ def test_an_unreachable_scheduler_leaves_the_output_folder_as_it_was(tmp_path, m
     fresh = tmp_path / "new" / "out"
     r = CliRunner().invoke(main, ["clean", str(BVH), "-o", str(fresh), "-c", _cfg(tmp_path),
                                   "--scheduler", "tcp://10.0.0.1:8786"])
-    _no_traceback(r)
+    no_traceback(r)
     assert r.exit_code == 2 and "cannot reach the Dask scheduler" in r.output, r.output
     assert not (tmp_path / "new").exists()
     used = tmp_path / "used"
@@ -678,7 +673,7 @@ def test_report_files_never_overwrite_the_captures_they_are_about(tmp_path):
     ]
     for args, what in cases:
         r = CliRunner().invoke(main, args)
-        _no_traceback(r)
+        no_traceback(r)
         assert r.exit_code == 2 and f"would overwrite {what}" in r.output, (args[0], r.output)
     assert _md5s(src) == before
     # a report file that is not a capture may go beside them, also replacing a text file
@@ -759,7 +754,7 @@ def test_training_mssa_on_a_bvh_and_a_c3d_says_one_model_per_skeleton(tmp_path):
     # "internal error AttributeError: 'NoneType' object has no attribute 'rot_axes'"
     out = tmp_path / "m.npz"
     r = CliRunner().invoke(main, ["train-dictionary", str(BVH), str(C3D), "--method", "mssa", "-o", str(out)])
-    _no_traceback(r)
+    no_traceback(r)
     assert r.exit_code == 2, r.output
     assert f"{C3D}: has no rotation channels" in r.output and "one model per skeleton" in r.output
     assert not out.exists()
@@ -774,7 +769,7 @@ def test_partlet_training_on_unusable_takes_is_one_clear_error(tmp_path):
                            ([asf], "no training motion has a complete window of 16 samples")):
         r = CliRunner().invoke(main, ["train-dictionary", *map(str, files), "--atoms", "4",
                                       "--iterations", "1", "-o", str(tmp_path / "m.npz")])
-        _no_traceback(r)
+        no_traceback(r)
         assert r.exit_code == 2 and message in r.output, r.output
     assert not (tmp_path / "m.npz").exists()
 
@@ -794,7 +789,7 @@ def test_a_link_to_a_folder_inside_an_input_folder_is_named_not_passed_over(tmp_
     for args in (["check", str(src)], ["info", str(src)],
                  ["clean", str(src), "-o", str(tmp_path / "out"), "-c", _cfg(tmp_path)]):
         r = CliRunner().invoke(main, args)
-        _no_traceback(r)
+        no_traceback(r)
         assert r.exit_code == 0, r.output
         assert f"SKIP  {src / 'session'}: a link to a folder, not followed" in r.output, (args[0], r.output)
 
@@ -820,7 +815,7 @@ def test_a_kinect_time_column_of_absurd_steps_is_refused_by_the_reader(tmp_path)
     (src / "absurd.csv").write_text(take(1e300))
     (src / "fine.csv").write_text(take(1 / 30))
     r = CliRunner().invoke(main, ["clean", str(src), "-o", str(tmp_path / "out"), "-c", "kinect"])
-    _no_traceback(r)
+    no_traceback(r)
     assert r.exit_code == 1, r.output
     error = [line for line in r.output.splitlines() if line.startswith("ERROR")]
     assert len(error) == 1 and error[0].startswith(f"ERROR {src / 'absurd.csv'}: the time column gives ")
@@ -844,7 +839,7 @@ def test_fps_sets_the_rate_of_files_that_store_none_and_leaves_stored_rates_alon
     out = tmp_path / "out"
     r = CliRunner().invoke(main, ["clean", str(src), "-o", str(out), "-c", _cfg(tmp_path),
                                   "--fps", "60"])
-    _no_traceback(r)
+    no_traceback(r)
     assert r.exit_code in (0, 1), r.output
     rates = {p.name.split(".")[0]: json.loads(p.read_text())["file"]["fps"]
              for p in out.glob("*.report.json")}
@@ -879,7 +874,7 @@ def test_files_that_share_a_name_but_not_a_format_keep_their_own_reports(tmp_pat
         out = tmp_path / f"out{jobs}"
         r = CliRunner().invoke(main, ["clean", str(src), "-o", str(out), "-c", _cfg(tmp_path),
                                       "-j", jobs, "--report", "json,md"])
-        _no_traceback(r)
+        no_traceback(r)
         assert r.exit_code == 1, r.output                   # take.amc failed
         for name in ("take.bvh", "take.c3d", "take.csv"):
             report = json.loads((out / f"{name}.report.json").read_text())
@@ -897,7 +892,7 @@ def test_a_file_named_again_inside_its_folder_is_cleaned_once(tmp_path):
     out = tmp_path / "out"
     r = CliRunner().invoke(main, ["clean", str(src), str(take), str(take), "-o", str(out),
                                   "-c", _cfg(tmp_path)])
-    _no_traceback(r)
+    no_traceback(r)
     assert r.exit_code == 0, r.output
     assert r.output.count(f"SKIP  {take}: given more than once") == 2
     assert r.output.count(f"{take} ->") == 1

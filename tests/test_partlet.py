@@ -328,6 +328,27 @@ def test_one_unreadable_training_file_is_named_left_out_and_recorded(tmp_path):
     assert [Path(u["path"]).name for u in training["unread"]] == ["05_03.amc"]
 
 
+def test_no_readable_training_file_names_it_once_with_its_line_and_writes_no_model(tmp_path):
+    """Every training file unreadable: exit 3 (an unreadable input), one message naming
+    the file once and the line of its fault, and no model written."""
+    import re
+    import shutil
+
+    takes = tmp_path / "takes"
+    takes.mkdir()
+    shutil.copy(shared("asfamc/05.asf"), takes / "05.asf")
+    good = shared("asfamc/05_02.amc").read_text().splitlines(keepends=True)
+    (takes / "05_03.amc").write_text("".join(good[:40]) + "12\nroot 1.0 oops\n")
+    out = tmp_path / "m.npz"
+    res = CliRunner().invoke(main, ["train-dictionary", str(takes), "-o", str(out), "--atoms", "16"])
+    assert res.exit_code == 3, res.output
+    amc = str(takes / "05_03.amc")
+    assert res.output.count(amc) == 1, res.output
+    assert re.search(re.escape(amc) + r": none of the 1 training files could be read; this one: "
+                     r"line \d+: ", res.output), res.output
+    assert not out.exists()
+
+
 def test_kinect_v1_v2_azure_and_msr_names_map_to_the_kinect_model_joints():
     from mocapfix import bodyparts
     from mocapfix.formats import kinect_layouts as kl
