@@ -88,6 +88,7 @@ from mocapfix.motion import Motion
 from mocapfix.solvers import run_offsets, svshrink, whittaker
 from mocapfix.solvers.bone_projection import project_lengths
 from mocapfix.solvers.localfit import moving_median
+from mocapfix.solvers.rigid import norms
 from mocapfix.solvers.segments import fillable, runs
 
 _LEG = ("knee", "ankle", "foot")
@@ -117,10 +118,6 @@ def _pelvis(names):
     return next((key[p] for p in _PELVIS if p in key), None)
 
 
-def _norm(x):
-    return np.sqrt(np.sum(x * x, axis=-1))
-
-
 def leg_swap_frames(P: np.ndarray, names: list[str], threshold: float) -> np.ndarray:
     """Frames (T,) where the leg chains are exchanged (module docstring, stage 1): the
     labelling (kept / exchanged per frame) of least cost by Viterbi (two states)."""
@@ -139,7 +136,7 @@ def leg_swap_frames(P: np.ndarray, names: list[str], threshold: float) -> np.nda
         for cs in range(2):
             a_prev, b_prev = (Y[0], Y[1]) if ps == 0 else (Y[1], Y[0])
             a_cur, b_cur = (Y[0], Y[1]) if cs == 0 else (Y[1], Y[0])
-            d = _norm(a_cur[1:] - a_prev[:-1]) + _norm(b_cur[1:] - b_prev[:-1])
+            d = norms(a_cur[1:] - a_prev[:-1]) + norms(b_cur[1:] - b_prev[:-1])
             step[1:, ps, cs] = np.nansum(d, axis=1)
     # two-state Viterbi; plain floats: a numpy call per frame costs more than the sums
     s00, s01, s10, s11 = (step[:, 0, 0].tolist(), step[:, 0, 1].tolist(),
@@ -304,7 +301,7 @@ class KinectSkeleton(Cleaner):
         centre = np.zeros((J, 3))
         centre[seen.any(axis=0)] = np.nanmedian(P[:, seen.any(axis=0)], axis=0)
         with np.errstate(invalid="ignore", over="ignore"):
-            gross = seen & ~(_norm(P - centre) <= _GROSS_M)
+            gross = seen & ~(norms(P - centre) <= _GROSS_M)
         P[gross] = np.nan
 
         # 1. leg confusion
@@ -398,7 +395,7 @@ class KinectSkeleton(Cleaner):
         sig0 = 0.01
         w0 = np.where(tracked, 1.0 / sig0 ** 2, np.where(inferred, 1.0 / sig_inf ** 2, 0.0))
         Z, cut0 = fit(w0)
-        res = _norm(P - Z)
+        res = norms(P - Z)
         sigma = np.full((T, J), sig0)
         p_exp = 0.0
         scale = np.full(J, sig0)
@@ -461,7 +458,7 @@ class KinectSkeleton(Cleaner):
         floor = self.length("min_outlier", motion) * mpu
         Z, cut = fit(weights, cut=cut0)
         for _ in range(self["passes"] + 1):
-            res = _norm(P - Z)
+            res = norms(P - Z)
             # a stretch the smooth cannot follow (fast motion, sparse rows) has large
             # residuals all along and is not an outlier: Hampel's local scale
             local = np.nan_to_num(moving_median(np.where(observed, res, np.nan), 3)) / 1.5382
@@ -538,7 +535,7 @@ class KinectSkeleton(Cleaner):
             constant = np.zeros(len(bones), bool)
             for i, (a, b) in enumerate(bones):
                 seen = observed[:, a] & observed[:, b]
-                raw = _norm(P_read[seen, a] - P_read[seen, b])
+                raw = norms(P_read[seen, a] - P_read[seen, b])
                 if len(raw) >= 3 and np.ptp(raw) <= max(2e-5 * np.max(raw), 1e-5):
                     # stored constant to the file's 6 decimals
                     constant[i], lengths[:, i] = True, float(np.median(raw))
@@ -550,7 +547,7 @@ class KinectSkeleton(Cleaner):
                     continue
                 # one length per bone (letting it drift below 0.3-1 Hz kept UTKinect's
                 # bone variation at 0.11-0.13 of 0.14: its bones change slowly with pose)
-                lengths[:, i] = np.median(_norm(out[both, a] - out[both, b]))
+                lengths[:, i] = np.median(norms(out[both, a] - out[both, b]))
             var = np.where(tracked & ~flagged, sigma ** 2,
                            np.where(inferred & ~flagged, sig_inf ** 2, (2 * sig_inf) ** 2))
             out = project_lengths(out, bones, lengths, var, sweeps=8, stiffness=k)
@@ -560,7 +557,7 @@ class KinectSkeleton(Cleaner):
             for i in sorted(np.flatnonzero(constant), key=lambda i: rank[int(bones[i][1])]):
                 a, b = bones[i]
                 d = out[:, b] - out[:, a]
-                n = _norm(d)[:, None]
+                n = norms(d)[:, None]
                 with np.errstate(invalid="ignore", divide="ignore"):
                     out[:, b] = np.where(n > 0, out[:, a] + d * (lengths[:, i, None] / n), out[:, b])
             info["constant_bones"] = int(constant.sum())

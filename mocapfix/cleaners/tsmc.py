@@ -91,9 +91,10 @@ from mocapfix.cleaners import register
 from mocapfix.cleaners.base import REJECTED_FILLS, Cleaner, Param
 from mocapfix.motion import Motion, missing_samples
 from mocapfix.solvers import dct, segments
+from mocapfix.solvers.localfit import moving_median
 from mocapfix.solvers.lowrank import leave_block_out_residual, ppca_fit, svt
 from mocapfix.solvers.pca_gapfill import fill_gaps_pca
-from mocapfix.solvers.rigid import body_frame, to_global, to_local
+from mocapfix.solvers.rigid import body_frame, norms, to_global, to_local
 from mocapfix.solvers.segments import implausible_runs, linear_bridge
 
 _CM = 100.0  # cm per metre
@@ -132,16 +133,15 @@ def _gross(motion: Motion) -> np.ndarray:
         return seen
     T, J, _ = pos.shape
     rows = np.arange(0, T, max(1, T // 2000))
+    sampled = seen[rows].any(axis=0)
     centre, own = np.zeros((J, 3)), np.zeros(J)
     with np.errstate(invalid="ignore", over="ignore"):
-        for part in (rows, np.arange(T)):
-            todo = seen[part].any(axis=0) & ~seen[rows].any(axis=0) if len(part) == T else \
-                seen[part].any(axis=0)
+        for part, todo in ((rows, sampled), (slice(None), seen.any(axis=0) & ~sampled)):
             if todo.any():
                 sub = pos[part][:, todo]
                 centre[todo] = np.nanmedian(sub, axis=0)
-                own[todo] = np.nanquantile(_norm3(sub - centre[todo]), 0.9, axis=0)
-        dist = _norm3(pos - centre)
+                own[todo] = np.nanquantile(norms(sub - centre[todo]), 0.9, axis=0)
+        dist = norms(pos - centre)
         every = dist[rows][seen[rows]]
         extent = np.maximum(own, float(np.quantile(every if len(every) else dist[seen], 0.9)))
         limit = np.maximum(GROSS_EXTENT * extent, GROSS_FLOOR_M / motion.metres_per_unit)
@@ -173,27 +173,17 @@ def _local_gross(pos: np.ndarray, seen: np.ndarray, fps: float, metres_per_unit:
         return out
     with np.errstate(invalid="ignore", over="ignore"), warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)     # a marker never seen twice in a row
-        step = _norm3(pos[1:] - pos[:-1])                                # NaN beside a gap
+        step = norms(pos[1:] - pos[:-1])                                # NaN beside a gap
         # the median step from at most 2,000 evenly spaced steps (the factor is 20)
         typical = np.nan_to_num(np.nanmedian(step[::max(1, len(step) // 2000)], axis=0))
         limit = np.maximum(LOCAL_GROSS_M / metres_per_unit, LOCAL_FACTOR * typical)
         suspects = np.flatnonzero((step > 0.5 * limit[None, :]).any(axis=0))
-    k = max(2, int(round(LOCAL_HALF_S * fps)))
-    for j in suspects:
-        x = np.where(seen[:, j, None], pos[:, j], np.nan)
-        padded = np.concatenate([np.full((k, 3), np.nan), x, np.full((k, 3), np.nan)])
-        windows = np.lib.stride_tricks.sliding_window_view(padded, 2 * k + 1, axis=0)
-        with np.errstate(invalid="ignore", over="ignore"), warnings.catch_warnings():
-            warnings.simplefilter("ignore", RuntimeWarning)              # all-NaN windows
-            local = np.nanmedian(windows, axis=-1)
-            out[:, j] = seen[:, j] & (_norm3(x - local) > limit[j])
+    if len(suspects):
+        x = np.where(seen[:, suspects, None], pos[:, suspects], np.nan)
+        local = moving_median(x, max(2, int(round(LOCAL_HALF_S * fps))))
+        with np.errstate(invalid="ignore", over="ignore"):
+            out[:, suspects] = seen[:, suspects] & (norms(x - local) > limit[suspects])
     return out
-
-
-def _norm3(v: np.ndarray) -> np.ndarray:
-    """Euclidean norm over the last axis of length 3, written out (several times faster
-    than ``np.linalg.norm(v, axis=-1)`` on (T, J, 3) arrays)."""
-    return np.sqrt(v[..., 0] * v[..., 0] + v[..., 1] * v[..., 1] + v[..., 2] * v[..., 2])
 
 
 def _pad_frames(cleaner: Cleaner, motion: Motion) -> int:

@@ -58,6 +58,12 @@ def _dot(x, y):
     return x[0] * y[0] + x[1] * y[1] + x[2] * y[2]
 
 
+def norms(v: np.ndarray) -> np.ndarray:
+    """Euclidean norm over the last axis (length 3) of ``v``, written out: several times
+    faster than ``np.linalg.norm(v, axis=-1)`` on (T, J, 3) arrays, with the same values."""
+    return np.sqrt(v[..., 0] * v[..., 0] + v[..., 1] * v[..., 1] + v[..., 2] * v[..., 2])
+
+
 def _best_rotation(H):
     """The rotation ``R = V diag(1, 1, d) Uᵀ`` of Kabsch (1976) for each 3 × 3 matrix of
     ``H = U S Vᵀ`` (n, 3, 3), in closed form on (n,) component arrays (numpy's batched SVD,
