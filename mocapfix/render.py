@@ -175,15 +175,22 @@ def to_markdown(report: dict) -> str:
 # -- HTML ------------------------------------------------------------------------------------
 
 def _ticks(lo: float, hi: float, n: int = 4) -> list[float]:
-    """Round tick values covering [lo, hi] (1-2-5 steps)."""
+    """Round tick values inside [lo, hi] (1-2-5 steps, about ``n`` intervals), at least two
+    of them: rounding the step up (2 → 5) can leave a single multiple in the range."""
     span = hi - lo
     if not np.isfinite(span) or span <= 0:
         return [lo]
     raw = span / n
     mag = 10 ** np.floor(np.log10(raw))
-    step = next(m * mag for m in (1, 2, 5, 10) if m * mag >= raw)
-    first = np.ceil(lo / step) * step
-    return [float(v) for v in np.arange(first, hi + step * 1e-9, step)]
+    steps = [m * mag for m in (0.5, 1, 2, 5, 10)]
+    k = next(i for i, m in enumerate(steps) if m >= raw)
+    while True:
+        step = steps[k]
+        first = np.ceil(lo / step) * step
+        ticks = [float(v) for v in np.arange(first, hi + step * 1e-9, step)]
+        if len(ticks) >= 2 or k == 0:
+            return ticks
+        k -= 1
 
 
 def _fmt_tick(v: float) -> str:

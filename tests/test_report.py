@@ -161,3 +161,25 @@ def test_marker_name_with_a_pipe_keeps_its_report_row_whole(tmp_path):
     assert len(border.findall(row)) == len(border.findall(header)), row
     html_text = (out / "pipes.c3d.report.html").read_text()
     assert "<td>a|b</td>" in html_text and "<td>a</td>" not in html_text
+
+
+def test_plot_ticks_are_round_inside_the_range_and_at_least_two():
+    """A span whose step rounds up from 2 to 5 held a single multiple (0.5-8.54 mm: only
+    5), and the browser test found a Kinect panel with one y tick."""
+    from hypothesis import given, strategies as st
+
+    from mocapfix.render import _ticks
+
+    assert _ticks(0.5, 8.54) == [2.0, 4.0, 6.0, 8.0]
+    assert _ticks(0.0, 100.0) == [0.0, 50.0, 100.0]
+
+    @given(st.floats(-1e4, 1e4), st.floats(1e-3, 1e4))
+    def check(lo, span):
+        ticks = _ticks(lo, lo + span)
+        assert len(ticks) >= 2
+        assert lo - 1e-9 * span <= ticks[0] and ticks[-1] <= lo + span + 1e-9 * span
+        steps = np.diff(ticks)
+        np.testing.assert_allclose(steps, steps[0], rtol=1e-6)
+        assert len(ticks) <= 11
+
+    check()
