@@ -45,3 +45,42 @@ def project_lengths(P: np.ndarray, bones: np.ndarray, lengths: np.ndarray, w: np
             Q[a] += d * (wa * k)[:, None]
             Q[b] -= d * (wb * k)[:, None]
     return Q.transpose(1, 0, 2).copy()
+
+
+def two_bone_pairs(bones: np.ndarray, n_joints: int) -> np.ndarray:
+    """(K, 2) joint pairs two bones apart (a common neighbour, not a bone themselves):
+    siblings such as the two hips, and grandparent-grandchild such as elbow-hand."""
+    bones = np.asarray(bones, dtype=np.intp).reshape(-1, 2)
+    near = [set() for _ in range(n_joints)]
+    for a, b in bones:
+        near[a].add(int(b))
+        near[b].add(int(a))
+    linked = {tuple(sorted(map(int, b))) for b in bones}
+    pairs = {tuple(sorted((a, c))) for m in range(n_joints) for a in near[m] for c in near[m]
+             if a != c}
+    return np.array(sorted(pairs - linked), dtype=np.intp).reshape(-1, 2)
+
+
+def steady_pairs(P: np.ndarray, good: np.ndarray, pairs: np.ndarray, noise: np.ndarray, *,
+                 window: int, ratio: float, min_frames: int) -> np.ndarray:
+    """The ``pairs`` (K, 2) of joints whose distance in ``P`` (T, J, 3) holds as steady as
+    measurement noise explains: over the frames where both are ``good`` (T, J) (at least
+    ``min_frames``), the standard deviation of the distance's ``window``-frame moving
+    average is at most ``ratio`` × √((σ_a² + σ_b²) / window), the spread white noise of
+    per-coordinate σ (``noise``, (J,)) alone would give it. A rigid link the skeleton does
+    not list (the pelvis's hip-hip distance, a thorax's shoulder-shoulder one) passes; a
+    pair across a bending joint does not once the bending outgrows the noise. Returns the
+    passing rows of ``pairs``."""
+    from scipy.ndimage import uniform_filter1d  # imported here: not loaded unless needed
+
+    pairs = np.asarray(pairs, dtype=np.intp).reshape(-1, 2)
+    keep = np.zeros(len(pairs), bool)
+    for i, (a, b) in enumerate(pairs):
+        both = good[:, a] & good[:, b]
+        if both.sum() < max(min_frames, 2 * window):
+            continue
+        d = P[both, a] - P[both, b]
+        dist = np.sqrt(np.einsum("ij,ij->i", d, d))
+        spread = float(np.std(uniform_filter1d(dist, window, mode="nearest")))
+        keep[i] = spread <= ratio * np.sqrt((noise[a] ** 2 + noise[b] ** 2) / window)
+    return pairs[keep]
