@@ -12,7 +12,9 @@
    of the process, each size run five times as it ships (the cores for the file's own
    parallel loops, :mod:`mocapfix.threads`) in turn with ``MOCAPFIX_THREADS=1``: the
    medians and the median of the paired ratios; and the start-up cost (``mocapfix
-   --version`` against ``mocapfix cleaners``, which loads every cleaner module).
+   --version`` against ``mocapfix cleaners``, which loads every cleaner module); and per
+   step, the seconds each step of the default pipeline takes at each size (from the JSON
+   report) beside the missing marker samples of the input and the rest of the wall time.
    That corruption puts ~21 gaps in a clip of any length. A second table keeps the rate
    of gaps per second instead, as a real capture has it: the four quarters of the
    4,500-frame case (its own gaps), and 18,000 frames whose four 4,500-frame stretches
@@ -132,7 +134,42 @@ def scaling():
             print(f"| {T} × {base.n_joints} | {np.median([r[0] for r in runs]):.2f} | "
                   f"{np.median([r[0] for r in single]):.2f} | {ratio:.2f} | "
                   f"{max(r[1] for r in runs):.0f} |")
+        per_step(cli, tmp)
         same_gap_rate(base, cli, tmp)
+
+
+def per_step(cli, tmp: Path):
+    """Where the time of the three sizes goes: each step's seconds from the JSON report
+    (median of three runs) and the rest of the wall time (start-up, imports, reading,
+    writing, the report). The marker samples missing in the input show what the gap
+    filler has to do: the corruption puts about as many gaps in a clip of any length."""
+    import json
+
+    rows = {}
+    for T in (1125, 4500, 18000):
+        src = tmp / f"c{T}.c3d"
+        reps = []
+        for k in range(3):
+            out = tmp / f"steps{T}_{k}"
+            t = time.perf_counter()
+            subprocess.run(cli + ["clean", str(src), "-o", str(out), "--report", "json"],
+                           check=True, capture_output=True, env=ENV)
+            wall = time.perf_counter() - t
+            report = json.loads(next(out.glob("*.report.json")).read_text())
+            steps = report["files"][0]["steps"] if "files" in report else report["steps"]
+            reps.append((wall, {s["cleaner"]: s.get("seconds", 0.0) for s in steps}))
+        names = [n for n, v in reps[0][1].items() if v >= 0.001]
+        secs = {n: float(np.median([r[1][n] for r in reps])) for n in names}
+        wall = float(np.median([r[0] for r in reps]))
+        missing = int(np.isnan(read(src).positions[..., 0]).sum())
+        rows[T] = (missing, secs, wall)
+    names = list(rows[4500][1])
+    print("\n| frames | missing samples | " + " | ".join(f"{n} (s)" for n in names)
+          + " | rest of the wall time (s) | wall (s) |")
+    print("|---:|---:|" + "---:|" * (len(names) + 2))
+    for T, (missing, secs, wall) in rows.items():
+        print(f"| {T} | {missing} | " + " | ".join(f"{secs.get(n, 0.0):.3f}" for n in names)
+              + f" | {wall - sum(secs.values()):.2f} | {wall:.2f} |")
 
 
 def _clean_seconds(args) -> tuple[float, float]:
