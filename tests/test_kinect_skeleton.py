@@ -13,7 +13,8 @@ from mocapfix.cleaners.depth_skeleton import leg_swap_frames
 from mocapfix.cli import main
 from mocapfix.formats import kinect as kf
 from mocapfix.solvers import run_offsets, svshrink, whittaker
-from mocapfix.solvers.bone_projection import project_lengths, steady_pairs, two_bone_pairs
+from mocapfix.solvers.bone_projection import (median_lengths, project_lengths, steady_pairs,
+                                               two_bone_pairs)
 
 from tests.conftest import SAMPLE_DATA, no_traceback, shared, shared_files
 
@@ -83,10 +84,12 @@ def test_steady_pairs_takes_a_rigid_link_and_leaves_a_bending_one():
     found = steady_pairs(P, good, np.array([[0, 1], [0, 2]]), noise, window=15, ratio=1.5,
                          min_frames=90)
     assert found.tolist() == [[0, 1]]
+    assert abs(median_lengths(P, good, found)[0] - 0.3) < 0.002
     # too few frames where both are seen: no verdict
     good[60:, 1] = False
     assert len(steady_pairs(P, good, np.array([[0, 1]]), noise, window=15, ratio=1.5,
                             min_frames=90)) == 0
+    assert np.isnan(median_lengths(P, good, np.array([[0, 1]]), min_frames=90)[0])
 
 
 def test_local_sure_smooths_a_still_pose_harder_than_a_fast_swing():

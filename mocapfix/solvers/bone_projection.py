@@ -47,6 +47,20 @@ def project_lengths(P: np.ndarray, bones: np.ndarray, lengths: np.ndarray, w: np
     return Q.transpose(1, 0, 2).copy()
 
 
+def median_lengths(P: np.ndarray, good: np.ndarray, links: np.ndarray, *,
+                   min_frames: int = 1) -> np.ndarray:
+    """(K,) median distance in ``P`` (T, J, 3) of each joint pair of ``links`` (K, 2) over
+    the frames where both are ``good`` (T, J); NaN with fewer than ``min_frames`` of
+    them (:func:`project_lengths` skips such a link)."""
+    out = np.full(len(links), np.nan)
+    for i, (a, b) in enumerate(np.asarray(links, dtype=np.intp).reshape(-1, 2)):
+        both = good[:, a] & good[:, b]
+        if both.sum() >= max(min_frames, 1):
+            d = P[both, a] - P[both, b]
+            out[i] = np.median(np.sqrt(np.einsum("ij,ij->i", d, d)))
+    return out
+
+
 def two_bone_pairs(bones: np.ndarray, n_joints: int) -> np.ndarray:
     """(K, 2) joint pairs two bones apart (a common neighbour, not a bone themselves):
     siblings such as the two hips, and grandparent-grandchild such as elbow-hand."""
