@@ -11,10 +11,17 @@ bone (a, b) with current length ``l`` and target ``L``,
 
 with ``w`` the joints' inverse masses (here: variances, so a well-measured joint barely
 moves) and ``s`` the stiffness. Vectorised over frames; the loop is over sweeps and bones.
+
+Links a skeleton does not list but its data holds rigid (:func:`two_bone_pairs`,
+:func:`steady_pairs`: the two hips, a forearm with its hand) are found by a test written
+for mocapfix, not taken from a paper: the spread of a pair's time-averaged distance
+against the spread its measurement noise alone would give.
 """
 from __future__ import annotations
 
 import numpy as np
+
+from mocapfix.solvers.rigid import norms
 
 
 def project_lengths(P: np.ndarray, bones: np.ndarray, lengths: np.ndarray, w: np.ndarray, *,
@@ -56,8 +63,7 @@ def median_lengths(P: np.ndarray, good: np.ndarray, links: np.ndarray, *,
     for i, (a, b) in enumerate(np.asarray(links, dtype=np.intp).reshape(-1, 2)):
         both = good[:, a] & good[:, b]
         if both.sum() >= max(min_frames, 1):
-            d = P[both, a] - P[both, b]
-            out[i] = np.median(np.sqrt(np.einsum("ij,ij->i", d, d)))
+            out[i] = np.median(norms(P[both, a] - P[both, b]))
     return out
 
 
@@ -93,8 +99,7 @@ def steady_pairs(P: np.ndarray, good: np.ndarray, pairs: np.ndarray, noise: np.n
         both = good[:, a] & good[:, b]
         if both.sum() < max(min_frames, 2 * window):
             continue
-        d = P[both, a] - P[both, b]
-        dist = np.sqrt(np.einsum("ij,ij->i", d, d))
+        dist = norms(P[both, a] - P[both, b])
         spread = float(np.std(uniform_filter1d(dist, window, mode="nearest")))
         keep[i] = spread <= ratio * np.sqrt((noise[a] ** 2 + noise[b] ** 2) / window)
     return pairs[keep]
