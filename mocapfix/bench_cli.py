@@ -60,10 +60,8 @@ def bench(ctx, clean_files, protocol, methods, configs, seeds, settings, json_ou
     """Corrupt each CLEAN_FILE with a seeded PROTOCOL, clean it with each method and
     print error tables against the clean data (mean ± std over seeds, seconds per file)."""
     from mocapfix import bench as bench_lib
-    from mocapfix.fileio import atomic_write_text
-
     from mocapfix.batch import check_output_file
-    from mocapfix.fileio import is_stream
+    from mocapfix.fileio import atomic_write_text, is_stream
 
     try:                      # before the work: a long run must not end on an unwritable path
         given = [c.strip() for c in (configs or "").split(",") if c.strip()]

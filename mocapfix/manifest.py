@@ -76,8 +76,6 @@ class Manifest:
         rec = self.records.get((str(job.source), self._rel(job.output)))
         if not rec or rec.get("status") != "done" or not self._same_run(rec):
             return False
-        if rec.get("output") != self._rel(job.output):
-            return False
         files = rec.get("files", [])
         if not isinstance(files, list) or not all(isinstance(f, str) for f in files):
             return False                          # a damaged record: redo the file

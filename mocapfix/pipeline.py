@@ -38,6 +38,7 @@ from mocapfix.motion import Motion
 from mocapfix.selection import Selection, cleanable, put, take
 from mocapfix.solvers.rigid import norms
 from mocapfix.yamlsafe import load_yaml as safe_load_yaml
+from mocapfix.yamlsafe import read_bounded
 
 CONFIG_VERSION = 1
 _STEP_KEYS = {"cleaner", "formats", "name", "markers", "exclude"}
@@ -286,8 +287,6 @@ def load_yaml(text, source: str = "<config>"):
 
 
 def load_config(path) -> Pipeline:
-    from mocapfix.yamlsafe import read_bounded
-
     path = Path(path)
     return loads_config(read_bounded(path, "config"), str(path))
 

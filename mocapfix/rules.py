@@ -39,6 +39,7 @@ from pathlib import Path
 
 from mocapfix.errors import ConfigError
 from mocapfix.formats import NAMES
+from mocapfix.yamlsafe import read_bounded
 
 STATUS_ORDER = {"OK": 0, "WARN": 1, "FAIL": 2}
 RULES_VERSION = 1
@@ -527,7 +528,6 @@ def loads_rules(text: str, source: str = "<rules>", stage: str = "input") -> Rul
 
 def load_rules(path, stage: str = "input", _chain: tuple = ()) -> RuleSet:
     from mocapfix.pipeline import load_yaml
-    from mocapfix.yamlsafe import read_bounded
 
     path = Path(path)
     return parse_rules(load_yaml(read_bounded(path, "rules"), str(path)), str(path), stage, _chain)

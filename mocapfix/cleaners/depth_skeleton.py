@@ -456,6 +456,7 @@ class KinectSkeleton(Cleaner):
         # 3b. rigid pairs the skeleton does not list: held like bones from here on
         rigid = np.zeros((0, 2), dtype=np.intp)
         has_bones = motion.skeleton is not None and len(motion.skeleton.bones) > 0
+        floor = self.length("min_outlier", motion) * mpu      # the smallest outlier (step 5)
         if self["rigid_pairs"] > 0 and self["bone_stiffness"] > 0 and has_bones:
             bones = motion.skeleton.bone_array
             window = max(3, int(round(_RIGID_WINDOW_S / max(h, 1e-9))))
@@ -469,8 +470,7 @@ class KinectSkeleton(Cleaner):
                 # along, and step 5 is where outliers are judged and reported (an Inferred
                 # sample's large variance already makes it take the corrections)
                 with np.errstate(invalid="ignore"):
-                    far = tracked & (res0 > np.maximum(self["outlier_k"] * sigma,
-                                                       self.length("min_outlier", motion) * mpu))
+                    far = tracked & (res0 > np.maximum(self["outlier_k"] * sigma, floor))
                 held = project_lengths(np.where(far[..., None], np.nan, P), links,
                                        median_lengths(P, tracked & ~far, links), var, sweeps=4,
                                        stiffness=self["bone_stiffness"])
@@ -518,7 +518,6 @@ class KinectSkeleton(Cleaner):
         sigma_inf = np.maximum(sigma, sig_inf)
         weights = np.where(tracked, 1.0 / sigma ** 2, np.where(inferred, 1.0 / sigma_inf ** 2, 0.0))
         flagged = np.zeros((T, J), bool)
-        floor = self.length("min_outlier", motion) * mpu
         Z, cut = fit(weights, cut=cut0)
         for _ in range(self["passes"] + 1):
             res = norms(P - Z)
@@ -591,7 +590,7 @@ class KinectSkeleton(Cleaner):
 
         # 7. bones
         k = self["bone_stiffness"]
-        if k > 0 and motion.skeleton is not None and len(motion.skeleton.bones):
+        if k > 0 and has_bones:
             bones = motion.skeleton.bone_array
             good = tracked & ~flagged
             lengths = np.full((T, len(bones)), np.nan)
