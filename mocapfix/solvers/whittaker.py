@@ -30,14 +30,34 @@ import numpy as np
 def penalty_bands(t: np.ndarray, order: int) -> np.ndarray:
     """``DᵀΔD`` of the module docstring in LAPACK lower banded storage, (order + 1, T)."""
     t = np.asarray(t, dtype=np.float64)
-    T, d = len(t), order
-    ab = np.zeros((d + 1, T))
-    n = T - d
-    if n <= 0:
+    return _bands(t, np.arange(max(len(t) - order, 0)), order)
+
+
+def stretch_bands(t: np.ndarray, starts: np.ndarray, stops: np.ndarray, order: int):
+    """``DᵀΔD`` of the stretches ``t[starts[k]:stops[k]]`` laid end to end, each penalised
+    on its own (no difference spans two stretches): one banded system whose solve smooths
+    every stretch at once. Returns (bands (order + 1, N), the index into ``t`` of each of
+    the N rows)."""
+    t = np.asarray(t, dtype=np.float64)
+    starts, stops = np.asarray(starts, dtype=np.intp), np.asarray(stops, dtype=np.intp)
+    lengths = stops - starts
+    first = np.cumsum(lengths) - lengths                     # each stretch's first row
+    rows = np.arange(int(lengths.sum()))
+    index = rows + np.repeat(starts - first, lengths)
+    inner = rows - np.repeat(first, lengths)                 # position within the stretch
+    heads = rows[inner < np.repeat(lengths, lengths) - order]
+    return _bands(t[index], heads, order), index
+
+
+def _bands(t: np.ndarray, heads: np.ndarray, order: int) -> np.ndarray:
+    """The banded ``DᵀΔD`` over ``t`` with one d-th difference on ``t[i..i+d]`` for each
+    ``i`` of ``heads``."""
+    d = order
+    ab = np.zeros((d + 1, len(t)))
+    if not len(heads):
         return ab
     # coefficients of d! x the d-th divided difference on t_i..t_{i+d}
-    idx = np.arange(n)[:, None] + np.arange(d + 1)[None, :]
-    tt = t[idx]                                              # (n, d+1)
+    tt = t[heads[:, None] + np.arange(d + 1)[None, :]]      # (n, d+1)
     diff = tt[:, :, None] - tt[:, None, :]                   # (n, d+1, d+1)
     eye = np.eye(d + 1, dtype=bool)
     prod = np.prod(np.where(eye, 1.0, diff), axis=2)
@@ -45,7 +65,7 @@ def penalty_bands(t: np.ndarray, order: int) -> np.ndarray:
     delta = (tt[:, -1] - tt[:, 0]) / d
     for p in range(d + 1):
         for q in range(p, d + 1):
-            ab[q - p, p:p + n] += c[:, p] * c[:, q] * delta
+            ab[q - p, heads + p] += c[:, p] * c[:, q] * delta
     return ab
 
 
