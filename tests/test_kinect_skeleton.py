@@ -133,6 +133,28 @@ def test_stretch_bands_smooth_each_stretch_as_if_alone():
                                    whittaker.penalty_bands(t, order))
 
 
+def test_smooth_varying_is_the_whittaker_smooth_when_the_strength_is_constant():
+    """A constant strength gives the plain smooth; any strength keeps a polynomial of
+    degree below the order (its differences, the penalty, are 0); a strength that is low
+    on one half and high on the other follows the data closely only on the first half."""
+    rng = np.random.default_rng(4)
+    t = np.cumsum(np.r_[0.0, rng.choice([1 / 30, 2 / 30], size=299, p=[0.95, 0.05])])
+    y = rng.normal(size=(300, 2))
+    w = rng.uniform(0.5, 2.0, 300)
+    for order in (2, 3):
+        np.testing.assert_allclose(
+            whittaker.smooth_varying(y, w, t, np.full(300, 0.003), order=order),
+            whittaker.smooth(y, w, t, 0.003, order=order), atol=1e-9)
+        poly = np.stack([1 + 2 * t - (0.5 * t ** 2 if order == 3 else 0.0), -t], axis=1)
+        lam = np.exp(rng.normal(size=300) * 3)
+        np.testing.assert_allclose(whittaker.smooth_varying(poly, w, t, lam, order=order), poly,
+                                   atol=1e-6)
+    lam = np.where(np.arange(300) < 150, 1e-15, 1e3)
+    z = whittaker.smooth_varying(y, w, t, lam, order=3)
+    assert np.abs(z[:140] - y[:140]).max() < 1e-3
+    assert np.std(z[160:] - y[160:]) > 0.8 * np.std(y[160:])
+
+
 def test_validation_runs_are_the_nearest_clean_stretches_of_the_same_length():
     ok = np.ones(40, bool)
     ok[[5, 30]] = False

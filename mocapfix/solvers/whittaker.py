@@ -49,20 +49,34 @@ def stretch_bands(t: np.ndarray, starts: np.ndarray, stops: np.ndarray, order: i
     return _bands(t[index], heads, order), index
 
 
-def _bands(t: np.ndarray, heads: np.ndarray, order: int) -> np.ndarray:
-    """The banded ``DᵀΔD`` over ``t`` with one d-th difference on ``t[i..i+d]`` for each
-    ``i`` of ``heads``."""
-    d = order
-    ab = np.zeros((d + 1, len(t)))
-    if not len(heads):
-        return ab
-    # coefficients of d! x the d-th divided difference on t_i..t_{i+d}
+def difference_coefficients(t: np.ndarray, order: int) -> tuple[np.ndarray, np.ndarray]:
+    """The coefficients (n, d+1) of d! x each d-th divided difference on ``t[i..i+d]``
+    and its share of the time axis Δ_i (n,), for the n = T - d differences of ``t``: what
+    :func:`smooth_varying` needs, to compute once per time axis."""
+    t = np.asarray(t, dtype=np.float64)
+    return _coefficients(t, np.arange(max(len(t) - order, 0)), order)
+
+
+def _coefficients(t: np.ndarray, heads: np.ndarray, d: int):
     tt = t[heads[:, None] + np.arange(d + 1)[None, :]]      # (n, d+1)
     diff = tt[:, :, None] - tt[:, None, :]                   # (n, d+1, d+1)
     eye = np.eye(d + 1, dtype=bool)
     prod = np.prod(np.where(eye, 1.0, diff), axis=2)
-    c = math.factorial(d) / prod                             # (n, d+1)
-    delta = (tt[:, -1] - tt[:, 0]) / d
+    return math.factorial(d) / prod, (tt[:, -1] - tt[:, 0]) / d
+
+
+def _bands(t: np.ndarray, heads: np.ndarray, order: int, scale: np.ndarray | None = None,
+           coefficients: tuple | None = None) -> np.ndarray:
+    """The banded ``DᵀΔD`` over ``t`` with one d-th difference on ``t[i..i+d]`` for each
+    ``i`` of ``heads`` (weighted by ``scale``, one per head, if given; ``coefficients``:
+    those of :func:`_coefficients`, if already computed)."""
+    d = order
+    ab = np.zeros((d + 1, len(t)))
+    if not len(heads):
+        return ab
+    c, delta = _coefficients(t, heads, d) if coefficients is None else coefficients
+    if scale is not None:
+        delta = delta * scale
     for p in range(d + 1):
         for q in range(p, d + 1):
             ab[q - p, heads + p] += c[:, p] * c[:, q] * delta
@@ -176,25 +190,45 @@ def local_sure_candidates(y: np.ndarray, w: np.ndarray, t: np.ndarray, lams, *, 
     return Zs, risk
 
 
-def pick_local(Zs: np.ndarray, risk: np.ndarray, half: int) -> tuple[np.ndarray, np.ndarray]:
-    """Each sample from the candidate smooth (``Zs`` (K, T, C)) of least ``risk`` (K, T)
-    summed over the samples within ±``half``: a smoothing strength that changes along time
-    by local risk (varying-bandwidth selection, e.g. Katkovnik 1999, "A new method for
-    varying adaptive bandwidth selection", IEEE Trans. Signal Process. 47(9)). Returns
-    (z (T, C), chosen index (T,))."""
+def local_lambdas(lams, risk: np.ndarray, half: int) -> tuple[np.ndarray, np.ndarray]:
+    """A smoothing strength per sample from local risk: the λ of ``lams`` whose ``risk``
+    (K, T) summed over the samples within ±``half`` is least (varying-bandwidth selection,
+    e.g. Katkovnik 1999, "A new method for varying adaptive bandwidth selection", IEEE
+    Trans. Signal Process. 47(9)), its log then averaged over ±``half`` so the strength
+    changes gradually. Returns (λ (T,), index of the least-risk λ (T,))."""
     from scipy.ndimage import uniform_filter1d
 
     local = uniform_filter1d(risk, 2 * half + 1, axis=1, mode="nearest")
     pick = np.argmin(local, axis=0)
-    return Zs[pick, np.arange(Zs.shape[1])], pick
+    log_lam = uniform_filter1d(np.log(np.asarray(lams, dtype=np.float64))[pick], 2 * half + 1,
+                               mode="nearest")
+    return np.exp(log_lam), pick
+
+
+def smooth_varying(y: np.ndarray, w: np.ndarray, t: np.ndarray, lam: np.ndarray, *,
+                   order: int = 2, coefficients: tuple | None = None) -> np.ndarray:
+    """The weighted Whittaker smooth of ``y`` (T, C) with a strength ``lam`` (T,) that
+    changes along time: the d-th difference on ``t[i..i+d]`` is penalised by the geometric
+    mean of ``lam`` over those d + 1 samples -- a penalty weight varying along the axis, as
+    in spatially adaptive smoothing splines (Pintore, Speckman & Holmes 2006, J. Multivar.
+    Anal. 97(5), eq. 2.1). One banded solve; ``coefficients``: the time axis's
+    :func:`difference_coefficients`, if already computed."""
+    t = np.asarray(t, dtype=np.float64)
+    T, d = len(t), order
+    n = max(T - d, 0)
+    csum = np.concatenate([[0.0], np.cumsum(np.log(lam))])
+    scale = np.exp((csum[d + 1:] - csum[:n]) / (d + 1)) if n else np.zeros(0)
+    bands = _bands(t, np.arange(n), d, scale, coefficients)
+    return smooth(y, w, t, 1.0, order=order, bands=bands)
 
 
 def smooth_local_sure(y: np.ndarray, w: np.ndarray, t: np.ndarray, lams, *, order: int = 2,
                       bands: np.ndarray | None = None, half: int = 15) -> tuple[np.ndarray, np.ndarray]:
-    """The smooth of ``y`` (T, C) with a strength that changes along time: each sample
-    takes, among the smooths at the λ of ``lams``, the one of least estimated risk
-    (:func:`local_sure_candidates`) over the samples within ±``half`` frames
-    (:func:`pick_local`). Slow parts keep the strong smoothing, fast ones (a foot's
-    swing) the weak one. Returns (z, index of the chosen λ per sample)."""
-    Zs, risk = local_sure_candidates(y, w, t, lams, order=order, bands=bands)
-    return pick_local(Zs, risk, half)
+    """The smooth of ``y`` (T, C) with a strength that changes along time: each sample's
+    λ is the one of least estimated risk (:func:`local_sure_candidates`) over the samples
+    within ±``half`` frames, gradually (:func:`local_lambdas`), in one solve
+    (:func:`smooth_varying`). Slow parts keep the strong smoothing, fast ones (a foot's
+    swing) the weak one. Returns (z, index of the least-risk λ per sample)."""
+    _, risk = local_sure_candidates(y, w, t, lams, order=order, bands=bands)
+    lam, pick = local_lambdas(lams, risk, half)
+    return smooth_varying(y, w, t, lam, order=order), pick
