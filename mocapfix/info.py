@@ -74,6 +74,7 @@ def summarise(motion: Motion) -> dict:
         "longest_gap_s": f["longest_gap_s"],
         "never_observed": f["never_seen"],
         "empty_frames": f["empty_frames"],
+        "frames_outside_take": f.get("frames_outside_take", []),
         "notes": list(motion.notes),
     }
     if motion.format == "kinect":
@@ -84,6 +85,16 @@ def summarise(motion: Motion) -> dict:
     if motion.format == "c3d":
         summary.update(c3d_details(motion))
     return summary
+
+
+def _take(s: dict) -> str:
+    """Where the missing figures are counted when the file has empty frames at its ends."""
+    outside = s.get("frames_outside_take") or []
+    if not outside:
+        return ""
+    first = outside[0][1] if outside[0][0] == 0 else 0
+    last = s["frames"] - (outside[-1][1] if outside[-1][0] > 0 else 0) - 1
+    return f"; in the take, frames {first}–{last}"
 
 
 def _list(names, limit):
@@ -106,7 +117,7 @@ def format_text(summary: dict, verbose: bool = False) -> str:
         f"  names       {_list(s['names'], limit)}",
         f"  missing     {100 * s['missing_fraction']:.1f} % in {s['gaps']} gaps "
         f"({s['interior_gaps']} interior), longest {s['longest_gap_frames']} frames"
-        f" ({s['longest_gap_s'] or 0:.2f} s)",
+        f" ({s['longest_gap_s'] or 0:.2f} s)" + _take(s),
     ]
     if s["never_observed"]:
         lines.append(f"  never seen  {_list(s['never_observed'], 8 if not verbose else limit)}")

@@ -177,9 +177,12 @@ def measure_input(motion: Motion, *, swaps: bool = True, outliers: bool = True) 
     marker = np.array([w is None for w in why], bool)
     fps = float(motion.fps) if motion.fps and np.isfinite(motion.fps) else float("nan")
     missing = motion.missing
-    count, longest, (col, start, length) = gap_runs(missing)
+    span = take_frames(missing, marker)
+    count, longest, (col, start, length) = gap_runs(missing[span])
+    start = start + span.start
     flags = outlier_flags(motion) if outliers else np.zeros((T, J), bool)
     observed = (~missing).sum(axis=0)
+    T_take = span.stop - span.start
     jit = jitter(motion)
     bones = bones_of(motion)
     bvar = bone_variation(motion.positions, bones)
@@ -188,7 +191,7 @@ def measure_input(motion: Motion, *, swaps: bool = True, outliers: bool = True) 
     for j in range(J):
         joints.append({
             "name": motion.names[j],
-            "missing": finite(missing[:, j].mean()) if T else 0.0,
+            "missing": finite(missing[span, j].mean()) if T_take else 0.0,
             "gaps": int(count[j]),
             "longest_gap_s": finite(longest[j] / fps) if longest[j] else 0.0,
             "longest_gap_frames": int(longest[j]),
@@ -206,6 +209,8 @@ def measure_input(motion: Motion, *, swaps: bool = True, outliers: bool = True) 
     if not marker.all():                    # the file figures: markers only
         missing, flags, observed, jit = missing[:, marker], flags[:, marker], observed[marker], jit[marker]
         start, length = start[marker[col]], length[marker[col]]
+    empty = _empty_frames(missing, observed)
+    missing = missing[span]
     names = [n for n, m in zip(motion.names, marker) if m]
     file = {
         "path": motion.path,
@@ -217,11 +222,11 @@ def measure_input(motion: Motion, *, swaps: bool = True, outliers: bool = True) 
         "units": motion.units,
         "missing": finite(missing.mean()) if missing.size else 0.0,
         "gaps": int(len(length)),
-        "interior_gaps": int(np.sum((start > 0) & (start + length < T))),
+        "interior_gaps": int(np.sum((start > span.start) & (start + length < span.stop))),
         "longest_gap_s": finite(length.max() / fps) if len(length) else 0.0,
         "longest_gap_frames": int(length.max()) if len(length) else 0,
         "never_seen": [names[j] for j in range(len(names)) if T and observed[j] == 0],
-        "empty_frames": _empty_frames(missing, observed),
+        "empty_frames": empty,
         "outliers": finite(flags.sum() / max(int(observed.sum()), 1)),
         "jitter": finite(np.nanmedian(jit)) if np.isfinite(jit).any() else None,
         "bone_variation": finite(np.nanmax(bvar)) if np.isfinite(bvar).any() else None,
@@ -231,6 +236,10 @@ def measure_input(motion: Motion, *, swaps: bool = True, outliers: bool = True) 
     }
     if not marker.all():
         file["points_not_cleaned"] = int((~marker).sum())
+    outside = _outside_take(span, T)
+    if outside:
+        file["frames_outside_take"] = outside
+        file["notes"].append(_outside_note(outside, T))
     if motion.confidence is not None and motion.confidence.size:
         conf = motion.confidence
         file["tracking"] = {
@@ -279,19 +288,19 @@ def _mean_confidence(after: Motion, start: int, length: int, joint: int) -> floa
     return finite(np.nanmean(conf[start:start + length, joint]))
 
 
-def uncertainty(before: Motion, after: Motion) -> np.ndarray:
-    """(J,) fraction of each joint's frames that rest on no measurement: samples missing in
-    the input (filled or not), each counted as ``1 − confidence`` of the cleaned motion
-    where it carries a per-sample fill confidence, else as 1. A marker rebuilt from 3 % of
-    its data is 97 % uncertain, however complete it looks after cleaning."""
+def uncertainty(before: Motion, after: Motion, frames: slice = slice(None)) -> np.ndarray:
+    """(J,) fraction of each joint's ``frames`` that rest on no measurement: samples
+    missing in the input (filled or not), each counted as ``1 − confidence`` of the cleaned
+    motion where it carries a per-sample fill confidence, else as 1. A marker rebuilt from
+    3 % of its data is 97 % uncertain, however complete it looks after cleaning."""
     miss_b = before.missing
     weight = np.ones_like(miss_b, dtype=np.float64)
     conf = after.confidence
     if conf is not None and conf.shape == miss_b.shape:
         c = np.clip(np.nan_to_num(conf, nan=0.0), 0.0, 1.0)
         weight = np.where(after.missing, 1.0, 1.0 - c)
-    T = miss_b.shape[0]
-    return (miss_b * weight).sum(axis=0) / max(T, 1)
+    part = (miss_b * weight)[frames]
+    return part.sum(axis=0) / max(part.shape[0], 1)
 
 
 def _correction_cause(outliers: np.ndarray, own: np.ndarray, parents: np.ndarray, names,
@@ -318,6 +327,29 @@ def _empty_frames(missing: np.ndarray, observed: np.ndarray) -> list[list[int]]:
         return []
     _, start, length = runs(missing[:, seen_somewhere].all(axis=1)[:, None])
     return [[int(s), int(n)] for s, n in zip(start, length)]
+
+
+def take_frames(missing: np.ndarray, points: np.ndarray | None = None) -> slice:
+    """The frames of the take: from the first to the last frame on which one of
+    ``points`` (default all) is seen. Frames before and after, where none is (an export's
+    empty first or last frames, a recording left running), hold nothing to clean or
+    fill: they are not graded. All frames when no point is ever seen."""
+    seen = ~missing if points is None else ~missing[:, points]
+    any_seen = np.flatnonzero(seen.any(axis=1))
+    if not len(any_seen):
+        return slice(0, missing.shape[0])
+    return slice(int(any_seen[0]), int(any_seen[-1]) + 1)
+
+
+def _outside_note(outside: list[list[int]], T: int) -> str:
+    where = " and ".join(f"{n} at the {'start' if a == 0 else 'end'}" for a, n in outside)
+    return (f"frames where no point is seen: {where} (of {T}); outside the take, not "
+            "graded")
+
+
+def _outside_take(span: slice, T: int) -> list[list[int]]:
+    """``[start, length]`` of the frames before and after ``span``."""
+    return [[a, b - a] for a, b in ((0, span.start), (span.stop, T)) if b > a]
 
 
 def measure_cleaning(result: CleanResult) -> dict:
@@ -348,8 +380,11 @@ def measure_cleaning(result: CleanResult) -> dict:
     # the kinematic chain (a marker set's rigid pairs in ``bones`` are not one)
     parents = before.skeleton.parents if before.skeleton is not None else np.full(J, -1, np.intp)
     var_b, var_a = bone_variation(before.positions, bones), bone_variation(after.positions, bones)
-    unc = uncertainty(before, after)
-    col, start, length = runs(miss_b)
+    span = take_frames(miss_b, graded)
+    T_take = span.stop - span.start
+    unc = uncertainty(before, after, span)
+    col, start, length = runs(miss_b[span])
+    start = start + span.start
     counted = graded[col]
     col, start, length = col[counted], start[counted], length[counted]
     labels = [r.step for r in records]
@@ -387,8 +422,8 @@ def measure_cleaning(result: CleanResult) -> dict:
                 correction["cause"] = cause
         entry = {
             "name": before.names[j],
-            "missing_before": finite(miss_b[:, j].mean()) if T else 0.0,
-            "missing_after": finite(miss_a[:, j].mean()) if T else 0.0,
+            "missing_before": finite(miss_b[span, j].mean()) if T_take else 0.0,
+            "missing_after": finite(miss_a[span, j].mean()) if T_take else 0.0,
             "uncertain": finite(unc[j]),
             "gaps": {"count": int(sel.sum()),
                      "longest_frames": int(length[sel].max()) if sel.any() else 0,
@@ -408,7 +443,8 @@ def measure_cleaning(result: CleanResult) -> dict:
             res = result.writeback_residual[:, j] * mm
             entry["writeback_residual_mm"] = {"mean": finite(np.nanmean(res)), "max": finite(np.nanmax(res))}
         joints.append(entry)
-    miss_b, miss_a, flagged = miss_b[:, graded], miss_a[:, graded], flagged[:, graded]
+    filled_samples = int((miss_b & ~miss_a)[:, graded].sum())
+    miss_b, miss_a, flagged = miss_b[span][:, graded], miss_a[span][:, graded], flagged[:, graded]
     file = {
         "path": before.path,
         "format": before.format,
@@ -418,7 +454,7 @@ def measure_cleaning(result: CleanResult) -> dict:
         "units": before.units,
         "missing_before": finite(miss_b.mean()) if miss_b.size else 0.0,
         "missing_after": finite(miss_a.mean()) if miss_a.size else 0.0,
-        "samples_filled": int((miss_b & ~miss_a).sum()),
+        "samples_filled": filled_samples,
         "samples_flagged": int(flagged.sum()),
         "gaps_before": int(len(length)),
         "gaps_unfilled": int(sum(len(j["gaps"]["unfilled"]) for j in joints)),
@@ -426,6 +462,10 @@ def measure_cleaning(result: CleanResult) -> dict:
         "seconds": finite(result.seconds),
         "notes": list(before.notes) + [n for n in after.notes if n not in before.notes],
     }
+    outside = _outside_take(span, T)
+    if outside:
+        file["frames_outside_take"] = outside
+        file["notes"].append(_outside_note(outside, T))
     steps = [{"step": r.step, "cleaner": r.cleaner, "seconds": finite(r.seconds),
               "filled": int(r.filled.sum()), "flagged": int(r.outliers.sum()),
               "moved_mean_mm": finite(np.mean(r.moved) * mm) if r.moved.size else 0.0,

@@ -141,3 +141,24 @@ def test_junit_error_for_unreadable_and_would_clean(tmp_path):
     assert measured["gaps"] >= 4 and wc["samples_filled"] > 0 and wc["missing_after"] == 0
     assert 0 < wc["uncertain"] < measured["missing"] + 1e-9
     assert _tree(src) == before and not list(src.rglob("*.report.*"))
+
+
+def test_frames_where_no_marker_is_seen_at_the_ends_are_not_graded():
+    """btk's gait trial sees its markers on frames 133-326 of 487 (the force plates record
+    on while the subject is out of view); the OptiTrack export has 229 empty last frames.
+    Graded on the take, both pass the default rules (they failed on 60 % missing and on a
+    2.3 s gap), and the measurement says which frames it left out."""
+    from mocapfix import read
+    from mocapfix.measure import measure_input
+
+    gait = need(DATA / "c3d" / "btk_Gait.c3d")
+    opti = need(DATA / "c3d" / "btk_mocap36_optitrack.c3d")
+    m = measure_input(read(gait), swaps=False, outliers=False)
+    assert m["file"]["frames_outside_take"] == [[0, 133], [327, 160]]
+    assert m["file"]["empty_frames"] == [[0, 133], [327, 160]]
+    assert max(j["missing"] for j in m["joints"]) < 0.05
+    assert measure_input(read(opti), swaps=False, outliers=False)["file"][
+        "frames_outside_take"] == [[1151, 229]]
+    r = CliRunner().invoke(main, ["check", str(gait), str(opti)])
+    assert r.exit_code == 0, r.output
+    assert [line.split()[0] for line in r.output.splitlines()[:2]] == ["OK", "OK"], r.output

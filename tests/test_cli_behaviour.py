@@ -264,10 +264,11 @@ def test_nan_report_threshold_is_refused_before_anything_is_written(tmp_path):
 
 def test_the_summary_counts_the_files_by_status(tmp_path):
     """The last line adds up the per-file lines: as many OK, WARN and FAIL as were printed
-    (the sample data plus the shared OptiTrack export, which FAILs on its empty last 2.3 s)."""
+    (the sample data plus the shared c3d.org MAC sample, which FAILs on its 8 markers
+    never seen)."""
     src = tmp_path / "in"
     shutil.copytree(SAMPLE_DATA, src)
-    shutil.copy(shared("c3d/btk_mocap36_optitrack.c3d"), src)
+    shutil.copy(shared("c3d/c3dorg_s06_MACsample.c3d"), src)
     r = CliRunner().invoke(main, ["clean", str(src), "-o", str(tmp_path / "out")])
     assert r.exit_code == 0, r.output
     lines = r.stdout.strip().splitlines()

@@ -5,6 +5,7 @@ import json
 import re
 
 import numpy as np
+import pytest
 from click.testing import CliRunner
 
 from mocapfix.clean import clean_motion
@@ -109,18 +110,24 @@ def test_long_fills_are_listed_with_their_confidence():
     assert "## Long fills" in md and "| M2 | 100–179 | 0.80 |" in md and "| M4 | 300" not in md
 
 
-def test_gaps_left_are_listed_once_per_span_with_the_reasons():
-    """Six markers on a rigid body at 100 fps: a 0.1 s gap in one marker (filled) and the
-    last 50 frames empty for every marker (nothing is seen: left), and a seventh marker
-    never seen. The Markdown lists the empty span once for the six markers with the
-    ensemble's reason, the never-seen marker as such, and not the filled gap."""
-    T, fps = 600, 100.0
+def _rigid_markers(T: int, fps: float, seed: int) -> np.ndarray:
+    """Six markers (mm) on a rigid body moving smoothly, M4 missing on frames 300-309."""
     t = np.arange(T) / fps
-    rng = np.random.default_rng(3)
+    rng = np.random.default_rng(seed)
     base = np.stack([400 * np.sin(t), 300 * np.cos(0.7 * t), 900 + 50 * np.sin(2 * t)], axis=1)
     pos = base[:, None, :] + rng.normal(0, 150, size=(6, 3))[None]
     pos[300:310, 4] = np.nan
-    pos[T - 50:] = np.nan
+    return pos
+
+
+def test_gaps_left_are_listed_once_per_span_with_the_reasons():
+    """Six markers on a rigid body at 100 fps: a 0.1 s gap in one marker (filled) and 50
+    frames empty for every marker (nothing is seen: left), and a seventh marker never
+    seen. The Markdown lists the empty span once for the six markers with the ensemble's
+    reason, the never-seen marker as such, and not the filled gap."""
+    T, fps = 600, 100.0
+    pos = _rigid_markers(T, fps, seed=3)
+    pos[450:500] = np.nan
     pos = np.concatenate([pos, np.full((T, 1, 3), np.nan)], axis=1)      # M6: never seen
     names = [f"M{k}" for k in range(7)]
     names[5] = "M|5"                                    # a pipe in a label stays in its cell
@@ -129,11 +136,42 @@ def test_gaps_left_are_listed_once_per_span_with_the_reasons():
     assert report["file"]["gaps_unfilled"] == 7
     md = to_markdown(report)
     section = md.split("## Gaps left unfilled", 1)[1].split("\n\n", 2)[1]
-    rows = [line for line in section.splitlines() if line.startswith("| 5")]
-    assert rows == ["| 550–599 | 0.50 | 6: M0, M1, M2, M3, M4, M\\|5 | step 1 (fill_ensemble): no "
+    rows = [line for line in section.splitlines() if line.startswith("| 4")]
+    assert rows == ["| 450–499 | 0.50 | 6: M0, M1, M2, M3, M4, M\\|5 | step 1 (fill_ensemble): no "
                     "other marker is seen through it |"]
     assert "| 300" not in section
     assert "| 0–599 | 6.00 | 1: M6 | never seen in the input |" in section
+
+
+def test_empty_frames_at_the_ends_are_outside_the_take_and_not_graded():
+    """An export with its last 0.5 s empty (no marker seen: the recording ran on after the
+    take) and a marker with a real 0.1 s gap in the take: the markers are graded on the
+    take, frames 0-549 (the gap counts, the empty end does not), and the report says which
+    frames it left out. The same empty frames in the middle are a whole-body dropout: every
+    marker's gap, left unfilled."""
+    T, fps = 600, 100.0
+    pos = _rigid_markers(T, fps, seed=5)
+    config = loads_config("pipeline:\n  - cleaner: fill\n    max_gap: 0.05 s\n")
+    end = pos.copy()
+    end[T - 50:] = np.nan
+    report = build_report(clean_motion(Motion(end, [f"M{k}" for k in range(6)], fps, units="mm",
+                                              metres_per_unit=0.001, format="c3d"), config))
+    f = report["file"]
+    assert f["frames_outside_take"] == [[550, 50]]
+    assert any("50 at the end" in n for n in f["notes"])
+    j4 = next(j for j in report["joints"] if j["name"] == "M4")
+    assert j4["missing_before"] == pytest.approx(10 / 550, abs=1e-6) == j4["missing_after"]
+    assert [j["missing_after"] for j in report["joints"] if j["name"] != "M4"] == [0.0] * 5
+    assert f["gaps_before"] == 1 and f["gaps_unfilled"] == 1
+    middle = pos.copy()
+    middle[400:450] = np.nan
+    report = build_report(clean_motion(Motion(middle, [f"M{k}" for k in range(6)], fps,
+                                              units="mm", metres_per_unit=0.001, format="c3d"),
+                                       config))
+    assert "frames_outside_take" not in report["file"]
+    assert report["file"]["gaps_unfilled"] == 7                # six dropouts and M4's gap
+    assert all(j["missing_after"] == pytest.approx(50 / 600, abs=1e-6) for j in report["joints"]
+               if j["name"] != "M4")
 
 
 def _fill_config(tmp_path) -> str:
