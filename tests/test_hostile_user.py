@@ -1216,3 +1216,21 @@ def test_values_near_1e300_print_no_numpy_warnings(tmp_path):
                            text=True, timeout=120)
         assert "Warning" not in r.stdout + r.stderr, (args, r.stderr)
         assert "huge.csv" in r.stdout + r.stderr and "Traceback" not in r.stderr, (args, r.stderr)
+
+
+def test_dry_run_says_a_folder_at_the_output_path_would_fail(tmp_path):
+    # the dry run said "(replaces the existing output)" where the real run fails with
+    # "cannot write: Is a directory"
+    import json
+
+    out = tmp_path / "out"
+    (out / KIN.name).mkdir(parents=True)
+    r = CliRunner().invoke(main, ["clean", str(KIN), "-o", str(out), "--dry-run"])
+    no_traceback(r)
+    assert r.exit_code == 0, r.output
+    assert "its output path is a folder: the file would fail" in r.output
+    assert "replaces" not in r.output
+    r = CliRunner().invoke(main, ["clean", str(KIN), "-o", str(out), "--json", "--dry-run"])
+    assert json.loads(r.stdout)["files"][0]["output_is_folder"] is True
+    r = CliRunner().invoke(main, ["clean", str(KIN), "-o", str(out)])
+    assert r.exit_code != 0 and "Is a directory" in r.output
