@@ -118,6 +118,31 @@ def _cell(text) -> str:
     return " ".join(str(text).splitlines()).replace("|", "\\|")
 
 
+#: a step's ``info`` lists up to this many items in the Markdown (longer ones: the JSON)
+_FINDINGS_ITEMS = 8
+
+
+def _step_findings(step: dict) -> str:
+    """A step's own figures from its ``info``, for people: numbers, words and short lists
+    (the rigid joint pairs ``kinect_skeleton`` holds, the gaps a filler filled); per-joint
+    tables and long lists stay in the JSON."""
+    def text(v) -> str:
+        return f"{v:.4g}" if isinstance(v, float) else str(v)
+
+    parts = []
+    for key, value in (step.get("info") or {}).items():
+        # the file summary counts the points no step cleans
+        if key == "points_not_cleaned" or value is None or isinstance(value, (bool, dict)):
+            continue
+        label = key.replace("_", " ")
+        if isinstance(value, (int, float, str)):
+            parts.append(f"{label} {_cell(text(value))}")
+        elif isinstance(value, list) and 0 < len(value) <= _FINDINGS_ITEMS and all(
+                isinstance(v, (int, float, str)) and not isinstance(v, bool) for v in value):
+            parts.append(f"{label} {_cell(', '.join(map(text, value)))}")
+    return "; ".join(parts)
+
+
 def to_markdown(report: dict) -> str:
     f = report["file"]
     name = Path(f["path"]).name if f.get("path") else "motion"
@@ -146,6 +171,9 @@ def to_markdown(report: dict) -> str:
         label = s["step"] + (f" (skipped: {s['skipped']})" if s.get("skipped") else "")
         out.append(f"| {label} | {s['cleaner']} | {s['filled']} | {s['flagged']} | "
                    f"{_num(s['moved_mean_mm'], '{:.3f}')} | {_num(s['seconds'], '{:.3f}')} |")
+    found = [f"- {s['step']}: {summary}" for s in run if (summary := _step_findings(s))]
+    if found:
+        out += ["", "What the steps found:", ""] + found
     if other:
         out += ["", f"Not run for {f['format']} (the config limits them to other formats): "
                 + ", ".join(other) + "."]

@@ -14,7 +14,7 @@ from mocapfix.motion import Motion, Skeleton
 from mocapfix.pipeline import loads_config
 from mocapfix.report import build_report, to_html, to_json, to_markdown
 
-from conftest import no_traceback
+from conftest import no_traceback, shared
 
 
 def _motion():
@@ -221,3 +221,22 @@ def test_plot_ticks_are_round_inside_the_range_and_at_least_two():
         assert len(ticks) <= 11
 
     check()
+
+
+def test_markdown_says_what_each_step_found():
+    """A real Kinect v2 recording (LabanotationSuite Ges01): the Markdown names the joint
+    pair ``kinect_skeleton`` found rigid and held, with its counts; per-joint tables of the
+    step's info (noise, cut-offs) stay in the JSON only."""
+    from mocapfix import read
+    from mocapfix.pipeline import load_config
+    from mocapfix.presets import resolve_config
+
+    motion = read(shared("kinect/kv2_laban_Ges01_wavehand.csv"))
+    report = build_report(clean_motion(motion, load_config(resolve_config("kinect"))))
+    md = to_markdown(report)
+    line = next(x for x in md.splitlines() if x.startswith("- step 1 (kinect_skeleton): "))
+    assert "rigid pairs HandLeft-ThumbLeft" in line
+    assert "leg swap frames 0" in line and "outliers 0" in line
+    assert "noise mm" not in line and "cutoff hz" not in line
+    info = report["steps"][0]["info"]
+    assert info["rigid_pairs"] == ["HandLeft-ThumbLeft"] and "noise_mm" in info
