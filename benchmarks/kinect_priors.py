@@ -25,17 +25,18 @@ of the four baselines of the protocol (mean over files, and the worst file)::
 
     python benchmarks/kinect_priors.py [--every 3] [--seed 0] [--window 8]
 
-Measured with ``--every 1`` (all 11 files, seed 0; ~1 min; ``kinect_skeleton`` with its
-rigid pairs, 0.719 before them, when the blends were 0.694 and 0.706):
+Measured with ``--every 1`` (all 11 files, seed 0; ~10 s; ``kinect_skeleton`` with its
+rigid pairs, validated fills and time-varying strength, 0.719 before them, when the blends
+were 0.694 and 0.706):
 
 | method | RMSE mm | ÷ best baseline | worst file ÷ best |
 |---|---|---|---|
 | baseline(best) | 11.19 | 1.000 | 1.000 |
-| kinect_skeleton | 7.72 | 0.688 | 0.777 (60_10) |
+| kinect_skeleton | 7.64 | 0.682 | 0.763 (05_10) |
 | window-wiener | 10.24 | 0.917 | 1.290 (cmu_131_03) |
-| blend wiener | 7.54 | 0.672 | 0.744 (60_10) |
+| blend wiener | 7.48 | 0.667 | 0.733 (60_10) |
 | mssa(trained) | 12.15 | 1.091 | 2.051 (cmu_131_03) |
-| blend mssa | 7.67 | 0.684 | 0.788 (cmu_131_03) |
+| blend mssa | 7.61 | 0.680 | 0.787 (cmu_131_03) |
 | partlet(kinect) | 16.99 | 1.459 | 2.766 (90_31) |
 | per-joint GCV | 9.84 | 0.879 | 0.999 (143_35) |
 | per-joint oracle (one strength) | 9.80 | 0.875 | 1.001 (143_35) |
@@ -43,7 +44,7 @@ rigid pairs, 0.719 before them, when the blends were 0.694 and 0.706):
 
 The priors trained on the 47 CMU dance/salsa/acrobatics trials do not carry to the
 walks and to the BVH skeletons (131_01/03) alone; blended they gain 0.01-0.03 of the
-best baseline (0.016 and 0.004 with the rigid pairs), far from the 0.6 target, for a shipped model and a window solve per
+best baseline (0.015 and 0.002 now), far from the 0.6 target, for a shipped model and a window solve per
 frame: not shipped.
 """
 from __future__ import annotations
