@@ -425,6 +425,38 @@ def test_fast_kinect_csv_writer_writes_what_the_general_one_writes(path):
     assert fast != "".join(line + end for line, end in zip(m.source.lines, m.source.endings))
 
 
+def test_fast_kinect_csv_writer_keeps_each_numbers_decimals(tmp_path):
+    """Lines whose every sample moved are rewritten whole at 6 decimals, unless one of
+    their numbers has more (then each keeps its own count): a recording with a third of
+    the coordinates of every other line at 9 or 3 decimals gives the same text as the
+    per-sample writer."""
+    lines = shared("kinect/kv2_laban_Ges02_balancinghands.csv").read_text().splitlines()
+    rng = np.random.default_rng(0)
+    for k, line in enumerate(lines):
+        t = line.split(",")
+        for i in range(1, len(t) - 1):
+            if (i - 1) % 4 == 3 or not t[i]:
+                continue
+            if k % 2 == 0:                  # every other line: all at 6 decimals
+                t[i] = f"{float(t[i]):.6f}"
+            elif rng.random() < 0.3:
+                t[i] = f"{float(t[i]):.9f}" if rng.random() < 0.5 else f"{float(t[i]):.3f}"
+        lines[k] = ",".join(t)
+    path = tmp_path / "decimals.csv"
+    path.write_text("\n".join(lines) + "\n")
+    m = kf.read(path)
+    out, _ = build("kinect_skeleton").apply(m)
+    fast = kf._fast_csv_text(m.source, out)
+    def decimals(line):
+        return [len(x) - x.index(".") - 1 for x in line.split(",") if "." in x]
+
+    written = fast.splitlines()
+    assert all(9 in decimals(written[k]) for k in range(1, len(lines), 2) if 9 in decimals(lines[k]))
+    assert all(set(decimals(written[k])) == {6} for k in range(0, len(lines), 2))
+    m.source.layout = "generic"
+    assert fast == kf._patched_text(m.source, out)
+
+
 @pytest.mark.parametrize("config", ["default", "kinect"])
 def test_report_status_separates_good_kinect_recordings_from_bad(config):
     """Both shipped configs run the same Kinect step and grade it alike: the clean

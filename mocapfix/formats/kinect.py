@@ -939,16 +939,36 @@ def _sample_edits(source: KinectSource, motion: Motion):
 _NOT_PLAIN = re.compile(r"[^0-9.,+\n-]")
 
 
-def _plain_lines(lines: list[str]) -> np.ndarray:
-    """(len(lines),) True where a line has nothing ``_NOT_PLAIN`` matches (one scan of
-    the joined text: a regex call per line costs more than the rewrite it guards)."""
+#: a number with more than 6 decimals: its rewrite keeps its own count (the others get 6)
+_LONG_DECIMALS = re.compile(r"\.[0-9]{7}")
+
+
+def _plain_lines(lines: list[str], pattern: re.Pattern = _NOT_PLAIN) -> np.ndarray:
+    """(len(lines),) True where a line has nothing ``pattern`` matches (one scan of the
+    joined text: a regex call per line costs more than the rewrite it guards)."""
     text = "\n".join(lines)
     sizes = np.fromiter(map(len, lines), np.int64, len(lines)) + 1
     starts = np.cumsum(sizes) - sizes
-    hits = [m.start() for m in _NOT_PLAIN.finditer(text)]
+    hits = [m.start() for m in pattern.finditer(text)]
     plain = np.ones(len(lines), bool)
     plain[np.searchsorted(starts, hits, side="right") - 1] = False
     return plain
+
+
+def _rewrite_whole_rows(fields: list[list[str]], values: np.ndarray, J: int) -> list[str]:
+    """Lines whose every sample moved (states kept) and whose numbers have at most 6
+    decimals: each coordinate token becomes ``%.6f`` of its new value, in one format call
+    for all of them, placed by list slices (no per-token object)."""
+    text = ("%.6f," * values.size) % tuple(values.ravel().tolist())
+    parts = text.split(",")
+    out = []
+    for k, tokens in enumerate(fields):
+        at = 3 * J * k
+        tokens[1:1 + 4 * J:4] = parts[at:at + 3 * J:3]
+        tokens[2:2 + 4 * J:4] = parts[at + 1:at + 3 * J:3]
+        tokens[3:3 + 4 * J:4] = parts[at + 2:at + 3 * J:3]
+        out.append(",".join(tokens))
+    return out
 
 
 def _fast_csv_text(source: KinectSource, motion: Motion) -> str:
@@ -969,6 +989,15 @@ def _fast_csv_text(source: KinectSource, motion: Motion) -> str:
     for r in np.flatnonzero(~bulk):
         lines[line_of[r]] = _patch_csv_line(fields[r], new[rows[r]], new_missing[rows[r]],
                                             source.missing[rows[r]], changed[rows[r]])
+    # lines where every sample moved and no state changes: rewritten whole
+    whole = bulk & changed[rows].all(axis=1) & ~new_missing[rows].any(axis=1)
+    whole &= ~source.missing[rows].any(axis=1)
+    if whole.any():
+        w = np.flatnonzero(whole)
+        w = w[_plain_lines([lines[line_of[i]] for i in w], _LONG_DECIMALS)]
+        for i, line in zip(w, _rewrite_whole_rows([fields[i] for i in w], new[rows[w]], J)):
+            lines[line_of[i]] = line
+        bulk[w] = False
     if bulk.any():
         b = np.flatnonzero(bulk)
         cells = np.array([f[:1 + 4 * J] for f in (fields[i] for i in b)], dtype=object)
