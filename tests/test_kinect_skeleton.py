@@ -196,6 +196,27 @@ def test_validated_shares_follow_which_estimate_predicts_the_cut_runs():
     assert np.all(share == 0.75)
 
 
+def test_a_joint_seen_too_rarely_to_smooth_keeps_its_samples_and_is_filled_from_its_parent():
+    """A hand seen on 4 of 40 frames (too few for its order-3 smooth): its samples used to
+    come out missing (the smooth's NaN written over them) and the frames between them
+    too. Now the samples are kept (only the bone step moves them) and the frames between
+    are the parent-based estimate."""
+    m = kf.read(KIN).slice_frames(0, 40)
+    P = m.positions.copy()
+    j = m.index("HandLeft")
+    seen = np.zeros(40, bool)
+    seen[[0, 12, 25, 39]] = True
+    P[~seen, j] = np.nan
+    for validate in (True, False):
+        out = build("kinect_skeleton", validate_fills=validate).apply(m.replace(positions=P))[0]
+        assert not np.isnan(out.positions[:, j]).any()
+        moved = np.linalg.norm(out.positions[seen, j] - P[seen, j], axis=1)
+        assert moved.max() < 0.02, moved                  # metres: the bone step only
+        wrist = m.index("WristLeft")
+        reach = np.linalg.norm(out.positions[:, j] - out.positions[:, wrist], axis=1)
+        assert np.ptp(reach) < 0.01                       # on its bone from the wrist
+
+
 def test_validated_fills_lower_the_error_of_lost_limbs(tmp_path):
     """Acrobatics (CMU 90_31) with Inferred and NotTracked limb ends: weighing the
     parent-based estimate of each lost run against the joint's own smooth by their
