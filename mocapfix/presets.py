@@ -33,15 +33,24 @@ def config_summary(path: Path, width: int = 90) -> str:
 
 def resolve_config(name_or_path) -> Path:
     """A pipeline config by path, or a shipped one by preset name."""
+    return resolve_preset(name_or_path, CONFIG_DIR, "config", config_names(),
+                          "; `mocapfix configs` lists them")
+
+
+def resolve_preset(name_or_path, folder: Path, kind: str, names: list[str],
+                   more: str = "") -> Path:
+    """A ``kind`` file by path, or a shipped preset of ``folder`` by name (``kinect``,
+    ``kinect.yaml``, or ``<folder name>/kinect`` as in the repository). A path that exists
+    wins; otherwise one error naming the presets (``names``; ``more`` appended)."""
     path = Path(name_or_path)
     if path.exists() and not path.is_dir():     # a file, or a pipe: -c <(…)
         return path
     text = str(name_or_path)
     stem = text[:-5] if text.endswith(".yaml") else text
-    preset = CONFIG_DIR / f"{Path(stem).name}.yaml"
-    if (("/" not in text) or text.startswith("configs/")) and preset.is_file():
+    preset = folder / f"{Path(stem).name}.yaml"
+    if (("/" not in text) or text.startswith(f"{folder.name}/")) and preset.is_file():
         return preset               # (also when a folder of that name is here: -c kinect)
     if path.is_dir():
-        raise ConfigError(f"{name_or_path}: is a folder, not a config file")
-    raise ConfigError(f"{name_or_path}: no such config file or preset "
-                      f"(presets: {', '.join(config_names())}; `mocapfix configs` lists them)")
+        raise ConfigError(f"{name_or_path}: is a folder, not a {kind} file")
+    raise ConfigError(f"{name_or_path}: no such {kind} file or preset "
+                      f"(presets: {', '.join(names)}{more})")

@@ -39,6 +39,7 @@ from pathlib import Path
 
 from mocapfix.errors import ConfigError
 from mocapfix.formats import NAMES
+from mocapfix.presets import resolve_preset
 from mocapfix.yamlsafe import read_bounded
 
 STATUS_ORDER = {"OK": 0, "WARN": 1, "FAIL": 2}
@@ -466,17 +467,9 @@ def preset_names() -> list[str]:
 
 
 def resolve_rules_path(name_or_path) -> Path:
-    """A rules file by path, or a shipped preset by name (``optical-gait``)."""
-    path = Path(name_or_path)
-    if path.exists() and not path.is_dir():     # a file, or a pipe: -r <(…)
-        return path
-    preset = RULES_DIR / f"{name_or_path}.yaml"
-    if "/" not in str(name_or_path) and preset.is_file():
-        return preset               # (also when a folder of that name is here: -r kinect)
-    if path.is_dir():
-        raise ConfigError(f"{name_or_path}: is a folder, not a rules file")
-    raise ConfigError(f"{name_or_path}: no such rules file or preset "
-                      f"(presets: {', '.join(preset_names())})")
+    """A rules file by path, or a shipped preset by name (``optical-gait``, or
+    ``optical-gait.yaml`` as ``-c`` takes ``kinect.yaml``)."""
+    return resolve_preset(name_or_path, RULES_DIR, "rules", preset_names())
 
 
 def parse_rules(data, source: str = "<rules>", stage: str = "input", _chain: tuple = ()) -> RuleSet:

@@ -118,6 +118,13 @@ def test_presets_work_outside_the_repo(tmp_path, monkeypatch):
     assert r.exit_code == 0, r.output
     r = CliRunner().invoke(main, ["clean", str(KIN), "-o", "out", "-c", "nope"])
     assert r.exit_code == 2 and "presets:" in r.output
+    # rule sets are named as configs are: with or without .yaml (-r optical-gait.yaml
+    # used to be "no such rules file or preset")
+    for name in ("optical-gait", "optical-gait.yaml"):
+        r = CliRunner().invoke(main, ["check", str(KIN), "-r", name])
+        assert r.exit_code in (0, 1), (name, r.output)
+    r = CliRunner().invoke(main, ["check", str(KIN), "-r", "nope"])
+    assert r.exit_code == 2 and "no such rules file or preset (presets: " in r.output
 
 
 def test_dry_run_overwrite_policy_and_true_provenance(tmp_path):
