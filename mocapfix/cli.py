@@ -401,14 +401,14 @@ def clean(inputs, outdir, config_path, reports, jobs, as_json, fps, allow_inside
     if dry_run:
         for j in todo:
             note = (" (its output path is a folder: the file would fail)" if j.output.is_dir()
-                    else " (replaces the existing output)" if j.output.exists() else "")
+                    else " (replaces the existing output)" if _output_there(j) else "")
             out.line(f"WOULD {one_line(j.source)} -> {one_line(j.output)}{note}", level=-1)
         out.line(f"dry run: {len(todo)} file(s) would be cleaned with {pipeline.source}, "
                  f"{len(skipped)} skipped; nothing written", level=-1, err=True)
         if as_json:                     # (stdout stayed empty: `--json --dry-run | jq` failed)
             click.echo(json.dumps({"dry_run": True, "config": str(pipeline.source),
                                    "files": [{"input": str(j.source), "output": str(j.output),
-                                              "replaces": j.output.is_file(),
+                                              "replaces": _output_there(j),
                                               **({"output_is_folder": True}
                                                  if j.output.is_dir() else {})}
                                              for j in todo],

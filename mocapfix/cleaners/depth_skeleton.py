@@ -123,6 +123,7 @@ import numpy as np
 
 from mocapfix.cleaners import register
 from mocapfix.cleaners.base import REPLACED_FRAMES, Cleaner, Param
+from mocapfix.errors import ConfigError
 from mocapfix.formats.kinect_layouts import normalise_name
 from mocapfix.motion import Motion
 from mocapfix.solvers import run_offsets, svshrink, whittaker
@@ -410,7 +411,6 @@ class KinectSkeleton(Cleaner):
             # the order-d penalty grows as 1 / step^(2d): at kilohertz rates, or with two
             # stamps a tick apart, the banded Cholesky of the smoother fails (it was an
             # "internal error LinAlgError: … not positive definite")
-            from mocapfix.errors import ConfigError
             t = (np.asarray(motion.times, dtype=np.float64) if motion.times is not None
                  else np.arange(len(motion.positions)) / motion.fps)
             steps = np.diff(t)
@@ -499,7 +499,14 @@ class KinectSkeleton(Cleaner):
             bands = bands_for(slice(0, T), order)
             Z = np.full_like(P, np.nan) if prev is None else prev.copy()
             new_cut = np.full(J, np.nan) if cut is None else cut.copy()
-            cands = {}
+
+            def local_smooth(y, w, c, wbar):
+                """The final smooth's strength varying along time (module docstring, 6)."""
+                lams = whittaker.lambda_for_cutoff(c * spread, wbar, h, order)
+                return whittaker.smooth_local_sure(
+                    y, w, t, lams, order=order, bands=bands, half=self["local_half"],
+                    coefficients=coefficients_for(order))[0]
+
             for j in (range(J) if joints is None else joints):
                 w = weights[:, j]
                 if (w > 0).sum() <= order + 1:
@@ -510,9 +517,7 @@ class KinectSkeleton(Cleaner):
                 if fixed is not None or (cut is not None and np.isfinite(cut[j])):
                     c = fixed if fixed is not None else cut[j]
                     if local and spread is not None:
-                        lams = whittaker.lambda_for_cutoff(c * spread, wbar, h, order)
-                        cands[j] = (y, w, lams, whittaker.local_sure_candidates(
-                            y, w, t, lams, order=order, bands=bands)[1])
+                        Z[:, j] = local_smooth(y, w, c, wbar)
                     else:
                         lam = float(whittaker.lambda_for_cutoff(c, wbar, h, order))
                         Z[:, j] = whittaker.smooth(y, w, t, lam, order=order, bands=bands)
@@ -533,18 +538,12 @@ class KinectSkeleton(Cleaner):
                 c = (wb / (h * lam)) ** (1.0 / (2 * order)) / (2.0 * np.pi)
                 new_cut[j] = c
                 if local and spread is not None:
-                    lams = whittaker.lambda_for_cutoff(c * spread, wbar, h, order)
-                    cands[j] = (y, w, lams, whittaker.local_sure_candidates(
-                        y, w, t, lams, order=order, bands=bands)[1])
+                    Z[:, j] = local_smooth(y, w, c, wbar)
                 elif win == slice(0, T):
                     Z[:, j] = zs
                 else:
                     lam = float(whittaker.lambda_for_cutoff(c, wbar, h, order))
                     Z[:, j] = whittaker.smooth(y, w, t, lam, order=order, bands=bands)
-            for j, (y, w, lams, risk) in cands.items():
-                lam, _ = whittaker.local_lambdas(lams, risk, self["local_half"])
-                Z[:, j] = whittaker.smooth_varying(y, w, t, lam, order=order,
-                                                   coefficients=coefficients_for(order))
             cut = new_cut
             return Z, cut
 
@@ -565,7 +564,7 @@ class KinectSkeleton(Cleaner):
                     # the 3-D residual norm of N(0, s² I) has median 1.5382 s
                     scale[j] = max(np.median(res[ok[:, j], j]) / 1.5382, 1e-4)
             if use_depth and ok.sum() > 50:
-                zlog = np.log(depth[ok] / np.nanmedian(depth[observed]))
+                zlog = np.log(depth[ok] / zref)
                 rlog = np.log(res[ok] / scale[np.nonzero(ok)[1]])
                 if np.var(zlog) > 1e-4:
                     p_exp = float(np.clip(np.cov(zlog, rlog)[0, 1] / np.var(zlog), 0.0, 2.0))
@@ -751,13 +750,11 @@ class KinectSkeleton(Cleaner):
                 lengths[:, i] = np.median(norms(out[both, a] - out[both, b]))
             var = np.where(tracked & ~flagged, sigma ** 2,
                            np.where(inferred & ~flagged, sig_inf ** 2, (2 * sig_inf) ** 2))
-            if len(rigid):       # the rigid pairs first: the bones, last, end nearest their lengths
-                pair_len = np.broadcast_to(median_lengths(out, good, rigid, min_frames=3),
-                                           (T, len(rigid)))
-                out = project_lengths(out, np.vstack([rigid, bones]),
-                                      np.hstack([pair_len, lengths]), var, sweeps=8, stiffness=k)
-            else:
-                out = project_lengths(out, bones, lengths, var, sweeps=8, stiffness=k)
+            # the rigid pairs (if any) first: the bones, last, end nearest their lengths
+            pair_len = np.broadcast_to(median_lengths(out, good, rigid, min_frames=3),
+                                       (T, len(rigid)))
+            out = project_lengths(out, np.vstack([rigid, bones]), np.hstack([pair_len, lengths]),
+                                  var, sweeps=8, stiffness=k)
             # bones the file stores at an exactly constant length (MSR Action3D) end
             # exactly at it: the child is put back on the sphere, parents first
             rank = {j: r for r, j in enumerate(_topological(motion.skeleton.parents))}

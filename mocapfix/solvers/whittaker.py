@@ -223,12 +223,15 @@ def smooth_varying(y: np.ndarray, w: np.ndarray, t: np.ndarray, lam: np.ndarray,
 
 
 def smooth_local_sure(y: np.ndarray, w: np.ndarray, t: np.ndarray, lams, *, order: int = 2,
-                      bands: np.ndarray | None = None, half: int = 15) -> tuple[np.ndarray, np.ndarray]:
+                      bands: np.ndarray | None = None, half: int = 15,
+                      coefficients: tuple | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The smooth of ``y`` (T, C) with a strength that changes along time: each sample's
     λ is the one of least estimated risk (:func:`local_sure_candidates`) over the samples
     within ±``half`` frames, gradually (:func:`local_lambdas`), in one solve
-    (:func:`smooth_varying`). Slow parts keep the strong smoothing, fast ones (a foot's
-    swing) the weak one. Returns (z, index of the least-risk λ per sample)."""
+    (:func:`smooth_varying`; ``bands`` and ``coefficients``: the time axis's
+    :func:`penalty_bands` and :func:`difference_coefficients`, if already computed). Slow
+    parts keep the strong smoothing, fast ones (a foot's swing) the weak one. Returns (z,
+    index of the least-risk λ per sample)."""
     _, risk = local_sure_candidates(y, w, t, lams, order=order, bands=bands)
     lam, pick = local_lambdas(lams, risk, half)
-    return smooth_varying(y, w, t, lam, order=order), pick
+    return smooth_varying(y, w, t, lam, order=order, coefficients=coefficients), pick
