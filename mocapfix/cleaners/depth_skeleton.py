@@ -131,7 +131,7 @@ from mocapfix.solvers.bone_projection import (median_lengths, project_lengths, s
                                                two_bone_pairs)
 from mocapfix.solvers.localfit import moving_median
 from mocapfix.solvers.rigid import norms
-from mocapfix.solvers.segments import fillable, runs
+from mocapfix.solvers.segments import NO_CAPTURE_VOLUME_M, fillable, runs
 
 _LEG = ("knee", "ankle", "foot")
 _PELVIS = ("spinebase", "hipcenter", "pelvis")
@@ -139,9 +139,6 @@ _PELVIS = ("spinebase", "hipcenter", "pelvis")
 _CUTOFFS = np.geomspace(0.7, 12.0, 8)
 #: GCV chooses the smoothing on at most this many frames (the middle of a long file)
 _GCV_FRAMES = 3000
-#: a sample this far (m) from its joint's median position is no depth-sensor measurement
-#: (a corrupt field, a flipped exponent bit; sensors reach ~10 m)
-_GROSS_M = 100.0
 #: the rigid-pair test averages distances over this long (s) ...
 _RIGID_WINDOW_S = 0.5
 #: ... on at least this many frames where both joints are tracked (3 s at 30 fps)
@@ -449,7 +446,7 @@ class KinectSkeleton(Cleaner):
         centre = np.zeros((J, 3))
         centre[seen.any(axis=0)] = np.nanmedian(P[:, seen.any(axis=0)], axis=0)
         with np.errstate(invalid="ignore", over="ignore"):
-            gross = seen & ~(norms(P - centre) <= _GROSS_M)
+            gross = seen & ~(norms(P - centre) <= NO_CAPTURE_VOLUME_M)
         P[gross] = np.nan
 
         # 1. leg confusion

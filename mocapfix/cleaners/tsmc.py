@@ -95,7 +95,7 @@ from mocapfix.solvers.localfit import moving_median
 from mocapfix.solvers.lowrank import leave_block_out_residual, ppca_fit, svt
 from mocapfix.solvers.pca_gapfill import fill_gaps_pca
 from mocapfix.solvers.rigid import body_frame, norms, to_global, to_local
-from mocapfix.solvers.segments import implausible_runs, linear_bridge
+from mocapfix.solvers.segments import NO_CAPTURE_VOLUME_M, implausible_runs, linear_bridge
 
 _CM = 100.0  # cm per metre
 
@@ -113,13 +113,12 @@ def _confident(motion: Motion, min_confidence: float) -> np.ndarray:
 
 #: a sample further from its marker's median position than this many times the larger of
 #: its marker's and the capture's extent (90th percentile of the distances to the marker's
-#: median: its own samples', every sample's), and than GROSS_FLOOR_M, is no measurement (a
+#: median: its own samples', every sample's), and than NO_CAPTURE_VOLUME_M, is no measurement (a
 #: corrupt field, a flipped exponent bit). Relative, so a file whose units are mislabelled
 #: is not taken for one big gross error, and per marker, so a wand moving over a static rig
 #: is not either (a capture-wide extent alone took the whole wand); the shared captures
 #: reach 2.2x (C3D) and 11x (Kinect) their extent
 GROSS_EXTENT = 20.0
-GROSS_FLOOR_M = 100.0     # no capture volume is that large (kinect_skeleton's screen: 100 m)
 
 
 def _gross(motion: Motion) -> np.ndarray:
@@ -144,7 +143,7 @@ def _gross(motion: Motion) -> np.ndarray:
         dist = norms(pos - centre)
         every = dist[rows][seen[rows]]
         extent = np.maximum(own, float(np.quantile(every if len(every) else dist[seen], 0.9)))
-        limit = np.maximum(GROSS_EXTENT * extent, GROSS_FLOOR_M / motion.metres_per_unit)
+        limit = np.maximum(GROSS_EXTENT * extent, NO_CAPTURE_VOLUME_M / motion.metres_per_unit)
         far = seen & ~(dist <= limit[None, :])
     if far.any():
         pos, seen = np.where(far[..., None], np.nan, pos), seen & ~far

@@ -364,6 +364,12 @@ def wavelet_denoise(x: np.ndarray, wavelet: str = "sym8", level: int | None = No
     return _by_gaps(x, func, gaps, min_length=2)
 
 
+#: a sample this far (m) from where its point usually is can be no measurement: no capture
+#: volume is that large, and depth sensors reach ~10 m (a corrupt field, a flipped exponent
+#: bit); the gross-error screens of ``tsmc`` and ``kinect_skeleton`` never keep one
+NO_CAPTURE_VOLUME_M = 100.0
+
+
 def implausible_runs(filled, write, observed_points, margin: float = 0.1) -> np.ndarray:
     """(T, J) mask of filled gap runs to reject: runs with a sample outside the capture
     volume (the bounding box of every observed sample, grown by ``margin`` of its size on
