@@ -22,6 +22,18 @@ def runs(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return column, start, end - start
 
 
+def take_frames(missing: np.ndarray, points: np.ndarray | None = None) -> slice:
+    """The frames of the take: from the first to the last frame on which one of
+    ``points`` (default all) is seen. Frames before and after, where none is (an export's
+    empty first or last frames, a recording left running), hold nothing to clean or
+    fill: they are not graded. All frames when no point is ever seen."""
+    seen = ~missing if points is None else ~missing[:, points]
+    any_seen = np.flatnonzero(seen.any(axis=1))
+    if not len(any_seen):
+        return slice(0, missing.shape[0])
+    return slice(int(any_seen[0]), int(any_seen[-1]) + 1)
+
+
 def gap_table(mask: np.ndarray) -> list[dict]:
     col, start, length = runs(mask)
     return [dict(column=int(c), start=int(s), length=int(n)) for c, s, n in zip(col, start, length)]

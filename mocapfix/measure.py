@@ -25,7 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from mocapfix.cleaners.base import REJECTED_FILLS
-from mocapfix.gaps import runs
+from mocapfix.gaps import runs, take_frames
 from mocapfix.metrics import bone_lengths, rms_acceleration
 from mocapfix.motion import Motion
 from mocapfix.selection import not_cleaned, take
@@ -327,18 +327,6 @@ def _empty_frames(missing: np.ndarray, observed: np.ndarray) -> list[list[int]]:
         return []
     _, start, length = runs(missing[:, seen_somewhere].all(axis=1)[:, None])
     return [[int(s), int(n)] for s, n in zip(start, length)]
-
-
-def take_frames(missing: np.ndarray, points: np.ndarray | None = None) -> slice:
-    """The frames of the take: from the first to the last frame on which one of
-    ``points`` (default all) is seen. Frames before and after, where none is (an export's
-    empty first or last frames, a recording left running), hold nothing to clean or
-    fill: they are not graded. All frames when no point is ever seen."""
-    seen = ~missing if points is None else ~missing[:, points]
-    any_seen = np.flatnonzero(seen.any(axis=1))
-    if not len(any_seen):
-        return slice(0, missing.shape[0])
-    return slice(int(any_seen[0]), int(any_seen[-1]) + 1)
 
 
 def _outside_note(outside: list[list[int]], T: int) -> str:

@@ -136,6 +136,22 @@ class Motion:
         return self.replace(positions=self.positions[span].copy(), confidence=pick(self.confidence),
                             channels=pick(self.channels), times=pick(self.times), source=None)
 
+    def with_frames(self, start: int, part: "Motion") -> "Motion":
+        """This Motion with frames ``start:start + part.n_frames`` taken from ``part`` (a
+        :meth:`slice_frames` of it, cleaned): positions, confidence, channels and notes."""
+        span = slice(start, start + part.n_frames)
+
+        def paste(whole, piece):
+            if whole is None or piece is None:
+                return None if whole is None else whole.copy()
+            out = whole.copy()
+            out[span] = piece
+            return out
+        return self.replace(positions=paste(self.positions, part.positions),
+                            confidence=paste(self.confidence, part.confidence),
+                            channels=paste(self.channels, part.channels),
+                            notes=list(part.notes))
+
     def copy(self) -> "Motion":
         return self.replace()
 

@@ -31,9 +31,10 @@ import numpy as np
 import yaml
 
 from mocapfix.cleaners import build
-from mocapfix.cleaners.base import REPLACED_FRAMES, Cleaner, FittedCleaner
+from mocapfix.cleaners.base import REJECTED_FILLS, REPLACED_FRAMES, Cleaner, FittedCleaner
 from mocapfix.errors import ConfigError
 from mocapfix.formats import NAMES
+from mocapfix.gaps import take_frames
 from mocapfix.motion import Motion
 from mocapfix.selection import Selection, cleanable, put, take
 from mocapfix.solvers.rigid import norms
@@ -116,17 +117,40 @@ class Pipeline:
         return motion, records
 
     def _apply_step(self, step: Step, motion: Motion) -> tuple[Motion, dict]:
-        """Run one step on the markers it may clean (see :mod:`mocapfix.selection`); the
-        other points come back unchanged."""
+        """Run one step on the markers it may clean (see :mod:`mocapfix.selection`) over
+        the frames of the take (:func:`~mocapfix.gaps.take_frames`: an export's empty
+        first and last frames hold nothing to clean, fill or count); the other points and
+        frames come back unchanged."""
         cols = cleanable(motion, self.select, step.select)
-        if cols.all():
-            return step.cleaner.apply(motion)
         if not cols.any():
             return motion.copy(), {"skipped": "no marker selected"}
+        span = take_frames(motion.missing, cols)
+        if span.stop - span.start == motion.n_frames:
+            return self._apply_on_points(step, motion, cols)
+        part, info = self._apply_on_points(step, motion.slice_frames(span.start, span.stop), cols)
+        return motion.with_frames(span.start, part), _shift_frames(info, span.start)
+
+    @staticmethod
+    def _apply_on_points(step: Step, motion: Motion, cols: np.ndarray) -> tuple[Motion, dict]:
+        if cols.all():
+            return step.cleaner.apply(motion)
         part, info = step.cleaner.apply(take(motion, cols))
         info = dict(info or {})
         info["points_not_cleaned"] = int((~cols).sum())
         return put(motion, cols, part), info
+
+
+def _shift_frames(info: dict, offset: int) -> dict:
+    """A step's ``info`` run on frames ``offset:`` with its frame numbers
+    (:data:`REPLACED_FRAMES`, :data:`REJECTED_FILLS`) made whole-file frame numbers."""
+    info = dict(info or {})
+    if info.get(REPLACED_FRAMES):
+        info[REPLACED_FRAMES] = {name: [int(f) + offset for f in frames]
+                                 for name, frames in info[REPLACED_FRAMES].items()}
+    if info.get(REJECTED_FILLS):
+        info[REJECTED_FILLS] = {name: [[int(entry[0]) + offset, *entry[1:]] for entry in fills]
+                                for name, fills in info[REJECTED_FILLS].items()}
+    return info
 
 
 def replaced_mask(info: dict, names, shape) -> np.ndarray:

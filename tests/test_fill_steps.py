@@ -90,7 +90,8 @@ def test_default_clean_fills_no_run_that_jumps_three_times_the_markers_largest_s
     """On these captures a group of markers leaves the volume at once and the PCA prior of
     ``tsmc`` changed its mind there: a foot marker was filled 558 / 622 mm from its last
     sample, 11–12× the largest step its own data makes (and 29 cm under the floor). On
-    s09 the prior still does without ``max_step``; on s04 it did while its iteration
+    s09 the prior still jumps more than 3× without ``max_step`` (3.9×; 11× while the steps
+    also saw the 11 empty frames after the take); on s04 it did while its iteration
     stopped at the fit cap, and no longer does converged (2.96×)."""
     motion = read(shared(f"c3d/{name}"))
     P0 = motion.positions
@@ -117,7 +118,7 @@ def test_default_clean_fills_no_run_that_jumps_three_times_the_markers_largest_s
         if step["cleaner"] == "tsmc":
             step["max_step"] = 0
     if "s09" in name:
-        assert worst_ratio(parse_config(data)) > 10.0
+        assert worst_ratio(parse_config(data)) > 3.0
 
 
 def test_fill_ensemble_refills_without_the_member_that_jumped_on_a_real_capture():
@@ -140,19 +141,20 @@ def test_fill_ensemble_refills_without_the_member_that_jumped_on_a_real_capture(
 
 
 def test_the_report_says_which_step_refused_a_gaps_fill_and_why(tmp_path):
-    """c3d.org s09: no other marker is seen through the right foot's trailing gap, so the
-    ensemble has no member for it, and tsmc's fill jumped; the gap is left, and the report
-    says both under it."""
+    """c3d.org s09: the points of the model's left tibia and foot segments (LTIO, LTIL,
+    LTOO, LTOP) are lost at frame 188, 82 frames before the take ends; the ensemble's
+    fill of LTIO left the capture volume and tsmc's jumped, so the gap is left, and the
+    report says both under it."""
     from mocapfix.clean import clean_file
     import json
 
     out = tmp_path / "s09.c3d"
     clean_file(shared("c3d/c3dorg_s09_PlugInC3D.c3d"), out, load_config(default_config_path()))
     report = json.loads((tmp_path / "s09.c3d.report.json").read_text())
-    rfoa = next(j for j in report["joints"] if j["name"] == "RFOA")
-    left = [g for g in rfoa["gaps"]["unfilled"] if g["start"] == 185]
+    ltio = next(j for j in report["joints"] if j["name"] == "LTIO")
+    left = [g for g in ltio["gaps"]["unfilled"] if g["start"] == 188]
     assert left and left[0]["rejected_by"] == [
-        {"step": "step 3 (fill_ensemble)", "why": "no other marker is seen through it"},
+        {"step": "step 3 (fill_ensemble)", "why": "its fill left the capture volume"},
         {"step": "step 4 (tsmc)",
          "why": "its fill jumped more than 3x the marker's largest measured step in one frame"}]
     refused = [g for j in report["joints"] for g in j["gaps"]["unfilled"] if "rejected_by" in g]

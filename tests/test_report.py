@@ -240,3 +240,57 @@ def test_markdown_says_what_each_step_found():
     assert "noise mm" not in line and "cutoff hz" not in line
     info = report["steps"][0]["info"]
     assert info["rigid_pairs"] == ["HandLeft-ThumbLeft"] and "noise_mm" in info
+
+
+def _padded(motion: Motion, before: int, after: int) -> Motion:
+    """``motion`` with ``before`` / ``after`` empty frames (no point seen) around it, on a
+    time axis that goes on at the frame rate."""
+    T, J = motion.n_frames, motion.n_joints
+    pos = np.full((before + T + after, J, 3), np.nan)
+    pos[before:before + T] = motion.positions
+    conf = None
+    if motion.confidence is not None:
+        conf = np.zeros(pos.shape[:2])
+        conf[before:before + T] = motion.confidence
+    times = None
+    if motion.times is not None:
+        t = np.asarray(motion.times, float)
+        times = np.r_[t[0] - np.arange(before, 0, -1) / motion.fps, t,
+                      t[-1] + np.arange(1, after + 1) / motion.fps]
+    return motion.replace(positions=pos, confidence=conf, times=times, source=None)
+
+
+@pytest.mark.parametrize("rel, config", [("c3d/hdm05_HDM_mm_01-02_03_120.c3d", "default"),
+                                         ("kinect/kv2_laban_Ges02_balancinghands.csv", "kinect")])
+def test_empty_frames_around_the_take_change_nothing_a_step_does(rel, config):
+    """An export padded with empty frames (a recording left running before and after the
+    take) is cleaned as the take alone: the same positions in the take, nothing invented in
+    the padding, and every step's findings the same — gap counts that match the report's,
+    and outliers rebuilt in place reported on the same frames of the file."""
+    from mocapfix import read
+    from mocapfix.presets import resolve_config
+    from mocapfix.pipeline import load_config
+    motion = read(shared(rel))
+    if motion.n_frames > 900:
+        motion = motion.slice_frames(0, 900)
+    motion.positions[100:112, 3] = np.nan                  # a gap in the take
+    pipeline = load_config(resolve_config(config))
+    plain = clean_motion(motion, pipeline)
+    padded = clean_motion(_padded(motion, 23, 17), pipeline)
+    T = motion.n_frames
+    assert np.isnan(padded.cleaned.positions[:23]).all()
+    assert np.isnan(padded.cleaned.positions[23 + T:]).all()
+    assert np.allclose(padded.cleaned.positions[23:23 + T], plain.cleaned.positions,
+                       rtol=0, atol=1e-9, equal_nan=True)
+    ran = [(a, b) for a, b in zip(plain.records, padded.records) if a.skipped is None]
+    assert ran
+    for a, b in ran:
+        assert a.info.keys() == b.info.keys()
+        counts = {k: v for k, v in a.info.items() if isinstance(v, (int, str))}
+        assert counts == {k: b.info[k] for k in counts}, a.step
+        assert np.array_equal(a.outliers, b.outliers[23:23 + T]), a.step
+        assert not b.outliers[:23].any() and not b.outliers[23 + T:].any()
+    rep_plain, rep_padded = build_report(plain), build_report(padded)
+    assert rep_padded["file"]["frames_outside_take"] == [[0, 23], [23 + T, 17]]
+    for key in ("gaps_before", "gaps_unfilled", "samples_filled", "samples_flagged"):
+        assert rep_padded["file"][key] == rep_plain["file"][key], key
