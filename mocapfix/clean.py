@@ -22,13 +22,16 @@ REPORT_KINDS = ("json", "md", "html")
 
 def clean_motion(motion: Motion, pipeline: Pipeline) -> CleanResult:
     """Run ``pipeline`` on ``motion``. For BVH/AMC the cleaned positions are turned back
-    into the file's channels and the written positions are their forward kinematics."""
+    into the file's channels and the written positions are their forward kinematics; a
+    value the output file cannot hold is dropped as its writer will drop it
+    (:func:`mocapfix.formats.storable`)."""
     started = time.perf_counter()
     cleaned, records = pipeline.run(motion)
     residual = None
     if cleaned.rig is not None and cleaned.channels is not None:
         channels, positions, residual = write_back(cleaned)
         cleaned = cleaned.replace(channels=channels, positions=positions)
+    cleaned = formats.storable(cleaned)
     return CleanResult(motion, cleaned, records, residual, time.perf_counter() - started,
                        not_cleaned(motion, pipeline.select))
 

@@ -361,6 +361,7 @@ def measure_cleaning(result: CleanResult) -> dict:
     rig = before.rig
     own = flagged if rig is None else made_missing | (flagged & np.asarray(rig.offset_in_own_frame, bool)[None, :J])
     who = who_filled(records, T, J)
+    who[miss_a] = -1                   # filled by a step, dropped by the writer (storable)
     moved = np.linalg.norm(after.positions - before.positions, axis=-1) * mm
     moved[miss_b | miss_a] = np.nan
     jitter_b, jitter_a = jitter(before), jitter(after)
@@ -446,6 +447,7 @@ def measure_cleaning(result: CleanResult) -> dict:
         "samples_flagged": int(flagged.sum()),
         "gaps_before": int(len(length)),
         "gaps_unfilled": int(sum(len(j["gaps"]["unfilled"]) for j in joints)),
+        "gaps_after": int(len(runs(miss_a)[0])),
         "long_fills": int(sum(g["long"] for j in joints for g in j["gaps"]["filled"])),
         "seconds": finite(result.seconds),
         "notes": list(before.notes) + [n for n in after.notes if n not in before.notes],

@@ -152,7 +152,8 @@ def to_markdown(report: dict) -> str:
            f"- file: {f['path']}",
            f"- missing before: {_pct(f['missing_before'])}, after: {_pct(f['missing_after'])}",
            f"- samples filled: {f['samples_filled']}, flagged as outliers: {f['samples_flagged']}",
-           f"- gaps before: {f['gaps_before']}, still unfilled: {f['gaps_unfilled']}, "
+           f"- gaps before: {f['gaps_before']}, after: {f.get('gaps_after', '–')} (of the "
+           f"input's, not wholly filled: {f['gaps_unfilled']}), "
            f"long fills (> {LONG_FILL_S:g} s): {f.get('long_fills', 0)}",
            f"- joints OK / WARN / FAIL: {f['joints_by_status']['OK']} / "
            f"{f['joints_by_status']['WARN']} / {f['joints_by_status']['FAIL']}"
@@ -178,7 +179,7 @@ def to_markdown(report: dict) -> str:
         out += ["", f"Not run for {f['format']} (the config limits them to other formats): "
                 + ", ".join(other) + "."]
     out += ["", "## Joints", "",
-            "| joint | status | missing before → after | rebuilt | gaps (longest) | outliers | "
+            "| joint | status | missing before → after | uncertain | gaps (longest) | outliers | "
             "correction mean / max (mm) | jitter before → after (m/s²) | why |",
             "|---|---|---|---|---|---:|---|---|---|"]
     for j in ranked(report):
@@ -396,7 +397,8 @@ def check_line(result: dict, verbose: bool = False) -> str:
         if wc and "error" not in wc:
             lines.append(f"      would clean: fill {wc['samples_filled']} samples, flag "
                          f"{wc['samples_flagged']}, leave {_pct(wc['missing_after'])} missing and "
-                         f"{_pct(wc['uncertain'])} not measured (rebuilt, or still missing)")
+                         f"{_pct(wc['uncertain'])} uncertain (missing in the input; a fill counts 1 − "
+                         "its confidence)")
         return "\n".join(lines)
     if not worst:
         return head

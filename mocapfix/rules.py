@@ -115,7 +115,7 @@ METRICS = {m.name: m for m in (
     # what a pipeline left (clean's report)
     Metric("missing_after", "cleaned", "fraction", "{v} still missing",
            "fraction of samples still missing after cleaning", "mean"),
-    Metric("uncertain", "cleaned", "fraction", "{v} not measured (rebuilt, or still missing)",
+    Metric("uncertain", "cleaned", "fraction", "{v} uncertain (missing in the input; a fill counts 1 − its confidence)",
            "fraction of frames not measured in the input (weighted by fill confidence)", "mean"),
     Metric("correction", "cleaned", "length", "a sample moved {v}",
            "largest move of a measured sample", "max"),

@@ -152,3 +152,33 @@ def test_with_group_replaces_one_group_and_keeps_the_others_bytes():
     broken = bytearray(section)
     struct.pack_into("<h", broken, 4 + 2 + len("POINT"), 30000)
     assert P.with_group(bytes(broken), "MOCAPFIX", []) is None
+
+
+def test_the_report_describes_the_fills_an_int16_file_could_not_hold(tmp_path):
+    """c3d.org s09 stores int16 coordinates (POINT:SCALE 0.0966: ±3.2 m). The default's fills
+    of markers leaving the volume reach beyond that; the writer leaves them as gaps, and the
+    report, the summary line and the gap counts must describe the file written, not the
+    fills the writer dropped (they said 2.2 % missing and 4 gaps for a file with 2.9 % and
+    28)."""
+    import json
+    from mocapfix.clean import clean_file
+    from mocapfix.gaps import runs, take_frames
+
+    out = tmp_path / "s09.c3d"
+    summary = clean_file(shared("c3d/c3dorg_s09_PlugInC3D.c3d"), out,
+                         load_config(default_config_path()))
+    report = json.loads((tmp_path / "s09.c3d.report.json").read_text())
+    written = formats.read(out)
+    markers = np.array([k == "marker" for k in written.kinds])
+    missing = written.missing
+    span = take_frames(missing, markers)
+    assert any("beyond the int16 range" in n for n in report["file"]["notes"])
+    assert report["file"]["missing_after"] == summary["missing_after"]
+    assert abs(report["file"]["missing_after"] - missing[span][:, markers].mean()) < 1e-6
+    assert report["file"]["gaps_after"] == len(runs(missing[span][:, markers])[0])
+    before = formats.read(shared("c3d/c3dorg_s09_PlugInC3D.c3d")).missing
+    filled = (before & ~missing)[:, markers]
+    assert report["file"]["samples_filled"] == int(filled.sum())
+    listed = sum(g["length"] for j in report["joints"] for g in j["gaps"]["filled"])
+    partly = sum(g["filled_frames"] for j in report["joints"] for g in j["gaps"]["unfilled"])
+    assert listed + partly == int(filled[span].sum())

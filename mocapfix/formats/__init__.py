@@ -115,6 +115,16 @@ def _read_as(path: Path, name: str, options: dict) -> Motion:
     return motion
 
 
+def storable(motion: Motion) -> Motion:
+    """``motion`` as the writer of its format will store it (a format module's
+    ``storable``, where a file cannot hold every value: an int16 C3D), so that what is
+    measured and reported is what is written."""
+    if motion.format not in FORMATS:
+        return motion
+    fix = getattr(module(motion.format), "storable", None)
+    return motion if fix is None else fix(motion)
+
+
 def write(motion: Motion, path, format: str | None = None, **options) -> list[Path]:
     """Write ``motion`` to ``path`` (format from the suffix unless given). Returns the files
     written (ASF/AMC writes the skeleton beside the motion)."""

@@ -839,6 +839,36 @@ def _positions_in_source_units(motion: Motion, source: C3DSource) -> np.ndarray:
     return positions
 
 
+def _beyond_int16(new: np.ndarray, source: C3DSource) -> np.ndarray:
+    """(T, P) True for the fills (samples missing in the source, present in ``new``, in
+    source units) that an int16 file's grid cannot hold: beyond ±32767 × POINT:SCALE."""
+    if source.storage != "int16":
+        return np.zeros(source.missing.shape, bool)
+    with np.errstate(invalid="ignore", over="ignore"):
+        out = np.abs(np.rint(new / source.scale)) > 32767
+    return source.missing & np.isfinite(new).all(axis=2) & out.any(axis=2)
+
+
+def storable(motion: Motion) -> Motion:
+    """``motion`` as :func:`write` will store it in its source file: a fill an int16 file
+    cannot hold (far outside where the markers ever were) is made a gap again, with a
+    note, so that the report describes the file written. Other motions come back as
+    they are."""
+    source = motion.source
+    if not isinstance(source, C3DSource) or motion.positions.shape != source.positions.shape:
+        return motion
+    lost = _beyond_int16(_positions_in_source_units(motion, source), source)
+    if not lost.any():
+        return motion
+    positions = motion.positions.copy()
+    positions[lost] = np.nan
+    confidence = None if motion.confidence is None else np.where(lost, 0.0, motion.confidence)
+    note = (f"{int(lost.sum())} filled samples lie beyond the int16 range of the file "
+            f"(±32767 × POINT:SCALE {source.scale:g}); left as gaps")
+    return motion.replace(positions=positions, confidence=confidence,
+                          notes=[*motion.notes, note])
+
+
 def _splice(motion: Motion, source: C3DSource, path, mark_missing: bool) -> bytes:
     new = _positions_in_source_units(motion, source)
     old = source.positions
@@ -851,11 +881,10 @@ def _splice(motion: Motion, source: C3DSource, path, mark_missing: bool) -> byte
     still_missing = new_missing & source.missing
 
     if source.storage == "int16":
-        # a fill the file's int16 grid cannot hold (beyond ±32767 × POINT:SCALE) is far
-        # outside where the markers ever were: it stays a gap (logged) rather than failing
-        # the file; a *measured* sample moved out of range is still an error
-        with np.errstate(invalid="ignore"):
-            unrepresentable = filled & (np.abs(np.rint(new / source.scale)) > 32767).any(axis=2)
+        # a fill the file's int16 grid cannot hold stays a gap (:func:`storable`, which
+        # ``clean`` applies before the report) rather than failing the file; a *measured*
+        # sample moved out of range is still an error
+        unrepresentable = filled & _beyond_int16(new, source)
         if unrepresentable.any():
             log.warning("%s: %d filled samples lie beyond the int16 range of the file; "
                         "written as gaps", path, int(unrepresentable.sum()))
