@@ -435,3 +435,19 @@ def test_glitch_screen_on_a_take_of_eight_frames_warns_nothing():
         found = glitches(x)
     assert not [w for w in caught if issubclass(w.category, RuntimeWarning)], [str(w.message) for w in caught]
     assert found.shape == x.shape and found[4, 2]
+
+
+def test_mssa_with_a_named_model_refuses_a_file_the_model_was_not_made_for():
+    """A model named in the config is what the user asked for: on a skeleton it was not
+    made for, the file is an error naming it (bases learned from the file instead left a
+    line that said OK); with no model named, the file's own bases are the documented
+    fallback (test above)."""
+    from mocapfix.errors import MocapfixError
+    from mocapfix.pipeline import loads_config
+    pipeline = loads_config("version: 1\npipeline:\n  - cleaner: mssa\n    model: mssa-cmu\n")
+    cleaner = pipeline.steps[0].cleaner
+    amc = formats.read(shared("asfamc/13_39.amc"))
+    assert cleaner.apply(amc)[1]["bases"] == "mssa-cmu"
+    bvh = formats.read(shared("bvh/cmu_cgspeed_131_01.bvh"))
+    with pytest.raises(MocapfixError, match=r"cmu_cgspeed_131_01\.bvh.*train a model for it"):
+        cleaner.apply(bvh)

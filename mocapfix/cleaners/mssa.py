@@ -24,8 +24,8 @@ layout (joint names and axes, or joint names), the window, the frame rate, the m
 the bases.
 
 Cleaning: a model is used when its layout and frame rate are the file's (a ``model``
-named in the config, else a shipped model made for that layout). Otherwise the bases are
-learned from the file itself (always with ``model: self``;
+named in the config — a file it does not fit is an error — else a shipped model made for
+that layout). Otherwise the bases are learned from the file itself (always with ``model: self``;
 :func:`mocapfix.solvers.ssa.robust_bases`: spikes flagged
 by a running median are replaced by it before the covariance, and the worst-explained
 windows are trimmed; K keeps the eigenvalues above ``noise_floor`` × the file's noise
@@ -246,6 +246,17 @@ class MSSA(FittedCleaner):
             if fits(self.layout_, self.fps_, self.space_):
                 return (self.bases_, self.mean_, self.unexplained_, self.values["model"] or "fitted",
                         self.window_)
+            if self.values["model"] is not None:
+                # the user named this model: bases learned from the file instead would not
+                # be what was asked for (and the line would still say OK)
+                what = {"positions": "joint positions", "rotations": "rotating joints"}
+                raise MocapfixError(
+                    f"{self.step}: the model {self.values['model']} was made for "
+                    f"{len(self.layout_)} {what[self.space_]} at {self.fps_:g} Hz; "
+                    f"{motion.path or 'this motion'} has {len(layout)} {what[space]} at "
+                    f"{motion.fps:g} Hz{' in another layout' if len(layout) == len(self.layout_) else ''}"
+                    "; train a model for it (mocapfix train-dictionary --method mssa) or use "
+                    "model: self")
             return None
         if self.values["model"] is None:   # "self": no model
             from mocapfix import models
