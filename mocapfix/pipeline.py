@@ -231,7 +231,7 @@ def _config_folder(source: str) -> Path | None:
 def parse_config(data, source: str = "<config>") -> Pipeline:
     """Validate a loaded config (dict, possibly carrying ``__line__`` marks)."""
     if not isinstance(data, dict):
-        raise ConfigError(f"{source}: a config is a mapping with 'version' and 'pipeline'")
+        raise ConfigError(f"{source}: a config is a mapping with 'pipeline' (and 'version: 1', which may be left out)")
     unknown = sorted(set(data) - _TOP_KEYS - {"__line__", "__keylines__"}, key=repr)
     if unknown:
         raise ConfigError(f"{source}: unknown top-level key(s) {', '.join(map(repr, unknown))} "

@@ -318,6 +318,19 @@ def _formats(value, where):
     return tuple(value)
 
 
+def _check_order(warn: Threshold | None, fail: Threshold | None, metric: Metric, where: str):
+    """A WARN threshold beyond the FAIL one could never be reached (the FAIL is checked
+    first): a config error rather than a rule that silently never warns. Thresholds in
+    different units (frames and seconds) are left alone: their order depends on the file."""
+    if warn is None or fail is None or warn.frames != fail.frames:
+        return
+    if (warn.value < fail.value) if metric.below else (warn.value > fail.value):
+        side = "below" if metric.below else "above"
+        raise ConfigError(f"{where}: warn {warn.text or warn.value} is beyond fail "
+                          f"{fail.text or fail.value}; {metric.name} fails {side} its fail "
+                          f"threshold first, so it could never warn")
+
+
 def parse_rule(raw, where: str, stage: str | None = None, formats=None, include=(),
                exclude=()) -> Rule:
     if not isinstance(raw, dict):
@@ -344,6 +357,7 @@ def parse_rule(raw, where: str, stage: str | None = None, formats=None, include=
         raise ConfigError(f"{where}: a rule needs 'warn' or 'fail' (or both)")
     warn = parse_threshold(raw["warn"], metric, f"{where}: warn") if "warn" in raw else None
     fail = parse_threshold(raw["fail"], metric, f"{where}: fail") if "fail" in raw else None
+    _check_order(warn, fail, metric, where)
     rname = raw.get("name", name)
     if not isinstance(rname, str) or not rname:
         raise ConfigError(f"{where}: 'name' must be a non-empty string")
@@ -478,7 +492,7 @@ def parse_rules(data, source: str = "<rules>", stage: str = "input", _chain: tup
     if data is None:
         data = {}
     if not isinstance(data, dict):
-        raise ConfigError(f"{source}: a rules file is a mapping with 'version' and 'rules'")
+        raise ConfigError(f"{source}: a rules file is a mapping with 'rules' (and 'version: 1', which may be left out)")
     unknown = sorted(k for k in data if k not in _TOP_KEYS and not str(k).startswith("__"))
     if unknown:
         raise ConfigError(f"{source}{_key_line(data, unknown[0])}: unknown top-level key(s) "
@@ -608,6 +622,17 @@ def validate_report_section(data, source: str) -> dict:
         if key.endswith(("_missing_after", "_uncertain", "_fraction", "_variation")) and value > 1:
             raise ConfigError(f"{where}: {key} is a fraction in [0, 1], got {value!r}")
         out[key] = float(value)
+    merged = {**DEFAULT_THRESHOLDS, **out}
+    for metric in {m for m, _ in REPORT_KEYS.values()}:
+        warn_key, fail_key = (next(k for k, v in REPORT_KEYS.items() if v == (metric, lvl))
+                              for lvl in ("warn", "fail"))
+        if warn_key in merged and fail_key in merged and merged[warn_key] > merged[fail_key]:
+            given = [k for k in (warn_key, fail_key) if k in out]
+            raise ConfigError(
+                f"{source}: report{_key_line(data, given[0])}: {warn_key} {merged[warn_key]:g} is "
+                f"above {fail_key} {merged[fail_key]:g}"
+                + ("" if len(given) == 2 else f" (the default; set {fail_key} too)")
+                + ": it could never warn")
     return out
 
 

@@ -3,6 +3,7 @@ include/exclude, validation errors with line numbers, the report section of conf
 from __future__ import annotations
 
 import math
+import re
 
 import numpy as np
 import pytest
@@ -214,3 +215,28 @@ def test_extends_adds_the_parent_rules_and_refuses_a_circle(tmp_path):
         (tmp_path / f"r{k}.yaml").write_text(f"version: 1\n{parent}" + own)
     with pytest.raises(ConfigError, match="nests too deep"):
         load_rules(tmp_path / "r0.yaml")
+
+
+@pytest.mark.parametrize("text, cause", [
+    ("version: 1\nrules:\n  - metric: fps\n    warn: 100 Hz\n    fail: 200 Hz\n",
+     "rule 1 (line 3): warn 100 Hz is beyond fail 200 Hz"),
+    ("version: 1\nrules:\n  - metric: missing\n    warn: 30%\n    fail: 10%\n",
+     "rule 1 (line 3): warn 30.0 % is beyond fail 10.0 %"),
+])
+def test_a_rule_whose_warn_lies_beyond_its_fail_is_a_config_error(text, cause):
+    """FAIL is checked first, so such a rule would silently never warn."""
+    with pytest.raises(ConfigError, match=re.escape(cause)):
+        loads_rules(text)
+    warn, fail = re.findall(r"(?:warn|fail): (.*)", text)
+    swapped = text.replace(f"warn: {warn}", "WARN").replace(f"fail: {fail}", f"warn: {fail}")
+    assert len(loads_rules(swapped.replace("WARN", f"fail: {warn}"))) == 1
+
+
+def test_report_thresholds_that_could_never_warn_are_a_config_error():
+    head = "version: 1\npipeline: []\nreport:\n"
+    with pytest.raises(ConfigError, match="line 4.*warn_missing_after 0.5 is above "
+                                          "fail_missing_after 0.01"):
+        loads_config(head + "  warn_missing_after: 0.5\n  fail_missing_after: 0.01\n")
+    with pytest.raises(ConfigError, match=r"0\.1 \(the default; set fail_missing_after too\)"):
+        loads_config(head + "  warn_missing_after: 0.5\n")
+    assert loads_config(head + "  warn_missing_after: 0.5\n  fail_missing_after: 0.6\n").report
