@@ -734,3 +734,25 @@ def test_every_layout_without_a_rate_takes_the_given_default_and_says_so(tmp_pat
     kept = formats.read(timed, default_fps=45)
     assert reads == [path, timed]
     assert kept.fps == pytest.approx(50) and not kept.source.extra["rate_assumed"]
+
+
+@pytest.mark.parametrize("row, stamp", [(50, "1e23"), (50, "0"), (0, "1e23"), (-1, "5")])
+def test_a_lone_corrupt_time_stamp_is_read_between_its_neighbours(tmp_path, row, stamp):
+    """One tick field corrupted (1e23, 0) in a real v2 recording: the time axis is the
+    recording's, not 3e17 dropped frames or a backward step, a note names the row, and
+    the file writes back byte for byte as read."""
+    src = shared("kinect/kv2_laban_Ges01_wavehand.csv")
+    lines = src.read_text().splitlines(keepends=True)
+    fields = lines[row].split(",")
+    fields[0] = stamp
+    lines[row] = ",".join(fields)
+    path = tmp_path / "stamp.csv"
+    path.write_text("".join(lines))
+    clean, hit = formats.read(src), formats.read(path)
+    assert np.allclose(hit.times, clean.times, atol=0.04)
+    assert hit.fps == pytest.approx(clean.fps, rel=1e-3)
+    k = row % len(lines) + 1
+    assert any(f"data rows {k})" in n for n in hit.notes), hit.notes
+    assert not any("backward" in n for n in hit.notes)
+    formats.write(hit, tmp_path / "out.csv")
+    assert (tmp_path / "out.csv").read_bytes() == path.read_bytes()

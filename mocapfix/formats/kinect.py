@@ -52,7 +52,9 @@ file looks truncated (the fragment is not written back); empty file / header onl
 Timing: timestamps (ticks, seconds, ms) or frame indices give ``motion.times`` in seconds
 from 0 and ``fps`` = 1 / median positive interval. Intervals > 1.5 x the median are
 reported as dropped-frame gaps, intervals of 0 as repeated frames, negative ones as
-backward steps -- in ``motion.notes``; rows are never inserted or removed.
+backward steps -- in ``motion.notes``; rows are never inserted or removed. A lone stamp
+far out of order with the rows around it (a corrupt field) is read as lying between them,
+with a note (:func:`_mend_lone_times`).
 
 Units: metres (``units="m"``) for the dataset layouts. A headed CSV uses its unit tag if
 it has one, else the unit is guessed from magnitude (median bone length when the
@@ -403,6 +405,45 @@ def _nonfinite_missing(coords: np.ndarray, notes: list[str]) -> np.ndarray:
     return bad
 
 
+#: a time stamp this many median frame intervals out of order with both rows around it
+#: (which are in order) is a corrupt field, not a clock: read as midway between them
+LONE_TIME_FACTOR = 100.0
+
+
+def _mend_lone_times(times: np.ndarray, notes: list[str]) -> np.ndarray:
+    """``times`` with each lone corrupt stamp (one row far out of order while the rows
+    before and after it are in order: 1e23 in a tick column made "3e17 dropped frames")
+    read as midway between its neighbours, the first or last row one median interval
+    from its neighbour; noted. Returns seconds from the first row. The file's rows and
+    stamps are written back as read."""
+    dt = np.diff(times)
+    positive = dt[dt > 0]
+    if len(times) < 3 or not len(positive):
+        return times - times[0] if len(times) else times
+    limit = LONE_TIME_FACTOR * float(np.median(positive))
+    t = times.copy()
+    inner = np.arange(1, len(t) - 1)
+    before, after = t[inner - 1], t[inner + 1]
+    out = np.maximum(before - t[inner], t[inner] - after)
+    lone = inner[(out > limit) & (after >= before)]
+    t[lone] = (t[lone - 1] + t[lone + 1]) / 2
+    median = float(np.median(positive))
+    ends = []
+    if abs(t[1] - t[0]) > limit and 0 < t[2] - t[1] <= limit:
+        t[0] = t[1] - median
+        ends.append(0)
+    if abs(t[-1] - t[-2]) > limit and 0 < t[-2] - t[-3] <= limit:
+        t[-1] = t[-2] + median
+        ends.append(len(t) - 1)
+    mended = sorted([*lone.tolist(), *ends])
+    if mended:
+        rows = ", ".join(str(r + 1) for r in mended[:5]) + (" …" if len(mended) > 5 else "")
+        notes.append(f"{len(mended)} time stamps far out of order with the rows around them "
+                     f"(data rows {rows}): read as corrupt, placed between their neighbours "
+                     "(written back as they were)")
+    return t - t[0]
+
+
 def _timing(times: np.ndarray, notes: list[str], unit_label="frame") -> float:
     """fps from the median positive interval; dropped/repeated/backward frames noted."""
     if len(times) < 2:
@@ -455,7 +496,7 @@ def _read_kinect_csv(path, lines, idx, notes, layout, fps, units) -> _Parsed:
         raise UnreadableFileError(path, "timestamp is not a number", line=idx[t] + 1)
     coords = block[..., :3]
     missing = (states == 0) | _nonfinite_missing(coords, notes)
-    times = (ticks - ticks[0]) * 1e-7
+    times = _mend_lone_times((ticks - np.median(ticks)) * 1e-7, notes)
     file_fps = _timing(times, notes)
     T = len(rows)
     j = np.arange(n)
@@ -499,7 +540,7 @@ def _read_utkinect(path, lines, idx, notes, layout, fps, units) -> _Parsed:
         notes.append(f"frame index (30 Hz camera frames) runs {index[0]:.0f}-{index[-1]:.0f}: "
                      f"{int(np.sum(jumps > 1))} jumps > 1 (largest {jumps.max():.0f}), "
                      f"{int(np.sum(jumps == 0))} repeated indices")
-    times = (index - index[0]) / UTKINECT_FPS
+    times = _mend_lone_times((index - np.median(index)) / UTKINECT_FPS, notes)
     file_fps = _timing(times, notes, unit_label="frame index")
     T = len(rows)
     j = np.arange(n)
@@ -609,7 +650,9 @@ def _time_kind(name: str) -> str:
 
 
 def _times_from_column(values: np.ndarray, kind: str, fps: float | None, notes) -> np.ndarray:
-    rel = values - values[0]
+    """Seconds from an arbitrary origin (:func:`_mend_lone_times` puts the first row at 0):
+    relative to the median stamp, so one corrupt stamp (1e23) costs no precision."""
+    rel = values - np.median(values)
     if kind == "frame":
         rate = fps or DEFAULT_FPS
         notes.append(RateAssumed(f"frame numbers but no time column: {DEFAULT_FPS:g} fps assumed"))
@@ -757,7 +800,7 @@ def _wide_times(rows, idx, time_col, fps, path, notes):
     if not np.isfinite(values).all():
         k = int(np.nonzero(~np.isfinite(values))[0][0])
         raise UnreadableFileError(path, "empty or non-numeric time/frame value", line=idx[k] + 1)
-    times = _times_from_column(values, kind, fps, notes)
+    times = _mend_lone_times(_times_from_column(values, kind, fps, notes), notes)
     file_fps = _timing(times, notes)
     return times, _or_default(file_fps, fps or DEFAULT_FPS, notes)
 
@@ -847,7 +890,7 @@ def _read_long(path, lines, idx, notes, layout, fps, units) -> _Parsed:
     unit = _guess_units(coords, missing, skeleton, _long_unit_tags(columns, roles), units,
                         notes, path)
     kind = "frame" if "frame" in roles else _time_kind(columns[key_col])
-    times = _times_from_column(frame_keys, kind, fps, notes)
+    times = _mend_lone_times(_times_from_column(frame_keys, kind, fps, notes), notes)
     file_fps = _or_default(_timing(times, notes), fps or DEFAULT_FPS, notes)
     last_line = np.full(T, -1, dtype=np.intp)
     np.maximum.at(last_line, frame_of_row, np.asarray(data_idx))
