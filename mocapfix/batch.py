@@ -463,21 +463,24 @@ class CleanTask:
         from mocapfix.clean import clean_file
 
         try:
-            from mocapfix.fileio import file_sha256
+            from mocapfix.manifest import input_identity
 
             pipeline = _pipeline(self.config, self.source)
             try:
-                before = file_sha256(job.source)
+                before = input_identity(job.source)
             except OSError:
                 before = None           # unreadable: clean_file names the cause
             result = clean_file(job.source, job.output, pipeline, self.reports, self.read_options)
-            # for the manifest: the hash of what was cleaned. Taken after the clean alone, a
+            # for the manifest: the hashes of what was cleaned. Taken after the clean alone, a
             # file still being written (copied, synced) was recorded with its new content
             # against an output of the old one, and the next run skipped it as finished
-            result["input_sha256"] = file_sha256(job.source)
-            if before is not None and result["input_sha256"] != before:
-                return error_result(job, f"{job.source}: the file changed while it was being "
+            after = input_identity(job.source)
+            if before is not None and after != before:
+                what = ("the file" if after["input_sha256"] != before["input_sha256"]
+                        else "a file read with it")
+                return error_result(job, f"{job.source}: {what} changed while it was being "
                                          "cleaned (is it still being written?); run again")
+            result.update(after)
             return result
         except MocapfixError as exc:
             return error_result(job, name_the_file(job.source, str(exc)))
@@ -492,18 +495,35 @@ _PIPELINES_LOCK = threading.Lock()
 
 def _pipeline(config: dict, source: str):
     """The parsed pipeline of ``config``, parsed once per process (a Dask worker's threads
-    share it; models are cached per process by :mod:`mocapfix.models`)."""
+    share it; models are cached per process by :mod:`mocapfix.models`) and again when one
+    of its model files changed since: a process that outlives a run (a Dask worker, a
+    library caller) kept cleaning with a model retrained at the same path."""
     import json
 
     from mocapfix.pipeline import UNIT_WARNINGS, parse_config
 
     key = (source, json.dumps(config, sort_keys=True, default=str))
     with _PIPELINES_LOCK:
-        if key not in _PIPELINES:
+        cached = _PIPELINES.get(key)
+        if cached is None or cached[1] != _stamps(cached[0].model_files()):
             _PIPELINES.clear()
-            _PIPELINES[key] = parse_config(config, source)
+            pipeline = parse_config(config, source)
+            _PIPELINES[key] = pipeline, _stamps(pipeline.model_files())
             UNIT_WARNINGS.clear()          # the CLI printed them when it loaded the config
-        return _PIPELINES[key]
+        return _PIPELINES[key][0]
+
+
+def _stamps(paths) -> tuple:
+    """(path, size, modification time) of each file, as :func:`mocapfix.models.load`
+    caches them; None for a file that cannot be seen."""
+    stamps = []
+    for p in paths:
+        try:
+            st = os.stat(p)
+            stamps.append((str(p), st.st_size, st.st_mtime_ns))
+        except OSError:
+            stamps.append((str(p), None))
+    return tuple(stamps)
 
 
 def run_batch(jobs: list[Job], config: dict, source: str, reports=("json",), workers: int = 1,

@@ -320,7 +320,7 @@ def _clean_line(r: dict, verbose: bool) -> str:
 @click.option("--overwrite", is_flag=True,
               help="Replace outputs (and their reports) left by an earlier run.")
 @click.option("--skip-existing", is_flag=True,
-              help="Leave files whose output exists alone (same config only).")
+              help="Leave files whose output exists alone (same config and models only).")
 @patterns
 @executors
 @common
@@ -328,11 +328,11 @@ def clean(inputs, outdir, config_path, reports, jobs, as_json, fps, allow_inside
           overwrite, skip_existing, include, exclude, scheduler, dask_workers):
     """Clean INPUT files or folders with a pipeline of cleaners.
 
-    Files an earlier run of the same config finished (recorded in the output folder's
-    mocapfix-manifest.jsonl, input unchanged) are skipped, so a killed run resumes; any
-    other output that exists already is an error unless --overwrite or --skip-existing is
-    given. Exit code 0 when every file was cleaned, 1 when some failed (the others are
-    still written), 2 for a usage or config error.
+    Files an earlier run of the same config and models finished (recorded in the output
+    folder's mocapfix-manifest.jsonl, input and its skeleton unchanged) are skipped, so
+    a killed run resumes; any other output that exists already is an error unless
+    --overwrite or --skip-existing is given. Exit code 0 when every file was cleaned, 1
+    when some failed (the others are still written), 2 for a usage or config error.
     """
     from pathlib import Path
 
@@ -360,7 +360,8 @@ def clean(inputs, outdir, config_path, reports, jobs, as_json, fps, allow_inside
             raise MocapfixError("no motion files found in " + ", ".join(inputs))
         config_file = Path(outdir) / "mocapfix-config.yaml"
         config_text = f"# effective config of this run (from {pipeline.source})\n" + pipeline.dump()
-        manifest = Manifest(outdir, run_key(config_text, kinds, {"fps": fps} if fps else None))
+        manifest = Manifest(outdir, run_key(config_text, kinds, {"fps": fps} if fps else None,
+                                            pipeline.model_files()))
         finished = set() if policy == "overwrite" else {j for j in jobs_list if manifest.finished(j)}
         # a folder where an output would go is not an earlier output: that file fails
         # ("cannot write: Is a directory"); --skip-existing skipped it as "output exists"
@@ -372,12 +373,17 @@ def clean(inputs, outdir, config_path, reports, jobs, as_json, fps, allow_inside
             raise MocapfixError(f"{len(existing)} output(s) exist already ({shown}); pass --overwrite "
                                 "to replace them or --skip-existing to keep them"
                                 + ("; the folder's manifest records them made with another config, "
-                                   "report kinds, --fps, version or input" if other else ""))
+                                   "model, report kinds, --fps, version, input or skeleton"
+                                   if other else ""))
         if policy == "skip" and existing and config_file.exists() and \
                 _config_body(config_file.read_text(encoding="utf-8")) != _config_body(config_text):
             raise MocapfixError(f"{config_file}: the outputs there were made with another config; "
                                 "--skip-existing would mix two configs in one folder (use --overwrite "
                                 "or another output folder)")
+        if policy == "skip" and any(manifest.made_with_other_models(j) for j in existing):
+            raise MocapfixError(f"{outdir}: the outputs there were made with other contents of the "
+                                "model file(s) this config reads; --skip-existing would mix two "
+                                "models in one folder (use --overwrite or another output folder)")
         # the folders this run makes (taken back if nothing runs)
         made = [p for p in (Path(outdir), *Path(outdir).parents) if not os.path.lexists(p)]
         if not dry_run:

@@ -1,22 +1,27 @@
 """The manifest of an output folder: what each input became, so a batch can resume.
 
 ``OUTDIR/mocapfix-manifest.jsonl`` is a journal, one JSON record per line, appended as each
-file finishes (one ``write`` of one line, then ``fsync``: a record is either whole or, after
-a crash mid-write, an unparsable last line that is ignored). The last record of an input
-and output wins (one file found through two given paths, ``clean in in/sub/x.bvh``, has two
-outputs and two records: keyed by the input alone, the second replaced the first and the
-re-run of the same command stopped on "output(s) exist already"). Fields: ``input`` (absolute path), ``input_sha256``, ``output`` and ``files``
-(relative to the output folder), ``status`` (``done``, ``failed``, or ``started`` — written
-for every file of a run before it begins), ``quality`` (OK/WARN/FAIL), ``config_sha256``
-(of the effective config text), ``reports``, ``read_options``, ``version`` (mocapfix),
-``time``; ``error`` for a failed file.
+file finishes (one ``write`` of one line, then ``fsync``: a record is either whole or,
+after a crash mid-write, an unparsable last line that is ignored). The last record of an
+input and output wins (one file found through two given paths, ``clean in in/sub/x.bvh``,
+has two outputs and two records: keyed by the input alone, the second replaced the first
+and the re-run of the same command stopped on "output(s) exist already"). Fields: ``input``
+(absolute path), ``input_sha256``, ``companions_sha256`` (``{path: sha256}`` of the other
+files read with the input: an AMC's ASF), ``output`` and ``files`` (relative to the output
+folder), ``status`` (``done``, ``failed``, or ``started`` — written for every file of a run
+before it begins), ``quality`` (OK/WARN/FAIL), ``config_sha256`` (of the effective config
+text), ``models_sha256`` (``{path: sha256}`` of the model files the pipeline may read),
+``reports``, ``read_options``, ``version`` (mocapfix), ``time``; ``error`` for a failed
+file.
 
-A file is *finished* when its last record is ``done`` with this run's config hash, report
-kinds, read options and mocapfix version, its input's sha256 is unchanged and its output
-files all exist. A re-run skips finished files; an output whose last record is ``started``
-under the same run key was written by an interrupted run of this same config (killed
-between writing and recording) and may be replaced without ``--overwrite``. At the end of a
-run the journal is rewritten (atomically) with one record per input and output.
+A file is *finished* when its last record is ``done`` with this run's config and model
+hashes, report kinds, read options and mocapfix version, the sha256 of its input and of the
+files read with it are unchanged and its output files all exist (a record written before a
+field existed lacks it, so its file is not finished). A re-run skips finished files; an
+output whose last record is ``started`` under the same run key was written by an
+interrupted run of this same config (killed between writing and recording) and may be
+replaced without ``--overwrite``. At the end of a run the journal is rewritten (atomically)
+with one record per input and output.
 """
 from __future__ import annotations
 
@@ -30,16 +35,40 @@ from mocapfix import __version__
 from mocapfix.fileio import atomic_write_text, file_sha256
 
 MANIFEST_NAME = "mocapfix-manifest.jsonl"
-_KEY_FIELDS = ("config_sha256", "reports", "read_options", "version")
+_KEY_FIELDS = ("config_sha256", "models_sha256", "reports", "read_options", "version")
+_INPUT_FIELDS = ("input_sha256", "companions_sha256")
 
 
-def run_key(config_text: str, reports, read_options: dict | None) -> dict:
-    """What determines a run's outputs besides the input: config, report kinds, read
-    options, mocapfix version."""
+def run_key(config_text: str, reports, read_options: dict | None, model_files=()) -> dict:
+    """What determines a run's outputs besides the input: config, the content of the model
+    files it reads (``model_files``, hashed here once per run: a model retrained at the
+    same path leaves the config text as it was), report kinds, read options, mocapfix
+    version."""
     body = "\n".join(line for line in config_text.splitlines() if not line.startswith("#"))
+    try:
+        models = {str(p): file_sha256(p) for p in model_files}
+    except OSError as exc:
+        from mocapfix.errors import ConfigError
+
+        raise ConfigError(f"{exc.filename}: cannot read the model file: {exc.strerror or exc}") from None
     return {"config_sha256": hashlib.sha256(body.encode("utf-8")).hexdigest(),
-            "reports": sorted(reports), "read_options": dict(sorted((read_options or {}).items())),
-            "version": __version__}
+            "models_sha256": models, "reports": sorted(reports),
+            "read_options": dict(sorted((read_options or {}).items())), "version": __version__}
+
+
+def input_identity(source) -> dict:
+    """The sha256 of ``source`` (``input_sha256``) and of every other file its reader reads
+    with it (``companions_sha256``: an AMC's ASF skeleton, which decides the output as much
+    as the AMC does). An OSError when one cannot be read."""
+    from mocapfix import formats
+    from mocapfix.errors import MocapfixError
+
+    try:
+        companions = formats.companion_files(source)
+    except MocapfixError:
+        companions = []                 # reading the input names the cause
+    return {"input_sha256": file_sha256(source),
+            "companions_sha256": {str(p): file_sha256(p) for p in companions}}
 
 
 class Manifest:
@@ -82,9 +111,18 @@ class Manifest:
         if not all((self.outdir / f).is_file() for f in files):
             return False
         try:
-            return file_sha256(job.source) == rec.get("input_sha256")
+            identity = input_identity(job.source)
         except OSError:
             return False
+        return all(rec.get(f) == identity[f] for f in _INPUT_FIELDS)
+
+    def made_with_other_models(self, job) -> bool:
+        """``job``'s output was recorded as made with this config but other model files
+        (retrained at the same path): an output ``--skip-existing`` must not keep as this
+        config's. A record without model hashes tells nothing."""
+        rec = self.records.get((str(job.source), self._rel(job.output)))
+        return (bool(rec) and rec.get("config_sha256") == self.key["config_sha256"]
+                and "models_sha256" in rec and rec["models_sha256"] != self.key["models_sha256"])
 
     def interrupted(self, job) -> bool:
         """``job`` was started by a run of this same config that did not record its end."""
@@ -143,8 +181,8 @@ class Manifest:
             rec.update(status="failed", error=result.get("error", ""))
         else:
             files = [*result.get("written", []), *result.get("reports", [])]
-            rec.update(status="done", quality=result["status"],
-                       input_sha256=result.get("input_sha256"), files=[self._rel(f) for f in files])
+            rec.update(status="done", quality=result["status"], files=[self._rel(f) for f in files],
+                       **{f: result.get(f) for f in _INPUT_FIELDS})
         self._append([rec])
 
     def close(self, compact: bool = True) -> None:

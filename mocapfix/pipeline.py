@@ -104,6 +104,11 @@ class Pipeline:
     def dump(self) -> str:
         return yaml.safe_dump(self.config(), sort_keys=False)
 
+    def model_files(self) -> list[Path]:
+        """Every model file the steps may read, each once, in step order."""
+        return list(dict.fromkeys(path for step in self.steps if isinstance(step.cleaner, FittedCleaner)
+                                  for path in step.cleaner.model_files()))
+
     def run(self, motion: Motion) -> tuple[Motion, list["StepRecord"]]:
         records = []
         for step in self.steps:

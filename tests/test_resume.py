@@ -14,9 +14,12 @@ from pathlib import Path
 
 from click.testing import CliRunner
 
-from conftest import SAMPLE_DATA, output_tree
+from conftest import SAMPLE_DATA, no_traceback, output_tree, shared
+from mocapfix import models
 from mocapfix.cli import main
-from mocapfix.manifest import MANIFEST_NAME
+from mocapfix.fileio import file_sha256
+from mocapfix.manifest import MANIFEST_NAME, run_key
+from mocapfix.pipeline import loads_config
 
 CFG = "pipeline:\n  - cleaner: spikes\n  - cleaner: fill\n    max_gap: 0.5 s\n  - cleaner: gaussian\n"
 
@@ -181,3 +184,119 @@ def test_a_rerun_takes_away_the_temporaries_a_killed_run_left(tmp_path):
     assert _run(src, "-o", out, "-c", cfg, "-q").exit_code == 0
     assert not any(p.exists() for p in stale)
     assert all(p.exists() for p in kept)
+
+
+def _subject(tmp_path) -> Path:
+    """A folder holding one CMU take and the skeleton it is read with."""
+    src = tmp_path / "tr"
+    src.mkdir()
+    for name in ("asfamc/13.asf", "asfamc/13_39.amc"):
+        shutil.copy(shared(name), src)
+    return src
+
+
+def _train_mssa(src: Path, model: Path, *options) -> None:
+    r = CliRunner().invoke(main, ["train-dictionary", str(src), "-o", str(model), "--method", "mssa",
+                                  *options])
+    assert r.exit_code == 0, r.output
+
+
+def test_a_model_retrained_at_the_same_path_is_not_finished(tmp_path):
+    # the run key hashed the config text alone, which names the model by path: after
+    # retraining the model there a re-run said "SKIP … finished earlier" and kept the
+    # output of the old model
+    src, model = _subject(tmp_path), tmp_path / "tr_model.npz"
+    cfg = tmp_path / "mssa.yaml"
+    cfg.write_text(f"version: 1\npipeline:\n  - cleaner: mssa\n    model: {model.name}\n")
+    out = tmp_path / "out"
+    amc = src / "13_39.amc"
+    _train_mssa(src, model)
+    assert _run(src, "-o", out, "-c", cfg, "-q").exit_code == 0
+    first_output, first = (out / "13_39.amc").read_bytes(), _records(out)[str(amc)]
+    r = _run(src, "-o", out, "-c", cfg)
+    assert r.exit_code == 0 and "finished earlier" in r.output, r.output   # same model: skipped
+
+    _train_mssa(src, model, "--window", "24", "--bases", "3")
+    r = _run(src, "-o", out, "-c", cfg)
+    assert r.exit_code == 2 and "finished earlier" not in r.output, r.output
+    assert "1 output(s) exist already" in r.output and "model" in r.output
+    # --skip-existing keeps outputs of this config only, and these are of another model
+    r = _run(src, "-o", out, "-c", cfg, "--skip-existing")
+    assert r.exit_code == 2 and "two models" in r.output, r.output
+    assert (out / "13_39.amc").read_bytes() == first_output
+    assert _run(src, "-o", out, "-c", cfg, "--overwrite", "-q").exit_code == 0
+    assert (out / "13_39.amc").read_bytes() != first_output
+    assert _records(out)[str(amc)]["models_sha256"] != first["models_sha256"]
+    assert "finished earlier" in _run(src, "-o", out, "-c", cfg).output
+
+
+def test_an_edited_skeleton_is_not_finished(tmp_path):
+    # an AMC's input hash covered the AMC alone: after the ASF it is read with was edited,
+    # a re-run skipped the take as finished, keeping its output and the old ASF beside it
+    src, cfg = _subject(tmp_path), _cfg(tmp_path)
+    out = tmp_path / "out"
+    assert _run(src, "-o", out, "-c", cfg, "-q").exit_code == 0
+    assert "finished earlier" in _run(src, "-o", out, "-c", cfg).output
+    asf = src / "13.asf"
+    text = asf.read_text()
+    assert "length 8.12393" in text                        # the left tibia
+    asf.write_text(text.replace("length 8.12393", "length 8.5"))
+    r = _run(src, "-o", out, "-c", cfg)
+    assert r.exit_code == 2 and "finished earlier" not in r.output, r.output
+    assert "1 output(s) exist already" in r.output and "skeleton" in r.output
+
+
+def test_a_skeleton_edited_while_its_take_is_cleaned_is_not_recorded_as_finished(tmp_path, monkeypatch):
+    import mocapfix.clean as clean_module
+
+    src, cfg = _subject(tmp_path), _cfg(tmp_path)
+    real = clean_module.clean_motion
+
+    def edit_the_skeleton_meanwhile(motion, pipeline):
+        with open(src / "13.asf", "a") as fh:
+            fh.write("# edited\n")
+        return real(motion, pipeline)
+
+    monkeypatch.setattr(clean_module, "clean_motion", edit_the_skeleton_meanwhile)
+    out = tmp_path / "out"
+    r = _run(src, "-o", out, "-c", cfg)
+    assert r.exit_code == 1, r.output
+    assert "a file read with it changed while it was being cleaned" in r.output
+    assert _records(out)[str(src / "13_39.amc")]["status"] == "failed"
+
+
+def test_a_manifest_without_model_and_skeleton_hashes_finishes_nothing(tmp_path):
+    # a manifest written before the run key held the models' and the input's companions'
+    # hashes cannot tell whether they changed: its files are redone, nothing crashes
+    src, model = _subject(tmp_path), tmp_path / "m.npz"
+    _train_mssa(src, model)
+    cfg = tmp_path / "mssa.yaml"
+    cfg.write_text(f"version: 1\npipeline:\n  - cleaner: mssa\n    model: {model}\n")
+    out = tmp_path / "out"
+    assert _run(src, "-o", out, "-c", cfg, "-q").exit_code == 0
+    path = out / MANIFEST_NAME
+    old = [{k: v for k, v in json.loads(line).items() if k not in ("models_sha256", "companions_sha256")}
+           for line in path.read_text().splitlines()]
+    path.write_text("".join(json.dumps(r) + "\n" for r in old))
+    r = _run(src, "-o", out, "-c", cfg)
+    no_traceback(r)
+    assert r.exit_code == 2 and "1 output(s) exist already" in r.output, r.output
+    r = _run(src, "-o", out, "-c", cfg, "--skip-existing")     # keeps it, as any output
+    no_traceback(r)
+    assert r.exit_code == 0 and "output exists" in r.output and "finished earlier" not in r.output
+    assert _run(src, "-o", out, "-c", cfg, "-q", "--overwrite").exit_code == 0
+    rec = _records(out)[str(src / "13_39.amc")]
+    assert rec["models_sha256"] == {str(model): file_sha256(model)}
+    assert rec["companions_sha256"] == {str(src / "13.asf"): file_sha256(src / "13.asf")}
+    assert "finished earlier" in _run(src, "-o", out, "-c", cfg).output
+
+
+def test_the_run_key_hashes_every_model_a_step_may_read():
+    # a step that names no model picks a shipped one per file: those count too
+    ships = models.shipped()
+    for step, names in (("cleaner: mssa", ["mssa-cmu"]), ("cleaner: mssa\n    model: self", []),
+                        ("cleaner: partlet_dictionary", ["partlet-cmu", "partlet-kinect"]),
+                        ("cleaner: mssa\n    model: mssa-cmu\n  - cleaner: mssa", ["mssa-cmu"])):
+        pipeline = loads_config(f"version: 1\npipeline:\n  - {step}\n")
+        key = run_key(pipeline.dump(), ["json"], None, pipeline.model_files())
+        assert key["models_sha256"] == {str(ships[n]): file_sha256(ships[n]) for n in names}, step

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any, ClassVar
 
 from mocapfix.errors import ConfigError
@@ -228,6 +229,10 @@ class FittedCleaner(Cleaner):
     fitted_attributes: ClassVar[tuple[str, ...]] = ()
     #: the parameter naming the model file, if the cleaner takes one
     model_param: ClassVar[str | None] = "model"
+    #: the shipped models the cleaner chooses from per file when no model is named
+    auto_models: ClassVar[tuple[str, ...]] = ()
+    #: the model file :meth:`resolve_models` loaded
+    _model_file: Path | None = None
 
     def fit(self, motions, progress=None) -> "FittedCleaner":
         """Learn the state from ``motions`` (a list of :class:`Motion`); returns self."""
@@ -254,6 +259,20 @@ class FittedCleaner(Cleaner):
         """What a model file records besides the state: the cleaner and its parameters."""
         return {"cleaner": self.name, "parameters": self.config()}
 
+    def model_files(self) -> list[Path]:
+        """The model files this step may read: the one its ``model`` parameter named, or
+        when none is named the shipped models it chooses from per file (:attr:`auto_models`).
+        Their content decides the outputs as much as the config does: a resumed batch
+        hashes them (:func:`mocapfix.manifest.run_key`)."""
+        from mocapfix import models
+
+        if self._model_file is not None:
+            return [self._model_file]
+        if self.is_fitted or self.values.get(self.model_param) is not None:
+            return []                   # state learned in memory, or mssa's ``model: self``
+        ships = models.shipped()
+        return [ships[name] for name in self.auto_models if name in ships]
+
     def resolve_models(self, base_dir=None) -> None:
         """Resolve the ``model`` parameter against ``base_dir`` (the config's folder) or the
         shipped models, read and check its header (a ConfigError naming the step if it is
@@ -271,6 +290,7 @@ class FittedCleaner(Cleaner):
                                      where=f"{self.step}: parameter '{self.model_param}'")
         if path.parent != models.SHIPPED_DIR:
             self.values[self.model_param] = str(path)   # absolute: workers need no config folder
+        self._model_file = path
         try:
             self.load_state(header, arrays)
         except (KeyError, ValueError, TypeError) as exc:

@@ -120,6 +120,7 @@ class MSSA(FittedCleaner):
         Param("window_step", "int", 4, "training: take every window_step-th window", low=1, high=1000),
     )
     fitted_attributes = ("bases_", "mean_", "layout_", "window_", "fps_", "space_")
+    auto_models = AUTO_MODELS
 
     def __init__(self, step=None, **values):
         super().__init__(step, **values)

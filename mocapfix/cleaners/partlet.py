@@ -297,6 +297,7 @@ class PartletDictionary(FittedCleaner):
         Param("seed", "int", 0, "training: random seed", low=0, high=2**31),
     )
     fitted_attributes = ("dictionary_", "template_", "joints_", "partlets_")
+    auto_models = tuple(name for _, name in AUTO_MODELS)
 
     def __init__(self, step=None, **values):
         super().__init__(step, **values)

@@ -2,8 +2,9 @@
 
 Each format module defines ``NAME``, ``SUFFIXES``, ``sniff(head: bytes) -> bool``,
 ``read(path, **options) -> Motion`` and ``write(motion, path, **options) -> list[Path]``
-(writers use :mod:`mocapfix.fileio` so outputs appear atomically). Modules are imported
-on first use so that ``mocapfix --help`` stays fast.
+(writers use :mod:`mocapfix.fileio` so outputs appear atomically); one whose reader reads
+other files besides the one named also defines ``companion_files(path) -> list[Path]``.
+Modules are imported on first use so that ``mocapfix --help`` stays fast.
 """
 from __future__ import annotations
 
@@ -95,6 +96,13 @@ def read(path, format: str | None = None, *, default_fps: float | None = None,
         motion.notes.append(f"--fps {float(default_fps):g} not used: the file stores its "
                             f"rate ({motion.fps:g} Hz)")
     return motion
+
+
+def companion_files(path) -> list[Path]:
+    """The files besides ``path`` that :func:`read` reads for it (an AMC's ASF skeleton);
+    an UnreadableFileError when ``path`` cannot be opened."""
+    find = getattr(module(detect(path)), "companion_files", None)
+    return find(Path(path)) if find is not None else []
 
 
 def _read_as(path: Path, name: str, options: dict) -> Motion:

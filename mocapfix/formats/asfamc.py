@@ -771,6 +771,17 @@ def write(motion: Motion, path, **options) -> list[Path]:
     return [path, _write_asf(asf_target, source)]
 
 
+def companion_files(path: Path) -> list[Path]:
+    """The ASF that :func:`read` reads with the AMC ``path`` (none for an ASF, or when none
+    is found: reading the AMC says so)."""
+    if path.suffix.lower() == ".asf":
+        return []
+    try:
+        return [find_asf(path)]
+    except (UnreadableFileError, OSError):
+        return []
+
+
 def skeleton_output(amc: Path, output: Path) -> tuple[Path, Path] | None:
     """(the ASF the AMC ``amc`` is read with, the copy of it written beside ``output``), or
     None when no ASF is found (reading the AMC will say so). For batch planning: two
