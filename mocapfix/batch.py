@@ -171,10 +171,17 @@ def _once(files: list, skipped: list, by_file: bool = False) -> tuple[list, list
     return kept, skipped
 
 
-def check_output_folder(outdir) -> Path:
+def check_output_folder(outdir, create: bool = True) -> Path:
     """Create ``outdir`` if needed and make sure files can be written there; a path that
-    runs through a file, or a folder we cannot write to, is a ConfigError."""
+    runs through a file, or a folder we cannot write to, is a ConfigError.
+
+    ``create=False`` (``clean --dry-run``) makes no folder: the nearest part of the path
+    that exists must be a folder taking new entries, tried the same way and refused with
+    the same messages, so a dry run refuses what the real run would."""
     outdir = Path(outdir)
+    if not create:
+        _check_future_folder(outdir)
+        return outdir
     try:
         outdir.mkdir(parents=True, exist_ok=True)
     except FileExistsError:
@@ -188,6 +195,21 @@ def check_output_folder(outdir) -> Path:
     except OSError as exc:
         raise ConfigError(f"{outdir}: cannot write to the output folder: {exc.strerror or exc}") from None
     return outdir
+
+
+def _check_future_folder(outdir: Path) -> None:
+    """:func:`check_output_folder` without creating ``outdir`` or its parents."""
+    folder = outdir
+    while not os.path.lexists(folder) and folder != folder.parent:
+        folder = folder.parent
+    if not folder.is_dir():
+        raise ConfigError(f"{outdir}: output folder is an existing file" if folder == outdir else
+                          f"{outdir}: cannot create the output folder: part of the path is a file")
+    try:
+        _probe_write(folder)
+    except OSError as exc:
+        what = "write to" if folder == outdir else "create"
+        raise ConfigError(f"{outdir}: cannot {what} the output folder: {exc.strerror or exc}") from None
 
 
 def _probe_write(folder) -> None:

@@ -316,7 +316,9 @@ def _clean_line(r: dict, verbose: bool) -> str:
 @click.option("--fps", type=FPS, default=None, help="Frame rate for files that store none (AMC).")
 @click.option("--allow-inside-input", is_flag=True,
               help="Allow the output folder to lie inside an input folder.")
-@click.option("--dry-run", is_flag=True, help="Say what would be cleaned and written; write nothing.")
+@click.option("--dry-run", is_flag=True,
+              help="Say what would be cleaned and written; write nothing. Refuses (exit 2) "
+                   "what the real run would refuse.")
 @click.option("--overwrite", is_flag=True,
               help="Replace outputs (and their reports) left by an earlier run.")
 @click.option("--skip-existing", is_flag=True,
@@ -367,7 +369,7 @@ def clean(inputs, outdir, config_path, reports, jobs, as_json, fps, allow_inside
         # ("cannot write: Is a directory"); --skip-existing skipped it as "output exists"
         existing = [j for j in jobs_list if _output_there(j) and j not in finished
                     and not manifest.interrupted(j)]
-        if existing and policy is None and not dry_run:
+        if existing and policy is None:
             shown = ", ".join(str(j.output) for j in existing[:3]) + (" …" if len(existing) > 3 else "")
             other = any(manifest.knows(j.source) for j in existing)
             raise MocapfixError(f"{len(existing)} output(s) exist already ({shown}); pass --overwrite "
@@ -386,11 +388,10 @@ def clean(inputs, outdir, config_path, reports, jobs, as_json, fps, allow_inside
                                 "models in one folder (use --overwrite or another output folder)")
         # the folders this run makes (taken back if nothing runs)
         made = [p for p in (Path(outdir), *Path(outdir).parents) if not os.path.lexists(p)]
-        if not dry_run:
-            check_output_folder(outdir)
-            if config_file.is_dir():
-                raise MocapfixError(f"{config_file}: is a folder; the run's config record "
-                                    "cannot be written there (move it away)")
+        check_output_folder(outdir, create=not dry_run)
+        if config_file.is_dir():
+            raise MocapfixError(f"{config_file}: is a folder; the run's config record "
+                                "cannot be written there (move it away)")
     except click.BadParameter as exc:
         _fail(str(exc), debug, exc)
     except MocapfixError as exc:

@@ -162,6 +162,75 @@ def test_dry_run_overwrite_policy_and_true_provenance(tmp_path):
     assert r.exit_code == 2 and "another config" in r.output
 
 
+def _error_lines(result) -> list:
+    return [line for line in result.output.splitlines() if line.startswith("mocapfix: error:")]
+
+
+def _tree(folder: Path) -> dict:
+    return {p: (p.stat().st_mtime_ns, p.read_bytes() if p.is_file() else None)
+            for p in sorted(folder.rglob("*"))}
+
+
+def test_dry_run_refuses_what_the_real_run_refuses(tmp_path, monkeypatch):
+    """The dry run said "WOULD ... (replaces the existing output)" with exit 0 where the
+    real run stops on an earlier output of a changed input, and "WOULD" for an output
+    folder the real run cannot write to: now both runs give the same error, exit 2, and
+    the dry run still writes nothing."""
+    src = _folder(tmp_path, BVH)
+    out = tmp_path / "out"
+    cfg = _cfg(tmp_path)
+    assert CliRunner().invoke(main, ["clean", str(src), "-o", str(out), "-c", cfg]).exit_code == 0
+    with open(src / BVH.name, "a") as fh:
+        fh.write("\n")                  # the input changed: its output is not "finished earlier"
+    before = _tree(out)
+    dry = CliRunner().invoke(main, ["clean", str(src), "-o", str(out), "-c", cfg, "--dry-run"])
+    real = CliRunner().invoke(main, ["clean", str(src), "-o", str(out), "-c", cfg])
+    assert dry.exit_code == real.exit_code == 2, dry.output
+    assert "WOULD" not in dry.output and "output(s) exist already" in dry.output
+    assert _error_lines(dry) == _error_lines(real)
+    assert _tree(out) == before
+
+    afile = tmp_path / "afile"
+    afile.write_text("x")
+    for target in (afile / "sub", afile / "sub" / "deeper"):
+        dry = CliRunner().invoke(main, ["clean", str(BVH), "-o", str(target), "-c", cfg, "--dry-run"])
+        real = CliRunner().invoke(main, ["clean", str(BVH), "-o", str(target), "-c", cfg])
+        assert dry.exit_code == real.exit_code == 2, dry.output
+        assert _error_lines(dry) == _error_lines(real) == [
+            f"mocapfix: error: {target}: cannot create the output folder: part of the path is a file"]
+
+    locked = tmp_path / "locked"
+    locked.mkdir()
+    if os.geteuid() == 0:               # root writes anywhere: refuse as the OS would
+        import tempfile
+
+        real_mkstemp = tempfile.mkstemp
+
+        def mkstemp(*args, dir=None, **kwargs):
+            if dir is not None and Path(dir) in (locked, locked.parent):
+                raise PermissionError(13, "Permission denied")
+            return real_mkstemp(*args, dir=dir, **kwargs)
+
+        monkeypatch.setattr(tempfile, "mkstemp", mkstemp)
+    else:
+        locked.chmod(0o500)
+        tmp_path.chmod(0o500)
+    try:
+        dry = CliRunner().invoke(main, ["clean", str(BVH), "-o", str(locked), "-c", cfg, "--dry-run"])
+        real = CliRunner().invoke(main, ["clean", str(BVH), "-o", str(locked), "-c", cfg])
+        assert dry.exit_code == real.exit_code == 2 and "WOULD" not in dry.output, dry.output
+        assert _error_lines(dry) == _error_lines(real) == [
+            f"mocapfix: error: {locked}: cannot write to the output folder: Permission denied"]
+        new = tmp_path / "new" / "out"      # to be made in a folder that takes no new entry
+        dry = CliRunner().invoke(main, ["clean", str(BVH), "-o", str(new), "-c", cfg, "--dry-run"])
+        assert dry.exit_code == 2 and _error_lines(dry) == [
+            f"mocapfix: error: {new}: cannot create the output folder: Permission denied"]
+        assert not (tmp_path / "new").exists() and not list(locked.iterdir())
+    finally:
+        tmp_path.chmod(0o755)
+        locked.chmod(0o755)
+
+
 def test_errors_name_the_file_and_the_parameter_line(tmp_path):
     cfg = _cfg(tmp_path, "pipeline:\n  - cleaner: butterworth\n    cutoff: 150 Hz\n", "nyq.yaml")
     r = CliRunner().invoke(main, ["clean", str(BVH), "-o", str(tmp_path / "o"), "-c", cfg])
