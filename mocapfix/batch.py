@@ -10,8 +10,9 @@ Discovery in folders skips, with a note: hidden files, our own reports and tempo
 files, files whose suffix is no motion format, ``.csv``/``.txt``/``.tsv`` files whose content
 is not motion data (Nexus/QTM exports, notes), special files (FIFOs, devices, sockets),
 broken links and symlink loops, folders that cannot be listed and links to folders (named:
-their files are not processed), and names filtered out by ``include``/``exclude`` patterns. Files named explicitly are always taken (and fail with a clear error if they
-cannot be read). Input trees are never written to.
+their files are not processed), and names filtered out by ``include``/``exclude``
+patterns (case-insensitive). Files named explicitly are always taken (and fail with a
+clear error if they cannot be read). Input trees are never written to.
 """
 from __future__ import annotations
 
@@ -96,8 +97,13 @@ def _looks_like_motion(path: Path) -> bool:
 
 
 def _matches(rel: str, patterns) -> bool:
+    """``rel`` (a path relative to its input folder, ``/``-separated) or its file name
+    matches one of the ``--include``/``--exclude`` globs, ignoring case on every OS: the
+    formats are told by suffix in any case, and ``*.c3d`` left out ``take.C3D``."""
+    rel = rel.lower()
     name = rel.rsplit("/", 1)[-1]
-    return any(fnmatch.fnmatch(rel, p) or fnmatch.fnmatch(name, p) for p in patterns)
+    return any(fnmatch.fnmatchcase(rel, p.lower()) or fnmatch.fnmatchcase(name, p.lower())
+               for p in patterns)
 
 
 def discover_inputs(inputs, include=(), exclude=(), sniff: bool = True,

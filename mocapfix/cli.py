@@ -154,9 +154,11 @@ def _discover(inputs, include, exclude, out: Out, once_per_file: bool = False):
 
 _pattern_options = [
     click.option("--include", multiple=True, metavar="GLOB",
-                 help="Only files (in folders) whose name or relative path matches; repeatable."),
+                 help="Only files (in folders) whose name or relative path matches, ignoring "
+                      "case ('*.c3d' takes take.C3D); repeatable."),
     click.option("--exclude", multiple=True, metavar="GLOB",
-                 help="Skip files (in folders) whose name or relative path matches; repeatable."),
+                 help="Skip files (in folders) whose name or relative path matches, ignoring "
+                      "case; repeatable."),
 ]
 
 

@@ -102,6 +102,26 @@ def test_non_motion_text_is_skipped_and_patterns_filter(tmp_path):
     assert (tmp_path / "x" / "walk_kinect_v2.csv").exists()
 
 
+def test_include_and_exclude_ignore_the_case_of_names(tmp_path):
+    """c3d.org's DEC sample is named ``.C3D``: format detection takes it, but ``--include
+    '*.c3d'`` passed it over ("not matched"), in clean, check and info alike, and
+    ``--exclude '*.C3D'`` kept ``walk_markers.c3d``."""
+    import json
+
+    src = _folder(tmp_path, C3D, KIN, shared("c3d/c3dorg_s02_DEC_INT.C3D"))
+    both = ["c3dorg_s02_DEC_INT.C3D", "walk_markers.c3d"]
+    r = CliRunner().invoke(main, ["info", str(src), "--json", "--include", "*.c3d"])
+    assert r.exit_code == 0, r.output
+    assert sorted(Path(row["path"]).name for row in json.loads(r.stdout)) == both
+    r = CliRunner().invoke(main, ["clean", str(src), "-o", str(tmp_path / "o"), "--dry-run",
+                                  "--json", "--include", "*.c3d"])
+    assert r.exit_code == 0, r.output
+    assert sorted(Path(f["input"]).name for f in json.loads(r.stdout)["files"]) == both
+    r = CliRunner().invoke(main, ["check", str(src), "--json", "--exclude", "*.C3D"])
+    assert [Path(f["name"]).name for f in json.loads(r.stdout)["files"]] == [KIN.name]
+    assert "SKIP  " + str(src / "c3dorg_s02_DEC_INT.C3D") + ": matched by --exclude" in r.output
+
+
 def test_presets_work_outside_the_repo(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     r = CliRunner().invoke(main, ["configs"])
