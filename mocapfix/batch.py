@@ -28,7 +28,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Iterator
 
-from mocapfix.errors import ConfigError, MocapfixError
+from mocapfix.errors import ConfigError, MocapfixError, name_the_file
 from mocapfix.fileio import is_stream
 from mocapfix.formats import MOTION_SUFFIXES, suffixes
 
@@ -352,11 +352,6 @@ def error_result(item, message: str) -> dict:
     if hasattr(item, "output"):
         out["output"] = str(item.output)
     return out
-
-
-def name_the_file(path, message: str) -> str:
-    """Per-file errors always name the file."""
-    return message if str(path) in message else f"{path}: {message}"
 
 
 def run_tasks(task: Callable, items: list, workers: int = 1,

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
-from mocapfix.errors import MocapfixError
+from mocapfix.errors import MocapfixError, name_the_file
 from mocapfix.rules import Finding, RuleSet
 
 EXIT_PASS, EXIT_FAILED, EXIT_USAGE, EXIT_UNREADABLE = 0, 1, 2, 3
@@ -86,8 +86,8 @@ class CheckTask:
                 pipeline = _pipeline(self.config, self.config_source or "<config>")
             result = check_motion(motion, self.rules, pipeline)
         except MocapfixError as exc:
-            text = str(exc) if str(path) in str(exc) else f"{path}: {exc}"
-            result = {"path": str(path), "status": "ERROR", "error": text, "findings": []}
+            result = {"path": str(path), "status": "ERROR", "error": name_the_file(path, exc),
+                      "findings": []}
         except Exception as exc:  # noqa: BLE001 — one bad file must not stop the batch
             from mocapfix.batch import internal_error
 

@@ -13,7 +13,7 @@ import sys
 import click
 
 from mocapfix import __version__
-from mocapfix.errors import MocapfixError, UnreadableFileError, one_line
+from mocapfix.errors import MocapfixError, UnreadableFileError, name_the_file, one_line
 
 EXIT_OK, EXIT_SOME_FAILED, EXIT_USAGE, EXIT_UNREADABLE = 0, 1, 2, 3
 
@@ -213,10 +213,8 @@ def info(inputs, as_json, fps, include, exclude):
             if debug:
                 raise
             failed += 1
-            from mocapfix.batch import name_the_file
-
-            message = str(exc) if isinstance(exc, MocapfixError) else \
-                name_the_file(f.path, f"internal error {type(exc).__name__}: {exc}")
+            message = name_the_file(f.path, exc if isinstance(exc, MocapfixError) else
+                                    f"internal error {type(exc).__name__}: {exc}")
             out.error(f"mocapfix: error: {one_line(message)}")
             summaries.append({"path": str(f.path), "error": message})
     if as_json:
@@ -292,7 +290,7 @@ def _parse_reports(value: str) -> tuple[str, ...]:
 
 def _clean_line(r: dict, verbose: bool) -> str:
     if r["status"] == "ERROR":
-        return f"ERROR {one_line(r['error'])}"
+        return f"ERROR {one_line(name_the_file(r['input'], r['error']))}"
     text = (f"{r['status']:<5} {one_line(r['input'])} -> {one_line(r['output'])} "
             f"(missing {100 * r['missing_before']:.1f} % -> {100 * r['missing_after']:.1f} %, "
             f"{r['seconds']:.2f} s)")

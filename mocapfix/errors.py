@@ -47,5 +47,14 @@ class ConfigError(MocapfixError):
     """A pipeline configuration or cleaner parameter is invalid."""
 
 
+def name_the_file(path, message) -> str:
+    """``message`` as a per-file error, ``<path>: <cause>``: every ``ERROR`` line starts
+    with the file it is about. A message that starts with the path is kept; one that only
+    mentions it further on (a cleaner's ``step 1 (...): ... (PATH: ...)``) gets it in front
+    as well, since a path in the middle of a line is easy to miss."""
+    message = str(message)
+    return message if message.startswith(str(path)) else f"{path}: {message}"
+
+
 def display_path(path) -> str:
     return str(Path(path))

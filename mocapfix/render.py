@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from mocapfix.errors import one_line
+from mocapfix.errors import name_the_file, one_line
 from mocapfix.gaps import runs
 from mocapfix.measure import LONG_FILL_S
 from mocapfix.rules import STATUS_ORDER
@@ -385,9 +385,8 @@ def check_line(result: dict, verbose: bool = False) -> str:
     """One line per file (more with ``verbose``): status, path, the worst findings; a line
     break in a file name or message is shown as ``\\n`` (it would split the file's line)."""
     status, path = result["status"], one_line(result["path"])
-    if status == "ERROR":                # the error names the file already (as clean's)
-        error = one_line(result["error"])
-        return f"ERROR {error}" if error.startswith(str(path)) else f"ERROR {path}: {error}"
+    if status == "ERROR":
+        return f"ERROR {one_line(name_the_file(result['path'], result['error']))}"
     findings = result.get("findings", [])
     worst = [f for f in findings if f["level"] == status] or findings
     head = f"{status:<5} {path}"

@@ -19,7 +19,7 @@ from pathlib import Path
 from mocapfix import formats, models
 from mocapfix.cleaners import build
 from mocapfix.cleaners.base import FittedCleaner
-from mocapfix.errors import MocapfixError, UnreadableFileError
+from mocapfix.errors import MocapfixError, UnreadableFileError, name_the_file
 
 #: --method → (cleaner, parameters that choose its training algorithm)
 METHODS: dict[str, tuple[str, dict]] = {
@@ -74,8 +74,7 @@ def read_all(paths, jobs: int = 1, fps: float | None = None, progress=None, spec
     out: list = [None] * len(paths)
     for done, (n, motion) in enumerate(run_tasks(ReadTask(fps), list(paths), jobs, spec=spec), 1):
         if isinstance(motion, dict):
-            message = (motion["error"] if str(paths[n]) in motion["error"]
-                       else f"{paths[n]}: {motion['error']}")
+            message = name_the_file(paths[n], motion["error"])
             if unread is None:
                 raise MocapfixError(message)
             unread.append({"path": str(paths[n]), "error": message,

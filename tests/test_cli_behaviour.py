@@ -263,6 +263,35 @@ def test_errors_name_the_file_and_the_parameter_line(tmp_path):
     assert r.exit_code == 2 and "line 5" in r.output and "max_gapp" in r.output
 
 
+def test_every_error_line_starts_with_the_input_path(tmp_path):
+    """A message that named the file only in its middle was printed as it came:
+    ``ERROR step 1 (partlet_dictionary): no partlet model for this skeleton (/in/x.c3d:
+    joints ...)`` (a marker set has no shipped model). Every per-file ERROR line reads
+    ``ERROR <input path>: <cause>``, in the text and in the JSON, also when the cause
+    names another file (a report that cannot be written)."""
+    import json
+
+    src = _folder(tmp_path, C3D)
+    take = src / C3D.name
+    cfg = _cfg(tmp_path, "pipeline:\n  - cleaner: partlet_dictionary\n", "partlet.yaml")
+    r = CliRunner().invoke(main, ["clean", str(take), "-o", str(tmp_path / "o"), "-c", cfg])
+    assert r.exit_code == 1, r.output
+    errors = [ln for ln in r.output.splitlines() if ln.startswith("ERROR")]
+    assert errors == [f"ERROR {take}: step 1 (partlet_dictionary): no partlet model for this "
+                      "skeleton (joints HIPS, CHEST, HEAD, HEADTOP, LEFTSHOULDER, LEFTELBOW…); "
+                      "train one with `mocapfix train-dictionary` and "
+                      "name it with `model:` in the config"]
+    r = CliRunner().invoke(main, ["clean", str(take), "-o", str(tmp_path / "j"), "-c", cfg, "--json"])
+    assert json.loads(r.stdout)["files"][0]["error"] == errors[0][len("ERROR "):]
+
+    out = tmp_path / "out"
+    (out / f"{C3D.name}.report.json").mkdir(parents=True)
+    r = CliRunner().invoke(main, ["clean", str(take), "-o", str(out), "-c", _cfg(tmp_path)])
+    assert r.exit_code == 1, r.output
+    errors = [ln for ln in r.output.splitlines() if ln.startswith("ERROR")]
+    assert errors == [f"ERROR {take}: {out / C3D.name}.report.json: cannot write: Is a directory"]
+
+
 def test_bare_numbers_for_physical_parameters_warn(tmp_path):
     cfg = _cfg(tmp_path, "pipeline:\n  - cleaner: fill\n    max_gap: 50\n", "bare.yaml")
     r = CliRunner().invoke(main, ["clean", str(BVH), "-o", str(tmp_path / "o"), "-c", cfg])

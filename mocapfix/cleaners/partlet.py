@@ -589,7 +589,7 @@ class PartletDictionary(FittedCleaner):
                 header, arrays = models.load(models.shipped()[name], cleaner=self.name)
                 return self.with_state(header, arrays)
         raise ConfigError(
-            f"{self.step}: no partlet model for this skeleton ({motion.path or 'motion'}: joints "
+            f"{motion.path or 'motion'}: {self.step}: no partlet model for this skeleton (joints "
             f"{', '.join(motion.names[:6])}…); train one with `mocapfix train-dictionary` and name it "
             f"with `model:` in the config")
 
@@ -599,8 +599,8 @@ class PartletDictionary(FittedCleaner):
             return self._shipped_for(motion)._apply(motion)
         idx = self._map_joints(motion.names)
         if (idx[self.frame_] < 0).sum() > len(self.frame_) - 3:
-            raise ConfigError(f"{self.step}: the model's torso joints are not in "
-                              f"{motion.path or 'this motion'}; train a model for this skeleton")
+            raise ConfigError(f"{motion.path or 'motion'}: {self.step}: the model's torso joints are "
+                              "not in this file; train a model for this skeleton")
         T = motion.n_frames
         coding = self.values["coding"] if self.values["coding"] != "auto" else (
             "ksvd" if self.method_ == "ksvd" else "robust")
