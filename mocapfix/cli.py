@@ -36,9 +36,9 @@ def _fail(message: str, debug: bool, exc: BaseException | None = None, code: int
 
 
 class Out:
-    """Where a command's lines go, by verbosity: ``-q`` errors and the summary only,
-    default one line per file, ``-v`` details. Lines are flushed as written, so a batch
-    streams off a terminal too."""
+    """Where a command's lines go, by verbosity: ``-q`` only the lines of level -1 (errors,
+    ``check``'s FAILs, the summary), default one line per file, ``-v`` details. Lines are
+    flushed as written, so a batch streams off a terminal too."""
 
     def __init__(self, verbosity: int, err: bool = False):
         self.verbosity, self.err = verbosity, err
@@ -53,10 +53,14 @@ class Out:
         sys.stderr.flush()
 
 
-def common(fn):
-    """-q/-v/--debug on a command (``--debug`` also works before the command)."""
+def common(fn=None, *, quiet_help: str = "Only errors and the summary."):
+    """-q/-v/--debug on a command (``--debug`` also works before the command).
+    ``@common(quiet_help=...)`` says what -q keeps where that is more than the errors
+    (``check``: its FAIL lines, which a CI log must show)."""
+    if fn is None:
+        return functools.partial(common, quiet_help=quiet_help)
 
-    @click.option("-q", "--quiet", "quiet", is_flag=True, help="Only errors and the summary.")
+    @click.option("-q", "--quiet", "quiet", is_flag=True, help=quiet_help)
     @click.option("-v", "--verbose", "verbose", count=True, help="More detail (reasons, notes).")
     @click.option("--debug", "debug_here", is_flag=True, help="Show tracebacks instead of one-line errors.")
     @click.pass_context
@@ -496,7 +500,7 @@ def _config_body(text: str) -> str:
 @click.option("--fps", type=FPS, default=None, help="Frame rate for files that store none (AMC).")
 @patterns
 @executors
-@common
+@common(quiet_help="Only FAIL and ERROR lines and the summary.")
 def check(inputs, rules_path, junit_path, as_json, fail_on, exit_zero, would_clean, jobs, fps,
           include, exclude, scheduler, dask_workers):
     """Check INPUT files or folders against quality rules without changing anything.

@@ -15,7 +15,7 @@ from click.testing import CliRunner
 from mocapfix.cli import main
 from mocapfix.formats import MOTION_SUFFIXES, write
 from mocapfix.motion import Motion
-from conftest import DATA, SAMPLE_DATA, need
+from conftest import DATA, SAMPLE_DATA, need, shared
 
 
 def _tree(folder):
@@ -120,6 +120,30 @@ def test_a_would_clean_pipeline_that_cannot_clean_a_file_fails_it_not_errors(tmp
     assert isinstance(cases["in/walk.c3d"].result[0], junitparser.Failure)
     r = CliRunner().invoke(main, ["check", str(src / "walk.c3d"), "-v", "--would-clean", str(cfg)])
     assert r.exit_code == 1 and "FAIL" in r.output and "cannot clean this file" in r.output, r.output
+
+
+def test_quiet_keeps_the_fail_and_error_lines_a_ci_log_needs(tmp_path):
+    """``check -q`` prints the FAIL and ERROR lines and the summary, not OK, WARN or SKIP
+    lines; its --help said "Only errors and the summary", as for the other commands."""
+    src = tmp_path / "in"
+    src.mkdir()
+    shutil.copy(shared("c3d/c3dorg_s06_MACsample.c3d"), src)     # 8 markers never seen: FAIL
+    shutil.copy(SAMPLE_DATA / "walk.bvh", src)                      # WARN
+    (src / "broken.c3d").write_bytes(b"x")                          # ERROR
+    (src / "notes.txt").write_text("subject 3, second session\n")  # not motion: a note
+    shutil.copy(SAMPLE_DATA / "walk.bvh", src / "old_walk.bvh")     # excluded: a SKIP line
+    args = ["check", str(src), "--exclude", "old_*"]
+    r = CliRunner().invoke(main, args)
+    assert sorted(line.split()[0] for line in r.output.splitlines()) == [
+        "ERROR", "FAIL", "SKIP", "WARN", "checked", "note:"], r.output
+    r = CliRunner().invoke(main, [*args, "-q"])
+    assert r.exit_code == 3
+    lines = r.output.splitlines()
+    assert lines[0].startswith(f"ERROR {src / 'broken.c3d'}: ")
+    assert lines[1].startswith(f"FAIL  {src / 'c3dorg_s06_MACsample.c3d'}  (")
+    assert lines[2:] == ["checked 3 files: 0 OK, 1 WARN, 1 FAIL, 1 ERROR"]
+    help_text = " ".join(CliRunner().invoke(main, ["check", "--help"]).output.split())
+    assert "-q, --quiet Only FAIL and ERROR lines and the summary." in help_text
 
 
 def test_junit_error_for_unreadable_and_would_clean(tmp_path):
