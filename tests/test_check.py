@@ -186,3 +186,28 @@ def test_frames_where_no_marker_is_seen_at_the_ends_are_not_graded():
     r = CliRunner().invoke(main, ["check", str(gait), str(opti)])
     assert r.exit_code == 0, r.output
     assert [line.split()[0] for line in r.output.splitlines()[:2]] == ["OK", "OK"], r.output
+
+
+def test_a_worker_that_dies_is_an_error_line_naming_its_file(tmp_path, monkeypatch):
+    """``check -j 2``: a worker process killed while it checks a file (out of memory, a
+    crash in a native library) gives that file an ERROR line naming it and exit 3; the
+    record the pool returns for it names the file under another key, and the line
+    builder stopped the run with an internal error."""
+    import os
+    import mocapfix.check as check_module
+
+    for name in ("a.c3d", "b.c3d"):
+        shutil.copy(SAMPLE_DATA / "walk_markers.c3d", tmp_path / name)
+    real = check_module.check_motion
+
+    def dies_on_b(motion, *args, **kwargs):
+        if motion.path.endswith("b.c3d"):
+            os._exit(9)
+        return real(motion, *args, **kwargs)
+
+    monkeypatch.setattr(check_module, "check_motion", dies_on_b)
+    res = CliRunner().invoke(main, ["check", str(tmp_path), "-j", "2", "--json"])
+    assert res.exit_code == 3, res.output
+    lines = [ln for ln in res.stderr.splitlines() if ln.startswith("ERROR")]
+    assert lines and all(str(tmp_path) in ln and "worker failed" in ln for ln in lines)
+    assert "internal error" not in res.output + res.stderr
