@@ -152,8 +152,8 @@ def to_markdown(report: dict) -> str:
            f"- file: {f['path']}",
            f"- missing before: {_pct(f['missing_before'])}, after: {_pct(f['missing_after'])}",
            f"- samples filled: {f['samples_filled']}, flagged as outliers: {f['samples_flagged']}",
-           f"- gaps before: {f['gaps_before']}, after: {f.get('gaps_after', '–')} (of the "
-           f"input's, not wholly filled: {f['gaps_unfilled']}), "
+           f"- gaps before: {f['gaps_before']}, after: {f.get('gaps_after', '–')} (input gaps "
+           f"not wholly filled: {f['gaps_unfilled']}), "
            f"long fills (> {LONG_FILL_S:g} s): {f.get('long_fills', 0)}",
            f"- joints OK / WARN / FAIL: {f['joints_by_status']['OK']} / "
            f"{f['joints_by_status']['WARN']} / {f['joints_by_status']['FAIL']}"
