@@ -543,9 +543,9 @@ def check(inputs, rules_path, junit_path, as_json, fail_on, exit_zero, would_cle
     results: list = [None] * len(found.files)
     try:
         for n, r in run_tasks(task, [f.path for f in found.files], jobs, spec=spec):
-            # a worker that died returns the pool's error record, which names the "input"
-            r.setdefault("path", r.pop("input", str(found.files[n].path)))
-            r.setdefault("findings", [])
+            if "path" not in r:         # a worker that died: the pool's error record
+                r["path"] = r.pop("input", str(found.files[n].path))
+                r.setdefault("findings", [])
             r["name"] = names[n]
             results[n] = r
             level = -1 if r["status"] in ("FAIL", "ERROR") else 0

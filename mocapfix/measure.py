@@ -236,10 +236,7 @@ def measure_input(motion: Motion, *, swaps: bool = True, outliers: bool = True) 
     }
     if not marker.all():
         file["points_not_cleaned"] = int((~marker).sum())
-    outside = _outside_take(span, T)
-    if outside:
-        file["frames_outside_take"] = outside
-        file["notes"].append(_outside_note(outside, T))
+    _mark_outside_take(file, span, T)
     if motion.confidence is not None and motion.confidence.size:
         conf = motion.confidence
         file["tracking"] = {
@@ -329,15 +326,15 @@ def _empty_frames(missing: np.ndarray, observed: np.ndarray) -> list[list[int]]:
     return [[int(s), int(n)] for s, n in zip(start, length)]
 
 
-def _outside_note(outside: list[list[int]], T: int) -> str:
-    where = " and ".join(f"{n} at the {'start' if a == 0 else 'end'}" for a, n in outside)
-    return (f"frames where no point is seen: {where} (of {T}); outside the take, not "
-            "graded")
-
-
-def _outside_take(span: slice, T: int) -> list[list[int]]:
-    """``[start, length]`` of the frames before and after ``span``."""
-    return [[a, b - a] for a, b in ((0, span.start), (span.stop, T)) if b > a]
+def _mark_outside_take(file: dict, span: slice, T: int) -> None:
+    """Record in the file figures which frames lie before and after the take ``span``
+    (``frames_outside_take``: ``[start, length]``), with a note; nothing when none do."""
+    outside = [[a, b - a] for a, b in ((0, span.start), (span.stop, T)) if b > a]
+    if outside:
+        where = " and ".join(f"{n} at the {'start' if a == 0 else 'end'}" for a, n in outside)
+        file["frames_outside_take"] = outside
+        file["notes"].append(f"frames where no point is seen: {where} (of {T}); outside the "
+                             "take, not graded")
 
 
 def measure_cleaning(result: CleanResult) -> dict:
@@ -452,10 +449,7 @@ def measure_cleaning(result: CleanResult) -> dict:
         "seconds": finite(result.seconds),
         "notes": list(before.notes) + [n for n in after.notes if n not in before.notes],
     }
-    outside = _outside_take(span, T)
-    if outside:
-        file["frames_outside_take"] = outside
-        file["notes"].append(_outside_note(outside, T))
+    _mark_outside_take(file, span, T)
     steps = [{"step": r.step, "cleaner": r.cleaner, "seconds": finite(r.seconds),
               "filled": int(r.filled.sum()), "flagged": int(r.outliers.sum()),
               "moved_mean_mm": finite(np.mean(r.moved) * mm) if r.moved.size else 0.0,

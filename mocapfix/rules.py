@@ -561,6 +561,9 @@ REPORT_KEYS = {
     "warn_bone_variation": ("bone_variation_after", "warn"),
     "fail_bone_variation": ("bone_variation_after", "fail"),
 }
+#: (warn key, fail key) of each metric of the ``report:`` section
+_REPORT_PAIRS = [(w, f) for w, (mw, lw) in REPORT_KEYS.items() if lw == "warn"
+                 for f, (mf, lf) in REPORT_KEYS.items() if lf == "fail" and mf == mw]
 DEFAULT_THRESHOLDS = {
     "warn_missing_after": 0.0,      # any sample still missing → WARN
     "fail_missing_after": 0.10,     # more than 10 % still missing → FAIL
@@ -623,9 +626,7 @@ def validate_report_section(data, source: str) -> dict:
             raise ConfigError(f"{where}: {key} is a fraction in [0, 1], got {value!r}")
         out[key] = float(value)
     merged = {**DEFAULT_THRESHOLDS, **out}
-    for metric in {m for m, _ in REPORT_KEYS.values()}:
-        warn_key, fail_key = (next(k for k, v in REPORT_KEYS.items() if v == (metric, lvl))
-                              for lvl in ("warn", "fail"))
+    for warn_key, fail_key in _REPORT_PAIRS:
         if warn_key in merged and fail_key in merged and merged[warn_key] > merged[fail_key]:
             given = [k for k in (warn_key, fail_key) if k in out]
             raise ConfigError(

@@ -428,7 +428,9 @@ class PMA(Cleaner):
         empty frames at the end of an export) gets no members, and its validation windows
         are cut but not filled — the members fitted for them were thrown away
         (btk_mocap36_optitrack, whose 36 gaps are its last 229 frames with no marker at
-        all: 4.9 → 0.05 s); the other gaps' windows and fills stay as they were."""
+        all: 4.9 → 0.05 s, measured on the whole file; the pipeline now runs steps on the
+        take, so in a clean this is the case of a whole-body dropout inside it); the other
+        gaps' windows and fills stay as they were."""
         pos = motion.positions
         windows = self._validation_windows(observed, gaps, copies)
         keep = np.ones(len(gaps), bool)

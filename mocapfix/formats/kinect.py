@@ -420,14 +420,14 @@ def _mend_lone_times(times: np.ndarray, notes: list[str]) -> np.ndarray:
     positive = dt[dt > 0]
     if len(times) < 3 or not len(positive):
         return times - times[0] if len(times) else times
-    limit = LONE_TIME_FACTOR * float(np.median(positive))
+    median = float(np.median(positive))
+    limit = LONE_TIME_FACTOR * median
     t = times.copy()
     inner = np.arange(1, len(t) - 1)
     before, after = t[inner - 1], t[inner + 1]
     out = np.maximum(before - t[inner], t[inner] - after)
     lone = inner[(out > limit) & (after >= before)]
     t[lone] = (t[lone - 1] + t[lone + 1]) / 2
-    median = float(np.median(positive))
     ends = []
     if abs(t[1] - t[0]) > limit and 0 < t[2] - t[1] <= limit:
         t[0] = t[1] - median
@@ -444,15 +444,18 @@ def _mend_lone_times(times: np.ndarray, notes: list[str]) -> np.ndarray:
     return t - t[0]
 
 
-def _timing(times: np.ndarray, notes: list[str], unit_label="frame") -> float:
-    """fps from the median positive interval; dropped/repeated/backward frames noted."""
+def _timing(raw: np.ndarray, notes: list[str], unit_label="frame") -> tuple[np.ndarray, float]:
+    """(the time axis, seconds from the first row, fps): lone corrupt stamps mended
+    (:func:`_mend_lone_times`), fps from the median positive interval,
+    dropped/repeated/backward frames noted. ``raw``: seconds from any origin."""
+    times = _mend_lone_times(raw, notes)
     if len(times) < 2:
-        return float("nan")
+        return times, float("nan")
     dt = np.diff(times)
     positive = dt[dt > 0]
     if not len(positive):
         notes.append("all rows have the same time stamp; rate unknown")
-        return float("nan")
+        return times, float("nan")
     median = float(np.median(positive))
     gaps = dt > GAP_FACTOR * median
     if gaps.any():
@@ -464,7 +467,7 @@ def _timing(times: np.ndarray, notes: list[str], unit_label="frame") -> float:
     backward = int(np.sum(dt < 0))
     if backward:
         notes.append(f"{backward} backward time steps (rows out of time order)")
-    return 1.0 / median
+    return times, 1.0 / median
 
 
 def _state_confidence(states: np.ndarray, missing: np.ndarray) -> np.ndarray:
@@ -496,8 +499,7 @@ def _read_kinect_csv(path, lines, idx, notes, layout, fps, units) -> _Parsed:
         raise UnreadableFileError(path, "timestamp is not a number", line=idx[t] + 1)
     coords = block[..., :3]
     missing = (states == 0) | _nonfinite_missing(coords, notes)
-    times = _mend_lone_times((ticks - np.median(ticks)) * 1e-7, notes)
-    file_fps = _timing(times, notes)
+    times, file_fps = _timing((ticks - np.median(ticks)) * 1e-7, notes)
     T = len(rows)
     j = np.arange(n)
     return _Parsed(
@@ -540,8 +542,8 @@ def _read_utkinect(path, lines, idx, notes, layout, fps, units) -> _Parsed:
         notes.append(f"frame index (30 Hz camera frames) runs {index[0]:.0f}-{index[-1]:.0f}: "
                      f"{int(np.sum(jumps > 1))} jumps > 1 (largest {jumps.max():.0f}), "
                      f"{int(np.sum(jumps == 0))} repeated indices")
-    times = _mend_lone_times((index - np.median(index)) / UTKINECT_FPS, notes)
-    file_fps = _timing(times, notes, unit_label="frame index")
+    times, file_fps = _timing((index - np.median(index)) / UTKINECT_FPS, notes,
+                              unit_label="frame index")
     T = len(rows)
     j = np.arange(n)
     return _Parsed(
@@ -650,7 +652,7 @@ def _time_kind(name: str) -> str:
 
 
 def _times_from_column(values: np.ndarray, kind: str, fps: float | None, notes) -> np.ndarray:
-    """Seconds from an arbitrary origin (:func:`_mend_lone_times` puts the first row at 0):
+    """Seconds from an arbitrary origin (:func:`_timing` puts the first row at 0):
     relative to the median stamp, so one corrupt stamp (1e23) costs no precision."""
     rel = values - np.median(values)
     if kind == "frame":
@@ -800,8 +802,7 @@ def _wide_times(rows, idx, time_col, fps, path, notes):
     if not np.isfinite(values).all():
         k = int(np.nonzero(~np.isfinite(values))[0][0])
         raise UnreadableFileError(path, "empty or non-numeric time/frame value", line=idx[k] + 1)
-    times = _mend_lone_times(_times_from_column(values, kind, fps, notes), notes)
-    file_fps = _timing(times, notes)
+    times, file_fps = _timing(_times_from_column(values, kind, fps, notes), notes)
     return times, _or_default(file_fps, fps or DEFAULT_FPS, notes)
 
 
@@ -890,8 +891,8 @@ def _read_long(path, lines, idx, notes, layout, fps, units) -> _Parsed:
     unit = _guess_units(coords, missing, skeleton, _long_unit_tags(columns, roles), units,
                         notes, path)
     kind = "frame" if "frame" in roles else _time_kind(columns[key_col])
-    times = _mend_lone_times(_times_from_column(frame_keys, kind, fps, notes), notes)
-    file_fps = _or_default(_timing(times, notes), fps or DEFAULT_FPS, notes)
+    times, file_fps = _timing(_times_from_column(frame_keys, kind, fps, notes), notes)
+    file_fps = _or_default(file_fps, fps or DEFAULT_FPS, notes)
     last_line = np.full(T, -1, dtype=np.intp)
     np.maximum.at(last_line, frame_of_row, np.asarray(data_idx))
     _, first_row = np.unique(keys, return_index=True)
