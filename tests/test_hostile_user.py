@@ -906,6 +906,24 @@ def test_a_file_named_again_inside_its_folder_is_cleaned_once(tmp_path):
 
 
 
+def _release_reader(fifo):
+    """Let a thread blocked opening ``fifo`` to read go on (EOF), never blocking here: a
+    blocking open for writing hung the test when the reader had just finished."""
+    try:
+        os.close(os.open(fifo, os.O_WRONLY | os.O_NONBLOCK))
+    except OSError:                 # ENXIO: nobody is reading (any more)
+        pass
+
+
+def _release_writer(fifo):
+    """Let a thread blocked opening ``fifo`` to write go on and drain what it writes,
+    never blocking here (with no writer left the read ends at once, on EOF)."""
+    fd = os.open(fifo, os.O_RDONLY | os.O_NONBLOCK)
+    os.set_blocking(fd, True)
+    with os.fdopen(fd, "rb") as fh:
+        fh.read()
+
+
 def test_junit_into_a_pipe_is_written_into_it_not_replaced(tmp_path):
     # `--junit /dev/null` or `--junit /dev/stdout` in a CI container run as root replaced
     # the device (the link) with a regular XML file: the temporary-then-rename of an
@@ -917,8 +935,7 @@ def test_junit_into_a_pipe_is_written_into_it_not_replaced(tmp_path):
     reader.start()
     r = CliRunner().invoke(main, ["check", str(KIN), "--junit", str(fifo), "-q"])
     if reader.is_alive():           # without the fix nobody opens the pipe to write
-        with open(fifo, "wb"):
-            pass
+        _release_reader(fifo)
     reader.join(10)
     no_traceback(r)
     assert r.exit_code in (0, 1), r.output
@@ -976,7 +993,7 @@ def test_config_from_a_pipe_is_read(tmp_path):
     writer.start()
     r = CliRunner().invoke(main, ["clean", str(KIN), "-o", str(tmp_path / "out"), "-c", str(fifo)])
     if writer.is_alive():           # without the fix nobody opens the pipe to read
-        fifo.read_bytes()
+        _release_writer(fifo)
     writer.join(10)
     no_traceback(r)
     assert r.exit_code == 0, r.output
