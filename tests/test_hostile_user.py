@@ -321,6 +321,39 @@ def test_two_amcs_never_share_an_output_skeleton_they_do_not_have_in_common(tmp_
     assert _md5s(y.parent) == {k: v for k, v in before.items() if k.parent == y.parent}
 
 
+def test_an_edited_asf_is_written_over_its_old_copy_that_only_this_amc_uses(tmp_path):
+    # x_01 cleaned, then its ASF edited (longer bones) and x_01 cleaned again with
+    # --overwrite: the run stopped on "out/walker.asf holds another ASF, which other AMC
+    # files there use", though the only AMC there was x_01's own earlier output
+    import re
+
+    from mocapfix import formats
+
+    x, _ = _two_subjects(tmp_path)
+    cfg = _cfg(tmp_path, "version: 1\npipeline: []\n", "none.yaml")
+    out = tmp_path / "out"
+    assert CliRunner().invoke(main, ["clean", str(x), "-o", str(out), "-c", cfg]).exit_code == 0
+    asf = x.parent / "walker.asf"
+    asf.write_text(re.sub(r"(length\s+)([0-9.]+)",
+                          lambda m: f"{m.group(1)}{1.2 * float(m.group(2)):.4f}", asf.read_text()))
+    r = CliRunner().invoke(main, ["clean", str(x), "-o", str(out), "-c", cfg, "--overwrite"])
+    no_traceback(r)
+    assert r.exit_code == 0, r.output
+    assert (out / "walker.asf").read_bytes() == asf.read_bytes()
+    assert abs(formats.read(out / x.name).positions - formats.read(x).positions).max() < 1e-6
+    # another AMC there read with the old copy: still refused, and named
+    shutil.copy(x, x.parent / "x_02.amc")
+    assert CliRunner().invoke(main, ["clean", str(x.parent / "x_02.amc"), "-o", str(out),
+                                     "-c", cfg]).exit_code == 0
+    asf.write_text(re.sub(r"(length\s+)([0-9.]+)",
+                          lambda m: f"{m.group(1)}{1.1 * float(m.group(2)):.4f}", asf.read_text()))
+    kept = (out / "walker.asf").read_bytes()
+    r = CliRunner().invoke(main, ["clean", str(x), "-o", str(out), "-c", cfg, "--overwrite"])
+    no_traceback(r)
+    assert r.exit_code == 1 and "holds another ASF" in r.output and "x_02.amc" in r.output, r.output
+    assert (out / "walker.asf").read_bytes() == kept
+
+
 def test_an_unforeseen_failure_is_one_line_and_the_other_files_go_on(tmp_path, monkeypatch):
     # info caught only mocapfix's own errors: anything else in one file (a bug, an OS
     # error) ended the run with a traceback and the files after it were never shown; any

@@ -797,15 +797,41 @@ def _refuse_other_skeleton(target: Path, source: AsfAmcSource, amc: Path) -> Non
     """An ASF of the same name already beside the output with other content belongs to
     other AMCs there (an earlier file of the batch from another folder, an earlier run):
     replacing it would pair them with the wrong skeleton, keeping it would pair this AMC
-    with the wrong one. Refused before anything is written."""
+    with the wrong one. Refused before anything is written. When no AMC there but ``amc``
+    itself is read with it (the output of an earlier run of this file, re-cleaned after
+    its ASF was edited), it is replaced."""
     try:
         if not target.exists() or target.read_bytes() == source.asf_bytes:
             return
     except OSError:
         return                      # unreadable or not a file: writing it reports the cause
+    users = _amcs_read_with(target, besides=amc)
+    if users == []:
+        return
+    shown = "" if users is None else " (" + ", ".join(p.name for p in users[:3]) + (
+        f" and {len(users) - 3} more" if len(users) > 3 else "") + ")"
     raise WriteError(amc, f"its skeleton cannot be written: {target} holds another ASF "
-                          f"(not {source.asf_path}), which other AMC files there use; clean "
-                          "this file into another folder, or remove that ASF")
+                          f"(not {source.asf_path}), which other AMC files there use{shown}; "
+                          "clean this file into another folder, or remove that ASF")
+
+
+def _amcs_read_with(asf: Path, besides: Path) -> list[Path] | None:
+    """The AMC files beside ``asf`` that :func:`find_asf` pairs with it, ``besides`` left
+    out (None when the folder cannot be listed)."""
+    try:
+        target, skip = asf.resolve(), besides.resolve()
+        candidates = sorted(p for p in asf.parent.iterdir()
+                            if p.suffix.lower() == ".amc" and p.is_file() and p.resolve() != skip)
+    except OSError:
+        return None
+    users = []
+    for amc in candidates:
+        try:
+            if find_asf(amc).resolve() == target:
+                users.append(amc)
+        except (UnreadableFileError, OSError):
+            continue
+    return users
 
 
 def _write_asf(target: Path, source: AsfAmcSource) -> Path:
