@@ -52,6 +52,9 @@ class Found:
 class Job:
     source: Path
     output: Path
+    #: for an AMC: the other outputs of the batch written beside the same copy of its ASF
+    #: (their earlier versions there do not keep that copy from being replaced)
+    rewritten: frozenset = frozenset()
 
 
 @dataclass
@@ -306,18 +309,21 @@ def plan_outputs(found: list, outdir, allow_inside_input: bool = False, inputs=(
         if job.output in seen:
             raise ConfigError(f"{job.source} and {seen[job.output]} would both be written to {job.output}")
         seen[job.output] = job.source
-    _check_shared_skeletons(jobs)
-    return jobs
+    return _check_shared_skeletons(jobs)
 
 
-def _check_shared_skeletons(jobs: list[Job]) -> None:
+def _check_shared_skeletons(jobs: list[Job]) -> list[Job]:
     """An AMC is written beside a copy of its ASF; two AMCs from different folders whose
     ASFs have one name but different content would overwrite each other's skeleton in the
-    output folder (files named one by one land side by side): a ConfigError naming both."""
+    output folder (files named one by one land side by side): a ConfigError naming both.
+    Returns the jobs, each AMC's with the outputs of the others that share its copy
+    (``Job.rewritten``)."""
     from mocapfix.formats.asfamc import skeleton_output
 
     skeletons: dict[Path, tuple[Path, Path]] = {}
-    for job in jobs:
+    sharing: dict[Path, set] = {}
+    target_of: dict[int, Path] = {}
+    for i, job in enumerate(jobs):
         if job.source.suffix.lower() != ".amc":
             continue
         found = skeleton_output(job.source, job.output)
@@ -329,6 +335,11 @@ def _check_shared_skeletons(jobs: list[Job]) -> None:
             raise ConfigError(f"{first[1]} and {job.source} would both write their skeleton to "
                               f"{target}, but {first[0]} and {asf} differ; clean them into "
                               "separate output folders (or name the folder above theirs)")
+        sharing.setdefault(target, set()).add(job.output)
+        target_of[i] = target
+    return [Job(job.source, job.output, frozenset(sharing[target_of[i]] - {job.output}))
+            if i in target_of and len(sharing[target_of[i]]) > 1 else job
+            for i, job in enumerate(jobs)]
 
 
 def _same_bytes(a: Path, b: Path) -> bool:
@@ -493,7 +504,8 @@ class CleanTask:
                 before = input_identity(job.source)
             except OSError:
                 before = None           # unreadable: clean_file names the cause
-            result = clean_file(job.source, job.output, pipeline, self.reports, self.read_options)
+            result = clean_file(job.source, job.output, pipeline, self.reports, self.read_options,
+                                {"rewritten": job.rewritten} if job.rewritten else None)
             # for the manifest: the hashes of what was cleaned. Taken after the clean alone, a
             # file still being written (copied, synced) was recorded with its new content
             # against an output of the old one, and the next run skipped it as finished

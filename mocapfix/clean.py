@@ -71,7 +71,7 @@ def remove_outputs(paths) -> None:
 
 
 def clean_file(source: Path, output: Path, pipeline: Pipeline, reports=("json",),
-               read_options: dict | None = None) -> dict:
+               read_options: dict | None = None, write_options: dict | None = None) -> dict:
     """Read, clean, write. Returns a JSON-able summary; raises MocapfixError on failure.
 
     Every report is rendered before anything is written, and a failure while writing
@@ -91,7 +91,8 @@ def clean_file(source: Path, output: Path, pipeline: Pipeline, reports=("json",)
     try:
         # in the format that was read, which the content decided, not the name: a BVH
         # saved as .c3d stays a BVH (the output mirrors the input's name)
-        written = list(formats.write(result.cleaned, output, format=motion.format))
+        written = list(formats.write(result.cleaned, output, format=motion.format,
+                                     **(write_options or {})))
         for kind, path in paths.items():
             atomic_write_text(path, texts[kind])
     except BaseException:

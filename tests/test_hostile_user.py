@@ -352,6 +352,15 @@ def test_an_edited_asf_is_written_over_its_old_copy_that_only_this_amc_uses(tmp_
     no_traceback(r)
     assert r.exit_code == 1 and "holds another ASF" in r.output and "x_02.amc" in r.output, r.output
     assert (out / "walker.asf").read_bytes() == kept
+    # both cleaned again in one run (with two workers): each one's earlier output is the
+    # other's only obstacle, and both are being replaced
+    r = CliRunner().invoke(main, ["clean", str(x), str(x.parent / "x_02.amc"), "-o", str(out),
+                                  "-c", cfg, "--overwrite", "-j", "2"])
+    no_traceback(r)
+    assert r.exit_code == 0, r.output
+    assert (out / "walker.asf").read_bytes() == asf.read_bytes()
+    for amc in (x, x.parent / "x_02.amc"):
+        assert abs(formats.read(out / amc.name).positions - formats.read(amc).positions).max() < 1e-6
 
 
 def test_an_unforeseen_failure_is_one_line_and_the_other_files_go_on(tmp_path, monkeypatch):

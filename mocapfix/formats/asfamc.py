@@ -744,7 +744,10 @@ def format_value(value: float) -> str:
     return "0" if text in ("-0", "") else text
 
 
-def write(motion: Motion, path, **options) -> list[Path]:
+def write(motion: Motion, path, rewritten=(), **options) -> list[Path]:
+    """Write the AMC ``path`` and the copy of its ASF beside it. ``rewritten``: other AMC
+    outputs there that the caller writes again with the same skeleton (a batch), whose
+    earlier versions do not keep an old copy of the ASF from being replaced."""
     path = Path(path)
     source = motion.source
     if not isinstance(source, AsfAmcSource):
@@ -766,7 +769,7 @@ def write(motion: Motion, path, **options) -> list[Path]:
     if asf_target.resolve() == path.resolve():
         raise WriteError(path, f"the AMC would overwrite its skeleton {source.asf_name}")
     text = _amc_text(source, channels)
-    _refuse_other_skeleton(asf_target, source, path)
+    _refuse_other_skeleton(asf_target, source, path, rewritten)
     atomic_write_bytes(path, text.encode("latin-1"))
     return [path, _write_asf(asf_target, source)]
 
@@ -793,19 +796,19 @@ def skeleton_output(amc: Path, output: Path) -> tuple[Path, Path] | None:
     return Path(output).with_name(asf.name), asf
 
 
-def _refuse_other_skeleton(target: Path, source: AsfAmcSource, amc: Path) -> None:
+def _refuse_other_skeleton(target: Path, source: AsfAmcSource, amc: Path, rewritten=()) -> None:
     """An ASF of the same name already beside the output with other content belongs to
     other AMCs there (an earlier file of the batch from another folder, an earlier run):
     replacing it would pair them with the wrong skeleton, keeping it would pair this AMC
     with the wrong one. Refused before anything is written. When no AMC there but ``amc``
-    itself is read with it (the output of an earlier run of this file, re-cleaned after
-    its ASF was edited), it is replaced."""
+    itself and the ``rewritten`` ones is read with it (the outputs of an earlier run,
+    cleaned again after their ASF was edited), it is replaced."""
     try:
         if not target.exists() or target.read_bytes() == source.asf_bytes:
             return
     except OSError:
         return                      # unreadable or not a file: writing it reports the cause
-    users = _amcs_read_with(target, besides=amc)
+    users = _amcs_read_with(target, besides=[amc, *map(Path, rewritten)])
     if users == []:
         return
     shown = "" if users is None else " (" + ", ".join(p.name for p in users[:3]) + (
@@ -815,13 +818,13 @@ def _refuse_other_skeleton(target: Path, source: AsfAmcSource, amc: Path) -> Non
                           "clean this file into another folder, or remove that ASF")
 
 
-def _amcs_read_with(asf: Path, besides: Path) -> list[Path] | None:
-    """The AMC files beside ``asf`` that :func:`find_asf` pairs with it, ``besides`` left
-    out (None when the folder cannot be listed)."""
+def _amcs_read_with(asf: Path, besides) -> list[Path] | None:
+    """The AMC files beside ``asf`` that :func:`find_asf` pairs with it, those in
+    ``besides`` left out (None when the folder cannot be listed)."""
     try:
-        target, skip = asf.resolve(), besides.resolve()
+        target, skip = asf.resolve(), {Path(p).resolve() for p in besides}
         candidates = sorted(p for p in asf.parent.iterdir()
-                            if p.suffix.lower() == ".amc" and p.is_file() and p.resolve() != skip)
+                            if p.suffix.lower() == ".amc" and p.is_file() and p.resolve() not in skip)
     except OSError:
         return None
     users = []
