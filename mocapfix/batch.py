@@ -16,6 +16,7 @@ clear error if they cannot be read). Input trees are never written to.
 """
 from __future__ import annotations
 
+import dataclasses
 import errno
 import fnmatch
 import os
@@ -340,6 +341,15 @@ def _check_shared_skeletons(jobs: list[Job]) -> list[Job]:
     return [Job(job.source, job.output, frozenset(sharing[target_of[i]] - {job.output}))
             if i in target_of and len(sharing[target_of[i]]) > 1 else job
             for i, job in enumerate(jobs)]
+
+
+def rewritten_among(jobs: list[Job]) -> list[Job]:
+    """``jobs`` with each one's ``rewritten`` outputs cut to those of ``jobs`` (the ones
+    that run: an output kept by --skip-existing is not written again, and its old
+    skeleton copy must stay)."""
+    outputs = {j.output for j in jobs}
+    return [dataclasses.replace(j, rewritten=j.rewritten & outputs) if j.rewritten else j
+            for j in jobs]
 
 
 def _same_bytes(a: Path, b: Path) -> bool:

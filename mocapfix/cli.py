@@ -342,7 +342,7 @@ def clean(inputs, outdir, config_path, reports, jobs, as_json, fps, allow_inside
     """
     from pathlib import Path
 
-    from mocapfix.batch import check_output_folder, plan_outputs, run_batch
+    from mocapfix.batch import check_output_folder, plan_outputs, rewritten_among, run_batch
     from mocapfix.clean import output_files, remove_outputs
     from mocapfix.fileio import atomic_write_text, remove_stale_temporaries
     from mocapfix.manifest import Manifest, run_key
@@ -402,6 +402,7 @@ def clean(inputs, outdir, config_path, reports, jobs, as_json, fps, allow_inside
         _fail(str(exc), debug, exc)
     todo = [j for j in jobs_list if j not in finished and not (policy == "skip" and _output_there(j))]
     skipped = [j for j in jobs_list if j not in todo]
+    todo = rewritten_among(todo)
     if not dry_run:
         # a killed run leaves its half-written temporaries; the files this run writes
         # anew take theirs away (never anything else)

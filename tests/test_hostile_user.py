@@ -361,6 +361,17 @@ def test_an_edited_asf_is_written_over_its_old_copy_that_only_this_amc_uses(tmp_
     assert (out / "walker.asf").read_bytes() == asf.read_bytes()
     for amc in (x, x.parent / "x_02.amc"):
         assert abs(formats.read(out / amc.name).positions - formats.read(amc).positions).max() < 1e-6
+    # edited once more; x_01's output removed, x_02's kept by --skip-existing: x_02's
+    # output is not written again, so its skeleton copy stays and x_01 is refused
+    asf.write_text(re.sub(r"(length\s+)([0-9.]+)",
+                          lambda m: f"{m.group(1)}{1.1 * float(m.group(2)):.4f}", asf.read_text()))
+    (out / x.name).unlink()
+    kept = (out / "walker.asf").read_bytes()
+    r = CliRunner().invoke(main, ["clean", str(x), str(x.parent / "x_02.amc"), "-o", str(out),
+                                  "-c", cfg, "--skip-existing"])
+    no_traceback(r)
+    assert r.exit_code == 1 and "holds another ASF" in r.output and "x_02.amc" in r.output, r.output
+    assert (out / "walker.asf").read_bytes() == kept
 
 
 def test_an_unforeseen_failure_is_one_line_and_the_other_files_go_on(tmp_path, monkeypatch):
