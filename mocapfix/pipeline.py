@@ -36,7 +36,7 @@ from mocapfix.errors import ConfigError
 from mocapfix.formats import NAMES
 from mocapfix.gaps import take_frames
 from mocapfix.motion import Motion
-from mocapfix.selection import Selection, cleanable, put, take
+from mocapfix.selection import Selection, cleanable, keep_rig_joints, put, take
 from mocapfix.solvers.rigid import norms
 from mocapfix.yamlsafe import load_yaml as safe_load_yaml
 from mocapfix.yamlsafe import read_bounded
@@ -139,10 +139,25 @@ class Pipeline:
     def _apply_on_points(step: Step, motion: Motion, cols: np.ndarray) -> tuple[Motion, dict]:
         if cols.all():
             return step.cleaner.apply(motion)
+        if motion.rig is not None and motion.channels is not None:
+            out, info = step.cleaner.apply(motion)
+            info = _without_points(info, [n for n, c in zip(motion.names, cols) if not c])
+            info["points_not_cleaned"] = int((~cols).sum())
+            return keep_rig_joints(motion, out, ~cols), info
         part, info = step.cleaner.apply(take(motion, cols))
         info = dict(info or {})
         info["points_not_cleaned"] = int((~cols).sum())
         return put(motion, cols, part), info
+
+
+def _without_points(info: dict, names: list[str]) -> dict:
+    """A step's ``info`` without the frames it says it replaced or rejected on ``names``
+    (joints of a rig it ran on whole, whose channels are then put back)."""
+    info = dict(info or {})
+    for key in (REPLACED_FRAMES, REJECTED_FILLS):
+        if info.get(key):
+            info[key] = {n: v for n, v in info[key].items() if n not in set(names)}
+    return info
 
 
 def _shift_frames(info: dict, offset: int) -> dict:

@@ -5,7 +5,10 @@ file says are not markers (``Motion.kinds``: C3D model outputs such as POINT:ANG
 which are never cleaned.
 
 Running a step on a selection hands the cleaner a Motion with only the selected columns
-and writes its result back into the full motion; the rest is returned bit-identical.
+and writes its result back into the full motion; the rest is returned bit-identical. On a
+BVH/AMC rig a joint's position hangs on its parents', so there the step runs on the whole
+rig and the joints left out get their own channels back as they were
+(:func:`keep_rig_joints`): their curves are untouched, and they move with their parents.
 """
 from __future__ import annotations
 
@@ -85,12 +88,31 @@ def not_cleaned(motion: Motion, *selections: "Selection | None") -> list[str | N
     return out
 
 
+def keep_rig_joints(before: Motion, after: Motion, left: np.ndarray) -> Motion:
+    """``after`` (a step's output on the whole rig of ``before``) with the rotation and
+    translation channels of the joints ``left`` (J,) bool as ``before`` has them, and the
+    positions their forward kinematics. A step that cleaned positions is first written
+    back into channels (:func:`mocapfix.writeback.solve_channels`), as the pipeline's end
+    would do."""
+    from mocapfix.writeback import solve_channels
+
+    rig = before.rig
+    ch = np.array(before.channels if after.channels is None else after.channels, dtype=np.float64)
+    target = after.positions
+    if not ((rig.positions(ch) == target) | np.isnan(target)).all():
+        ch = solve_channels(rig, ch, target)
+    for j in np.flatnonzero(left):
+        cols = [int(c) for c in rig.rot_columns[j]] + [int(c) for c in rig.trans_columns[j] if c >= 0]
+        ch[:, cols] = before.channels[:, cols]
+    return after.replace(channels=ch, positions=rig.positions(ch))
+
+
 def take(motion: Motion, cols: np.ndarray) -> Motion:
-    """The Motion of the points ``cols`` (J,) bool only (rig/channels formats refused: their
-    positions are tied to every joint of the rig)."""
+    """The Motion of the points ``cols`` (J,) bool only (not for a BVH/AMC rig, whose
+    positions are tied to every joint: :func:`keep_rig_joints`)."""
     if motion.rig is not None or motion.channels is not None:
-        raise ConfigError(f"{motion.path or 'motion'}: 'markers'/'exclude' select markers of "
-                          f"marker data (C3D, Kinect), not joints of a {motion.format} rig")
+        raise ConfigError(f"{motion.path or 'motion'}: a {motion.format} rig's joints cannot "
+                          "be taken apart (its positions hang on every joint)")
     idx = np.flatnonzero(cols)
     skeleton = None
     if motion.skeleton is not None:

@@ -207,3 +207,51 @@ def test_a_selection_that_picks_no_marker_warns():
                               "markers: ['NoSuchMarker*']\npipeline:\n  - {cleaner: fill}\n")
     assert report["file"]["joints"] == 0 and report["file"]["status"] == "WARN"
     assert any("leave none of this file's markers" in n for n in report["file"]["notes"])
+
+
+# -- BVH/AMC rigs: a joint left out keeps its own curves ------------------------------------
+
+def _spiked_bandai():
+    """The Bandai walk with 20° glitches on the left hand's and the left lower arm's first
+    rotation channel (frames 40 and 80)."""
+    motion = read(shared("bvh/bandai_dataset-1_walk_normal_001.bvh"))
+    ch = motion.channels.copy()
+    rig = motion.rig
+    for name in ("Hand_L", "LowerArm_L"):
+        col = rig.rot_columns[rig.names.index(name)][0]
+        ch[[40, 80], col] += 20.0
+    return motion.replace(channels=ch, positions=rig.positions(ch)), ch
+
+
+@pytest.mark.parametrize("where", ["pipeline", "step"])
+def test_a_rig_joint_left_out_keeps_its_channels_and_the_others_are_cleaned(where):
+    # selections were refused on BVH/AMC ("select markers of marker data, not joints of a
+    # bvh rig"): an animator could not keep the hands' curves out of the cleaning
+    motion, ch = _spiked_bandai()
+    rig = motion.rig
+    step = "  - {cleaner: rotation_outliers, threshold: 16"
+    text = (f"exclude: ['Hand_*']\npipeline:\n{step}}}\n" if where == "pipeline"
+            else f"pipeline:\n{step}, exclude: ['Hand_*']}}\n")
+    out, records = loads_config(text).run(motion)
+    hand = list(rig.rot_columns[rig.names.index("Hand_L")])
+    arm = list(rig.rot_columns[rig.names.index("LowerArm_L")])
+    assert np.array_equal(out.channels[:, hand], ch[:, hand])          # glitches and all
+    clean = read(shared("bvh/bandai_dataset-1_walk_normal_001.bvh")).channels
+    assert np.abs(out.channels[[40, 80], arm[0]] - clean[[40, 80], arm[0]]).max() < 2.0
+    assert np.allclose(out.positions, rig.positions(out.channels))
+    assert "Hand_L" not in records[0].info.get("replaced_frames", {})
+    assert "LowerArm_L" in records[0].info["replaced_frames"]
+    assert records[0].info["points_not_cleaned"] == 4                  # Hand_L/R and their ends
+
+
+def test_a_position_step_on_a_rig_keeps_the_left_out_joints_channels():
+    from mocapfix.clean import clean_motion
+
+    motion, ch = _spiked_bandai()
+    rig = motion.rig
+    pipe = loads_config("pipeline:\n  - {cleaner: gaussian, sigma: 2 frames, exclude: ['Hand_L']}\n")
+    result = clean_motion(motion, pipe)
+    hand = list(rig.rot_columns[rig.names.index("Hand_L")])
+    arm = list(rig.rot_columns[rig.names.index("LowerArm_L")])
+    assert np.array_equal(result.cleaned.channels[:, hand], ch[:, hand])
+    assert np.abs(result.cleaned.channels[:, arm] - ch[:, arm]).max() > 1.0   # smoothed
