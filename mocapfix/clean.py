@@ -8,13 +8,15 @@ import stat
 import time
 from pathlib import Path
 
+import numpy as np
+
 from mocapfix import formats
 from mocapfix.errors import UnreadableFileError
 from mocapfix.fileio import NAME_MAX, atomic_write_text
 from mocapfix.motion import Motion
 from mocapfix.pipeline import Pipeline
 from mocapfix.report import CleanResult, build_report, to_html, to_json, to_markdown
-from mocapfix.selection import not_cleaned
+from mocapfix.selection import not_cleaned, own_channels
 from mocapfix.writeback import write_back
 
 REPORT_KINDS = ("json", "md", "html")
@@ -28,12 +30,19 @@ def clean_motion(motion: Motion, pipeline: Pipeline) -> CleanResult:
     started = time.perf_counter()
     cleaned, records = pipeline.run(motion)
     residual = None
+    why = not_cleaned(motion, pipeline.select)
     if cleaned.rig is not None and cleaned.channels is not None:
         channels, positions, residual = write_back(cleaned)
+        excluded = np.array([w is not None for w in why], bool)
+        if excluded.any():
+            # the joints the config leaves out keep their channels through the write-back
+            # of what later steps filled (selection.keep_rig_joints)
+            channels = own_channels(cleaned.rig, channels, motion.channels, excluded)
+            positions = cleaned.rig.positions(channels)
+            residual = np.linalg.norm(positions - cleaned.positions, axis=-1)
         cleaned = cleaned.replace(channels=channels, positions=positions)
     cleaned = formats.storable(cleaned)
-    return CleanResult(motion, cleaned, records, residual, time.perf_counter() - started,
-                       not_cleaned(motion, pipeline.select))
+    return CleanResult(motion, cleaned, records, residual, time.perf_counter() - started, why)
 
 
 def report_paths(output: Path, kinds) -> dict[str, Path]:

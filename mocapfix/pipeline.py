@@ -151,12 +151,22 @@ class Pipeline:
 
 
 def _without_points(info: dict, names: list[str]) -> dict:
-    """A step's ``info`` without the frames it says it replaced or rejected on ``names``
-    (joints of a rig it ran on whole, whose channels are then put back)."""
+    """A step's ``info`` without what it says of the joints ``names`` (joints of a rig it
+    ran on whole, whose channels are then put back): entries keyed by joint name (the
+    frames it replaced or rejected, per-joint counts) lose those joints, and the frame
+    counts of what it replaced (``spike_frames``, ``joint_frames_replaced``) are counted
+    again from what is left."""
     info = dict(info or {})
-    for key in (REPLACED_FRAMES, REJECTED_FILLS):
-        if info.get(key):
-            info[key] = {n: v for n, v in info[key].items() if n not in set(names)}
+    drop = set(names)
+    for key, value in list(info.items()):
+        if isinstance(value, dict) and value and drop & set(value):
+            info[key] = {n: v for n, v in value.items() if n not in drop}
+    replaced = info.get(REPLACED_FRAMES)
+    if isinstance(replaced, dict):
+        if "joint_frames_replaced" in info:
+            info["joint_frames_replaced"] = sum(len(v) for v in replaced.values())
+        if "spike_frames" in info:
+            info["spike_frames"] = len({int(f) for v in replaced.values() for f in v})
     return info
 
 

@@ -105,7 +105,9 @@ def _not_cleaned(report: dict, shown: int = 12) -> list[str]:
         by_why.setdefault(p["why"], []).append(p["name"])
     if not by_why:
         return []
-    out = ["", "## Not cleaned (passed through unchanged, not graded)", ""]
+    rig = report.get("file", {}).get("format") in ("bvh", "asfamc")
+    out = ["", "## Not cleaned (" + ("their own channels as read, moving with their parents; "
+                                     if rig else "passed through unchanged, ") + "not graded)", ""]
     for why, names in by_why.items():
         more = f", … (+{len(names) - shown})" if len(names) > shown else ""
         out.append(f"- {len(names)} × {why}: {', '.join(names[:shown])}{more}")

@@ -88,12 +88,15 @@ def not_cleaned(motion: Motion, *selections: "Selection | None") -> list[str | N
     return out
 
 
-def keep_rig_joints(before: Motion, after: Motion, left: np.ndarray) -> Motion:
+def keep_rig_joints(before: Motion, after: Motion, excluded: np.ndarray) -> Motion:
     """``after`` (a step's output on the whole rig of ``before``) with the rotation and
-    translation channels of the joints ``left`` (J,) bool as ``before`` has them, and the
-    positions their forward kinematics. A step that cleaned positions is first written
-    back into channels (:func:`mocapfix.writeback.solve_channels`), as the pipeline's end
-    would do."""
+    translation channels of the joints ``excluded`` (J,) bool as ``before`` has them. A
+    step that cleaned positions is written back into channels first
+    (:func:`mocapfix.writeback.solve_channels`, as the pipeline's end does), so that the
+    rotations of the other joints are the step's. The excluded joints and the joints below
+    them take the positions of those channels; every other joint keeps the positions the
+    step gave it, samples it flagged (made missing) included: the steps after it fill
+    them, and the pipeline's end writes them back and reports what it could not reach."""
     from mocapfix.writeback import solve_channels
 
     rig = before.rig
@@ -101,10 +104,23 @@ def keep_rig_joints(before: Motion, after: Motion, left: np.ndarray) -> Motion:
     target = after.positions
     if not ((rig.positions(ch) == target) | np.isnan(target)).all():
         ch = solve_channels(rig, ch, target)
-    for j in np.flatnonzero(left):
+    ch = own_channels(rig, ch, before.channels, excluded)
+    below = np.asarray(excluded, bool).copy()
+    for j, p in enumerate(rig.parents):           # parents come first
+        below[j] |= p >= 0 and below[p]
+    positions = target.copy()
+    positions[:, below] = rig.positions(ch)[:, below]
+    return after.replace(channels=ch, positions=positions)
+
+
+def own_channels(rig, channels: np.ndarray, source: np.ndarray, excluded: np.ndarray) -> np.ndarray:
+    """``channels`` with the rotation and translation columns of the joints ``excluded``
+    (J,) bool taken from ``source``."""
+    out = np.array(channels, dtype=np.float64)
+    for j in np.flatnonzero(excluded):
         cols = [int(c) for c in rig.rot_columns[j]] + [int(c) for c in rig.trans_columns[j] if c >= 0]
-        ch[:, cols] = before.channels[:, cols]
-    return after.replace(channels=ch, positions=rig.positions(ch))
+        out[:, cols] = source[:, cols]
+    return out
 
 
 def take(motion: Motion, cols: np.ndarray) -> Motion:

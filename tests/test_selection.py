@@ -255,3 +255,30 @@ def test_a_position_step_on_a_rig_keeps_the_left_out_joints_channels():
     arm = list(rig.rot_columns[rig.names.index("LowerArm_L")])
     assert np.array_equal(result.cleaned.channels[:, hand], ch[:, hand])
     assert np.abs(result.cleaned.channels[:, arm] - ch[:, arm]).max() > 1.0   # smoothed
+
+
+@pytest.mark.parametrize("where", ["pipeline", "step"])
+def test_flag_then_fill_still_repairs_a_rig_when_joints_are_left_out(where):
+    # the first version wrote the flagging step's positions back at once: its flagged
+    # (missing) samples became the old rotations' positions again, the fill after it had
+    # nothing to fill, and a 60° knee glitch stayed in the file as soon as any joint was
+    # excluded
+    from mocapfix.clean import clean_motion
+
+    truth = read(shared("bvh/cmu_cgspeed_131_01.bvh"))
+    rig = truth.rig
+    ch = truth.channels.copy()
+    ch[500:503, rig.rot_columns[rig.names.index("RightKnee")][0]] += 60.0
+    glitched = truth.replace(channels=ch, positions=rig.positions(ch))
+    sel = "exclude: ['Left*']\n"
+    text = (f"{sel}pipeline:\n  - cleaner: spikes\n  - cleaner: fill\n" if where == "pipeline"
+            else "pipeline:\n  - {cleaner: spikes, exclude: ['Left*']}\n  - cleaner: fill\n")
+    plain = clean_motion(glitched, loads_config("pipeline:\n  - cleaner: spikes\n  - cleaner: fill\n"))
+    result = clean_motion(glitched, loads_config(text))
+    ankle = rig.names.index("RightAnkle")
+    before = np.abs(glitched.positions[500:503, ankle] - truth.positions[500:503, ankle]).max()
+    after = np.abs(result.cleaned.positions[500:503, ankle] - truth.positions[500:503, ankle]).max()
+    assert after < 0.05 * before
+    left = [int(c) for j, n in enumerate(rig.names) if n.startswith("Left") for c in rig.rot_columns[j]]
+    assert np.array_equal(result.cleaned.channels[:, left], ch[:, left])
+    assert np.nanmax(result.writeback_residual) == pytest.approx(np.nanmax(plain.writeback_residual))
