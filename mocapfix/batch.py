@@ -55,7 +55,7 @@ class Job:
     output: Path
     #: for an AMC: the other outputs of the batch written beside the same copy of its ASF
     #: (their earlier versions there do not keep that copy from being replaced)
-    rewritten: frozenset = frozenset()
+    shares_asf_with: frozenset = frozenset()
 
 
 @dataclass
@@ -310,20 +310,20 @@ def plan_outputs(found: list, outdir, allow_inside_input: bool = False, inputs=(
         if job.output in seen:
             raise ConfigError(f"{job.source} and {seen[job.output]} would both be written to {job.output}")
         seen[job.output] = job.source
-    return _check_shared_skeletons(jobs)
+    return _plan_skeletons(jobs)
 
 
-def _check_shared_skeletons(jobs: list[Job]) -> list[Job]:
+def _plan_skeletons(jobs: list[Job]) -> list[Job]:
     """An AMC is written beside a copy of its ASF; two AMCs from different folders whose
-    ASFs have one name but different content would overwrite each other's skeleton in the
-    output folder (files named one by one land side by side): a ConfigError naming both.
-    Returns the jobs, each AMC's with the outputs of the others that share its copy
-    (``Job.rewritten``)."""
+    ASFs have one name (in any letter case: ``05.asf`` and ``05.ASF`` pair alike) but
+    different content would overwrite each other's skeleton in the output folder (files
+    named one by one land side by side): a ConfigError naming both. Returns the jobs, each
+    AMC's with the outputs of the others that share its copy (``Job.shares_asf_with``)."""
     from mocapfix.formats.asfamc import skeleton_output
 
     skeletons: dict[Path, tuple[Path, Path]] = {}
     sharing: dict[Path, set] = {}
-    target_of: dict[int, Path] = {}
+    key_of: dict[int, Path] = {}
     for i, job in enumerate(jobs):
         if job.source.suffix.lower() != ".amc":
             continue
@@ -331,25 +331,54 @@ def _check_shared_skeletons(jobs: list[Job]) -> list[Job]:
         if found is None:
             continue
         target, asf = found
-        first = skeletons.setdefault(target, (asf, job.source))
+        key = target.with_name(target.name.casefold())
+        first = skeletons.setdefault(key, (asf, job.source))
         if first[0] != asf and not _same_bytes(first[0], asf):
             raise ConfigError(f"{first[1]} and {job.source} would both write their skeleton to "
                               f"{target}, but {first[0]} and {asf} differ; clean them into "
                               "separate output folders (or name the folder above theirs)")
-        sharing.setdefault(target, set()).add(job.output)
-        target_of[i] = target
-    return [Job(job.source, job.output, frozenset(sharing[target_of[i]] - {job.output}))
-            if i in target_of and len(sharing[target_of[i]]) > 1 else job
+        sharing.setdefault(key, set()).add(job.output)
+        key_of[i] = key
+    return [Job(job.source, job.output, frozenset(sharing[key_of[i]] - {job.output}))
+            if i in key_of and len(sharing[key_of[i]]) > 1 else job
             for i, job in enumerate(jobs)]
 
 
-def rewritten_among(jobs: list[Job]) -> list[Job]:
-    """``jobs`` with each one's ``rewritten`` outputs cut to those of ``jobs`` (the ones
-    that run: an output kept by --skip-existing is not written again, and its old
+def sharing_among(jobs: list[Job]) -> list[Job]:
+    """``jobs`` with each one's ``shares_asf_with`` cut to the outputs of ``jobs`` (the
+    ones that run: an output kept by --skip-existing is not written again, and its
     skeleton copy must stay)."""
     outputs = {j.output for j in jobs}
-    return [dataclasses.replace(j, rewritten=j.rewritten & outputs) if j.rewritten else j
-            for j in jobs]
+    return [dataclasses.replace(j, shares_asf_with=j.shares_asf_with & outputs)
+            if j.shares_asf_with else j for j in jobs]
+
+
+def skeleton_conflicts(jobs: list[Job]) -> list[str]:
+    """What the AMC writer would refuse for ``jobs`` (those that run, after
+    :func:`sharing_among`): the copy of an AMC's ASF that cannot be written beside its
+    output (:func:`mocapfix.formats.asfamc.skeleton_conflict`), one message per job, so
+    that the run can refuse before any file is touched (and ``--dry-run`` with it)."""
+    from mocapfix.formats.asfamc import skeleton_conflict, skeleton_output
+
+    copies = {job: skeleton_output(job.source, job.output) for job in jobs
+              if job.source.suffix.lower() == ".amc"}
+    by_folder: dict[Path, set] = {}
+    for found in copies.values():
+        if found is not None:
+            by_folder.setdefault(found[0].parent, set()).add(found[0])
+    out = []
+    for job, found in copies.items():
+        if found is None:
+            continue
+        try:
+            content = found[1].read_bytes()
+        except OSError:
+            continue                # unreadable: reading the AMC names the cause
+        why = skeleton_conflict(job.output, found[1], content, job.shares_asf_with,
+                                planned=by_folder[found[0].parent] - {found[0]})
+        if why:
+            out.append(f"{job.source}: its skeleton cannot be written: {why}")
+    return out
 
 
 def _same_bytes(a: Path, b: Path) -> bool:
@@ -515,7 +544,7 @@ class CleanTask:
             except OSError:
                 before = None           # unreadable: clean_file names the cause
             result = clean_file(job.source, job.output, pipeline, self.reports, self.read_options,
-                                {"rewritten": job.rewritten} if job.rewritten else None)
+                                {"also_written": job.shares_asf_with} if job.shares_asf_with else None)
             # for the manifest: the hashes of what was cleaned. Taken after the clean alone, a
             # file still being written (copied, synced) was recorded with its new content
             # against an output of the old one, and the next run skipped it as finished

@@ -342,7 +342,8 @@ def clean(inputs, outdir, config_path, reports, jobs, as_json, fps, allow_inside
     """
     from pathlib import Path
 
-    from mocapfix.batch import check_output_folder, plan_outputs, rewritten_among, run_batch
+    from mocapfix.batch import (check_output_folder, plan_outputs, run_batch, sharing_among,
+                                skeleton_conflicts)
     from mocapfix.clean import output_files, remove_outputs
     from mocapfix.fileio import atomic_write_text, remove_stale_temporaries
     from mocapfix.manifest import Manifest, run_key
@@ -400,9 +401,20 @@ def clean(inputs, outdir, config_path, reports, jobs, as_json, fps, allow_inside
         _fail(str(exc), debug, exc)
     except MocapfixError as exc:
         _fail(str(exc), debug, exc)
-    todo = [j for j in jobs_list if j not in finished and not (policy == "skip" and _output_there(j))]
+    # --skip-existing keeps what an earlier run finished: an output whose replacement a
+    # run started and never finished (killed) is redone, as without the option -- kept,
+    # an AMC there could sit beside the new copy of an ASF its batch-mates had replaced
+    todo = [j for j in jobs_list if j not in finished
+            and not (policy == "skip" and _output_there(j) and not manifest.interrupted(j))]
     skipped = [j for j in jobs_list if j not in todo]
-    todo = rewritten_among(todo)
+    todo = sharing_among(todo)
+    conflicts = skeleton_conflicts(todo)
+    if conflicts:
+        for folder in made:             # the folders this run made, empty: taken back
+            with contextlib.suppress(OSError):
+                folder.rmdir()
+        more = f" (and {len(conflicts) - 1} more)" if len(conflicts) > 1 else ""
+        _fail(conflicts[0] + more + "; nothing was cleaned", debug, None)
     if not dry_run:
         # a killed run leaves its half-written temporaries; the files this run writes
         # anew take theirs away (never anything else)

@@ -302,11 +302,13 @@ def test_two_amcs_never_share_an_output_skeleton_they_do_not_have_in_common(tmp_
     no_traceback(r)
     assert r.exit_code == 2 and "walker.asf" in r.output and "differ" in r.output, r.output
     assert not out.exists()
-    # one at a time into one folder: the second is refused, the first keeps its skeleton
+    # one at a time into one folder: the second is refused before it runs (exit 2, as
+    # --dry-run says), the first keeps its skeleton
     assert CliRunner().invoke(main, ["clean", str(x), "-o", str(out), "-c", cfg]).exit_code == 0
-    r = CliRunner().invoke(main, ["clean", str(y), "-o", str(out), "-c", cfg])
-    no_traceback(r)
-    assert r.exit_code == 1 and "holds another ASF" in r.output, r.output
+    for extra in (["--dry-run"], []):
+        r = CliRunner().invoke(main, ["clean", str(y), "-o", str(out), "-c", cfg, *extra])
+        no_traceback(r)
+        assert r.exit_code == 2 and "holds another ASF" in r.output and "x_01.amc" in r.output, r.output
     assert (out / "walker.asf").read_bytes() == (x.parent / "walker.asf").read_bytes()
     assert not list(out.glob("y_01*"))
     np_x = formats.read(out / "x_01.amc").positions
@@ -347,11 +349,11 @@ def test_an_edited_asf_is_written_over_its_old_copy_that_only_this_amc_uses(tmp_
                                      "-c", cfg]).exit_code == 0
     asf.write_text(re.sub(r"(length\s+)([0-9.]+)",
                           lambda m: f"{m.group(1)}{1.1 * float(m.group(2)):.4f}", asf.read_text()))
-    kept = (out / "walker.asf").read_bytes()
+    kept = _md5s(out)
     r = CliRunner().invoke(main, ["clean", str(x), "-o", str(out), "-c", cfg, "--overwrite"])
     no_traceback(r)
-    assert r.exit_code == 1 and "holds another ASF" in r.output and "x_02.amc" in r.output, r.output
-    assert (out / "walker.asf").read_bytes() == kept
+    assert r.exit_code == 2 and "holds another ASF" in r.output and "x_02.amc" in r.output, r.output
+    assert _md5s(out) == kept        # refused before any work: x_01's earlier output stays
     # both cleaned again in one run (with two workers): each one's earlier output is the
     # other's only obstacle, and both are being replaced
     r = CliRunner().invoke(main, ["clean", str(x), str(x.parent / "x_02.amc"), "-o", str(out),
@@ -366,12 +368,81 @@ def test_an_edited_asf_is_written_over_its_old_copy_that_only_this_amc_uses(tmp_
     asf.write_text(re.sub(r"(length\s+)([0-9.]+)",
                           lambda m: f"{m.group(1)}{1.1 * float(m.group(2)):.4f}", asf.read_text()))
     (out / x.name).unlink()
-    kept = (out / "walker.asf").read_bytes()
+    kept = _md5s(out)
     r = CliRunner().invoke(main, ["clean", str(x), str(x.parent / "x_02.amc"), "-o", str(out),
                                   "-c", cfg, "--skip-existing"])
     no_traceback(r)
-    assert r.exit_code == 1 and "holds another ASF" in r.output and "x_02.amc" in r.output, r.output
-    assert (out / "walker.asf").read_bytes() == kept
+    assert r.exit_code == 2 and "holds another ASF" in r.output and "x_02.amc" in r.output, r.output
+    assert _md5s(out) == kept
+
+
+def test_skip_existing_redoes_an_output_whose_replacement_was_interrupted(tmp_path):
+    # x_01 and x_02 cleaned; their ASF edited; a --overwrite run of both killed after x_01
+    # (its output and the new ASF copy written, x_02's old output still there, recorded as
+    # started); then --skip-existing kept x_02's old output beside the new skeleton copy
+    import json
+    import re
+
+    from mocapfix import formats
+
+    x, _ = _two_subjects(tmp_path)
+    x2 = x.parent / "x_02.amc"
+    shutil.copy(x, x2)
+    cfg = _cfg(tmp_path, "version: 1\npipeline: []\n", "none.yaml")
+    out = tmp_path / "out"
+    assert CliRunner().invoke(main, ["clean", str(x), str(x2), "-o", str(out), "-c", cfg]).exit_code == 0
+    old_x2 = (out / x2.name).read_bytes()
+    asf = x.parent / "walker.asf"
+    asf.write_text(re.sub(r"(length\s+)([0-9.]+)",
+                          lambda m: f"{m.group(1)}{1.2 * float(m.group(2)):.4f}", asf.read_text()))
+    assert CliRunner().invoke(main, ["clean", str(x), str(x2), "-o", str(out), "-c", cfg,
+                                     "--overwrite"]).exit_code == 0
+    # what the killed run leaves: x_02's earlier output, and its last record "started"
+    (out / x2.name).write_bytes(old_x2)
+    manifest = out / "mocapfix-manifest.jsonl"
+    done = [json.loads(line) for line in manifest.read_text().splitlines()
+            if json.loads(line).get("output") == x2.name][-1]
+    started = {k: v for k, v in done.items() if k not in ("quality", "files", "input_sha256",
+                                                          "companions_sha256")}
+    started["status"] = "started"
+    with manifest.open("a") as f:
+        f.write(json.dumps(started) + "\n")
+    r = CliRunner().invoke(main, ["clean", str(x), str(x2), "-o", str(out), "-c", cfg,
+                                  "--skip-existing"])
+    no_traceback(r)
+    assert r.exit_code == 0, r.output
+    assert not any("SKIP" in line and "x_02" in line for line in r.output.splitlines()), r.output
+    assert (out / "walker.asf").read_bytes() == asf.read_bytes()
+    assert abs(formats.read(out / x2.name).positions - formats.read(x2).positions).max() < 1e-6
+
+
+def test_an_asf_named_in_other_letter_case_is_not_read_with_the_wrong_amc(tmp_path):
+    # a/walker.asf beside x_01.amc and b/WALKER.ASF (longer bones) beside y_01.amc: named
+    # one by one they wrote out/walker.asf and out/WALKER.ASF, and out/y_01.amc was read
+    # back with walker.asf, the wrong skeleton, without a word
+    from mocapfix import formats
+
+    x, y = _two_subjects(tmp_path)
+    (y.parent / "walker.asf").rename(y.parent / "WALKER.ASF")
+    cfg = _cfg(tmp_path, "version: 1\npipeline: []\n", "none.yaml")
+    out = tmp_path / "out"
+    r = CliRunner().invoke(main, ["clean", str(x), str(y), "-o", str(out), "-c", cfg])
+    no_traceback(r)
+    assert r.exit_code == 2 and "differ" in r.output, r.output
+    assert CliRunner().invoke(main, ["clean", str(x), "-o", str(out), "-c", cfg]).exit_code == 0
+    kept = _md5s(out)
+    r = CliRunner().invoke(main, ["clean", str(y), "-o", str(out), "-c", cfg])
+    no_traceback(r)
+    assert r.exit_code == 2 and "could not be read back" in r.output, r.output
+    assert _md5s(out) == kept
+    assert abs(formats.read(out / x.name).positions - formats.read(x).positions).max() < 1e-6
+    # another name altogether, in one run: each AMC found the only .asf of its folder, and
+    # with both copies side by side neither output could be read back
+    (y.parent / "WALKER.ASF").rename(y.parent / "runner.asf")
+    r = CliRunner().invoke(main, ["clean", str(x), str(y), "-o", str(tmp_path / "o3"), "-c", cfg])
+    no_traceback(r)
+    assert r.exit_code == 2 and "could not be read back" in r.output, r.output
+    assert not (tmp_path / "o3").exists()
 
 
 def test_an_unforeseen_failure_is_one_line_and_the_other_files_go_on(tmp_path, monkeypatch):

@@ -744,9 +744,9 @@ def format_value(value: float) -> str:
     return "0" if text in ("-0", "") else text
 
 
-def write(motion: Motion, path, rewritten=(), **options) -> list[Path]:
-    """Write the AMC ``path`` and the copy of its ASF beside it. ``rewritten``: other AMC
-    outputs there that the caller writes again with the same skeleton (a batch), whose
+def write(motion: Motion, path, also_written=(), **options) -> list[Path]:
+    """Write the AMC ``path`` and the copy of its ASF beside it. ``also_written``: other
+    AMC outputs there that the caller writes again with the same skeleton (a batch), whose
     earlier versions do not keep an old copy of the ASF from being replaced."""
     path = Path(path)
     source = motion.source
@@ -769,7 +769,9 @@ def write(motion: Motion, path, rewritten=(), **options) -> list[Path]:
     if asf_target.resolve() == path.resolve():
         raise WriteError(path, f"the AMC would overwrite its skeleton {source.asf_name}")
     text = _amc_text(source, channels)
-    _refuse_other_skeleton(asf_target, source, path, rewritten)
+    conflict = skeleton_conflict(path, Path(source.asf_path), source.asf_bytes, also_written)
+    if conflict:
+        raise WriteError(path, f"its skeleton cannot be written: {conflict}")
     atomic_write_bytes(path, text.encode("latin-1"))
     return [path, _write_asf(asf_target, source)]
 
@@ -796,45 +798,83 @@ def skeleton_output(amc: Path, output: Path) -> tuple[Path, Path] | None:
     return Path(output).with_name(asf.name), asf
 
 
-def _refuse_other_skeleton(target: Path, source: AsfAmcSource, amc: Path, rewritten=()) -> None:
-    """An ASF of the same name already beside the output with other content belongs to
-    other AMCs there (an earlier file of the batch from another folder, an earlier run):
-    replacing it would pair them with the wrong skeleton, keeping it would pair this AMC
-    with the wrong one. Refused before anything is written. When no AMC there but ``amc``
-    itself and the ``rewritten`` ones is read with it (the outputs of an earlier run,
-    cleaned again after their ASF was edited), it is replaced."""
-    try:
-        if not target.exists() or target.read_bytes() == source.asf_bytes:
-            return
-    except OSError:
-        return                      # unreadable or not a file: writing it reports the cause
-    users = _amcs_read_with(target, besides=[amc, *map(Path, rewritten)])
-    if users == []:
-        return
-    shown = "" if users is None else " (" + ", ".join(p.name for p in users[:3]) + (
-        f" and {len(users) - 3} more" if len(users) > 3 else "") + ")"
-    raise WriteError(amc, f"its skeleton cannot be written: {target} holds another ASF "
-                          f"(not {source.asf_path}), which other AMC files there use{shown}; "
-                          "clean this file into another folder, or remove that ASF")
+def skeleton_conflict(amc: Path, asf: Path, asf_bytes: bytes, also_written=(),
+                      planned=()) -> str | None:
+    """Why the copy of the ASF ``asf`` (content ``asf_bytes``) cannot be written beside the
+    AMC output ``amc`` (None: it can). An AMC is paired with its skeleton by file name
+    (:func:`find_asf`: the AMC's own name, its subject's, else the only ``.asf`` there), so
+    the copy must not leave an AMC there with the wrong skeleton or none:
 
+    - ``amc`` itself read with another file (``05.asf`` beside a copy ``05.ASF``), or with
+      none (two ``.asf`` files there, neither named after it);
+    - another AMC there read with another skeleton than now, or none (it found the only
+      ``.asf`` there, and the copy is a second);
+    - a copy of another ASF already at the copy's name, which other AMC files there are
+      read with (an earlier file of the batch from another folder, an earlier run):
+      replacing it would pair them with the wrong skeleton, keeping it this one. When no
+      AMC there but ``amc`` and the ``also_written`` ones is read with it (the outputs of
+      an earlier run, cleaned again after their ASF was edited), it is replaced.
 
-def _amcs_read_with(asf: Path, besides) -> list[Path] | None:
-    """The AMC files beside ``asf`` that :func:`find_asf` pairs with it, those in
-    ``besides`` left out (None when the folder cannot be listed)."""
+    ``planned``: the other ASF copies a batch will write in that folder. Checked by the
+    batch plan before any file runs, and by the writer before anything is written."""
+    amc, target = Path(amc), Path(amc).with_name(Path(asf).name)
+    folder = amc.parent
     try:
-        target, skip = asf.resolve(), {Path(p).resolve() for p in besides}
-        candidates = sorted(p for p in asf.parent.iterdir()
-                            if p.suffix.lower() == ".amc" and p.is_file() and p.resolve() not in skip)
+        present = {p.name for p in folder.iterdir() if p.is_file()} if folder.is_dir() else set()
     except OSError:
-        return None
-    users = []
-    for amc in candidates:
-        try:
-            if find_asf(amc).resolve() == target:
-                users.append(amc)
-        except (UnreadableFileError, OSError):
+        present = set()
+    after = present | {target.name} | {Path(p).name for p in planned}
+    found = _asf_for(amc.name, after)
+    stem = amc.stem
+    if found is None:
+        shown = ", ".join(sorted(n for n in after if n.lower().endswith(".asf")))
+        return (f"it could not be read back with it: the folder would hold several .asf files "
+                f"({shown}) and none named {stem}.asf or {stem.split('_', 1)[0]}.asf; clean "
+                "it into a folder of its own")
+    if found != target.name and not _holds(folder / found, asf_bytes):
+        return (f"{folder / found} would be read with it instead of its skeleton (a copy of "
+                f"{asf}); clean this file into another folder, or move {found} away")
+    try:
+        replaced = target.name in present and target.read_bytes() != asf_bytes
+    except OSError:
+        replaced = False            # unreadable or not a file: writing it reports the cause
+    ignoring = {amc.name, *(Path(p).name for p in also_written)}
+    users, lost = [], []
+    for other in sorted(n for n in present if n.lower().endswith(".amc") and n not in ignoring):
+        now = _asf_for(other, present)
+        if now is None:
             continue
-    return users
+        if _asf_for(other, after) != now:
+            lost.append(f"{other} (read with {now})")
+        elif now == target.name and replaced:
+            users.append(other)
+    if lost:
+        return (f"writing {target.name} there would leave {', '.join(lost[:3])} without its "
+                "skeleton; clean this file into another folder")
+    if users:
+        shown = ", ".join(users[:3]) + (f" and {len(users) - 3} more" if len(users) > 3 else "")
+        return (f"{target} holds another ASF (not {asf}), which other AMC files there use "
+                f"({shown}); clean this file into another folder, or remove that ASF")
+    return None
+
+
+def _asf_for(amc_name: str, names) -> str | None:
+    """The name of the ASF :func:`find_asf` reads with the AMC ``amc_name`` in a folder
+    holding the files ``names`` (None: none found)."""
+    stem = Path(amc_name).stem
+    for base in (stem, stem.split("_", 1)[0]):
+        for suffix in (".asf", ".ASF", ".Asf"):
+            if base + suffix in names:
+                return base + suffix
+    asfs = [n for n in names if n.lower().endswith(".asf")]
+    return asfs[0] if len(asfs) == 1 else None
+
+
+def _holds(path: Path, content: bytes) -> bool:
+    try:
+        return path.read_bytes() == content
+    except OSError:
+        return False
 
 
 def _write_asf(target: Path, source: AsfAmcSource) -> Path:
