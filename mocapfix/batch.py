@@ -358,7 +358,7 @@ def skeleton_conflicts(jobs: list[Job]) -> list[str]:
     :func:`sharing_among`): the copy of an AMC's ASF that cannot be written beside its
     output (:func:`mocapfix.formats.asfamc.skeleton_conflict`), one message per job, so
     that the run can refuse before any file is touched (and ``--dry-run`` with it)."""
-    from mocapfix.formats.asfamc import skeleton_conflict, skeleton_output
+    from mocapfix.formats.asfamc import file_names, skeleton_conflict, skeleton_output
 
     copies = {job: skeleton_output(job.source, job.output) for job in jobs
               if job.source.suffix.lower() == ".amc"}
@@ -366,6 +366,7 @@ def skeleton_conflicts(jobs: list[Job]) -> list[str]:
     for found in copies.values():
         if found is not None:
             by_folder.setdefault(found[0].parent, set()).add(found[0])
+    listed = {folder: file_names(folder) for folder in by_folder}
     out = []
     for job, found in copies.items():
         if found is None:
@@ -375,7 +376,8 @@ def skeleton_conflicts(jobs: list[Job]) -> list[str]:
         except OSError:
             continue                # unreadable: reading the AMC names the cause
         why = skeleton_conflict(job.output, found[1], content, job.shares_asf_with,
-                                planned=by_folder[found[0].parent] - {found[0]})
+                                planned=by_folder[found[0].parent] - {found[0]},
+                                present=listed[found[0].parent])
         if why:
             out.append(f"{job.source}: its skeleton cannot be written: {why}")
     return out

@@ -58,6 +58,7 @@ Why hand-written
 from __future__ import annotations
 
 import heapq
+import os
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -667,14 +668,15 @@ def find_asf(amc_path: Path, asf_option=None) -> Path:
         return asf
     folder = amc_path.parent
     stems = [amc_path.stem, amc_path.stem.split("_", 1)[0]]
-    for stem in stems:
-        for suffix in (".asf", ".ASF", ".Asf"):
-            candidate = folder / (stem + suffix)
-            if candidate.is_file():
-                return candidate
-    in_folder = sorted(p for p in folder.iterdir() if p.suffix.lower() == ".asf" and p.is_file())
-    if len(in_folder) == 1:
-        return in_folder[0]
+
+    def asf_files():
+        with os.scandir(folder) as entries:
+            return [e.name for e in entries if e.name.lower().endswith(".asf") and e.is_file()]
+
+    found = _asf_for(amc_path.name, lambda name: (folder / name).is_file(), asf_files)
+    if found is not None:
+        return folder / found
+    in_folder = asf_files()
     tried = " or ".join(f"{s}.asf" for s in dict.fromkeys(stems))
     why = f"{len(in_folder)} .asf files there" if in_folder else "no .asf file there"
     raise UnreadableFileError(
@@ -799,7 +801,7 @@ def skeleton_output(amc: Path, output: Path) -> tuple[Path, Path] | None:
 
 
 def skeleton_conflict(amc: Path, asf: Path, asf_bytes: bytes, also_written=(),
-                      planned=()) -> str | None:
+                      planned=(), present: set | None = None) -> str | None:
     """Why the copy of the ASF ``asf`` (content ``asf_bytes``) cannot be written beside the
     AMC output ``amc`` (None: it can). An AMC is paired with its skeleton by file name
     (:func:`find_asf`: the AMC's own name, its subject's, else the only ``.asf`` there), so
@@ -815,16 +817,14 @@ def skeleton_conflict(amc: Path, asf: Path, asf_bytes: bytes, also_written=(),
       AMC there but ``amc`` and the ``also_written`` ones is read with it (the outputs of
       an earlier run, cleaned again after their ASF was edited), it is replaced.
 
-    ``planned``: the other ASF copies a batch will write in that folder. Checked by the
-    batch plan before any file runs, and by the writer before anything is written."""
+    ``planned``: the other ASF copies a batch will write in that folder; ``present``: the
+    names of the files in it, if already listed (:func:`file_names`). Checked by the batch
+    plan before any file runs, and by the writer before anything is written."""
     amc, target = Path(amc), Path(amc).with_name(Path(asf).name)
     folder = amc.parent
-    try:
-        present = {p.name for p in folder.iterdir() if p.is_file()} if folder.is_dir() else set()
-    except OSError:
-        present = set()
+    present = file_names(folder) if present is None else present
     after = present | {target.name} | {Path(p).name for p in planned}
-    found = _asf_for(amc.name, after)
+    found = _asf_for(amc.name, after.__contains__, lambda: after)
     stem = amc.stem
     if found is None:
         shown = ", ".join(sorted(n for n in after if n.lower().endswith(".asf")))
@@ -838,13 +838,15 @@ def skeleton_conflict(amc: Path, asf: Path, asf_bytes: bytes, also_written=(),
         replaced = target.name in present and target.read_bytes() != asf_bytes
     except OSError:
         replaced = False            # unreadable or not a file: writing it reports the cause
+    if not replaced and after == present:
+        return None                 # nothing another AMC there is read with changes
     ignoring = {amc.name, *(Path(p).name for p in also_written)}
     users, lost = [], []
     for other in sorted(n for n in present if n.lower().endswith(".amc") and n not in ignoring):
-        now = _asf_for(other, present)
+        now = _asf_for(other, present.__contains__, lambda: present)
         if now is None:
             continue
-        if _asf_for(other, after) != now:
+        if _asf_for(other, after.__contains__, lambda: after) != now:
             lost.append(f"{other} (read with {now})")
         elif now == target.name and replaced:
             users.append(other)
@@ -858,16 +860,27 @@ def skeleton_conflict(amc: Path, asf: Path, asf_bytes: bytes, also_written=(),
     return None
 
 
-def _asf_for(amc_name: str, names) -> str | None:
-    """The name of the ASF :func:`find_asf` reads with the AMC ``amc_name`` in a folder
-    holding the files ``names`` (None: none found)."""
+def _asf_for(amc_name: str, has, listing) -> str | None:
+    """The name of the ASF the AMC ``amc_name`` is read with (None: none): the AMC's own
+    name, then its subject's (the part before the first ``_``), in three letter cases,
+    else the only ``.asf`` of the folder. ``has(name)``: whether the folder holds that
+    file; ``listing()``: the names there (asked only for the last rule)."""
     stem = Path(amc_name).stem
     for base in (stem, stem.split("_", 1)[0]):
         for suffix in (".asf", ".ASF", ".Asf"):
-            if base + suffix in names:
+            if has(base + suffix):
                 return base + suffix
-    asfs = [n for n in names if n.lower().endswith(".asf")]
+    asfs = [n for n in listing() if n.lower().endswith(".asf")]
     return asfs[0] if len(asfs) == 1 else None
+
+
+def file_names(folder: Path) -> set:
+    """The names of the files in ``folder`` (empty when it is not there or not listable)."""
+    try:
+        with os.scandir(folder) as entries:
+            return {e.name for e in entries if e.is_file()}
+    except OSError:
+        return set()
 
 
 def _holds(path: Path, content: bytes) -> bool:
