@@ -153,9 +153,9 @@ class Pipeline:
 def _without_points(info: dict, names: list[str]) -> dict:
     """A step's ``info`` without what it says of the joints ``names`` (joints of a rig it
     ran on whole, whose channels are then put back): entries keyed by joint name (the
-    frames it replaced or rejected, per-joint counts) lose those joints, and the frame
-    counts of what it replaced (``spike_frames``, ``joint_frames_replaced``) are counted
-    again from what is left."""
+    frames it replaced or rejected, per-joint counts) lose those joints, and the counts of
+    what it replaced or flagged (``spike_frames``, ``joint_frames_replaced``, ``flagged``)
+    are counted again from what is left."""
     info = dict(info or {})
     drop = set(names)
     for key, value in list(info.items()):
@@ -167,6 +167,9 @@ def _without_points(info: dict, names: list[str]) -> dict:
             info["joint_frames_replaced"] = sum(len(v) for v in replaced.values())
         if "spike_frames" in info:
             info["spike_frames"] = len({int(f) for v in replaced.values() for f in v})
+    per_marker = info.get("flagged_per_marker")
+    if isinstance(per_marker, dict) and isinstance(info.get("flagged"), int):
+        info["flagged"] = int(sum(per_marker.values()))
     return info
 
 

@@ -100,16 +100,21 @@ def keep_rig_joints(before: Motion, after: Motion, excluded: np.ndarray) -> Moti
     from mocapfix.writeback import solve_channels
 
     rig = before.rig
+    excluded = np.asarray(excluded, bool)
     ch = np.array(before.channels if after.channels is None else after.channels, dtype=np.float64)
     target = after.positions
     if not ((rig.positions(ch) == target) | np.isnan(target)).all():
         ch = solve_channels(rig, ch, target)
     ch = own_channels(rig, ch, before.channels, excluded)
-    below = np.asarray(excluded, bool).copy()
+    below = excluded.copy()
     for j, p in enumerate(rig.parents):           # parents come first
         below[j] |= p >= 0 and below[p]
     positions = target.copy()
     positions[:, below] = rig.positions(ch)[:, below]
+    # a cleaned joint below an excluded one keeps its flags too (a knee's glitch below an
+    # excluded hip: its ankle samples stay missing for the fill)
+    flagged = np.isnan(target).any(axis=-1) & ~np.isnan(before.positions).any(axis=-1)
+    positions[flagged & ~excluded[None, :]] = np.nan
     return after.replace(channels=ch, positions=positions)
 
 

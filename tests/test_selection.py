@@ -257,7 +257,7 @@ def test_a_position_step_on_a_rig_keeps_the_left_out_joints_channels():
     assert np.abs(result.cleaned.channels[:, arm] - ch[:, arm]).max() > 1.0   # smoothed
 
 
-@pytest.mark.parametrize("where", ["pipeline", "step"])
+@pytest.mark.parametrize("where", ["pipeline", "step", "above", "markers"])
 def test_flag_then_fill_still_repairs_a_rig_when_joints_are_left_out(where):
     # the first version wrote the flagging step's positions back at once: its flagged
     # (missing) samples became the old rotations' positions again, the fill after it had
@@ -270,8 +270,11 @@ def test_flag_then_fill_still_repairs_a_rig_when_joints_are_left_out(where):
     ch = truth.channels.copy()
     ch[500:503, rig.rot_columns[rig.names.index("RightKnee")][0]] += 60.0
     glitched = truth.replace(channels=ch, positions=rig.positions(ch))
-    sel = "exclude: ['Left*']\n"
-    text = (f"{sel}pipeline:\n  - cleaner: spikes\n  - cleaner: fill\n" if where == "pipeline"
+    # "above": the glitched knee hangs below the excluded hip; "markers": the root is left
+    # out (every joint hangs below it), and the flags below it were lost
+    sel = {"pipeline": "exclude: ['Left*']\n", "above": "exclude: ['RightHip']\n",
+           "markers": "markers: ['Right*']\n"}.get(where, "")
+    text = (f"{sel}pipeline:\n  - cleaner: spikes\n  - cleaner: fill\n" if sel
             else "pipeline:\n  - {cleaner: spikes, exclude: ['Left*']}\n  - cleaner: fill\n")
     plain = clean_motion(glitched, loads_config("pipeline:\n  - cleaner: spikes\n  - cleaner: fill\n"))
     result = clean_motion(glitched, loads_config(text))
@@ -279,6 +282,9 @@ def test_flag_then_fill_still_repairs_a_rig_when_joints_are_left_out(where):
     before = np.abs(glitched.positions[500:503, ankle] - truth.positions[500:503, ankle]).max()
     after = np.abs(result.cleaned.positions[500:503, ankle] - truth.positions[500:503, ankle]).max()
     assert after < 0.05 * before
-    left = [int(c) for j, n in enumerate(rig.names) if n.startswith("Left") for c in rig.rot_columns[j]]
+    kept = {"above": ("RightHip",), "markers": tuple(n for n in rig.names if not n.startswith("Right"))}
+    names = kept.get(where, tuple(n for n in rig.names if n.startswith("Left")))
+    left = [int(c) for j, n in enumerate(rig.names) if n in names for c in rig.rot_columns[j]]
     assert np.array_equal(result.cleaned.channels[:, left], ch[:, left])
-    assert np.nanmax(result.writeback_residual) == pytest.approx(np.nanmax(plain.writeback_residual))
+    if where in ("pipeline", "step"):
+        assert np.nanmax(result.writeback_residual) == pytest.approx(np.nanmax(plain.writeback_residual))
