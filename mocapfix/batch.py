@@ -16,7 +16,6 @@ clear error if they cannot be read). Input trees are never written to.
 """
 from __future__ import annotations
 
-import dataclasses
 import errno
 import fnmatch
 import os
@@ -53,9 +52,6 @@ class Found:
 class Job:
     source: Path
     output: Path
-    #: for an AMC: the other outputs of the batch written beside the same copy of its ASF
-    #: (their earlier versions there do not keep that copy from being replaced)
-    shares_asf_with: frozenset = frozenset()
 
 
 @dataclass
@@ -317,70 +313,68 @@ def _plan_skeletons(jobs: list[Job]) -> list[Job]:
     """An AMC is written beside a copy of its ASF; two AMCs from different folders whose
     ASFs have one name (in any letter case: ``05.asf`` and ``05.ASF`` pair alike) but
     different content would overwrite each other's skeleton in the output folder (files
-    named one by one land side by side): a ConfigError naming both. Returns the jobs, each
-    AMC's with the outputs of the others that share its copy (``Job.shares_asf_with``)."""
+    named one by one land side by side): a ConfigError naming both. Returns the jobs."""
     from mocapfix.formats.asfamc import skeleton_output
 
     skeletons: dict[Path, tuple[Path, Path]] = {}
-    sharing: dict[Path, set] = {}
-    key_of: dict[int, Path] = {}
-    for i, job in enumerate(jobs):
-        if job.source.suffix.lower() != ".amc":
-            continue
-        found = skeleton_output(job.source, job.output)
+    for job in jobs:
+        found = _skeleton_written(job, skeleton_output)
         if found is None:
             continue
         target, asf = found
-        key = target.with_name(target.name.casefold())
-        first = skeletons.setdefault(key, (asf, job.source))
+        first = skeletons.setdefault(target.with_name(target.name.casefold()), (asf, job.source))
         if first[0] != asf and not _same_bytes(first[0], asf):
             raise ConfigError(f"{first[1]} and {job.source} would both write their skeleton to "
                               f"{target}, but {first[0]} and {asf} differ; clean them into "
                               "separate output folders (or name the folder above theirs)")
-        sharing.setdefault(key, set()).add(job.output)
-        key_of[i] = key
-    return [Job(job.source, job.output, frozenset(sharing[key_of[i]] - {job.output}))
-            if i in key_of and len(sharing[key_of[i]]) > 1 else job
-            for i, job in enumerate(jobs)]
-
-
-def sharing_among(jobs: list[Job]) -> list[Job]:
-    """``jobs`` with each one's ``shares_asf_with`` cut to the outputs of ``jobs`` (the
-    ones that run: an output kept by --skip-existing is not written again, and its
-    skeleton copy must stay)."""
-    outputs = {j.output for j in jobs}
-    return [dataclasses.replace(j, shares_asf_with=j.shares_asf_with & outputs)
-            if j.shares_asf_with else j for j in jobs]
+    return jobs
 
 
 def skeleton_conflicts(jobs: list[Job]) -> list[str]:
-    """What the AMC writer would refuse for ``jobs`` (those that run, after
-    :func:`sharing_among`): the copy of an AMC's ASF that cannot be written beside its
-    output (:func:`mocapfix.formats.asfamc.skeleton_conflict`), one message per job, so
-    that the run can refuse before any file is touched (and ``--dry-run`` with it)."""
+    """What the AMC writer would refuse for ``jobs`` (those that run), checked for all of
+    them together before any runs (:func:`mocapfix.formats.asfamc.skeleton_conflict`): an
+    ASF copy that would pair an AMC in its output folder with the wrong skeleton or none,
+    given every copy and AMC the run writes there. One message per job; the run refuses
+    before any file is touched (``--dry-run`` with it), and its writers skip the check."""
     from mocapfix.formats.asfamc import file_names, skeleton_conflict, skeleton_output
 
-    copies = {job: skeleton_output(job.source, job.output) for job in jobs
-              if job.source.suffix.lower() == ".amc"}
-    by_folder: dict[Path, set] = {}
-    for found in copies.values():
+    copies = {job: _skeleton_written(job, skeleton_output) for job in jobs}
+    folders: dict[Path, dict] = {}
+    for job, found in copies.items():
         if found is not None:
-            by_folder.setdefault(found[0].parent, set()).add(found[0])
-    listed = {folder: file_names(folder) for folder in by_folder}
+            f = folders.setdefault(found[0].parent, {"planned": {}, "rewriting": set()})
+            f["planned"].setdefault(found[0].name, found[1])
+            f["rewriting"].add(job.output.name)
+    copies = {job: found for job, found in copies.items() if job.source.suffix.lower() == ".amc"}
+    for folder, f in folders.items():
+        f["present"] = file_names(folder)
+        f["outsiders"] = sorted(n for n in f["present"]
+                                if n.lower().endswith(".amc") and n not in f["rewriting"])
     out = []
     for job, found in copies.items():
         if found is None:
             continue
+        target, asf = found
         try:
-            content = found[1].read_bytes()
+            content = asf.read_bytes()
         except OSError:
             continue                # unreadable: reading the AMC names the cause
-        why = skeleton_conflict(job.output, found[1], content, job.shares_asf_with,
-                                planned=by_folder[found[0].parent] - {found[0]},
-                                present=listed[found[0].parent])
+        f = folders[target.parent]
+        why = skeleton_conflict(job.output, asf, content, rewriting=f["rewriting"],
+                                planned={n: a for n, a in f["planned"].items() if n != target.name},
+                                present=f["present"], outsiders=f["outsiders"])
         if why:
             out.append(f"{job.source}: its skeleton cannot be written: {why}")
     return out
+
+
+def _skeleton_written(job: Job, skeleton_output) -> tuple[Path, Path] | None:
+    """(the ASF file ``job`` writes, the ASF it copies): an AMC's copy beside its output,
+    or an ASF named as an input itself; None for other files."""
+    suffix = job.source.suffix.lower()
+    if suffix == ".asf":
+        return job.output, job.source
+    return skeleton_output(job.source, job.output) if suffix == ".amc" else None
 
 
 def _same_bytes(a: Path, b: Path) -> bool:
@@ -545,8 +539,9 @@ class CleanTask:
                 before = input_identity(job.source)
             except OSError:
                 before = None           # unreadable: clean_file names the cause
+            # an AMC's skeleton copy was checked with the whole batch's (skeleton_conflicts)
             result = clean_file(job.source, job.output, pipeline, self.reports, self.read_options,
-                                {"also_written": job.shares_asf_with} if job.shares_asf_with else None)
+                                skeleton_checked=True)
             # for the manifest: the hashes of what was cleaned. Taken after the clean alone, a
             # file still being written (copied, synced) was recorded with its new content
             # against an output of the old one, and the next run skipped it as finished

@@ -80,9 +80,11 @@ def remove_outputs(paths) -> None:
 
 
 def clean_file(source: Path, output: Path, pipeline: Pipeline, reports=("json",),
-               read_options: dict | None = None, write_options: dict | None = None) -> dict:
+               read_options: dict | None = None, skeleton_checked: bool = False) -> dict:
     """Read, clean, write. Returns a JSON-able summary; raises MocapfixError on failure.
 
+    ``skeleton_checked``: an AMC's ASF copy was checked with its batch's
+    (:func:`mocapfix.batch.skeleton_conflicts`), so its writer does not check it alone.
     Every report is rendered before anything is written, and a failure while writing
     removes the output and its reports, so a failed file leaves nothing behind (but the
     ASF an AMC is written beside, which the subject's other AMCs there share). Reports of kinds
@@ -101,7 +103,8 @@ def clean_file(source: Path, output: Path, pipeline: Pipeline, reports=("json",)
         # in the format that was read, which the content decided, not the name: a BVH
         # saved as .c3d stays a BVH (the output mirrors the input's name)
         written = list(formats.write(result.cleaned, output, format=motion.format,
-                                     **(write_options or {})))
+                                     **({"skeleton_checked": True} if skeleton_checked
+                                        and motion.format == "asfamc" else {})))
         for kind, path in paths.items():
             atomic_write_text(path, texts[kind])
     except BaseException:

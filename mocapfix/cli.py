@@ -342,8 +342,7 @@ def clean(inputs, outdir, config_path, reports, jobs, as_json, fps, allow_inside
     """
     from pathlib import Path
 
-    from mocapfix.batch import (check_output_folder, plan_outputs, run_batch, sharing_among,
-                                skeleton_conflicts)
+    from mocapfix.batch import check_output_folder, plan_outputs, run_batch, skeleton_conflicts
     from mocapfix.clean import output_files, remove_outputs
     from mocapfix.fileio import atomic_write_text, remove_stale_temporaries
     from mocapfix.manifest import Manifest, run_key
@@ -407,7 +406,6 @@ def clean(inputs, outdir, config_path, reports, jobs, as_json, fps, allow_inside
     todo = [j for j in jobs_list if j not in finished
             and not (policy == "skip" and _output_there(j) and not manifest.interrupted(j))]
     skipped = [j for j in jobs_list if j not in todo]
-    todo = sharing_among(todo)
     conflicts = skeleton_conflicts(todo)
     if conflicts:
         for folder in made:             # the folders this run made, empty: taken back

@@ -17,7 +17,7 @@ from click.testing import CliRunner
 
 from mocapfix.cli import main
 
-from conftest import SAMPLE_DATA, no_traceback
+from conftest import SAMPLE_DATA, no_traceback, shared
 
 BVH, C3D, KIN = SAMPLE_DATA / "walk.bvh", SAMPLE_DATA / "walk_markers.c3d", SAMPLE_DATA / "walk_kinect_v2.csv"
 FAST = "version: 1\npipeline:\n  - cleaner: fill\n    max_gap: 0.5 s\n"
@@ -443,6 +443,64 @@ def test_an_asf_named_in_other_letter_case_is_not_read_with_the_wrong_amc(tmp_pa
     no_traceback(r)
     assert r.exit_code == 2 and "could not be read back" in r.output, r.output
     assert not (tmp_path / "o3").exists()
+
+
+def test_an_amc_output_left_without_its_skeleton_copy_is_written_again(tmp_path):
+    # a run killed after writing out/05_01.amc but before its copy out/05.asf: 05_01.amc
+    # then read the only .asf there, 13.asf, and every later run (resume, --overwrite,
+    # --skip-existing) refused with "would leave 05_01.amc (read with 13.asf) without its
+    # skeleton", though 05_01.amc was one of the files it would write again
+    from mocapfix import formats
+
+    src = tmp_path / "in"
+    src.mkdir()
+    for name in ("05.asf", "05_01.amc", "13.asf", "13_39.amc"):
+        shutil.copy(shared(f"asfamc/{name}"), src / name)
+    cfg = _cfg(tmp_path, "version: 1\npipeline: []\n", "none.yaml")
+    out = tmp_path / "out"
+    assert CliRunner().invoke(main, ["clean", str(src), "-o", str(out), "-c", cfg]).exit_code == 0
+    (out / "05.asf").unlink()
+    r = CliRunner().invoke(main, ["clean", str(src), "-o", str(out), "-c", cfg, "--overwrite"])
+    no_traceback(r)
+    assert r.exit_code == 0, r.output
+    for amc in ("05_01.amc", "13_39.amc"):
+        got, want = formats.read(out / amc), formats.read(src / amc)
+        assert got.n_joints == want.n_joints and abs(got.positions - want.positions).max() < 1e-6
+
+
+def test_one_asf_in_two_letter_cases_with_the_same_content_is_not_refused(tmp_path):
+    # a/05.ASF and b/05.asf hold the same skeleton: the plan let them share one copy, and
+    # then refused 05_10 because out/05.ASF, a copy not written yet, could not be read
+    from mocapfix import formats
+
+    for sub, asf, amc in (("a", "05.ASF", "05_01.amc"), ("b", "05.asf", "05_10.amc")):
+        (tmp_path / sub).mkdir()
+        shutil.copy(shared("asfamc/05.asf"), tmp_path / sub / asf)
+        shutil.copy(shared(f"asfamc/{amc}"), tmp_path / sub / amc)
+    cfg = _cfg(tmp_path, "version: 1\npipeline: []\n", "none.yaml")
+    out = tmp_path / "out"
+    r = CliRunner().invoke(main, ["clean", str(tmp_path / "a" / "05_01.amc"),
+                                  str(tmp_path / "b" / "05_10.amc"), "-o", str(out), "-c", cfg])
+    no_traceback(r)
+    assert r.exit_code == 0, r.output
+    for amc in ("05_01.amc", "05_10.amc"):
+        assert formats.read(out / amc).n_joints == formats.read(shared(f"asfamc/{amc}")).n_joints
+
+
+def test_an_asf_named_as_an_input_is_planned_like_the_copies_beside_amcs(tmp_path):
+    # x2/05/05_01.amc (with CMU's 05.asf) and x1/05/05.asf, another skeleton, named
+    # together: out/05.asf ended as x1's skeleton and out/05_01.amc was read with it
+    for sub, asf in (("x1", "143.asf"), ("x2", "05.asf")):
+        (tmp_path / sub / "05").mkdir(parents=True)
+        shutil.copy(shared(f"asfamc/{asf}"), tmp_path / sub / "05" / "05.asf")
+    shutil.copy(shared("asfamc/05_01.amc"), tmp_path / "x2" / "05" / "05_01.amc")
+    cfg = _cfg(tmp_path, "version: 1\npipeline: []\n", "none.yaml")
+    r = CliRunner().invoke(main, ["clean", str(tmp_path / "x2" / "05" / "05_01.amc"),
+                                  str(tmp_path / "x1" / "05" / "05.asf"), "-o", str(tmp_path / "out"),
+                                  "-c", cfg])
+    no_traceback(r)
+    assert r.exit_code == 2 and "differ" in r.output, r.output
+    assert not (tmp_path / "out").exists()
 
 
 def test_an_unforeseen_failure_is_one_line_and_the_other_files_go_on(tmp_path, monkeypatch):

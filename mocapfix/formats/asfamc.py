@@ -746,10 +746,13 @@ def format_value(value: float) -> str:
     return "0" if text in ("-0", "") else text
 
 
-def write(motion: Motion, path, also_written=(), **options) -> list[Path]:
-    """Write the AMC ``path`` and the copy of its ASF beside it. ``also_written``: other
-    AMC outputs there that the caller writes again with the same skeleton (a batch), whose
-    earlier versions do not keep an old copy of the ASF from being replaced."""
+def write(motion: Motion, path, skeleton_checked: bool = False, **options) -> list[Path]:
+    """Write the copy of the motion's ASF beside the AMC ``path``, then the AMC (a run
+    killed in between leaves the AMC's old version beside the new skeleton, which a re-run
+    rewrites, never an AMC without its skeleton). The copy is checked first
+    (:func:`skeleton_conflict`) unless ``skeleton_checked``: a batch checks all its files
+    together before any runs (each file alone would see its batch-mates' half-written
+    state)."""
     path = Path(path)
     source = motion.source
     if not isinstance(source, AsfAmcSource):
@@ -771,11 +774,13 @@ def write(motion: Motion, path, also_written=(), **options) -> list[Path]:
     if asf_target.resolve() == path.resolve():
         raise WriteError(path, f"the AMC would overwrite its skeleton {source.asf_name}")
     text = _amc_text(source, channels)
-    conflict = skeleton_conflict(path, Path(source.asf_path), source.asf_bytes, also_written)
-    if conflict:
-        raise WriteError(path, f"its skeleton cannot be written: {conflict}")
+    if not skeleton_checked:
+        conflict = skeleton_conflict(path, Path(source.asf_path), source.asf_bytes)
+        if conflict:
+            raise WriteError(path, f"its skeleton cannot be written: {conflict}")
+    copy = _write_asf(asf_target, source)
     atomic_write_bytes(path, text.encode("latin-1"))
-    return [path, _write_asf(asf_target, source)]
+    return [path, copy]
 
 
 def companion_files(path: Path) -> list[Path]:
@@ -800,8 +805,9 @@ def skeleton_output(amc: Path, output: Path) -> tuple[Path, Path] | None:
     return Path(output).with_name(asf.name), asf
 
 
-def skeleton_conflict(amc: Path, asf: Path, asf_bytes: bytes, also_written=(),
-                      planned=(), present: set | None = None) -> str | None:
+def skeleton_conflict(amc: Path, asf: Path, asf_bytes: bytes, *, rewriting=(),
+                      planned: dict | None = None, present: set | None = None,
+                      outsiders: list | None = None) -> str | None:
     """Why the copy of the ASF ``asf`` (content ``asf_bytes``) cannot be written beside the
     AMC output ``amc`` (None: it can). An AMC is paired with its skeleton by file name
     (:func:`find_asf`: the AMC's own name, its subject's, else the only ``.asf`` there), so
@@ -813,17 +819,21 @@ def skeleton_conflict(amc: Path, asf: Path, asf_bytes: bytes, also_written=(),
       ``.asf`` there, and the copy is a second);
     - a copy of another ASF already at the copy's name, which other AMC files there are
       read with (an earlier file of the batch from another folder, an earlier run):
-      replacing it would pair them with the wrong skeleton, keeping it this one. When no
-      AMC there but ``amc`` and the ``also_written`` ones is read with it (the outputs of
+      replacing it would pair them with the wrong skeleton, keeping it this one. When the
+      only AMCs there read with it are being written again (``rewriting``: the names of
+      the AMC outputs the caller writes there, each beside its own copy: the outputs of
       an earlier run, cleaned again after their ASF was edited), it is replaced.
 
-    ``planned``: the other ASF copies a batch will write in that folder; ``present``: the
-    names of the files in it, if already listed (:func:`file_names`). Checked by the batch
-    plan before any file runs, and by the writer before anything is written."""
+    A batch checks every file before any runs (:func:`mocapfix.batch.skeleton_conflicts`):
+    ``planned`` maps the names of the other copies it writes in that folder to the ASF
+    each copies, ``present`` holds the names of the files there (:func:`file_names`),
+    ``outsiders`` the AMCs there it does not write; the writer checks a file written
+    alone."""
     amc, target = Path(amc), Path(amc).with_name(Path(asf).name)
     folder = amc.parent
+    planned = planned or {}
     present = file_names(folder) if present is None else present
-    after = present | {target.name} | {Path(p).name for p in planned}
+    after = present | {target.name} | set(planned)
     found = _asf_for(amc.name, after.__contains__, lambda: after)
     stem = amc.stem
     if found is None:
@@ -831,18 +841,17 @@ def skeleton_conflict(amc: Path, asf: Path, asf_bytes: bytes, also_written=(),
         return (f"it could not be read back with it: the folder would hold several .asf files "
                 f"({shown}) and none named {stem}.asf or {stem.split('_', 1)[0]}.asf; clean "
                 "it into a folder of its own")
-    if found != target.name and not _holds(folder / found, asf_bytes):
+    if found != target.name and not _holds(planned.get(found, folder / found), asf_bytes):
         return (f"{folder / found} would be read with it instead of its skeleton (a copy of "
                 f"{asf}); clean this file into another folder, or move {found} away")
-    try:
-        replaced = target.name in present and target.read_bytes() != asf_bytes
-    except OSError:
-        replaced = False            # unreadable or not a file: writing it reports the cause
+    replaced = target.name in present and not _holds(target, asf_bytes)
     if not replaced and after == present:
         return None                 # nothing another AMC there is read with changes
-    ignoring = {amc.name, *(Path(p).name for p in also_written)}
+    if outsiders is None:
+        skip = {amc.name, *rewriting}
+        outsiders = sorted(n for n in present if n.lower().endswith(".amc") and n not in skip)
     users, lost = [], []
-    for other in sorted(n for n in present if n.lower().endswith(".amc") and n not in ignoring):
+    for other in outsiders:
         now = _asf_for(other, present.__contains__, lambda: present)
         if now is None:
             continue
@@ -883,7 +892,7 @@ def file_names(folder: Path) -> set:
         return set()
 
 
-def _holds(path: Path, content: bytes) -> bool:
+def _holds(path, content: bytes) -> bool:
     try:
         return path.read_bytes() == content
     except OSError:
