@@ -36,7 +36,7 @@ from mocapfix.errors import ConfigError
 from mocapfix.formats import NAMES
 from mocapfix.gaps import take_frames
 from mocapfix.motion import Motion
-from mocapfix.selection import Selection, cleanable, keep_rig_joints, put, take
+from mocapfix.selection import Selection, cleanable, keep_rig_joints, moved_channels, put, take
 from mocapfix.solvers.rigid import norms
 from mocapfix.yamlsafe import load_yaml as safe_load_yaml
 from mocapfix.yamlsafe import read_bounded
@@ -141,7 +141,10 @@ class Pipeline:
             return step.cleaner.apply(motion)
         if motion.rig is not None and motion.channels is not None:
             out, info = step.cleaner.apply(motion)
-            info = _without_points(info, [n for n, c in zip(motion.names, cols) if not c])
+            if moved_channels(motion, out):
+                # a rotation step: what it did to the excluded joints' channels is undone
+                info = _without_points(info, [n for n, c in zip(motion.names, cols) if not c])
+            info = dict(info or {})
             info["points_not_cleaned"] = int((~cols).sum())
             return keep_rig_joints(motion, out, ~cols), info
         part, info = step.cleaner.apply(take(motion, cols))
@@ -154,8 +157,9 @@ def _without_points(info: dict, names: list[str]) -> dict:
     """A step's ``info`` without what it says of the joints ``names`` (joints of a rig it
     ran on whole, whose channels are then put back): entries keyed by joint name (the
     frames it replaced or rejected, per-joint counts) lose those joints, and the counts of
-    what it replaced or flagged (``spike_frames``, ``joint_frames_replaced``, ``flagged``)
-    are counted again from what is left."""
+    what it replaced (``spike_frames``, ``joint_frames_replaced``) are counted again from
+    what is left. For a rotation step only: the flags of a position step stay on every
+    joint (:func:`mocapfix.selection.keep_rig_joints`)."""
     info = dict(info or {})
     drop = set(names)
     for key, value in list(info.items()):
@@ -167,9 +171,6 @@ def _without_points(info: dict, names: list[str]) -> dict:
             info["joint_frames_replaced"] = sum(len(v) for v in replaced.values())
         if "spike_frames" in info:
             info["spike_frames"] = len({int(f) for v in replaced.values() for f in v})
-    per_marker = info.get("flagged_per_marker")
-    if isinstance(per_marker, dict) and isinstance(info.get("flagged"), int):
-        info["flagged"] = int(sum(per_marker.values()))
     return info
 
 

@@ -88,22 +88,34 @@ def not_cleaned(motion: Motion, *selections: "Selection | None") -> list[str | N
     return out
 
 
+def moved_channels(before: Motion, after: Motion) -> bool:
+    """Whether a step's output ``after`` on a rig is its channels' forward kinematics (a
+    rotation step: it changed channels) rather than cleaned positions the channels do not
+    follow yet (a position step)."""
+    ch = before.channels if after.channels is None else after.channels
+    target = after.positions
+    return bool(((before.rig.positions(ch) == target) | np.isnan(target)).all())
+
+
 def keep_rig_joints(before: Motion, after: Motion, excluded: np.ndarray) -> Motion:
     """``after`` (a step's output on the whole rig of ``before``) with the rotation and
     translation channels of the joints ``excluded`` (J,) bool as ``before`` has them. A
-    step that cleaned positions is written back into channels first
+    joint's position is its parents' business: an excluded joint keeps its own channels,
+    not its place. A step that cleaned positions is written back into channels first
     (:func:`mocapfix.writeback.solve_channels`, as the pipeline's end does), so that the
     rotations of the other joints are the step's. The excluded joints and the joints below
     them take the positions of those channels; every other joint keeps the positions the
-    step gave it, samples it flagged (made missing) included: the steps after it fill
-    them, and the pipeline's end writes them back and reports what it could not reach."""
+    step gave it. Samples the step flagged (made missing) stay missing on every joint,
+    excluded ones included: they are the evidence of a glitch in a joint above (a wrist
+    thrown off by its elbow's rotation), which the steps after it fill and the pipeline's
+    end writes back (then puts the excluded joints' channels back)."""
     from mocapfix.writeback import solve_channels
 
     rig = before.rig
     excluded = np.asarray(excluded, bool)
     ch = np.array(before.channels if after.channels is None else after.channels, dtype=np.float64)
     target = after.positions
-    if not ((rig.positions(ch) == target) | np.isnan(target)).all():
+    if not moved_channels(before, after):
         ch = solve_channels(rig, ch, target)
     ch = own_channels(rig, ch, before.channels, excluded)
     below = excluded.copy()
@@ -111,10 +123,8 @@ def keep_rig_joints(before: Motion, after: Motion, excluded: np.ndarray) -> Moti
         below[j] |= p >= 0 and below[p]
     positions = target.copy()
     positions[:, below] = rig.positions(ch)[:, below]
-    # a cleaned joint below an excluded one keeps its flags too (a knee's glitch below an
-    # excluded hip: its ankle samples stay missing for the fill)
     flagged = np.isnan(target).any(axis=-1) & ~np.isnan(before.positions).any(axis=-1)
-    positions[flagged & ~excluded[None, :]] = np.nan
+    positions[flagged] = np.nan
     return after.replace(channels=ch, positions=positions)
 
 

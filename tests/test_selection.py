@@ -257,7 +257,7 @@ def test_a_position_step_on_a_rig_keeps_the_left_out_joints_channels():
     assert np.abs(result.cleaned.channels[:, arm] - ch[:, arm]).max() > 1.0   # smoothed
 
 
-@pytest.mark.parametrize("where", ["pipeline", "step", "above", "markers"])
+@pytest.mark.parametrize("where", ["pipeline", "step", "above", "markers", "child", "child-step"])
 def test_flag_then_fill_still_repairs_a_rig_when_joints_are_left_out(where):
     # the first version wrote the flagging step's positions back at once: its flagged
     # (missing) samples became the old rotations' positions again, the fill after it had
@@ -272,17 +272,21 @@ def test_flag_then_fill_still_repairs_a_rig_when_joints_are_left_out(where):
     glitched = truth.replace(channels=ch, positions=rig.positions(ch))
     # "above": the glitched knee hangs below the excluded hip; "markers": the root is left
     # out (every joint hangs below it), and the flags below it were lost
+    # "child": the joint below the glitched knee is excluded, and its thrown-off samples are
+    # the only evidence of the glitch (they were dropped, and the report said OK)
     sel = {"pipeline": "exclude: ['Left*']\n", "above": "exclude: ['RightHip']\n",
-           "markers": "markers: ['Right*']\n"}.get(where, "")
+           "markers": "markers: ['Right*']\n", "child": "exclude: ['RightAnkle']\n"}.get(where, "")
+    step = "['RightAnkle']" if where == "child-step" else "['Left*']"
     text = (f"{sel}pipeline:\n  - cleaner: spikes\n  - cleaner: fill\n" if sel
-            else "pipeline:\n  - {cleaner: spikes, exclude: ['Left*']}\n  - cleaner: fill\n")
+            else f"pipeline:\n  - {{cleaner: spikes, exclude: {step}}}\n  - cleaner: fill\n")
     plain = clean_motion(glitched, loads_config("pipeline:\n  - cleaner: spikes\n  - cleaner: fill\n"))
     result = clean_motion(glitched, loads_config(text))
     ankle = rig.names.index("RightAnkle")
     before = np.abs(glitched.positions[500:503, ankle] - truth.positions[500:503, ankle]).max()
     after = np.abs(result.cleaned.positions[500:503, ankle] - truth.positions[500:503, ankle]).max()
     assert after < 0.05 * before
-    kept = {"above": ("RightHip",), "markers": tuple(n for n in rig.names if not n.startswith("Right"))}
+    kept = {"above": ("RightHip",), "markers": tuple(n for n in rig.names if not n.startswith("Right")),
+            "child": ("RightAnkle",)}
     names = kept.get(where, tuple(n for n in rig.names if n.startswith("Left")))
     left = [int(c) for j, n in enumerate(rig.names) if n in names for c in rig.rot_columns[j]]
     assert np.array_equal(result.cleaned.channels[:, left], ch[:, left])
