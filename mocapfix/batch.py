@@ -345,7 +345,6 @@ def skeleton_conflicts(jobs: list[Job]) -> list[str]:
             f = folders.setdefault(found[0].parent, {"planned": {}, "rewriting": set()})
             f["planned"].setdefault(found[0].name, found[1])
             f["rewriting"].add(job.output.name)
-    copies = {job: found for job, found in copies.items() if job.source.suffix.lower() == ".amc"}
     for folder, f in folders.items():
         f["present"] = file_names(folder)
         f["outsiders"] = sorted(n for n in f["present"]
@@ -360,11 +359,13 @@ def skeleton_conflicts(jobs: list[Job]) -> list[str]:
         except OSError:
             continue                # unreadable: reading the AMC names the cause
         f = folders[target.parent]
-        why = skeleton_conflict(job.output, asf, content, rewriting=f["rewriting"],
+        amc = job.output if job.source.suffix.lower() == ".amc" else None
+        why = skeleton_conflict(amc, asf, content, rewriting=f["rewriting"], target=target,
                                 planned={n: a for n, a in f["planned"].items() if n != target.name},
                                 present=f["present"], outsiders=f["outsiders"])
         if why:
-            out.append(f"{job.source}: its skeleton cannot be written: {why}")
+            what = "its skeleton cannot be written" if amc is not None else "cannot be written there"
+            out.append(f"{job.source}: {what}: {why}")
     return out
 
 

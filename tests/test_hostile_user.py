@@ -13,6 +13,7 @@ import sys
 import threading
 from pathlib import Path
 
+import pytest
 from click.testing import CliRunner
 
 from mocapfix.cli import main
@@ -501,6 +502,26 @@ def test_an_asf_named_as_an_input_is_planned_like_the_copies_beside_amcs(tmp_pat
     no_traceback(r)
     assert r.exit_code == 2 and "differ" in r.output, r.output
     assert not (tmp_path / "out").exists()
+    # one run after another: x2's 05_01 cleaned, then an ASF named 05_01.asf, which
+    # find_asf reads with out/05_01.amc before 05.asf (by the AMC's own name)
+    out = tmp_path / "out"
+    assert CliRunner().invoke(main, ["clean", str(tmp_path / "x2" / "05" / "05_01.amc"),
+                                     "-o", str(out), "-c", cfg]).exit_code == 0
+    other = tmp_path / "x1" / "05" / "05_01.asf"
+    (tmp_path / "x1" / "05" / "05.asf").rename(other)
+    kept = _md5s(out)
+    for extra in (["--dry-run"], []):
+        r = CliRunner().invoke(main, ["clean", str(other), "-o", str(out), "-c", cfg, *extra])
+        no_traceback(r)
+        assert r.exit_code == 2 and "05_01.amc (read with 05.asf)" in r.output, r.output
+    assert _md5s(out) == kept
+    # the writer alone (the Python API) refuses it too
+    from mocapfix import formats
+    from mocapfix.errors import WriteError
+
+    with pytest.raises(WriteError, match="read with 05.asf"):
+        formats.write(formats.read(other), out / "05_01.asf")
+    assert _md5s(out) == kept
 
 
 def test_an_unforeseen_failure_is_one_line_and_the_other_files_go_on(tmp_path, monkeypatch):

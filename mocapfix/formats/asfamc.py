@@ -770,6 +770,10 @@ def write(motion: Motion, path, skeleton_checked: bool = False, **options) -> li
     if path.suffix.lower() == ".asf":
         if channels.shape[0] > 1:
             raise WriteError(path, "an .asf file holds only the skeleton; write the motion to a .amc path")
+        conflict = None if skeleton_checked else skeleton_conflict(
+            None, Path(source.asf_path), source.asf_bytes, target=path)
+        if conflict:
+            raise WriteError(path, f"cannot be written there: {conflict}")
         return [_write_asf(path, source)]
     if asf_target.resolve() == path.resolve():
         raise WriteError(path, f"the AMC would overwrite its skeleton {source.asf_name}")
@@ -805,11 +809,12 @@ def skeleton_output(amc: Path, output: Path) -> tuple[Path, Path] | None:
     return Path(output).with_name(asf.name), asf
 
 
-def skeleton_conflict(amc: Path, asf: Path, asf_bytes: bytes, *, rewriting=(),
+def skeleton_conflict(amc: Path | None, asf: Path, asf_bytes: bytes, *, rewriting=(),
                       planned: dict | None = None, present: set | None = None,
-                      outsiders: list | None = None) -> str | None:
+                      outsiders: list | None = None, target: Path | None = None) -> str | None:
     """Why the copy of the ASF ``asf`` (content ``asf_bytes``) cannot be written beside the
-    AMC output ``amc`` (None: it can). An AMC is paired with its skeleton by file name
+    AMC output ``amc`` (None: it can); with ``amc`` None, why the ASF cannot be written at
+    ``target`` (an ASF cleaned as a file of its own). An AMC is paired with its skeleton by file name
     (:func:`find_asf`: the AMC's own name, its subject's, else the only ``.asf`` there), so
     the copy must not leave an AMC there with the wrong skeleton or none:
 
@@ -829,26 +834,28 @@ def skeleton_conflict(amc: Path, asf: Path, asf_bytes: bytes, *, rewriting=(),
     each copies, ``present`` holds the names of the files there (:func:`file_names`),
     ``outsiders`` the AMCs there it does not write; the writer checks a file written
     alone."""
-    amc, target = Path(amc), Path(amc).with_name(Path(asf).name)
-    folder = amc.parent
+    target = Path(target) if target is not None else Path(amc).with_name(Path(asf).name)
+    folder = target.parent
     planned = planned or {}
     present = file_names(folder) if present is None else present
     after = present | {target.name} | set(planned)
-    found = _asf_for(amc.name, after.__contains__, lambda: after)
-    stem = amc.stem
-    if found is None:
-        shown = ", ".join(sorted(n for n in after if n.lower().endswith(".asf")))
-        return (f"it could not be read back with it: the folder would hold several .asf files "
-                f"({shown}) and none named {stem}.asf or {stem.split('_', 1)[0]}.asf; clean "
-                "it into a folder of its own")
-    if found != target.name and not _holds(planned.get(found, folder / found), asf_bytes):
-        return (f"{folder / found} would be read with it instead of its skeleton (a copy of "
-                f"{asf}); clean this file into another folder, or move {found} away")
+    if amc is not None:
+        amc = Path(amc)
+        found = _asf_for(amc.name, after.__contains__, lambda: after)
+        stem = amc.stem
+        if found is None:
+            shown = ", ".join(sorted(n for n in after if n.lower().endswith(".asf")))
+            return (f"it could not be read back with it: the folder would hold several .asf "
+                    f"files ({shown}) and none named {stem}.asf or {stem.split('_', 1)[0]}.asf; "
+                    "clean it into a folder of its own")
+        if found != target.name and not _holds(planned.get(found, folder / found), asf_bytes):
+            return (f"{folder / found} would be read with it instead of its skeleton (a copy "
+                    f"of {asf}); clean this file into another folder, or move {found} away")
     replaced = target.name in present and not _holds(target, asf_bytes)
     if not replaced and after == present:
         return None                 # nothing another AMC there is read with changes
     if outsiders is None:
-        skip = {amc.name, *rewriting}
+        skip = {*([amc.name] if amc is not None else []), *rewriting}
         outsiders = sorted(n for n in present if n.lower().endswith(".amc") and n not in skip)
     users, lost = [], []
     for other in outsiders:
