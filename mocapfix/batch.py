@@ -314,11 +314,9 @@ def _plan_skeletons(jobs: list[Job]) -> list[Job]:
     ASFs have one name (in any letter case: ``05.asf`` and ``05.ASF`` pair alike) but
     different content would overwrite each other's skeleton in the output folder (files
     named one by one land side by side): a ConfigError naming both. Returns the jobs."""
-    from mocapfix.formats.asfamc import skeleton_output
-
     skeletons: dict[Path, tuple[Path, Path]] = {}
     for job in jobs:
-        found = _skeleton_written(job, skeleton_output)
+        found = _skeleton_written(job)
         if found is None:
             continue
         target, asf = found
@@ -336,9 +334,9 @@ def skeleton_conflicts(jobs: list[Job]) -> list[str]:
     ASF copy that would pair an AMC in its output folder with the wrong skeleton or none,
     given every copy and AMC the run writes there. One message per job; the run refuses
     before any file is touched (``--dry-run`` with it), and its writers skip the check."""
-    from mocapfix.formats.asfamc import file_names, skeleton_conflict, skeleton_output
+    from mocapfix.formats.asfamc import file_names, skeleton_conflict
 
-    copies = {job: _skeleton_written(job, skeleton_output) for job in jobs}
+    copies = {job: _skeleton_written(job) for job in jobs}
     folders: dict[Path, dict] = {}
     for job, found in copies.items():
         if found is not None:
@@ -369,9 +367,11 @@ def skeleton_conflicts(jobs: list[Job]) -> list[str]:
     return out
 
 
-def _skeleton_written(job: Job, skeleton_output) -> tuple[Path, Path] | None:
+def _skeleton_written(job: Job) -> tuple[Path, Path] | None:
     """(the ASF file ``job`` writes, the ASF it copies): an AMC's copy beside its output,
     or an ASF named as an input itself; None for other files."""
+    from mocapfix.formats.asfamc import skeleton_output
+
     suffix = job.source.suffix.lower()
     if suffix == ".asf":
         return job.output, job.source

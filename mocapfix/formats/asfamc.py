@@ -814,9 +814,9 @@ def skeleton_conflict(amc: Path | None, asf: Path, asf_bytes: bytes, *, rewritin
                       outsiders: list | None = None, target: Path | None = None) -> str | None:
     """Why the copy of the ASF ``asf`` (content ``asf_bytes``) cannot be written beside the
     AMC output ``amc`` (None: it can); with ``amc`` None, why the ASF cannot be written at
-    ``target`` (an ASF cleaned as a file of its own). An AMC is paired with its skeleton by file name
-    (:func:`find_asf`: the AMC's own name, its subject's, else the only ``.asf`` there), so
-    the copy must not leave an AMC there with the wrong skeleton or none:
+    ``target`` (an ASF cleaned as a file of its own). An AMC is paired with its skeleton by
+    file name (:func:`find_asf`: the AMC's own name, its subject's, else the only ``.asf``
+    there), so the copy must not leave an AMC there with the wrong skeleton or none:
 
     - ``amc`` itself read with another file (``05.asf`` beside a copy ``05.ASF``), or with
       none (two ``.asf`` files there, neither named after it);
