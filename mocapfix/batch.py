@@ -306,14 +306,15 @@ def plan_outputs(found: list, outdir, allow_inside_input: bool = False, inputs=(
         if job.output in seen:
             raise ConfigError(f"{job.source} and {seen[job.output]} would both be written to {job.output}")
         seen[job.output] = job.source
-    return _plan_skeletons(jobs)
+    _check_shared_skeletons(jobs)
+    return jobs
 
 
-def _plan_skeletons(jobs: list[Job]) -> list[Job]:
+def _check_shared_skeletons(jobs: list[Job]) -> None:
     """An AMC is written beside a copy of its ASF; two AMCs from different folders whose
     ASFs have one name (in any letter case: ``05.asf`` and ``05.ASF`` pair alike) but
     different content would overwrite each other's skeleton in the output folder (files
-    named one by one land side by side): a ConfigError naming both. Returns the jobs."""
+    named one by one land side by side): a ConfigError naming both."""
     skeletons: dict[Path, tuple[Path, Path]] = {}
     for job in jobs:
         found = _skeleton_written(job)
@@ -325,7 +326,6 @@ def _plan_skeletons(jobs: list[Job]) -> list[Job]:
             raise ConfigError(f"{first[1]} and {job.source} would both write their skeleton to "
                               f"{target}, but {first[0]} and {asf} differ; clean them into "
                               "separate output folders (or name the folder above theirs)")
-    return jobs
 
 
 def skeleton_conflicts(jobs: list[Job]) -> list[str]:
@@ -347,14 +347,19 @@ def skeleton_conflicts(jobs: list[Job]) -> list[str]:
         f["present"] = file_names(folder)
         f["outsiders"] = sorted(n for n in f["present"]
                                 if n.lower().endswith(".amc") and n not in f["rewriting"])
+    contents: dict[Path, bytes | None] = {}     # one read per ASF, however many AMCs use it
     out = []
     for job, found in copies.items():
         if found is None:
             continue
         target, asf = found
-        try:
-            content = asf.read_bytes()
-        except OSError:
+        if asf not in contents:
+            try:
+                contents[asf] = asf.read_bytes()
+            except OSError:
+                contents[asf] = None
+        content = contents[asf]
+        if content is None:
             continue                # unreadable: reading the AMC names the cause
         f = folders[target.parent]
         amc = job.output if job.source.suffix.lower() == ".amc" else None

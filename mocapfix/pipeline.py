@@ -141,12 +141,13 @@ class Pipeline:
             return step.cleaner.apply(motion)
         if motion.rig is not None and motion.channels is not None:
             out, info = step.cleaner.apply(motion)
-            if moved_channels(motion, out):
+            channel_step = moved_channels(motion, out)
+            if channel_step:
                 # a rotation step: what it did to the excluded joints' channels is undone
                 info = _without_points(info, [n for n, c in zip(motion.names, cols) if not c])
             info = dict(info or {})
             info["points_not_cleaned"] = int((~cols).sum())
-            return keep_rig_joints(motion, out, ~cols), info
+            return keep_rig_joints(motion, out, ~cols, channel_step), info
         part, info = step.cleaner.apply(take(motion, cols))
         info = dict(info or {})
         info["points_not_cleaned"] = int((~cols).sum())

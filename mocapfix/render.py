@@ -19,7 +19,7 @@ import numpy as np
 from mocapfix.errors import name_the_file, one_line
 from mocapfix.gaps import runs
 from mocapfix.measure import LONG_FILL_S
-from mocapfix.rules import STATUS_ORDER
+from mocapfix.rules import METRICS, STATUS_ORDER
 
 
 def to_json(report: dict) -> str:
@@ -398,8 +398,7 @@ def check_line(result: dict, verbose: bool = False) -> str:
         if wc and "error" not in wc:
             lines.append(f"      would clean: fill {wc['samples_filled']} samples, flag "
                          f"{wc['samples_flagged']}, leave {_pct(wc['missing_after'])} missing and "
-                         f"{_pct(wc['uncertain'])} uncertain (missing in the input; a fill counts 1 − "
-                         "its confidence)")
+                         + METRICS["uncertain"].phrase.format(v=_pct(wc["uncertain"])))
         return "\n".join(lines)
     if not worst:
         return head

@@ -97,7 +97,8 @@ def moved_channels(before: Motion, after: Motion) -> bool:
     return bool(((before.rig.positions(ch) == target) | np.isnan(target)).all())
 
 
-def keep_rig_joints(before: Motion, after: Motion, excluded: np.ndarray) -> Motion:
+def keep_rig_joints(before: Motion, after: Motion, excluded: np.ndarray,
+                    channel_step: bool | None = None) -> Motion:
     """``after`` (a step's output on the whole rig of ``before``) with the rotation and
     translation channels of the joints ``excluded`` (J,) bool as ``before`` has them. A
     joint's position is its parents' business: an excluded joint keeps its own channels,
@@ -108,14 +109,15 @@ def keep_rig_joints(before: Motion, after: Motion, excluded: np.ndarray) -> Moti
     step gave it. Samples the step flagged (made missing) stay missing on every joint,
     excluded ones included: they are the evidence of a glitch in a joint above (a wrist
     thrown off by its elbow's rotation), which the steps after it fill and the pipeline's
-    end writes back (then puts the excluded joints' channels back)."""
+    end writes back (then puts the excluded joints' channels back). ``channel_step``:
+    :func:`moved_channels` of the step, if already known."""
     from mocapfix.writeback import solve_channels
 
     rig = before.rig
     excluded = np.asarray(excluded, bool)
     ch = np.array(before.channels if after.channels is None else after.channels, dtype=np.float64)
     target = after.positions
-    if not moved_channels(before, after):
+    if not (moved_channels(before, after) if channel_step is None else channel_step):
         ch = solve_channels(rig, ch, target)
     ch = own_channels(rig, ch, before.channels, excluded)
     below = excluded.copy()
