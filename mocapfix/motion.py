@@ -138,7 +138,10 @@ class Motion:
 
     def with_frames(self, start: int, part: "Motion") -> "Motion":
         """This Motion with frames ``start:start + part.n_frames`` taken from ``part`` (a
-        :meth:`slice_frames` of it, cleaned): positions, confidence, channels and notes."""
+        :meth:`slice_frames` of it, cleaned): positions, confidence, channels and notes. A
+        confidence the part gained (a filler's, for its fills) is kept, the frames around
+        it taking 1 where a sample is seen and 0 where not (as
+        :func:`mocapfix.selection.put` does for points)."""
         span = slice(start, start + part.n_frames)
 
         def paste(whole, piece):
@@ -147,8 +150,11 @@ class Motion:
             out = whole.copy()
             out[span] = piece
             return out
+        confidence = self.confidence
+        if confidence is None and part.confidence is not None:
+            confidence = (~self.missing).astype(np.float64)
         return self.replace(positions=paste(self.positions, part.positions),
-                            confidence=paste(self.confidence, part.confidence),
+                            confidence=paste(confidence, part.confidence),
                             channels=paste(self.channels, part.channels),
                             notes=list(part.notes))
 

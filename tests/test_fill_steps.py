@@ -159,3 +159,22 @@ def test_the_report_says_which_step_refused_a_gaps_fill_and_why(tmp_path):
          "why": "its fill jumped more than 3x the marker's largest measured step in one frame"}]
     refused = [g for j in report["joints"] for g in j["gaps"]["unfilled"] if "rejected_by" in g]
     assert all(g["filled_frames"] < g["length"] for g in refused)
+
+
+def test_fill_confidences_survive_the_take_of_a_motion_without_confidence():
+    # steps run on the take (the frames from the first to the last one where a marker is
+    # seen) and Motion.with_frames pasted the result back; a Motion read or built without
+    # confidence (an API caller's, the bench's) lost the confidence a filler gave its fills
+    # whenever the file had empty frames at an end, so the report counted every fill as
+    # wholly uncertain
+    motion = read(shared("c3d/cmu_85_02.c3d"))
+    P = motion.positions[:400].copy()
+    P[:12] = np.nan                                  # an export's empty first frames
+    P[200:230, 5] = np.nan                           # a gap inside the take
+    m = motion.replace(positions=P, confidence=None, source=None)
+    out, _ = parse_config({"version": 1, "pipeline": [{"cleaner": "fill_ensemble"}]}).run(m)
+    assert not np.isnan(out.positions[200:230, 5]).any()
+    assert out.confidence is not None
+    filled = out.confidence[200:230, 5]
+    assert np.all((filled > 0) & (filled < 1))
+    assert np.all(out.confidence[:12] == 0) and np.all(out.confidence[12:200, 5] == 1)
