@@ -44,6 +44,9 @@ were 0.694 and 0.706):
 | kinect_skeleton, final strength by the truth (±5 frames) | 7.27 | 0.649 | 0.739 (05_10) |
 | kinect_skeleton without the wrist-thumb bones | 7.55 | 0.675 | 0.761 (05_10) |
 
+A Gaussian mixture over windows of each body part, the strongest trained prior measured, is
+in ``benchmarks/kinect_gmm_prior.py`` (0.765 alone, 0.648 blended).
+
 The priors trained on the 47 CMU dance/salsa/acrobatics trials do not carry to the
 walks and to the BVH skeletons (131_01/03) alone; blended they gain 0.01-0.03 of the
 best baseline (0.015 and 0.002 now), far from the 0.6 target, for a shipped model and a window solve per
@@ -184,6 +187,55 @@ def without_links(motion, pairs):
         ds.project_lengths = shipped
 
 
+def kinect_corpus() -> list[np.ndarray]:
+    """The training corpus (``TRAINING``) mapped to the 25 Kinect v2 joints as the protocol
+    maps its truth, at 30 fps (both phases of the 120 Hz frames): (T, 25, 3) m each."""
+    from mocapfix import bench_kinect as bk
+    from mocapfix.train import discover_training, read_all
+
+    train = []
+    for m in read_all(discover_training([str(TRAINING)])):
+        idx = [m.index(bk.AMC_TO_KINECT[n]) for n in bk.kl.KINECT_V2]
+        for off in (0, 2):
+            train.append(m.positions[off::4, idx] * m.metres_per_unit)
+    return train
+
+
+def test_files() -> list[Path]:
+    """The protocol's 11 files, in the order whose index seeds each file's corruption."""
+    return sorted((DATA / "asfamc").glob("*.amc")) + sorted((DATA / "bvh").glob("cmu_*.bvh"))
+
+
+def jitter_files(every, picks, seed):
+    """(index, Motion read back from the Kinect v2 CSV, truth (T, 25, 3) m on its frames)
+    of the jitter scenario for each picked file, built as ``mocapfix bench --protocol
+    kinect`` builds them."""
+    from mocapfix import bench_kinect as bk
+    from mocapfix import formats
+    from mocapfix.formats import kinect as kinect_format
+
+    with tempfile.TemporaryDirectory() as tmp:
+        for fi in picks:
+            src = formats.read(every[fi])
+            truth_all = bk.kinect_truth(src, np.random.default_rng([seed, fi]), 450)
+            times_all = np.arange(len(truth_all)) / bk.KINECT_FPS
+            coords, states, keep = bk.sensor_corruption(truth_all, "jitter", seed * 1000 + fi * 10)
+            path = Path(tmp) / "x.csv"
+            path.write_text(bk.kinect_v2_csv(coords[keep], states[keep], times_all[keep]))
+            yield fi, kinect_format.read(path), truth_all[keep]
+
+
+def print_table(rows: dict, names: list[str]) -> None:
+    """Markdown rows: RMSE mm (mean over files), its ratio to ``rows["baseline(best)"]``
+    (mean over files) and the worst file's ratio."""
+    best = np.array(rows["baseline(best)"])
+    print("| method | RMSE mm | ÷ best baseline | worst file ÷ best |\n|---|---|---|---|")
+    for k, v in rows.items():
+        ratio = np.array(v) / best
+        print(f"| {k} | {np.mean(v):.2f} | {ratio.mean():.3f} | {ratio.max():.3f} "
+              f"({names[int(np.argmax(ratio))]}) |")
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--every", type=int, default=3, help="every n-th of the 11 files "
@@ -192,27 +244,19 @@ def main():
     ap.add_argument("--window", type=int, default=8)
     args = ap.parse_args()
     from mocapfix import bench_kinect as bk
-    from mocapfix import formats
     from mocapfix.cleaners import build
-    from mocapfix.formats import kinect as kinect_format
     from mocapfix.motion import Motion
-    from mocapfix.train import discover_training, read_all
 
     names = list(bk.kl.KINECT_V2)
     ix = {n: i for i, n in enumerate(names)}
     root, hl, hr, L, J = ix["SpineBase"], ix["HipLeft"], ix["HipRight"], args.window, len(names)
     bones = bk.kl.skeleton_for("kinect_v2").bone_array
-    # training corpus -> Kinect joints at 30 fps (both phases of the 120 Hz frames)
-    train = []
-    for m in read_all(discover_training([str(TRAINING)])):
-        idx = [m.index(bk.AMC_TO_KINECT[n]) for n in names]
-        for off in (0, 2):
-            train.append(m.positions[off::4, idx] * m.metres_per_unit)
+    train = kinect_corpus()
     Xs = np.concatenate([_windows(P, L, root, hl, hr)[0][::2] for P in train])
     Xc = Xs - Xs.mean(axis=0)
     C = Xc.T @ Xc / len(Xc)
     # the files, numbered as the protocol numbers them (its seeds depend on the index)
-    every = sorted((DATA / "asfamc").glob("*.amc")) + sorted((DATA / "bvh").glob("cmu_*.bvh"))
+    every = test_files()
     picks = list(range(0, len(every), args.every))
     mssa = None
     rows = {k: [] for k in ("baseline(best)", "kinect_skeleton", "window-wiener", "blend wiener",
@@ -220,57 +264,43 @@ def main():
                             "per-joint oracle (one strength)", "per-joint oracle (±5 frames)",
                             "kinect_skeleton, final strength by the truth (±5 frames)",
                             "kinect_skeleton without the wrist-thumb bones")}
-    with tempfile.TemporaryDirectory() as tmp:
-        for fi in picks:
-            src = formats.read(every[fi])
-            truth_all = bk.kinect_truth(src, np.random.default_rng([args.seed, fi]), 450)
-            times_all = np.arange(len(truth_all)) / bk.KINECT_FPS
-            coords, states, keep = bk.sensor_corruption(truth_all, "jitter", args.seed * 1000 + fi * 10)
-            path = Path(tmp) / "x.csv"
-            path.write_text(bk.kinect_v2_csv(coords[keep], states[keep], times_all[keep]))
-            motion = kinect_format.read(path)
-            truth, times = truth_all[keep], motion.times
-            mpu = motion.metres_per_unit
+    for fi, motion, truth in jitter_files(every, picks, args.seed):
+        times, mpu = motion.times, motion.metres_per_unit
 
-            def rmse(est, truth=truth, times=times):
-                return bk.score(est, truth, times, bones)["rmse_mm"]
+        def rmse(est, truth=truth, times=times):
+            return bk.score(est, truth, times, bones)["rmse_mm"]
 
-            base = bk._baseline_outputs(motion, times, truth, bones)
-            rows["baseline(best)"].append(min(rmse(e) for e, _, _ in base.values()))
-            out, _ = build("kinect_skeleton").apply(motion)
-            Z = out.positions * mpu
-            rows["kinect_skeleton"].append(rmse(Z))
-            P = bk.interpolate_missing(motion.positions * mpu, times)
-            sig = bk.JITTER_BASE_MM[None] * 1e-3 * P[..., 2] / 2.0
-            X, tf = _windows(P, L, root, hl, hr)
-            mu = X.mean(axis=0)
-            d = np.repeat(np.tile(np.median(sig, axis=0) ** 2, L), 3)
-            K = np.linalg.solve(C + np.diag(d), C).T            # C (C + D)^-1
-            W = _unwindow((X - mu) @ K.T + mu, tf, len(P), L, J)
-            rows["window-wiener"].append(rmse(W))
-            rows["blend wiener"].append(rmse(0.8 * Z + 0.2 * W))
-            if mssa is None:
-                mssa = build("mssa", space="positions", window=L, window_step=2)
-                mssa.fit([Motion(P / mpu, names, bk.KINECT_FPS, units=motion.units,
-                                 metres_per_unit=mpu, format="kinect") for P in train])
-            M = mssa.apply(motion)[0].positions * mpu
-            rows["mssa(trained)"].append(rmse(M))
-            rows["blend mssa"].append(rmse(0.8 * Z + 0.2 * M))
-            for k, v in oracle_bounds(P, truth, times).items():
-                rows[k].append(v)
-            rows["kinect_skeleton, final strength by the truth (±5 frames)"].append(
-                rmse(truth_strength(motion, truth) * mpu))
-            rows["kinect_skeleton without the wrist-thumb bones"].append(
-                rmse(without_links(motion, [("WristLeft", "ThumbLeft"),
-                                            ("WristRight", "ThumbRight")]) * mpu))
-            rows["partlet(kinect)"].append(rmse(build("partlet_dictionary").apply(motion)[0].positions * mpu))
-            print(f"{every[fi].name}: " + ", ".join(f"{k} {v[-1]:.2f}" for k, v in rows.items()))
-    best = np.array(rows["baseline(best)"])
-    print("| method | RMSE mm | ÷ best baseline | worst file ÷ best |\n|---|---|---|---|")
-    for k, v in rows.items():
-        ratio = np.array(v) / best
-        print(f"| {k} | {np.mean(v):.2f} | {ratio.mean():.3f} | {ratio.max():.3f} "
-              f"({every[picks[int(np.argmax(ratio))]].name}) |")
+        base = bk._baseline_outputs(motion, times, truth, bones)
+        rows["baseline(best)"].append(min(rmse(e) for e, _, _ in base.values()))
+        out, _ = build("kinect_skeleton").apply(motion)
+        Z = out.positions * mpu
+        rows["kinect_skeleton"].append(rmse(Z))
+        P = bk.interpolate_missing(motion.positions * mpu, times)
+        sig = bk.JITTER_BASE_MM[None] * 1e-3 * P[..., 2] / 2.0
+        X, tf = _windows(P, L, root, hl, hr)
+        mu = X.mean(axis=0)
+        d = np.repeat(np.tile(np.median(sig, axis=0) ** 2, L), 3)
+        K = np.linalg.solve(C + np.diag(d), C).T            # C (C + D)^-1
+        W = _unwindow((X - mu) @ K.T + mu, tf, len(P), L, J)
+        rows["window-wiener"].append(rmse(W))
+        rows["blend wiener"].append(rmse(0.8 * Z + 0.2 * W))
+        if mssa is None:
+            mssa = build("mssa", space="positions", window=L, window_step=2)
+            mssa.fit([Motion(P / mpu, names, bk.KINECT_FPS, units=motion.units,
+                             metres_per_unit=mpu, format="kinect") for P in train])
+        M = mssa.apply(motion)[0].positions * mpu
+        rows["mssa(trained)"].append(rmse(M))
+        rows["blend mssa"].append(rmse(0.8 * Z + 0.2 * M))
+        for k, v in oracle_bounds(P, truth, times).items():
+            rows[k].append(v)
+        rows["kinect_skeleton, final strength by the truth (±5 frames)"].append(
+            rmse(truth_strength(motion, truth) * mpu))
+        rows["kinect_skeleton without the wrist-thumb bones"].append(
+            rmse(without_links(motion, [("WristLeft", "ThumbLeft"),
+                                        ("WristRight", "ThumbRight")]) * mpu))
+        rows["partlet(kinect)"].append(rmse(build("partlet_dictionary").apply(motion)[0].positions * mpu))
+        print(f"{every[fi].name}: " + ", ".join(f"{k} {v[-1]:.2f}" for k, v in rows.items()))
+    print_table(rows, [every[i].name for i in picks])
 
 
 if __name__ == "__main__":
