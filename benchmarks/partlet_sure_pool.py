@@ -32,7 +32,7 @@ Measured (05_02 + 05_10, seeds 0–1; 2-core machine):
 | truth pool | 0.826 | 1.921 | 4.700 | 0.398 | 2.080 | – |
 
 The SURE weights take 30 dB below the paper on the mean of the two trials (05_02 0.81,
-05_10 0.876: above it) at 3.5× partlet's time on noise-only input. No weighting of these
+05_10 0.876: above it) at 3.7× partlet's time on noise-only input. No weighting of these
 denoisers — even one chosen with the truth — comes near 3.73 at 10 dB; a larger pool
 chosen with the truth (these three plus the K-SVD ℓ1 variant and partlet without its
 coarse scale, its local smoothing strength or its bone step, each at μ ∈ {0, 3, 30,
