@@ -65,7 +65,12 @@ from scipy.special import logsumexp  # noqa: E402
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from kinect_priors import (_unwindow, _windows, jitter_files, kinect_corpus,  # noqa: E402
-                           print_table, test_files)
+                           print_table, protocol_files)
+
+from mocapfix.formats.kinect_layouts import KINECT_V2  # noqa: E402
+
+#: the joints that place and turn a window: pelvis, and the hip line
+_FRAME = tuple(KINECT_V2.index(n) for n in ("SpineBase", "HipLeft", "HipRight"))
 
 PARTS = (
     ("SpineBase", "SpineMid", "SpineShoulder", "Neck", "Head", "ShoulderLeft", "ShoulderRight",
@@ -89,7 +94,9 @@ def _log_gauss(Z, means, covs):
 
 def fit_gmm(Z, K, *, iters=60, reg=1e-7, seed=0):
     """Full-covariance GMM of the rows of Z by EM (Dempster, Laird & Rubin 1977), started
-    from k-means++ seeds and ten Lloyd steps. Returns (weights, means, covariances)."""
+    from k-means++ seeds and ten Lloyd steps. Returns (weights, means, covariances).
+    Written here because scikit-learn, whose GaussianMixture does this, is not a
+    dependency of mocapfix, for one benchmark script."""
     rng = np.random.default_rng(seed)
     N, r = Z.shape
     centres = [Z[rng.integers(N)]]
@@ -124,7 +131,7 @@ class PartPrior:
 
     def __init__(self, train, joints, L, K, rank, *, fallback=0.05, stride=2):
         self.joints, self.L = np.asarray(joints), L
-        X = np.concatenate([self._centred(P, L)[::stride] for P in train])
+        X = np.concatenate([self._centred(P)[::stride] for P in train])
         self.mean = X.mean(axis=0)
         Xc = X - self.mean
         evals, evecs = np.linalg.eigh(Xc.T @ Xc / len(Xc))
@@ -146,13 +153,11 @@ class PartPrior:
             self.means = np.vstack([self.means, m])
             self.covs = np.concatenate([self.covs, C[None]])
 
-    def _centred(self, P, L):
-        X = self.part_windows(P, L)[0]
+    def _centred(self, P):
+        """The part's windows of one trial, its mean window taken out."""
+        X = _windows(P, self.L, *_FRAME)[0]
+        X = X.reshape(len(X), self.L, -1, 3)[:, :, self.joints].reshape(len(X), -1)
         return X - X.mean(axis=0)
-
-    def part_windows(self, P, L):
-        X, tf = _windows(P, L, 0, 12, 16)            # SpineBase, HipLeft, HipRight
-        return X.reshape(len(X), L, -1, 3)[:, :, self.joints].reshape(len(X), -1), tf
 
     def posterior_mean(self, Y, noise_var):
         """E[x | y] for every window y (row of Y) under y = x + N(0, diag(noise_var))."""
@@ -173,7 +178,7 @@ def denoise(priors, P, sigma):
     T, J, _ = P.shape
     L = priors[0].L
     var = np.median(sigma, axis=0) ** 2
-    X, tf = _windows(P, L, 0, 12, 16)
+    X, tf = _windows(P, L, *_FRAME)
     X4 = X.reshape(len(X), L, J, 3)
     total, count = np.zeros_like(X4), np.zeros(J)
     for prior in priors:
@@ -215,7 +220,7 @@ def main():
     parts = [[names.index(n) for n in part] for part in PARTS]
     train = mirrored(kinect_corpus(), names)
     priors = [PartPrior(train, j, args.window, args.components, args.rank) for j in parts]
-    every = test_files()
+    every = protocol_files()
     picks = list(range(0, len(every), args.every))
     files = list(jitter_files(every, picks, args.seed))
     ceiling = None

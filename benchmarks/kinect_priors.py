@@ -201,7 +201,7 @@ def kinect_corpus() -> list[np.ndarray]:
     return train
 
 
-def test_files() -> list[Path]:
+def protocol_files() -> list[Path]:
     """The protocol's 11 files, in the order whose index seeds each file's corruption."""
     return sorted((DATA / "asfamc").glob("*.amc")) + sorted((DATA / "bvh").glob("cmu_*.bvh"))
 
@@ -256,7 +256,7 @@ def main():
     Xc = Xs - Xs.mean(axis=0)
     C = Xc.T @ Xc / len(Xc)
     # the files, numbered as the protocol numbers them (its seeds depend on the index)
-    every = test_files()
+    every = protocol_files()
     picks = list(range(0, len(every), args.every))
     mssa = None
     rows = {k: [] for k in ("baseline(best)", "kinect_skeleton", "window-wiener", "blend wiener",
