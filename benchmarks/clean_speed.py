@@ -30,7 +30,8 @@ dropped from its environment: an installed tool runs from its ``__pycache__``; c
 mocapfix's modules from source costs ~0.2 s a run); case 1 and the start-up keep the best
 of three runs.
 
-    python benchmarks/clean_speed.py [--scaling | --animation]   (only case 3 / case 4)
+    python benchmarks/clean_speed.py [--scaling | --animation | --single]
+        (only case 3 / case 4 / case 1)
 """
 from __future__ import annotations
 
@@ -66,19 +67,26 @@ def clean(inputs, out, jobs):
     return time.perf_counter() - t0
 
 
+def single(tmp: Path) -> None:
+    """Case 1: the 4,500-frame, 41-marker capture, best of three (``--single`` runs only
+    this one)."""
+    base = read(DATA / "cmu_85_02.c3d")
+    long = np.concatenate([base.positions, base.positions[::-1]] * 3)[:4500]
+    motion = _fresh(base, long)
+    corrupted, _ = occlusion(motion.replace(positions=long), "mixed", 0)
+    write(_fresh(base, corrupted.positions), tmp / "long.c3d")
+    t = min(clean([tmp / "long.c3d"], tmp / f"out{k}", 1) for k in range(3))
+    print("| capture | frames × markers | `mocapfix clean` wall time (s) |")
+    print("|---|---:|---:|")
+    print(f"| 85_02 ×6, mixed corruption | 4500 × {base.n_joints} | {t:.2f} |")
+
+
 def main():
     base = read(DATA / "cmu_85_02.c3d")
     hdm = read(DATA / "hdm05_HDM_mm_01-02_03_120.c3d").slice_frames(0, 1500)
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
-        long = np.concatenate([base.positions, base.positions[::-1]] * 3)[:4500]
-        motion = _fresh(base, long)
-        corrupted, _ = occlusion(motion.replace(positions=long), "mixed", 0)
-        write(_fresh(base, corrupted.positions), tmp / "long.c3d")
-        t = min(clean([tmp / "long.c3d"], tmp / f"out{k}", 1) for k in range(3))
-        print("| capture | frames × markers | `mocapfix clean` wall time (s) |")
-        print("|---|---:|---:|")
-        print(f"| 85_02 ×6, mixed corruption | 4500 × {base.n_joints} | {t:.2f} |")
+        single(tmp)
 
         batch = tmp / "batch"
         batch.mkdir()
@@ -221,6 +229,9 @@ if __name__ == "__main__":
         scaling()
     elif "--animation" in sys.argv:
         long_take()
+    elif "--single" in sys.argv:
+        with tempfile.TemporaryDirectory() as folder:
+            single(Path(folder))
     else:
         main()
         scaling()

@@ -17,7 +17,11 @@ left unfilled is counted in ``unfilled``, not as an error). Methods:
     python benchmarks/versus_peers.py [--seeds 2] [--max-frames 1500] [--only NAME ...]
         [--min-seconds 2]     (c3d.org s02, 9 markers × 1.8 s, needs --min-seconds 1.5)
 
-Prints Markdown tables: gap RMSE per capture, and each method's ratio to ``pma``.
+Prints Markdown tables: gap RMSE per capture, and each method's ratio to ``pma``. The
+peers (linear, spline, pca, pma) run with ``max_fill_error: null`` (every fill written, as
+published); ``fill_ensemble`` and ``default`` with the default gate, so their RMSE is over
+what they write, and the share of the gap samples they leave unfilled as too uncertain is
+in the ``unfilled %`` columns.
 """
 from __future__ import annotations
 
@@ -48,6 +52,9 @@ CAPTURES = {
     "ktk_racing_full.c3d": "wheelchair racing block (70 Hz)",
     "c3dorg_s13_Dance.c3d": "PhoeniX dance (40 m, 65 Hz)",
 }
+
+#: our methods: run under the default fill gate (``max_fill_error``); the peers run without
+OURS = ("fill_ensemble", "default")
 
 METHODS = {
     "linear": [{"cleaner": "fill", "method": "linear", "max_gap": None}],
@@ -87,6 +94,28 @@ def complete_block(motion, min_seconds: float = 2.0, min_markers: int = 9):
                           confidence=None, kinds=None, times=None, skeleton=None)
 
 
+def captures(max_frames: int, min_seconds: float = 2.0, only=None):
+    """``(file name, label, clean motion)`` of every capture of :data:`CAPTURES` there is:
+    the gap-free captures whole, the others' largest complete block, cut to their first
+    ``max_frames`` frames (a note is printed for a file that is missing or has no block)."""
+    for name, label in CAPTURES.items():
+        if only and name not in only:
+            continue
+        path = DATA / name
+        if not path.exists():
+            print(f"(missing: {path})")
+            continue
+        motion = read(path)
+        clean = (motion if not motion.missing.any() and motion.kinds is None
+                 else complete_block(motion, min_seconds))
+        if clean is None:
+            print(f"(no complete block in {name})")
+            continue
+        if clean.n_frames > max_frames:
+            clean = clean.slice_frames(0, max_frames)
+        yield name, label, clean.replace(source=None, confidence=None)
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--seeds", type=int, default=2)
@@ -97,35 +126,24 @@ def main():
     ap.add_argument("--min-seconds", type=float, default=2.0,
                     help="shortest complete block taken from a file with gaps")
     args = ap.parse_args()
-    methods = {k: parse_config({"version": 1, "pipeline": v}, k) for k, v in METHODS.items()}
+    methods = {k: parse_config({"version": 1, "pipeline": v, **({} if k in OURS else
+                                                                {"max_fill_error": None})}, k)
+               for k, v in METHODS.items()}
     methods["default"] = load_config(REPO / "configs" / "default.yaml")
     if args.methods:
         methods = {k: v for k, v in methods.items() if k in args.methods}
     regimes = {"gaps 0.1–1.5 s": 1.5, "gaps 0.1–3 s": 3.0}
     rows = []
-    for name, label in CAPTURES.items():
-        if args.only and name not in args.only:
-            continue
-        path = DATA / name
-        if not path.exists():
-            print(f"(missing: {path})")
-            continue
-        motion = read(path)
-        clean = (motion if not motion.missing.any() and motion.kinds is None
-                 else complete_block(motion, args.min_seconds))
-        if clean is None:
-            print(f"(no complete block in {name})")
-            continue
-        if clean.n_frames > args.max_frames:
-            clean = clean.slice_frames(0, args.max_frames)
-        clean = clean.replace(source=None, confidence=None)
+    for name, label, clean in captures(args.max_frames, args.min_seconds, args.only):
         mm = clean.metres_per_unit * 1e3
         for regime, max_s in regimes.items():
             scores = {k: [] for k in methods}
             unfilled = {k: 0 for k in methods}
+            samples = 0
             seconds = {k: 0.0 for k in methods}
             for seed in range(args.seeds):
                 corrupted, mask = occlusion_gaps(clean, np.random.default_rng(seed), max_s=max_s)
+                samples += int(mask.sum())
                 for k, pipe in methods.items():
                     t0 = time.perf_counter()
                     out, _ = pipe.run(corrupted)
@@ -136,8 +154,10 @@ def main():
                                      else float("nan"))
             row = {"capture": f"{label}, {clean.n_frames}×{clean.n_joints}", "regime": regime}
             for k in methods:
-                row[k] = float(np.mean(scores[k]))
+                # a seed where a method writes no gap sample has no RMSE: left out
+                row[k] = float(np.nanmean(scores[k])) if np.isfinite(scores[k]).any() else np.nan
                 row[k + ":unfilled"] = unfilled[k]
+                row[k + ":unfilled %"] = 100.0 * unfilled[k] / max(samples, 1)
                 row[k + ":s"] = seconds[k] / args.seeds
             rows.append(row)
             print(regime, row["capture"], {k: round(row[k], 2) for k in methods}, flush=True)
@@ -148,19 +168,24 @@ def main():
             continue
         print(f"\n### Gap RMSE, mm — {regime} (mean of {args.seeds} seeds; "
               "[n] = samples left unfilled)\n")
-        print("| capture | " + " | ".join(names) + " | ensemble / pma | default / pma |")
-        print("|---|" + "---:|" * (len(names) + 2))
+        ours = [k for k in OURS if k in names]
+        print("| capture | " + " | ".join(names) + " | ensemble / pma | default / pma | "
+              + " | ".join(f"{k} unfilled %" for k in ours) + " |")
+        print("|---|" + "---:|" * (len(names) + 2 + len(ours)))
         for r in sel:
             cells = [f"{r[k]:.2f}" + (f" [{r[k + ':unfilled']}]" if r[k + ":unfilled"] else "")
                      for k in names]
             ratio = lambda k: (f"{r[k] / r['pma']:.2f}" if k in r and "pma" in r else "–")  # noqa: E731
             print(f"| {r['capture']} | " + " | ".join(cells)
-                  + f" | {ratio('fill_ensemble')} | {ratio('default')} |")
+                  + f" | {ratio('fill_ensemble')} | {ratio('default')} | "
+                  + " | ".join(f"{r[k + ':unfilled %']:.1f}" for k in ours) + " |")
         if "pma" in names:
             for k in ("fill_ensemble", "default"):
                 if k in names:
                     g = np.exp(np.mean([np.log(r[k] / r["pma"]) for r in sel]))
-                    print(f"\n{k} / pma, geometric mean over captures: {g:.2f}")
+                    u = np.mean([r[k + ":unfilled %"] for r in sel])
+                    print(f"\n{k} / pma, geometric mean over captures: {g:.2f} "
+                          f"(unfilled: {u:.1f} % of the gap samples, mean over captures)")
         print("\nseconds per run: " + ", ".join(
             f"{k} {np.mean([r[k + ':s'] for r in sel]):.2f}" for k in names))
 

@@ -173,6 +173,13 @@ class Method:
                                    None if pipe is None else pipe.source))
 
 
+def _every_fill(config: dict) -> dict:
+    """A baseline's or a single cleaner's config with every fill written
+    (``max_fill_error: null``): they are the methods as published, the references the
+    configs are measured against; a config (``--configs``) keeps its own gate."""
+    return {"max_fill_error": None, **config}
+
+
 def resolve_methods(names=None, configs=None) -> tuple[list[Method], list[str]]:
     """The baselines, then the named cleaners / baselines (default: every registered
     cleaner when neither ``names`` nor ``configs`` is given), then the configs.
@@ -190,14 +197,16 @@ def resolve_methods(names=None, configs=None) -> tuple[list[Method], list[str]]:
         if missing:
             notes.append(f"baseline {name!r} skipped: cleaner(s) {', '.join(missing)} not registered")
             continue
-        methods.append(Method(name, "baseline", None if cfg is None else parse_config(cfg, f"baseline {name}")))
+        methods.append(Method(name, "baseline", None if cfg is None
+                              else parse_config(_every_fill(cfg), f"baseline {name}")))
     if names is None and not configs:
         names = list(reg)
     for name in names or []:
         if name in BASELINES:
             continue
         if name in NAMED:
-            methods.append(Method(name, "baseline", parse_config(NAMED[name], f"method {name}")))
+            methods.append(Method(name, "baseline", parse_config(_every_fill(NAMED[name]),
+                                                                 f"method {name}")))
             continue
         if name in TUNED:
             methods.append(tuned_method(name))
@@ -208,7 +217,7 @@ def resolve_methods(names=None, configs=None) -> tuple[list[Method], list[str]]:
                               f"named pipeline ({', '.join(NAMED)}) nor an oracle-tuned "
                               f"baseline ({', '.join(TUNED)})")
         methods.append(Method(name, "cleaner", parse_config(
-            {"version": 1, "pipeline": [{"cleaner": name}]}, f"method {name}")))
+            _every_fill({"version": 1, "pipeline": [{"cleaner": name}]}), f"method {name}")))
     for path in configs or []:
         stem = Path(path).name.rsplit(".", 1)[0]
         methods.append(Method(f"config:{stem}", "config", load_config(path)))

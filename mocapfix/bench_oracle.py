@@ -58,7 +58,9 @@ class OracleMethod:
 
     def __init__(self, name: str, cleaner: str, grid: list[tuple[str, dict]]):
         self.name, self.cleaner, self.grid_params = name, cleaner, list(grid)
-        self.grid = [(label, parse_config({"version": 1, "pipeline": [{"cleaner": cleaner, **p}]},
+        # the published smoothers as they are: every fill written (max_fill_error: null)
+        self.grid = [(label, parse_config({"version": 1, "max_fill_error": None,
+                                           "pipeline": [{"cleaner": cleaner, **p}]},
                                           f"method {name} ({label})")) for label, p in grid]
         self.pipeline = None
         self.last_choice: str | None = None

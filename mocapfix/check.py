@@ -57,6 +57,8 @@ def would_clean(motion, pipeline) -> dict:
         "uncertain": sum(j["uncertain"] or 0.0 for j in joints) / max(len(joints), 1),
         "moved_max_mm": max((j["correction_mm"]["max"] or 0.0 for j in joints), default=0.0),
         "gaps_unfilled": f["gaps_unfilled"],
+        "fill_bound_max_mm": f.get("fill_bound_max_mm"),
+        "samples_left_uncertain": f.get("samples_left_uncertain", 0),
         "joints_uncertain": [j["name"] for j in joints if (j["uncertain"] or 0.0) * T >= 1
                              and j["status"] != "OK"][:20],
     }

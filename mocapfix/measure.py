@@ -25,6 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from mocapfix.cleaners.base import REJECTED_FILLS
+from mocapfix.solvers.fill_error import run_error
 from mocapfix.gaps import runs, take_frames
 from mocapfix.metrics import bone_lengths, rms_acceleration
 from mocapfix.motion import Motion
@@ -266,15 +267,39 @@ LONG_FILL_S = 0.5
 
 def _rejected_fills(records, names) -> dict:
     """Per point index, the fills steps made and did not write (their ``info``'s
-    :data:`~mocapfix.cleaners.base.REJECTED_FILLS`): ``[(start, length, step, why), ...]``."""
+    :data:`~mocapfix.cleaners.base.REJECTED_FILLS`): ``[(start, length, step, why, error_mm,
+    bound_mm, uncertain), ...]`` (``uncertain``: left as too uncertain to fill, with the
+    fill's estimate and bound, None where it had none)."""
     index = {n: i for i, n in enumerate(names)}
     out: dict = {}
     for rec in records:
         for name, entries in ((rec.info or {}).get(REJECTED_FILLS) or {}).items():
             if name in index:
                 out.setdefault(index[name], []).extend(
-                    (int(a), int(m), rec.step, str(why)) for a, m, why in entries)
+                    (int(e[0]), int(e[1]), rec.step, str(e[2]),
+                     *(e[3:5] if len(e) >= 5 else (None, None)), len(e) >= 5) for e in entries)
     return out
+
+
+def _fill_error(after: Motion, start: int, length: int, joint: int) -> dict:
+    """The estimated error and 90 % bound (mm) of the fill of one gap (the pipeline's
+    ``Motion.fill_errors``, :func:`mocapfix.solvers.fill_error.run_error`); None for both
+    when part of it has no estimate."""
+    found = run_error(after.fill_errors, after.names[joint], start, length)
+    if found is None:
+        return {"error_mm": None, "bound_mm": None}
+    return {"error_mm": finite(found[0], 3), "bound_mm": finite(found[1], 3)}
+
+
+def _left_uncertain(refused: dict, missing_after: np.ndarray) -> np.ndarray:
+    """(T, J) the samples still missing that a step left as too uncertain to fill (a
+    rejection with an estimate slot: :class:`mocapfix.cleaners.base.FillGate`)."""
+    out = np.zeros(missing_after.shape, bool)
+    for j, entries in refused.items():
+        for a, m, *_, uncertain in entries:
+            if uncertain:
+                out[a:a + m, j] = True
+    return out & missing_after
 
 
 def _mean_confidence(after: Motion, start: int, length: int, joint: int) -> float | None:
@@ -375,6 +400,7 @@ def measure_cleaning(result: CleanResult) -> dict:
     col, start, length = col[counted], start[counted], length[counted]
     labels = [r.step for r in records]
     refused = _rejected_fills(records, before.names)
+    left_uncertain = _left_uncertain(refused, miss_a)
     joints = []
     for j in np.flatnonzero(graded):
         sel = col == j
@@ -387,12 +413,15 @@ def measure_cleaning(result: CleanResult) -> dict:
                                     "seconds": finite(n / before.fps),
                                     "long": bool(n / before.fps > LONG_FILL_S),
                                     "confidence": _mean_confidence(after, s, n, j),
+                                    **_fill_error(after, s, n, j),
                                     "filled_by": ", ".join(labels[k] for k in steps)})
             else:
                 left = {"start": int(s), "length": int(n),
                         "filled_frames": int((span_who >= 0).sum())}
-                refusals = [{"step": step, "why": reason}
-                            for a, m, step, reason in refused.get(j, ()) if a < s + n and s < a + m]
+                refusals = [{"step": step, "why": reason,
+                             **({"error_mm": err, "bound_mm": bound} if err is not None else {})}
+                            for a, m, step, reason, err, bound, _ in refused.get(j, ())
+                            if a < s + n and s < a + m]
                 if refusals:
                     left["rejected_by"] = refusals
                 gaps_left.append(left)
@@ -406,6 +435,7 @@ def measure_cleaning(result: CleanResult) -> dict:
             cause = _correction_cause(flagged, own, parents, before.names, frame, j)
             if cause:
                 correction["cause"] = cause
+        bounds = [g["bound_mm"] for g in gaps_filled if g["bound_mm"] is not None]
         entry = {
             "name": before.names[j],
             "missing_before": finite(miss_b[span, j].mean()) if T_take else 0.0,
@@ -414,6 +444,8 @@ def measure_cleaning(result: CleanResult) -> dict:
             "gaps": {"count": int(sel.sum()),
                      "longest_frames": int(length[sel].max()) if sel.any() else 0,
                      "filled": gaps_filled, "unfilled": gaps_left},
+            "fill_bound_mm": max(bounds, default=None),
+            "left_uncertain": finite(left_uncertain[span, j].mean()) if T_take else 0.0,
             "outliers_flagged": int(flagged[:, j].sum()),
             "correction_mm": correction,
             "jitter_before": finite(jitter_b[j]),
@@ -446,6 +478,11 @@ def measure_cleaning(result: CleanResult) -> dict:
         "gaps_unfilled": int(sum(len(j["gaps"]["unfilled"]) for j in joints)),
         "gaps_after": int(len(runs(miss_a)[0])),
         "long_fills": int(sum(g["long"] for j in joints for g in j["gaps"]["filled"])),
+        "fill_bound_max_mm": max((j["fill_bound_mm"] for j in joints
+                                  if j["fill_bound_mm"] is not None), default=None),
+        "fills_without_estimate": int(sum(g["bound_mm"] is None for j in joints
+                                          for g in j["gaps"]["filled"])),
+        "samples_left_uncertain": int(left_uncertain[:, graded].sum()),
         "seconds": finite(result.seconds),
         "notes": list(before.notes) + [n for n in after.notes if n not in before.notes],
     }

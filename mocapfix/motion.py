@@ -8,6 +8,9 @@ channel values they store (``channels``) and the rig that maps channels to posit
 kinematics. ``source`` is whatever the writer needs to reproduce the file and is never
 touched by cleaners.
 
+``fill_errors`` (optional) holds the estimated error and calibrated bound of each run of
+samples a pipeline filled (:mod:`mocapfix.solvers.fill_error`).
+
 ``kinds`` (optional, one entry per joint) says what each point is when a file stores more
 than markers: "marker", or e.g. "angle", "force", "moment", "power", "scalar" for the model
 outputs a C3D keeps as points (POINT:ANGLES, ...). The pipeline cleans only markers and
@@ -79,6 +82,11 @@ class Motion:
     path: str | None = None
     notes: list[str] = field(default_factory=list)
     kinds: list[str] | None = None
+    #: the error estimates of the fills a pipeline wrote, and of the gaps it left as too
+    #: uncertain to fill, ``{name: [[start, length, error_mm, bound_mm, step, written],
+    #: ...]}`` (set by :meth:`mocapfix.pipeline.Pipeline.run`; error and bound None where
+    #: a left gap had no estimate; the report and the C3D writer list them)
+    fill_errors: dict | None = None
 
     def __post_init__(self):
         self.positions = np.asarray(self.positions, dtype=np.float64)

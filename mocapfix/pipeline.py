@@ -13,6 +13,8 @@ Config shape (safe-loaded)::
         exclude: ["Probe*"]         # optional: markers this step leaves alone
     markers: ["*"]                   # optional: markers the whole pipeline cleans
     exclude: [RASI]                  # optional: markers the whole pipeline leaves alone
+    max_fill_error: 20 mm            # optional: a fill is written only when its calibrated
+                                     # 90 % error bound is at most this (null: every fill)
     report:                          # optional thresholds of the quality report
       warn_missing_after: 0.0        # keys: mocapfix.rules.REPORT_KEYS
       ...
@@ -20,6 +22,18 @@ Config shape (safe-loaded)::
 Errors name the file, the line and the key. Running records, per step, which samples it
 filled, which it flagged (made missing) and how far it moved the rest: the provenance the
 quality report is built from.
+
+**Fills are written only when they can be trusted** (``max_fill_error``, default
+:data:`DEFAULT_MAX_FILL_ERROR`): on a format that can store a missing sample and would
+otherwise store a fill as measured (:data:`GATED_FORMATS`), every step runs under a
+:class:`~mocapfix.cleaners.base.FillGate`. A step's fill (a run of samples missing before
+it and present after it) is kept when the step gave it an error estimate
+(``info["fill_errors"]``, :mod:`mocapfix.solvers.fill_error`) whose calibrated 90 % bound
+is at most the threshold; otherwise it is put back as missing, listed under the step's
+``rejected_fills`` with its estimate and bound, and no later step fills those samples
+(the steps that fill are told, so they do not fill a gap only for it to be dropped). The
+cleaned motion carries the estimates of the fills it keeps (``Motion.fill_errors``) for
+the report and the C3D writer.
 """
 from __future__ import annotations
 
@@ -31,11 +45,14 @@ import numpy as np
 import yaml
 
 from mocapfix.cleaners import build
-from mocapfix.cleaners.base import REJECTED_FILLS, REPLACED_FRAMES, Cleaner, FittedCleaner
+from mocapfix.cleaners.base import (FILL_ERRORS, REJECTED_FILLS, REPLACED_FRAMES, Cleaner,
+                                    FillGate, FittedCleaner)
 from mocapfix.errors import ConfigError
 from mocapfix.formats import NAMES
-from mocapfix.gaps import take_frames
+from mocapfix.gaps import runs, take_frames
 from mocapfix.motion import Motion
+from mocapfix.quantity import Quantity, parse_quantity
+from mocapfix.solvers.fill_error import uncertain_reason
 from mocapfix.selection import Selection, cleanable, keep_rig_joints, moved_channels, put, take
 from mocapfix.solvers.rigid import norms
 from mocapfix.yamlsafe import load_yaml as safe_load_yaml
@@ -43,7 +60,16 @@ from mocapfix.yamlsafe import read_bounded
 
 CONFIG_VERSION = 1
 _STEP_KEYS = {"cleaner", "formats", "name", "markers", "exclude"}
-_TOP_KEYS = {"version", "pipeline", "report", "markers", "exclude"}
+_TOP_KEYS = {"version", "pipeline", "report", "markers", "exclude", "max_fill_error"}
+#: the default of ``max_fill_error``: the size of the soft-tissue artefact of skin markers
+#: (10–20 mm; Leardini et al. 2005, Gait Posture 21:212), which inverse-kinematics solvers
+#: already absorb; a fill that may be further off than that is not written as data
+DEFAULT_MAX_FILL_ERROR = "20 mm"
+#: formats where a fill is gated: they store a missing sample (C3D: residual −1) and would
+#: store a fill as a valid sample. Kinect files mark fills as Inferred (the sensor's own
+#: word for a joint it did not see) and are not gated; BVH/AMC cannot store a missing
+#: sample at all
+GATED_FORMATS = ("c3d",)
 
 
 class _LineLoader(yaml.SafeLoader):
@@ -85,18 +111,33 @@ class Step:
         return out
 
 
+def parse_max_fill_error(value, where: str) -> Quantity | None:
+    """The ``max_fill_error`` value: a length above 0 and at most 100 m, or None (off)."""
+    if value is None:
+        return None
+    q = parse_quantity(value, "length", "mm", where)
+    if q.si is None or not (0.0 < q.si <= 100.0):
+        raise ConfigError(f"{where} = {value!r} is out of range (allowed: a length > 0 and "
+                          "<= 100 m, or null to write every fill)")
+    return q
+
+
 @dataclass
 class Pipeline:
     steps: list[Step]
     report: dict = field(default_factory=dict)
     source: str | None = None
     select: Selection | None = None
+    #: the largest calibrated 90 % error bound of a fill written (None: every fill)
+    max_fill_error: Quantity | None = field(
+        default_factory=lambda: parse_max_fill_error(DEFAULT_MAX_FILL_ERROR, "max_fill_error"))
 
     def config(self) -> dict:
         """The effective config (every parameter, defaults included) as a plain dict."""
         out = {"version": CONFIG_VERSION, "pipeline": [s.config() for s in self.steps]}
         if self.select is not None:
             out.update(self.select.config())
+        out["max_fill_error"] = None if self.max_fill_error is None else str(self.max_fill_error)
         if self.report:
             out["report"] = dict(self.report)
         return out
@@ -111,36 +152,90 @@ class Pipeline:
 
     def run(self, motion: Motion) -> tuple[Motion, list["StepRecord"]]:
         records = []
+        gated = self.max_fill_error is not None and motion.format in GATED_FORMATS
+        # samples a step left as too uncertain to fill: no later step fills them
+        settled = np.zeros(motion.positions.shape[:2], bool) if gated else None
         for step in self.steps:
             if not step.applies(motion):
                 records.append(StepRecord.not_run(step, motion, "not for this format"))
                 continue
             started = time.perf_counter()
-            out, info = self._apply_step(step, motion)
+            out, info = self._apply_step(step, motion, settled)
+            if gated:
+                out, info = self._gate(step, motion, out, info, settled)
             records.append(StepRecord.compare(step, motion, out, info, time.perf_counter() - started))
             motion = out
-        return motion, records
+        return motion.replace(fill_errors=written_fill_errors(motion, records)), records
 
-    def _apply_step(self, step: Step, motion: Motion) -> tuple[Motion, dict]:
+    def _gate(self, step: Step, before: Motion, after: Motion, info: dict,
+              settled: np.ndarray) -> tuple[Motion, dict]:
+        """The step's fills without those it gave no estimate for, or whose 90 % bound
+        exceeds ``max_fill_error`` (put back as missing and listed in the info's
+        :data:`REJECTED_FILLS` with their estimate and bound); marks in ``settled`` (in
+        place) every gap left as too uncertain, by the step or here."""
+        info = dict(info or {})
+        limit_mm = self.max_fill_error.si * 1e3
+        listed = info.get(FILL_ERRORS) or {}
+        col, start, length = runs(before.missing & ~after.missing)
+        drop = []
+        for j, s, n in zip(col.tolist(), start.tolist(), length.tolist()):
+            entry = next((e for e in listed.get(after.names[j], ())
+                          if e[0] <= s and s + n <= e[0] + e[1]), None)
+            if entry is None or entry[3] > limit_mm:
+                drop.append((j, s, n, entry))
+        if drop:
+            positions = after.positions.copy()
+            confidence = None if after.confidence is None else after.confidence.copy()
+            rejected = {k: list(v) for k, v in (info.get(REJECTED_FILLS) or {}).items()}
+            for j, s, n, entry in drop:
+                positions[s:s + n, j] = np.nan
+                if confidence is not None:
+                    confidence[s:s + n, j] = 0.0
+                err, bound = (None, None) if entry is None else (entry[2], entry[3])
+                why = uncertain_reason(err, bound, f"{step.cleaner.name} gives no error "
+                                       "estimate for its fills")
+                rejected.setdefault(after.names[j], []).append([s, n, why, err, bound])
+            info[REJECTED_FILLS] = rejected
+            after = after.replace(positions=positions, confidence=confidence)
+        index = {name: j for j, name in enumerate(after.names)}
+        for name, entries in (info.get(REJECTED_FILLS) or {}).items():
+            for entry in entries:
+                if len(entry) >= 5 and name in index:
+                    settled[int(entry[0]):int(entry[0]) + int(entry[1]), index[name]] = True
+        return after, info
+
+    def _apply_step(self, step: Step, motion: Motion,
+                    settled: np.ndarray | None = None) -> tuple[Motion, dict]:
         """Run one step on the markers it may clean (see :mod:`mocapfix.selection`) over
         the frames of the take (:func:`~mocapfix.gaps.take_frames`: an export's empty
         first and last frames hold nothing to clean, fill or count); the other points and
-        frames come back unchanged."""
+        frames come back unchanged. ``settled``: the fill gate is on, and these samples
+        were left as too uncertain to fill (None: no gate)."""
         cols = cleanable(motion, self.select, step.select)
         if not cols.any():
             return motion.copy(), {"skipped": "no marker selected"}
         span = take_frames(motion.missing, cols)
+
+        def gate(frames: slice) -> FillGate | None:
+            if settled is None:
+                return None
+            leave = settled[frames]
+            if not cols.all() and motion.rig is None:
+                leave = leave[:, cols]
+            return FillGate(self.max_fill_error.si, leave if leave.any() else None)
         if span.stop - span.start == motion.n_frames:
-            return self._apply_on_points(step, motion, cols)
-        part, info = self._apply_on_points(step, motion.slice_frames(span.start, span.stop), cols)
+            return self._apply_on_points(step, motion, cols, gate(slice(None)))
+        part, info = self._apply_on_points(step, motion.slice_frames(span.start, span.stop), cols,
+                                           gate(span))
         return motion.with_frames(span.start, part), _shift_frames(info, span.start)
 
     @staticmethod
-    def _apply_on_points(step: Step, motion: Motion, cols: np.ndarray) -> tuple[Motion, dict]:
+    def _apply_on_points(step: Step, motion: Motion, cols: np.ndarray,
+                         gate: FillGate | None = None) -> tuple[Motion, dict]:
         if cols.all():
-            return step.cleaner.apply(motion)
+            return step.cleaner.apply(motion, gate)
         if motion.rig is not None and motion.channels is not None:
-            out, info = step.cleaner.apply(motion)
+            out, info = step.cleaner.apply(motion, gate)
             channel_step = moved_channels(motion, out)
             if channel_step:
                 # a rotation step: what it did to the excluded joints' channels is undone
@@ -148,7 +243,7 @@ class Pipeline:
             info = dict(info or {})
             info["points_not_cleaned"] = int((~cols).sum())
             return keep_rig_joints(motion, out, ~cols, channel_step), info
-        part, info = step.cleaner.apply(take(motion, cols))
+        part, info = step.cleaner.apply(take(motion, cols), gate)
         info = dict(info or {})
         info["points_not_cleaned"] = int((~cols).sum())
         return put(motion, cols, part), info
@@ -182,10 +277,39 @@ def _shift_frames(info: dict, offset: int) -> dict:
     if info.get(REPLACED_FRAMES):
         info[REPLACED_FRAMES] = {name: [int(f) + offset for f in frames]
                                  for name, frames in info[REPLACED_FRAMES].items()}
-    if info.get(REJECTED_FILLS):
-        info[REJECTED_FILLS] = {name: [[int(entry[0]) + offset, *entry[1:]] for entry in fills]
-                                for name, fills in info[REJECTED_FILLS].items()}
+    for key in (REJECTED_FILLS, FILL_ERRORS):
+        if info.get(key):
+            info[key] = {name: [[int(entry[0]) + offset, *entry[1:]] for entry in fills]
+                         for name, fills in info[key].items()}
     return info
+
+
+def written_fill_errors(motion: Motion, records) -> dict:
+    """``{name: [[start, length, error_mm, bound_mm, step, written], ...]}``: the
+    estimates the steps gave (:data:`FILL_ERRORS`) of the fills ``motion`` (the
+    pipeline's output) holds, the last step's where two estimated the same samples
+    (``written`` 1), and the gaps left as too uncertain to fill that are still missing,
+    with their estimate and bound when they had one (``written`` 0; from the steps'
+    :data:`REJECTED_FILLS`)."""
+    missing = motion.missing
+    index = {name: j for j, name in enumerate(motion.names)}
+    out: dict = {}
+    for rec in records:
+        for name, entries in ((rec.info or {}).get(FILL_ERRORS) or {}).items():
+            j = index.get(name)
+            if j is None:
+                continue
+            for s, n, err, bound in (e[:4] for e in entries):
+                if not missing[int(s):int(s) + int(n), j].any():
+                    kept = [e for e in out.get(name, ()) if e[0] + e[1] <= s or s + n <= e[0]]
+                    out[name] = kept + [[int(s), int(n), err, bound, rec.step, 1]]
+    for rec in records:
+        for name, entries in ((rec.info or {}).get(REJECTED_FILLS) or {}).items():
+            j = index.get(name)
+            for e in entries:
+                if j is not None and len(e) >= 5 and missing[int(e[0]):int(e[0]) + int(e[1]), j].all():
+                    out.setdefault(name, []).append([int(e[0]), int(e[1]), e[3], e[4], rec.step, 0])
+    return out
 
 
 def replaced_mask(info: dict, names, shape) -> np.ndarray:
@@ -308,7 +432,14 @@ def parse_config(data, source: str = "<config>") -> Pipeline:
     from mocapfix.rules import validate_report_section
 
     report = validate_report_section(data.get("report"), source)
-    return Pipeline(steps, report, source, Selection.parse(data, source))
+    line = (data.get("__keylines__") or {}).get("max_fill_error")
+    where = f"{source}{f' (line {line})' if line else ''}: max_fill_error"
+    raw = data.get("max_fill_error", DEFAULT_MAX_FILL_ERROR)
+    if isinstance(raw, (int, float)) and not isinstance(raw, bool):
+        UNIT_WARNINGS.append(f"{where}: {raw} has no unit; read as '{raw} mm' — write the "
+                             "unit to say so")
+    return Pipeline(steps, report, source, Selection.parse(data, source),
+                    parse_max_fill_error(_strip_lines(raw), where))
 
 
 def _check_step_params(name: str, raw: dict, params: dict, where: str) -> None:

@@ -65,12 +65,23 @@ def _long_fills(report: dict) -> list[str]:
     if not rows:
         return []
     out = ["", f"## Long fills (> {LONG_FILL_S:g} s: rebuilt from the model, not measured)", "",
-           "| joint | frames | s | confidence | filled by |", "|---|---|---:|---:|---|"]
+           "| joint | frames | s | confidence | estimated error (mm) | 90 % bound (mm) | filled by |",
+           "|---|---|---:|---:|---:|---:|---|"]
     for name, g in sorted(rows, key=lambda r: -r[1]["length"]):
         conf = "–" if g.get("confidence") is None else f"{g['confidence']:.2f}"
         out.append(f"| {_cell(name)} | {g['start']}–{g['start'] + g['length'] - 1} "
-                   f"| {g['seconds']:.2f} | {conf} | {g['filled_by']} |")
+                   f"| {g['seconds']:.2f} | {conf} | {_num(g.get('error_mm'))} "
+                   f"| {_num(g.get('bound_mm'))} | {g['filled_by']} |")
     return out
+
+
+def _fill_summary(f: dict) -> str:
+    """The file summary's line on the fills' error estimates and what was left."""
+    largest = f.get("fill_bound_max_mm")
+    return (f"- fills' 90 % error bound: largest {_num(largest)} mm"
+            + (f" ({f['fills_without_estimate']} fills without an estimate)"
+               if f.get("fills_without_estimate") else "")
+            + f"; samples left as too uncertain to fill: {f.get('samples_left_uncertain', 0)}")
 
 
 def _gaps_left(report: dict, shown: int = 12) -> list[str]:
@@ -157,6 +168,7 @@ def to_markdown(report: dict) -> str:
            f"- gaps before: {f['gaps_before']}, after: {f.get('gaps_after', '–')} (input gaps "
            f"not wholly filled: {f['gaps_unfilled']}), "
            f"long fills (> {LONG_FILL_S:g} s): {f.get('long_fills', 0)}",
+           _fill_summary(f),
            f"- joints OK / WARN / FAIL: {f['joints_by_status']['OK']} / "
            f"{f['joints_by_status']['WARN']} / {f['joints_by_status']['FAIL']}"
            + (f" ({f['points_not_cleaned']} more points not cleaned: see below)"
@@ -397,7 +409,9 @@ def check_line(result: dict, verbose: bool = False) -> str:
         wc = result.get("would_clean")
         if wc and "error" not in wc:
             lines.append(f"      would clean: fill {wc['samples_filled']} samples, flag "
-                         f"{wc['samples_flagged']}, leave {_pct(wc['missing_after'])} missing and "
+                         f"{wc['samples_flagged']}, leave {_pct(wc['missing_after'])} missing "
+                         f"({wc.get('samples_left_uncertain', 0)} samples as too uncertain to "
+                         f"fill; largest fill bound {_num(wc.get('fill_bound_max_mm'))} mm) and "
                          + METRICS["uncertain"].phrase.format(v=_pct(wc["uncertain"])))
         return "\n".join(lines)
     if not worst:

@@ -84,6 +84,7 @@ _GETTERS = {
     "writeback": _get("writeback_residual_mm", "max"),
     "flagged": lambda j, f: (j["outliers_flagged"] / f["frames"]) if f.get("frames") else 0.0,
     "gaps_unfilled": lambda j, f: len(j["gaps"]["unfilled"]),
+    "fill_bound": _get("fill_bound_mm"),
 }
 
 #: what a joint's entry says about why a metric's value is what it is, added to a finding
@@ -127,6 +128,10 @@ METRICS = {m.name: m for m in (
            "bone length std/mean after cleaning", "max"),
     Metric("gaps_unfilled", "cleaned", "count", "{v} gaps left unfilled",
            "gaps no step filled completely", "sum"),
+    Metric("fill_bound", "cleaned", "length", "a fill written may be off by {v} (90 % bound "
+           "of its RMS error)", "largest calibrated 90 % error bound of a fill written", "max"),
+    Metric("left_uncertain", "cleaned", "fraction", "{v} left unfilled as too uncertain to fill",
+           "fraction of samples left missing because no fill could be trusted", "mean"),
 )}
 
 _FILE_ONLY_KEYS = {"dropped_frames": "dropped_frames", "timestamp_jumps": "timestamp_jumps",
@@ -560,6 +565,10 @@ REPORT_KEYS = {
     "fail_writeback_mm": ("writeback", "fail"),
     "warn_bone_variation": ("bone_variation_after", "warn"),
     "fail_bone_variation": ("bone_variation_after", "fail"),
+    "warn_fill_bound_mm": ("fill_bound", "warn"),
+    "fail_fill_bound_mm": ("fill_bound", "fail"),
+    "warn_left_uncertain": ("left_uncertain", "warn"),
+    "fail_left_uncertain": ("left_uncertain", "fail"),
 }
 #: (warn key, fail key) of each metric of the ``report:`` section
 _REPORT_PAIRS = [(w, f) for w, (mw, lw) in REPORT_KEYS.items() if lw == "warn"
@@ -574,6 +583,9 @@ DEFAULT_THRESHOLDS = {
     "warn_writeback_mm": 1.0,       # rotation write-back residual above this → WARN
     "fail_writeback_mm": 20.0,
     "warn_bone_variation": 0.05,    # bone length std/mean after cleaning
+    "warn_fill_bound_mm": 20.0,     # a fill written may be off by more (90 % bound) → WARN
+                                    # (only with max_fill_error raised or null)
+    "warn_left_uncertain": 0.0,     # any sample left as too uncertain to fill → WARN
 }
 
 

@@ -92,7 +92,9 @@ def test_default_clean_fills_no_run_that_jumps_three_times_the_markers_largest_s
     sample, 11–12× the largest step its own data makes (and 29 cm under the floor). On
     s09 the prior still jumps more than 3× without ``max_step`` (3.9×; 11× while the steps
     also saw the 11 empty frames after the take); on s04 it did while its iteration
-    stopped at the fit cap, and no longer does converged (2.96×)."""
+    stopped at the fit cap, and no longer does converged (2.96×). Under the fill gate
+    (``max_fill_error``, on by default) ``tsmc`` fills nothing, so its screen is tested
+    with the gate off (``max_fill_error: null``, every fill written as before)."""
     motion = read(shared(f"c3d/{name}"))
     P0 = motion.positions
     missing = np.isnan(P0).any(axis=2)
@@ -114,6 +116,8 @@ def test_default_clean_fills_no_run_that_jumps_three_times_the_markers_largest_s
     config = load_config(default_config_path())
     assert worst_ratio(config) <= 3.0
     data = load_yaml(default_config_path().read_text())
+    data["max_fill_error"] = None
+    assert worst_ratio(parse_config(data)) <= 3.0
     for step in data["pipeline"]:
         if step["cleaner"] == "tsmc":
             step["max_step"] = 0
@@ -143,22 +147,31 @@ def test_fill_ensemble_refills_without_the_member_that_jumped_on_a_real_capture(
 def test_the_report_says_which_step_refused_a_gaps_fill_and_why(tmp_path):
     """c3d.org s09: the points of the model's left tibia and foot segments (LTIO, LTIL,
     LTOO, LTOP) are lost at frame 188, 82 frames before the take ends; the ensemble's
-    fill of LTIO left the capture volume and tsmc's jumped, so the gap is left, and the
-    report says both under it."""
+    fill of LTIO left the capture volume, so the gap is left, and the report says so
+    under it. Under the default fill gate ``tsmc`` makes no fill (it has no error
+    estimate); with the gate off (``max_fill_error: null``) it fills, its fill jumps, and
+    the report gives both reasons."""
     from mocapfix.clean import clean_file
     import json
 
-    out = tmp_path / "s09.c3d"
-    clean_file(shared("c3d/c3dorg_s09_PlugInC3D.c3d"), out, load_config(default_config_path()))
-    report = json.loads((tmp_path / "s09.c3d.report.json").read_text())
-    ltio = next(j for j in report["joints"] if j["name"] == "LTIO")
-    left = [g for g in ltio["gaps"]["unfilled"] if g["start"] == 188]
-    assert left and left[0]["rejected_by"] == [
-        {"step": "step 3 (fill_ensemble)", "why": "its fill left the capture volume"},
-        {"step": "step 4 (tsmc)",
-         "why": "its fill jumped more than 3x the marker's largest measured step in one frame"}]
-    refused = [g for j in report["joints"] for g in j["gaps"]["unfilled"] if "rejected_by" in g]
-    assert all(g["filled_frames"] < g["length"] for g in refused)
+    def refusals(config, name):
+        out = tmp_path / f"{name}.c3d"
+        clean_file(shared("c3d/c3dorg_s09_PlugInC3D.c3d"), out, config)
+        report = json.loads((tmp_path / f"{name}.c3d.report.json").read_text())
+        ltio = next(j for j in report["joints"] if j["name"] == "LTIO")
+        left = [g for g in ltio["gaps"]["unfilled"] if g["start"] == 188]
+        refused = [g for j in report["joints"] for g in j["gaps"]["unfilled"] if "rejected_by" in g]
+        assert all(g["filled_frames"] < g["length"] for g in refused)
+        assert left
+        return left[0]["rejected_by"]
+
+    volume = {"step": "step 3 (fill_ensemble)", "why": "its fill left the capture volume"}
+    assert refusals(load_config(default_config_path()), "gated") == [volume]
+    data = load_yaml(default_config_path().read_text())
+    data["max_fill_error"] = None
+    assert refusals(parse_config(data), "ungated") == [volume, {
+        "step": "step 4 (tsmc)",
+        "why": "its fill jumped more than 3x the marker's largest measured step in one frame"}]
 
 
 def test_fill_confidences_survive_the_take_of_a_motion_without_confidence():

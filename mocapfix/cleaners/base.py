@@ -31,8 +31,41 @@ _PHYSICAL = {"length", "time", "frequency"}
 #: ``{name: [frame, ...]}`` (JSON-able, so the report keeps it)
 REPLACED_FRAMES = "replaced_frames"
 #: the info key of the fills a step made and did not write, with why:
-#: ``{name: [[start, length, why], ...]}`` (the report says why such a gap is left)
+#: ``{name: [[start, length, why], ...]}`` (the report says why such a gap is left); a
+#: gap left because its fill could not be trusted (:class:`FillGate`) has five entries,
+#: ``[start, length, why, error_mm, bound_mm]`` (None when there is no estimate), and no
+#: later step fills it
 REJECTED_FILLS = "rejected_fills"
+#: the info key of the error estimates of a step's fills (:mod:`mocapfix.solvers.fill_error`):
+#: ``{name: [[start, length, error_mm, bound_mm], ...]}``, one entry per filled run
+FILL_ERRORS = "fill_errors"
+
+#: what a step that cannot estimate its fills' error says when it fills nothing under the
+#: gate (``info["skipped_fills"]``)
+NOT_ESTIMATED = ("no fills: it gives no error estimate, so under max_fill_error none "
+                 "would be written")
+
+
+@dataclass(frozen=True)
+class FillGate:
+    """What the pipeline tells a step about fills (top-level ``max_fill_error``): a fill
+    is written only when its calibrated 90 % error bound is at most ``max_error_m``
+    (metres); ``leave`` (T, J) marks the samples an earlier step left as too uncertain to
+    fill, which this step leaves missing too (None: none). Steps that fill and can
+    estimate their error (``fill_ensemble``, ``pma``, ``fill``) honour it themselves;
+    steps that cannot (``tsmc``, ``fill_pca``) do not fill under it, and the pipeline
+    drops any other step's fill that carries no estimate below the bound."""
+
+    max_error_m: float
+    leave: Any = None
+
+    def max_error(self, motion: Motion) -> float:
+        """The threshold in the length unit of ``motion``."""
+        return self.max_error_m / motion.metres_per_unit
+
+    def left(self, j: int, s: int, e: int) -> bool:
+        """The gap ``(j, s, e)`` holds samples an earlier step left as too uncertain."""
+        return self.leave is not None and bool(self.leave[s:e, j].any())
 
 
 @dataclass(frozen=True)
@@ -150,6 +183,9 @@ class Cleaner:
     #: (:func:`mocapfix.solvers.lowrank.blas_single_thread`): for cleaners whose kernels
     #: are many small matrix products, where threads only add overhead
     single_thread_blas: ClassVar[bool] = False
+    #: ``_apply`` takes the pipeline's :class:`FillGate` as ``gate=`` (its fills carry
+    #: :data:`FILL_ERRORS`, or it makes none under the gate)
+    gated: ClassVar[bool] = False
 
     def __init__(self, step: str | None = None, **values):
         self.step = step or self.name
@@ -193,15 +229,17 @@ class Cleaner:
         return out
 
     # -- the contract ---------------------------------------------------------
-    def apply(self, motion: Motion) -> tuple[Motion, dict]:
-        """Clean ``motion``; returns a new Motion and a JSON-able info dict."""
+    def apply(self, motion: Motion, gate: FillGate | None = None) -> tuple[Motion, dict]:
+        """Clean ``motion``; returns a new Motion and a JSON-able info dict. ``gate``: the
+        pipeline's trust rule for fills, passed on to a :attr:`gated` cleaner."""
+        kwargs = {"gate": gate} if self.gated else {}
         if self.single_thread_blas:
             from mocapfix.solvers.lowrank import blas_single_thread
 
             with blas_single_thread():
-                result = self._apply(motion)
+                result = self._apply(motion, **kwargs)
         else:
-            result = self._apply(motion)
+            result = self._apply(motion, **kwargs)
         if isinstance(result, Motion):
             return result, {}
         return result

@@ -6,10 +6,14 @@ from __future__ import annotations
 import numpy as np
 
 from mocapfix.cleaners import register
-from mocapfix.cleaners.base import Cleaner, Param
-from mocapfix.gaps import gap_report
+from mocapfix.cleaners.base import FILL_ERRORS, REJECTED_FILLS, Cleaner, FillGate, Param
+from mocapfix.gaps import gap_report, runs
 from mocapfix.motion import Motion
+from mocapfix.solvers import fill_error
 from mocapfix.solvers.segments import INTERPOLATORS, interpolate_gaps
+
+#: validation windows per filled gap (as ``fill_ensemble``'s ``validation_copies``)
+VALIDATION_COPIES = 2
 
 
 @register
@@ -31,6 +35,7 @@ class Fill(Cleaner):
     """
 
     name = "fill"
+    gated = True
     summary = "fill short gaps by linear, cubic-spline or PCHIP interpolation"
     params = (
         Param("method", "choice", "pchip", "interpolant", choices=INTERPOLATORS),
@@ -38,7 +43,7 @@ class Fill(Cleaner):
               unit="s", low=0.0, nullable=True),
     )
 
-    def _apply(self, motion: Motion):
+    def _apply(self, motion: Motion, gate: FillGate | None = None):
         pos = motion.positions
         T, J, _ = pos.shape
         if pos.size == 0:
@@ -49,7 +54,43 @@ class Fill(Cleaner):
             times = np.asarray(times, dtype=np.float64)
             if times.shape != (T,) or not np.all(np.isfinite(times)) or np.any(np.diff(times) <= 0):
                 times = None            # unusable time stamps: assume uniform sampling
-        filled, _ = interpolate_gaps(pos.reshape(T, 3 * J), self["method"], max_gap, times)
-        out = motion.replace(positions=filled.reshape(T, J, 3))
+
+        def interpolate(positions):
+            return interpolate_gaps(positions.reshape(T, -1), self["method"], max_gap,
+                                    times)[0].reshape(positions.shape)
+
+        filled = interpolate(pos)
+        if gate is not None and gate.leave is not None:
+            filled[gate.leave] = np.nan         # left as too uncertain by an earlier step
+        trust = self._judge(motion, filled, gate, interpolate)
+        out = motion.replace(positions=filled)
         info = gap_report(motion.missing, out.missing, motion.fps)
+        info.update({FILL_ERRORS: trust.written, "fill_error_factors": trust.factors})
+        if trust.rejected:
+            info[REJECTED_FILLS] = trust.rejected
         return out, info
+
+    @staticmethod
+    def _judge(motion: Motion, filled: np.ndarray, gate, interpolate):
+        """Estimate the error of every gap ``filled`` fills (the interpolant on validation
+        windows of its length, on the markers that have gaps only) and, under ``gate``,
+        put back as missing (in place) the gaps whose bound exceeds the threshold."""
+        pos = motion.positions
+        observed = ~motion.missing
+        j, s, n = runs(observed ^ ~np.isnan(filled).any(axis=2))
+        gaps = list(zip(j.tolist(), s.tolist(), (s + n).tolist()))
+        trust = fill_error.FillTrust(motion, gate)
+        if not gaps:
+            return trust
+        cols = np.unique(j)
+        index = np.full(pos.shape[1], -1)
+        index[cols] = np.arange(len(cols))
+        local = [(int(index[g[0]]), g[1], g[2]) for g in gaps]
+        windows = fill_error.validation_windows(observed[:, cols], local, VALIDATION_COPIES)
+        trust.estimate(gaps, fill_error.window_fill_errors(
+            pos[:, cols], local, windows, lambda cut, spans: interpolate(cut)),
+            "interpolation")
+        for g in gaps:
+            if not trust.allows(g):
+                filled[g[1]:g[2], g[0]] = np.nan
+        return trust

@@ -4,7 +4,7 @@ in :mod:`mocapfix.solvers.pca_gapfill`."""
 from __future__ import annotations
 
 from mocapfix.cleaners import register
-from mocapfix.cleaners.base import Cleaner, Param
+from mocapfix.cleaners.base import NOT_ESTIMATED, Cleaner, FillGate, Param
 from mocapfix.solvers.pca_gapfill import ALIGNS, fill_gaps_pca
 
 
@@ -12,6 +12,9 @@ from mocapfix.solvers.pca_gapfill import ALIGNS, fill_gaps_pca
 class PCAFill(Cleaner):
     name = "fill_pca"
     single_thread_blas = True
+    #: under the pipeline's ``max_fill_error`` it fills nothing: it gives no estimate of
+    #: its fills' error, so none could be written (and it would cost its fits for nothing)
+    gated = True
     summary = ("fill gaps from the other markers by iterative PCA in a body frame "
                "(Gloersen & Federolf 2016)")
     params = (
@@ -35,7 +38,9 @@ class PCAFill(Cleaner):
               choices=ALIGNS),
     )
 
-    def _apply(self, motion):
+    def _apply(self, motion, gate: FillGate | None = None):
+        if gate is not None:
+            return motion.copy(), {"skipped_fills": NOT_ESTIMATED}
         max_gap = None if self["max_gap"] is None else self.frames("max_gap", motion)
         scale = self.values["weight_scale"]
         out, info = fill_gaps_pca(

@@ -23,10 +23,10 @@ import dataclasses
 import numpy as np
 
 from mocapfix.cleaners import build, register
-from mocapfix.cleaners.base import REJECTED_FILLS, Cleaner, Param
+from mocapfix.cleaners.base import FILL_ERRORS, REJECTED_FILLS, Cleaner, FillGate, Param
 from mocapfix.errors import ConfigError
 from mocapfix.motion import Motion, missing_samples
-from mocapfix.solvers import pma
+from mocapfix.solvers import fill_error, pma
 from mocapfix.solvers.pca_gapfill import fill_gaps_pca
 from mocapfix.solvers.segments import largest_steps, steepest_step
 
@@ -46,6 +46,7 @@ REFILL_COPIES = 1
 class PMA(Cleaner):
     name = "pma"
     single_thread_blas = True
+    gated = True
     summary = ("fill gaps by a plausibility-weighted average of five fillers with soft "
                "distance constraints (Tits et al. 2018 'PMA')")
     params = (
@@ -109,7 +110,7 @@ class PMA(Cleaner):
             out["tsmc"] = build("tsmc", observed="keep").apply(motion)[0].positions
         return out
 
-    def _apply(self, motion: Motion):
+    def _apply(self, motion: Motion, gate: FillGate | None = None):
         pos = motion.positions
         T, J, _ = pos.shape
         observed = ~motion.missing
@@ -123,18 +124,28 @@ class PMA(Cleaner):
         conf = np.ones((T, J)) if motion.confidence is None else motion.confidence.copy()
         conf[~observed] = 0.0
         weight_sum: dict[str, float] = {}
-        gaps = pma.gap_list(observed, max_gap, self["fill_ends"])
+        # a gap an earlier step left as too uncertain to fill stays missing (FillGate)
+        gaps = [g for g in pma.gap_list(observed, max_gap, self["fill_ends"])
+                if gate is None or not gate.left(*g)]
         info["gaps"] = len(gaps)
         horizon = self.frames("confidence_horizon", motion)
+        trust = fill_error.FillTrust(motion, gate)
         if self["short_gap"] is not None and self.frames("short_gap", motion) >= 1:
-            gaps = self._fill_short(out, conf, gaps, self.frames("short_gap", motion), horizon)
+            gaps = self._fill_short(out, conf, gaps, self.frames("short_gap", motion), horizon,
+                                    trust)
             info["gaps_filled"] = info["gaps"] - len(gaps)
             seen = ~missing_samples(out)
             info["filled"] = int((seen & ~observed).sum())
+            # a short gap left as too uncertain is no gap for the members to fill
+            gaps = [g for g in gaps if not trust.refused(g)]
             pos, observed = out.copy(), seen
         work = motion if pos is motion.positions else motion.replace(positions=pos)
         external = self._external(work)
-        if self["weights"] == "plausibility":
+        # windows are needed to weight the members (weights: validation/best) or, under the
+        # gate, to estimate the fills' error (weights: plausibility weights them as before)
+        validate = self["weights"] != "plausibility" or gate is not None
+        windows: list = [[] for _ in gaps]
+        if not validate:
             members = pma.member_fills(pos, observed, gaps, external, local=local,
                                        neighbours=self["neighbours"], mu=mu, sd=sd,
                                        weight_scale=self.length("weight_scale", motion))
@@ -144,9 +155,12 @@ class PMA(Cleaner):
             # makes them, the refill rounds reuse them (a reference only fixes a frame's
             # orientation)
             references: dict = {}
-            members, validated = self._validated_fills(work, observed, gaps, external, local,
-                                                       mu, sd, references=references,
-                                                       skip_unsupported=not external)
+            members, validated, windows = self._validated_fills(
+                work, observed, gaps, external, local, mu, sd, references=references,
+                skip_unsupported=not external, skip_unvalidated=gate is not None,
+                with_windows=True)
+        if self["weights"] == "plausibility":
+            validated = [{}] * len(gaps)
         expected = len(pma.member_names(local, self["neighbours"])) + len(external)
         seen_points = motion.positions[~motion.missing]
         lo, hi = seen_points.min(axis=0), seen_points.max(axis=0)
@@ -155,17 +169,23 @@ class PMA(Cleaner):
         top = largest_steps(pos, observed)
         combined = [self._combine(pos, gap, cand, fills, verr, mu, sd, floor, box, top)
                     for gap, (cand, fills), verr in zip(gaps, members, validated)]
+        if validate:
+            cross, fitted = self._window_errors(pos, gaps, windows, mu, sd, floor, box, top)
+            trust.estimate(gaps, cross, "the members", fitted=fitted)
         if self["refill"] > 0 and self["weights"] != "plausibility":
             combined = self._refill(work, observed, gaps, local, mu, sd, floor, box,
-                                    members, validated, combined, info, references, top)
+                                    members, validated, combined, info, references, top,
+                                    trust)
         info["rejected_samples"] = 0
-        info[REJECTED_FILLS] = {}
-        for (j, s, e), result, (cand, _) in zip(gaps, combined, members):
+        info[REJECTED_FILLS] = trust.rejected
+        for (j, s, e), result, (cand, _), tested in zip(gaps, combined, members, windows):
             n = e - s
             if result is None:
                 if not len(cand):
                     info[REJECTED_FILLS].setdefault(motion.names[j], []).append(
                         [int(s), int(n), "no other marker is seen through it"])
+                elif gate is not None and not tested:
+                    trust.refuse((j, s, e))
                 continue
             avg, spread, names, w = result
             if avg is None:
@@ -174,6 +194,8 @@ class PMA(Cleaner):
                 info["rejected_samples"] += int(n)
                 info[REJECTED_FILLS].setdefault(motion.names[j], []).append(
                     [int(s), int(n), "its fill left the capture volume"])
+                continue
+            if not trust.allows((j, s, e)):
                 continue
             out[s:e, j] = avg
             # confidence: the members' agreement, the distance to the nearest observed
@@ -190,7 +212,55 @@ class PMA(Cleaner):
         if info["gaps_filled"]:
             averaged = max(sum(weight_sum.values()), 1e-12)     # one unit per averaged gap
             info["weights_mean"] = {k: round(v / averaged, 3) for k, v in weight_sum.items()}
+        info.update({FILL_ERRORS: trust.written, "fill_error_factors": trust.factors})
+        if gate is not None:
+            info["gaps_too_uncertain"] = trust.count
         return motion.replace(positions=out, confidence=conf), info
+
+    def _window_errors(self, pos, gaps, windows, mu, sd, floor, box, top):
+        """Two (G, copies) errors of the combined fill (:meth:`_combine`: the weighted
+        average, the soft constraint, the jump screen) on each gap's validation windows:
+        its members weighted by their errors on the gap's *other* windows (cross-fitted:
+        the weights are not chosen on the window they are judged on — a window's test
+        error, as the real gap's fill is judged on a gap its weights were not chosen on;
+        a gap with one window uses that window's), and weighted by their errors on all
+        its windows, as the real gap's fill is (the errors its estimate is made of).
+        NaN where the window's fill leaves the capture volume or a copy has no window for
+        the gap."""
+        copies = max((w[0] for ws in windows for w in ws), default=-1) + 1
+        cross = np.full((len(gaps), max(copies, 1)), np.nan)
+        fitted = cross.copy()
+        cut_positions: dict = {}
+        plausibility = self["weights"] == "plausibility"
+
+        def mean_errors(fills, chosen):
+            return {} if plausibility else {
+                k: float(np.mean([o[k] for o in chosen if k in o]))
+                for k in fills if any(k in o for o in chosen)}
+
+        for g, ((j, _, _), ws) in enumerate(zip(gaps, windows)):
+            for c, u, v, cand, fills, _ in ws:
+                if not fills:
+                    continue
+                if c not in cut_positions:
+                    cut_positions[c] = self._cut_positions(pos, gaps, windows, c)
+                others = [w[5] for w in ws if w[0] != c] or [w[5] for w in ws if w[0] == c]
+                for out, chosen in ((cross, others), (fitted, [w[5] for w in ws])):
+                    result = self._combine(cut_positions[c], (j, u, v), cand, fills,
+                                           mean_errors(fills, chosen), mu, sd, floor, box, top)
+                    if result is not None and result[0] is not None:
+                        out[g, c] = fill_error.rms_error(result[0], pos[u:v, j])
+        return cross, fitted
+
+    @staticmethod
+    def _cut_positions(pos, gaps, windows, copy):
+        """The positions of validation copy ``copy``: its windows made missing."""
+        out = pos.copy()
+        for (j, _, _), ws in zip(gaps, windows):
+            for c, u, v, *_ in ws:
+                if c == copy:
+                    out[u:v, j] = np.nan
+        return out
 
     def _combine(self, pos, gap, cand, fills, verr, mu, sd, floor, box, top):
         """One gap's fill from its members' fills: their average weighted by validation
@@ -278,7 +348,7 @@ class PMA(Cleaner):
         return np.tensordot(w / w.sum(), np.stack([fills[k] for k in names]), axes=1)
 
     def _refill(self, motion, observed, gaps, local, mu, sd, floor, box, members, validated,
-                combined, info, references, top):
+                combined, info, references, top, trust):
         """The refill rounds (``refill``): an interior gap of at least
         :data:`REFILL_MIN_S` during which one of its marker's most rigid neighbours (as
         many as the largest ``neighbours`` count) is missing too, and that neighbour's
@@ -310,14 +380,15 @@ class PMA(Cleaner):
             """The capture with every interior gap the ensemble filled taken as seen."""
             filled = pos.copy()
             for (j, s, e), (_, fills), verr, done in zip(gaps, members, validated, combined):
-                if 0 < s and e < T and done is not None and done[0] is not None:
+                if (0 < s and e < T and done is not None and done[0] is not None
+                        and trust.trusted((j, s, e))):
                     filled[s:e, j] = self._average(pos, (j, s, e), fills, verr, top)
             return filled
 
         filled = current_fills()
         redo: dict[int, list[int]] = {}
         for g, (j, s, e) in enumerate(gaps):
-            if s == 0 or e == T or e - s < REFILL_MIN_S * motion.fps:
+            if s == 0 or e == T or e - s < REFILL_MIN_S * motion.fps or not trust.trusted(gaps[g]):
                 continue
             best = np.array([k for k in ranked[j] if k != j and np.isfinite(sd[j, k])][:K],
                             dtype=np.intp)
@@ -371,14 +442,23 @@ class PMA(Cleaner):
                                         top)
         return combined
 
-    @staticmethod
-    def _fill_short(out, conf, gaps, short, horizon):
+    def _fill_short(self, out, conf, gaps, short, horizon, trust):
         """Fill (in place) the interior gaps of at most ``short`` frames by cubic Hermite
-        curves (:func:`mocapfix.solvers.pma.hermite_short_gaps`); returns the gaps left
-        for the members."""
+        curves (:func:`mocapfix.solvers.pma.hermite_short_gaps`), each with its error on
+        validation windows of its length and a bound calibrated on them (``trust``: under
+        a gate, only those it trusts are filled); returns the gaps not filled."""
+        T = out.shape[0]
         observed = ~missing_samples(out)
-        small = [g for g in gaps if g[2] - g[1] <= short]
-        done = pma.hermite_short_gaps(out, observed, small)
+        small = [g for g in gaps if g[2] - g[1] <= short and 0 < g[1] and g[2] < T]
+
+        def hermite(cut_positions, spans):
+            pma.hermite_short_gaps(cut_positions, ~missing_samples(cut_positions), spans)
+            return cut_positions
+
+        windows = fill_error.validation_windows(observed, small, self["validation_copies"])
+        trust.estimate(small, fill_error.window_fill_errors(out, small, windows, hermite),
+                       "cubic Hermite")
+        done = pma.hermite_short_gaps(out, observed, [g for g in small if trust.allows(g)])
         if done:
             g = np.array(done, dtype=np.intp)
             n = g[:, 2] - g[:, 1]
@@ -389,37 +469,14 @@ class PMA(Cleaner):
         return [g for g in gaps if g not in done]
 
     def _validation_windows(self, observed, gaps, copies=None):
-        """The synthetic gaps that validate the members: ``copies`` (default
-        ``validation_copies``) times, per
-        gap a window of the gap's length cut at a random (seeded) place where the marker
-        and its borders were seen (windows of one marker in one copy do not overlap).
-        Returns per copy ``(cut, windows)``: the observed mask with the copy's windows
-        cut, and the windows as ``(gap index, start, stop)``."""
-        T = observed.shape[0]
-        rng = np.random.default_rng(0)
-        out = []
-        for _ in range(copies or self["validation_copies"]):
-            cut = observed.copy()
-            synth = []
-            for gi, (j, s, e) in enumerate(gaps):
-                n = e - s
-                if T - n - 1 < 1:
-                    continue
-                c = np.concatenate([[0], np.cumsum(cut[:, j])])
-                u = np.arange(1, T - n)
-                good = u[(c[u + n + 1] - c[u - 1]) == n + 2]
-                if not len(good):
-                    continue
-                u = int(rng.choice(good))
-                cut[u:u + n, j] = False
-                synth.append((gi, u, u + n))
-            if not synth:
-                break
-            out.append((cut, synth))
-        return out
+        """The synthetic gaps that validate the members
+        (:func:`mocapfix.solvers.fill_error.validation_windows`), ``copies`` (default
+        ``validation_copies``) of them per gap."""
+        return fill_error.validation_windows(observed, gaps, copies or self["validation_copies"])
 
     def _validated_fills(self, motion, observed, gaps, external, local, mu, sd, copies=None,
-                         references=None, skip_unsupported=False):
+                         references=None, skip_unsupported=False, skip_unvalidated=False,
+                         with_windows=False):
         """Every member's fill of every gap and, per gap, member name → mean squared error
         on the gap's validation windows (:meth:`_validation_windows`;
         :func:`mocapfix.solvers.pma.validated_member_fills`); the external members are
@@ -430,16 +487,25 @@ class PMA(Cleaner):
         (btk_mocap36_optitrack, whose 36 gaps are its last 229 frames with no marker at
         all: 4.9 → 0.05 s, measured on the whole file; the pipeline now runs steps on the
         take, so in a clean this is the case of a whole-body dropout inside it); the other
-        gaps' windows and fills stay as they were."""
+        gaps' windows and fills stay as they were. ``skip_unvalidated``: likewise a gap
+        that gets no validation window (its marker is never seen as long as the gap): under
+        a :class:`FillGate` its fill has no estimate and would not be written.
+        ``with_windows``: also return, per gap, its windows with the members' fills there
+        (:func:`mocapfix.solvers.pma.validated_member_fills`)."""
         pos = motion.positions
         windows = self._validation_windows(observed, gaps, copies)
         keep = np.ones(len(gaps), bool)
         if skip_unsupported:
             keep = np.array([len(pma.candidates(observed, sd, *g)) > 0 for g in gaps], bool)
-            if not keep.all():
-                index = np.cumsum(keep) - 1             # a kept gap's place among the kept
-                windows = [(cut, [(int(index[g]), u, v) for g, u, v in synth if keep[g]])
-                           for cut, synth in windows]
+        if skip_unvalidated:
+            tested = np.zeros(len(gaps), bool)
+            for _, synth in windows:
+                tested[[g for g, _, _ in synth]] = True
+            keep &= tested
+        if not keep.all():
+            index = np.cumsum(keep) - 1             # a kept gap's place among the kept
+            windows = [(cut, [(int(index[g]), u, v) for g, u, v in synth if keep[g]])
+                       for cut, synth in windows]
 
         def copy_external(cut):
             return self._external(motion.replace(positions=np.where(cut[..., None], pos, np.nan),
@@ -450,8 +516,9 @@ class PMA(Cleaner):
             neighbours=self["neighbours"], mu=mu, sd=sd,
             weight_scale=self.length("weight_scale", motion),
             copy_external=copy_external if external else None, references=references))
-        rows = [next(rows) if k else (np.array([], dtype=np.intp), {}, {}) for k in keep]
-        return [(cand, fills) for cand, fills, _ in rows], [errs for _, _, errs in rows]
+        rows = [next(rows) if k else (np.array([], dtype=np.intp), {}, {}, []) for k in keep]
+        out = [(cand, fills) for cand, fills, _, _ in rows], [errs for _, _, errs, _ in rows]
+        return (*out, [w for *_, w in rows]) if with_windows else out
 
 
 def _defaults(params, **new):

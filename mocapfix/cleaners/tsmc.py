@@ -88,7 +88,7 @@ import warnings
 import numpy as np
 
 from mocapfix.cleaners import register
-from mocapfix.cleaners.base import REJECTED_FILLS, Cleaner, Param
+from mocapfix.cleaners.base import NOT_ESTIMATED, REJECTED_FILLS, Cleaner, FillGate, Param
 from mocapfix.motion import Motion, missing_samples
 from mocapfix.solvers import dct, segments
 from mocapfix.solvers.localfit import moving_median
@@ -456,6 +456,10 @@ class TSMC(Cleaner):
 
     name = "tsmc"
     single_thread_blas = True
+    #: under the pipeline's ``max_fill_error`` it fills nothing (no estimate of its fills'
+    #: error): the completion is not run, and ``observed: auto``/``smooth`` smooth the
+    #: measured samples of channels bridged linearly across their gaps
+    gated = True
     summary = ("fill gaps and untrusted samples: PCA prediction from the other markers + "
                "low-rank, smooth completion of the rest (Feng 2014 TSMC)")
     params = (
@@ -499,7 +503,7 @@ class TSMC(Cleaner):
               "largest trusted step is left missing (0: no such check)", low=0.0, high=1e6),
     )
 
-    def _apply(self, motion: Motion):
+    def _apply(self, motion: Motion, gate: FillGate | None = None):
         pos = motion.positions
         T, J, _ = pos.shape
         observed = ~motion.missing
@@ -508,12 +512,24 @@ class TSMC(Cleaner):
         if T < 2 or not rows.any():
             return motion.copy(), info
         trusted = observed & _confident(motion, self["min_confidence"])
+        mode = self["observed"]
+        if gate is not None:
+            # no estimate of the completion's error: under the gate it fills nothing, and
+            # the samples it would re-estimate (low reader confidence) stay as measured
+            if mode in ("keep", "model"):
+                return motion.copy(), {**info, "skipped_fills": NOT_ESTIMATED}
+            trusted = observed
         cols = np.repeat(rows, 3)
         omega = np.repeat(trusted, 3, axis=1)[:, cols]
         x = pos.reshape(T, 3 * J)[:, cols]
-        mode = self["observed"]
         p = dct.fast_pad(T, _pad_frames(self, motion))
-        if mode == "model" or not omega.all():
+        if gate is not None and not omega.all():
+            # the channels bridged across their gaps, only for the smoothing of the
+            # measured samples: the completion is not run
+            est = linear_bridge(np.where(omega, x, np.nan))
+            sinfo = {"iterations": 0, "residual": 0.0, "converged": True, "rank": None,
+                     "skipped_fills": NOT_ESTIMATED}
+        elif mode == "model" or not omega.all():
             fill, sinfo = self._complete(motion, trusted, rows, p)
             est = fill if mode == "model" else np.where(omega, x, fill)
         else:   # every sample trusted: the completion would return the data unchanged
@@ -538,6 +554,9 @@ class TSMC(Cleaner):
         seen = rows.sum()
         frame_ok = trusted[:, rows].sum(axis=1) >= max(3, self["min_observed"] * seen)
         written = ~trusted & rows[None, :] & frame_ok[:, None]
+        if gate is not None:
+            out[~observed] = np.nan                 # the bridges are not fills
+            written[:] = False
         out[~trusted & rows[None, :] & ~frame_ok[:, None]] = np.nan   # too few markers seen
         outside = implausible_runs(out, written, pos[trusted])
         jumped = segments.discontinuous_runs(out, written & ~outside,

@@ -914,8 +914,9 @@ def _splice(motion: Motion, source: C3DSource, path, mark_missing: bool) -> byte
     frames["p"] = points
     frames["a"] = source.analog
     header, prefix = source.header, source.prefix
-    if filled.any():
-        header, prefix = _with_fill_group(source, _fill_params(motion, source, filled), path)
+    left = _left_runs(motion, new_missing)
+    if filled.any() or left:
+        header, prefix = _with_fill_group(source, _fill_params(motion, source, filled, left), path)
     return header + prefix + frames.tobytes() + source.tail
 
 
@@ -949,17 +950,43 @@ def _old_fills(source: C3DSource) -> list[tuple]:
     cols = [joined("FILL_POINTS", str.strip), joined("FILL_FIRST", float), joined("FILL_LAST", float),
             joined("FILL_CONFIDENCE", float), joined("FILL_LONG", int)]
     n = min(len(c) for c in cols)
+    # FILL_ERROR / FILL_BOUND: -1 for runs listed by a mocapfix that wrote none
+    for key in ("FILL_ERROR", "FILL_BOUND"):
+        values = joined(key, float)
+        cols.append(values[:n] + [-1.0] * (n - len(values[:n])))
     return [tuple(c[i] for c in cols) for i in range(n)]
 
 
-def _fill_params(motion: Motion, source: C3DSource, filled: np.ndarray) -> list[tuple]:
+def _left_runs(motion: Motion, missing: np.ndarray) -> list[tuple]:
+    """``(point, start, length, error_mm, bound_mm)`` of every gap the pipeline left as too
+    uncertain to fill (``Motion.fill_errors`` entries not written) that is still missing
+    in ``missing`` (-1 for an estimate it had none of)."""
+    index = {name: j for j, name in enumerate(motion.names)}
+    out = []
+    for name, entries in (motion.fill_errors or {}).items():
+        for e in entries:
+            j = index.get(name)
+            if len(e) >= 6 and not e[5] and j is not None and missing[e[0]:e[0] + e[1], j].all():
+                out.append((j, int(e[0]), int(e[1]), -1.0 if e[2] is None else float(e[2]),
+                            -1.0 if e[3] is None else float(e[3])))
+    return sorted(out, key=lambda r: (r[1], r[0]))
+
+
+def _fill_params(motion: Motion, source: C3DSource, filled: np.ndarray,
+                 left: list[tuple] = ()) -> list[tuple]:
     """MOCAPFIX group parameters listing every run of filled samples per point: FILL_POINTS
     (label), FILL_FIRST / FILL_LAST (C3D frame numbers, first and last filled frame),
     FILL_CONFIDENCE (mean ``Motion.confidence`` over the run, 0–1), FILL_LONG (1 when the
     run spans more than LONG_FILL_S seconds: rebuilt from a model, not bridged), plus
-    FILL_COUNT and LONG_FILL_S. Fills listed by an earlier run are kept."""
+    FILL_ERROR / FILL_BOUND (the run's estimated RMS error and its calibrated 90 % bound,
+    mm, :mod:`mocapfix.solvers.fill_error`; -1: no estimate), plus FILL_COUNT and
+    LONG_FILL_S. Fills listed by an earlier run are kept. The gaps left as too uncertain
+    to fill (``left``, :func:`_left_runs`: residual -1 in the file) are listed as
+    LEFT_POINTS, LEFT_FIRST / LEFT_LAST, LEFT_ERROR / LEFT_BOUND (what their fill's error
+    was estimated to be) and LEFT_COUNT."""
     from mocapfix.gaps import runs
     from mocapfix.measure import LONG_FILL_S
+    from mocapfix.solvers.fill_error import run_error
 
     col, start, length = runs(filled)
     conf = motion.confidence if motion.confidence is not None else np.zeros(filled.shape)
@@ -968,7 +995,8 @@ def _fill_params(motion: Motion, source: C3DSource, filled: np.ndarray) -> list[
     for c, s, n in sorted(zip(col.tolist(), start.tolist(), length.tolist()), key=lambda r: (r[1], r[0])):
         mean = float(np.nanmean(conf[s:s + n, c])) if np.isfinite(conf[s:s + n, c]).any() else 0.0
         rows.append((source.names[c], float(first + s), float(first + s + n - 1), mean,
-                     int(n / motion.fps > LONG_FILL_S)))
+                     int(n / motion.fps > LONG_FILL_S),
+                     *(run_error(motion.fill_errors, motion.names[c], s, n) or (-1.0, -1.0))))
     f32 = lambda name, v: (name, 4, (len(v),), np.asarray(v, "<f4").tobytes(), "")  # noqa: E731
     params = _chunked("FILL_POINTS", [r[0] for r in rows],
                       lambda name, v: (name, -1, *string_value(v, "replace"), "label of each filled run"))
@@ -977,6 +1005,18 @@ def _fill_params(motion: Motion, source: C3DSource, filled: np.ndarray) -> list[
     params += _chunked("FILL_CONFIDENCE", [r[3] for r in rows], f32)
     params += _chunked("FILL_LONG", [r[4] for r in rows],
                        lambda name, v: (name, 1, (len(v),), np.asarray(v, "<i1").tobytes(), ""))
+    params += _chunked("FILL_ERROR", [r[5] for r in rows], f32)
+    params += _chunked("FILL_BOUND", [r[6] for r in rows], f32)
+    if left:
+        params += _chunked("LEFT_POINTS", [source.names[r[0]] for r in left],
+                           lambda name, v: (name, -1, *string_value(v, "replace"),
+                                            "label of each gap left as too uncertain to fill"))
+        params += _chunked("LEFT_FIRST", [float(first + r[1]) for r in left], f32)
+        params += _chunked("LEFT_LAST", [float(first + r[1] + r[2] - 1) for r in left], f32)
+        params += _chunked("LEFT_ERROR", [r[3] for r in left], f32)
+        params += _chunked("LEFT_BOUND", [r[4] for r in left], f32)
+        params += [("LEFT_COUNT", 4, (), struct.pack("<f", float(len(left))),
+                    "gaps left as too uncertain to fill")]
     params += [("FILL_COUNT", 4, (), struct.pack("<f", float(len(rows))), "filled runs listed"),
                ("LONG_FILL_S", 4, (), struct.pack("<f", LONG_FILL_S), "a fill longer than this (s) is long")]
     return params

@@ -479,26 +479,32 @@ def validated_member_fills(pos, observed, gaps, copies, external, *, local=LOCAL
     gaps' frames (the same marker and neighbours; a reference only fixes the frame's
     orientation; ``references``: those shapes by ``(marker, neighbours)``, used and
     extended; the refill rounds of :class:`mocapfix.cleaners.pma.PMA` pass the first
-    pass's, made from other training frames). Returns one ``(cand, fills,
-    errors)`` per gap, ``errors`` name → mean squared error over the copies."""
+    pass's, made from other training frames). Returns one ``(cand, fills, errors,
+    windows)`` per gap, ``errors`` name → mean squared error over the copies and
+    ``windows`` one ``(copy, u, v, cand, fills, errors)`` per window of the gap: the
+    members' fills of that window and their squared errors on it (so that a caller can
+    measure its own combination of the members on the windows)."""
     references = {} if references is None else references
     real = member_fills(pos, observed, gaps, external, local=local, neighbours=neighbours,
                         weight_scale=weight_scale, mu=mu, sd=sd, max_train=max_train,
                         references=references)
     errors = [{} for _ in gaps]
-    for cut, windows in copies:
+    windows_of = [[] for _ in gaps]
+    for c, (cut, windows) in enumerate(copies):
         synth = [(gaps[g][0], u, v) for g, u, v in windows]
         fills = member_fills(np.where(cut[..., None], pos, np.nan), cut, synth,
                              copy_external(cut) if copy_external else {}, local=local,
                              neighbours=neighbours, weight_scale=weight_scale, mu=mu, sd=sd,
                              max_train=max_train, references=references)
-        for (g, u, v), (_, f) in zip(windows, fills):
+        for (g, u, v), (cand, f) in zip(windows, fills):
             j = gaps[g][0]
-            for name, value in f.items():
-                errors[g].setdefault(name, []).append(
-                    float(np.mean(np.sum((value - pos[u:v, j]) ** 2, axis=1))))
-    return [(cand, f, {k: float(np.mean(v)) for k, v in err.items()})
-            for (cand, f), err in zip(real, errors)]
+            mine = {name: float(np.mean(np.sum((value - pos[u:v, j]) ** 2, axis=1)))
+                    for name, value in f.items()}
+            for name, value in mine.items():
+                errors[g].setdefault(name, []).append(value)
+            windows_of[g].append((c, u, v, cand, f, mine))
+    return [(cand, f, {k: float(np.mean(v)) for k, v in err.items()}, mine)
+            for (cand, f), err, mine in zip(real, errors, windows_of)]
 
 
 def candidates(observed, sd, j, s, e):
