@@ -25,7 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from mocapfix.cleaners.base import REJECTED_FILLS
-from mocapfix.solvers.fill_error import run_error
+from mocapfix.solvers.fill_error import FillIndex
 from mocapfix.gaps import runs, take_frames
 from mocapfix.metrics import bone_lengths, rms_acceleration
 from mocapfix.motion import Motion
@@ -281,11 +281,11 @@ def _rejected_fills(records, names) -> dict:
     return out
 
 
-def _fill_error(after: Motion, start: int, length: int, joint: int) -> dict:
+def _fill_error(index: FillIndex, name: str, start: int, length: int) -> dict:
     """The estimated error and 90 % bound (mm) of the fill of one gap (the pipeline's
-    ``Motion.fill_errors``, :func:`mocapfix.solvers.fill_error.run_error`); None for both
-    when part of it has no estimate."""
-    found = run_error(after.fill_errors, after.names[joint], start, length)
+    ``Motion.fill_errors``, :class:`mocapfix.solvers.fill_error.FillIndex`); None for
+    both when part of it has no estimate."""
+    found = index.error(name, start, length)
     if found is None:
         return {"error_mm": None, "bound_mm": None}
     return {"error_mm": finite(found[0], 3), "bound_mm": finite(found[1], 3)}
@@ -401,6 +401,7 @@ def measure_cleaning(result: CleanResult) -> dict:
     labels = [r.step for r in records]
     refused = _rejected_fills(records, before.names)
     left_uncertain = _left_uncertain(refused, miss_a)
+    fills = FillIndex(after.fill_errors)
     joints = []
     for j in np.flatnonzero(graded):
         sel = col == j
@@ -413,7 +414,7 @@ def measure_cleaning(result: CleanResult) -> dict:
                                     "seconds": finite(n / before.fps),
                                     "long": bool(n / before.fps > LONG_FILL_S),
                                     "confidence": _mean_confidence(after, s, n, j),
-                                    **_fill_error(after, s, n, j),
+                                    **_fill_error(fills, before.names[j], s, n),
                                     "filled_by": ", ".join(labels[k] for k in steps)})
             else:
                 left = {"start": int(s), "length": int(n),

@@ -175,12 +175,14 @@ class Pipeline:
         place) every gap left as too uncertain, by the step or here."""
         info = dict(info or {})
         limit_mm = self.max_fill_error.si * 1e3
-        listed = info.get(FILL_ERRORS) or {}
+        listed = {(name, int(e[0])): e for name, entries in (info.get(FILL_ERRORS) or {}).items()
+                  for e in entries}
         col, start, length = runs(before.missing & ~after.missing)
         drop = []
         for j, s, n in zip(col.tolist(), start.tolist(), length.tolist()):
-            entry = next((e for e in listed.get(after.names[j], ())
-                          if e[0] <= s and s + n <= e[0] + e[1]), None)
+            entry = listed.get((after.names[j], s))        # the run the step estimated
+            if entry is not None and s + n > entry[0] + entry[1]:
+                entry = None
             if entry is None or entry[3] > limit_mm:
                 drop.append((j, s, n, entry))
         if drop:
@@ -294,15 +296,16 @@ def written_fill_errors(motion: Motion, records) -> dict:
     missing = motion.missing
     index = {name: j for j, name in enumerate(motion.names)}
     out: dict = {}
-    for rec in records:
+    taken = np.zeros(missing.shape, bool)           # samples a later step's estimate holds
+    for rec in reversed(records):
         for name, entries in ((rec.info or {}).get(FILL_ERRORS) or {}).items():
             j = index.get(name)
-            if j is None:
-                continue
             for s, n, err, bound in (e[:4] for e in entries):
-                if not missing[int(s):int(s) + int(n), j].any():
-                    kept = [e for e in out.get(name, ()) if e[0] + e[1] <= s or s + n <= e[0]]
-                    out[name] = kept + [[int(s), int(n), err, bound, rec.step, 1]]
+                span = slice(int(s), int(s) + int(n))
+                if j is None or missing[span, j].any() or taken[span, j].any():
+                    continue
+                taken[span, j] = True
+                out.setdefault(name, []).append([int(s), int(n), err, bound, rec.step, 1])
     for rec in records:
         for name, entries in ((rec.info or {}).get(REJECTED_FILLS) or {}).items():
             j = index.get(name)

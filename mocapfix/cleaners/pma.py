@@ -15,6 +15,16 @@ theirs): ``exp(-spread / confidence_scale) · exp(-d / confidence_horizon) · m 
 the nearest observed sample of the marker, and ``m`` of the ``M`` configured members able
 to fill the gap (the local ones need the marker seen with its neighbours for a while).
 A marker rebuilt across long stretches, or from few members, gets a low confidence.
+
+Every fill also gets an estimated error and a calibrated 90 % bound
+(:mod:`mocapfix.solvers.fill_error`): the combined fill — the same weighted average, soft
+constraint and jump screen — is made on each of the gap's validation windows with the
+members weighted on the gap's other windows, and its error there measured; the short
+gaps' cubic Hermite curves are measured on windows of their own. Under the pipeline's
+``max_fill_error`` (:class:`mocapfix.cleaners.base.FillGate`) a gap whose bound exceeds
+it is left missing (``rejected_fills``, with its estimate and bound), a gap with no
+window is not fitted at all, and neither is refilled nor lent to the refill rounds;
+``pma`` (plausibility weights) validates its members only under the gate, to estimate.
 """
 from __future__ import annotations
 

@@ -542,8 +542,9 @@ class TSMC(Cleaner):
             # are independent: on the task's threads
             from mocapfix.threads import parallel_map
 
+            bridged = est if gate is not None else linear_bridge(np.where(omega, x, np.nan))
             (smoothed, _), (_, noise) = parallel_map(lambda args: _gcv_denoise(*args), [
-                (est, p), (linear_bridge(np.where(omega, x, np.nan)), p, omega)])
+                (est, p), (bridged, p, omega)])
             noisy = noise > self.length("noise_floor", motion) if mode == "auto" \
                 else np.ones(noise.shape, bool)
             est = np.where(noisy[None, :], smoothed, est)

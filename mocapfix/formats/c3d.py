@@ -986,17 +986,18 @@ def _fill_params(motion: Motion, source: C3DSource, filled: np.ndarray,
     was estimated to be) and LEFT_COUNT."""
     from mocapfix.gaps import runs
     from mocapfix.measure import LONG_FILL_S
-    from mocapfix.solvers.fill_error import run_error
+    from mocapfix.solvers.fill_error import FillIndex
 
     col, start, length = runs(filled)
     conf = motion.confidence if motion.confidence is not None else np.zeros(filled.shape)
     first = source.first_frame
     rows = _old_fills(source)
+    estimates = FillIndex(motion.fill_errors)
     for c, s, n in sorted(zip(col.tolist(), start.tolist(), length.tolist()), key=lambda r: (r[1], r[0])):
         mean = float(np.nanmean(conf[s:s + n, c])) if np.isfinite(conf[s:s + n, c]).any() else 0.0
         rows.append((source.names[c], float(first + s), float(first + s + n - 1), mean,
                      int(n / motion.fps > LONG_FILL_S),
-                     *(run_error(motion.fill_errors, motion.names[c], s, n) or (-1.0, -1.0))))
+                     *(estimates.error(motion.names[c], s, n) or (-1.0, -1.0))))
     f32 = lambda name, v: (name, 4, (len(v),), np.asarray(v, "<f4").tobytes(), "")  # noqa: E731
     params = _chunked("FILL_POINTS", [r[0] for r in rows],
                       lambda name, v: (name, -1, *string_value(v, "replace"), "label of each filled run"))

@@ -60,28 +60,39 @@ def validation_windows(observed: np.ndarray, gaps, copies: int, seed: int = 0):
     frames bounding the window were seen (windows of one marker in one copy do not
     overlap). Returns per copy ``(cut, windows)``: the observed mask with the copy's
     windows cut, and the windows as ``(gap index, start, stop)``. A gap whose marker has
-    no such stretch gets no window; copies stop when no gap gets one."""
+    no such stretch gets no window; copies stop when no gap gets one. The places a window
+    of one marker and length may start are found once and struck out as windows are cut
+    (thousands of spike holes cost one pass over their marker, not one each)."""
     T = observed.shape[0]
     rng = np.random.default_rng(seed)
+    seen_rows = np.ascontiguousarray(observed.T)
     out = []
     for _ in range(copies):
-        cut = observed.copy()
+        cut_rows = seen_rows.copy()
         synth = []
+        starts: dict = {}          # marker → length → where a window may start (1..T−n−1)
         for gi, (j, s, e) in enumerate(gaps):
             n = e - s
             if T - n - 1 < 1:
                 continue
-            c = np.concatenate([[0], np.cumsum(cut[:, j])])
-            u = np.arange(1, T - n)
-            good = u[(c[u + n + 1] - c[u - 1]) == n + 2]
+            mine = starts.setdefault(j, {})
+            if n not in mine:
+                c = np.concatenate([[0], np.cumsum(cut_rows[j])])
+                u = np.arange(1, T - n)
+                mine[n] = (c[u + n + 1] - c[u - 1]) == n + 2
+            good = np.flatnonzero(mine[n])
             if not len(good):
                 continue
-            u = int(rng.choice(good))
-            cut[u:u + n, j] = False
+            u = int(good[rng.integers(len(good))]) + 1     # the draw of rng.choice(good + 1)
+            cut_rows[j, u:u + n] = False
+            # a window starting at w covers frames w − 1 .. w + m: those that meet the cut
+            # frames u .. u + n − 1 can no longer start there
+            for m, ok in mine.items():
+                ok[max(u - m - 1, 0):max(u + n, 0)] = False
             synth.append((gi, u, u + n))
         if not synth:
             break
-        out.append((cut, synth))
+        out.append((np.ascontiguousarray(cut_rows.T), synth))
     return out
 
 
@@ -94,11 +105,11 @@ def estimates(window_errors: np.ndarray, floor: float = 0.0) -> np.ndarray:
     """Per gap the geometric mean of its windows' errors (G, C; NaN where a copy has no
     window for the gap; each floored at ``floor``); NaN for a gap with no window. The
     errors of one gap's windows spread log-normally (a window in an easy stretch of the
-    motion, one in a hard one: the two windows of a gap differ by more than 3× in one
-    gap in ten on the shared captures); their geometric mean is the median under that
+    motion, one in a hard one: the two windows of a gap differ by about 3× or more in one
+    gap in five on the shared captures); their geometric mean is the median under that
     model, where their RMS is pulled up by the worse window (with it, the bounds covered
     93.0 % of the fills of benchmarks/fill_calibration.py at a median bound 3.0× the true
-    error, against 91.2 % at 2.8×)."""
+    error, against 91.2 % at 2.8×: :func:`averaging_exponent`)."""
     e = np.asarray(window_errors, dtype=float).reshape(len(window_errors), -1)
     ok = np.isfinite(e)
     count = ok.sum(axis=1)
@@ -165,28 +176,38 @@ def averaging_exponent(windows: np.ndarray, copies: int) -> np.ndarray:
     score's log has spread σ √(1 + 1/(copies − 1)) and the real gap's error over its
     estimate σ √(1 + 1/windows) (the real gap is one more draw, its estimate an average
     of ``windows``): the quantile's log scales by their ratio. With two copies and two
-    windows, 0.87: measured over the nine captures of benchmarks/fill_calibration.py, the
-    unscaled quantile covered 95.7 % of the fills, the scaled 94.5 % (the fills are also
-    better than their windows' — median true error 0.71× the estimate — as the real gap's
-    members are weighted on two windows and refilled; not used, as it is not a property of
-    every filler)."""
+    windows, 0.87. Measured offline on the windows and fills of the nine captures of
+    benchmarks/fill_calibration.py (four seeds, both gap ranges, 1,234 fills): the
+    unscaled quantile covered 93.9 % of the fills at a median bound 3.3× their true
+    error, the scaled one 91.2 % at 2.8× (with the RMS instead of the geometric mean as
+    the estimate: 94.6 % at 3.6×, 93.0 % at 3.0×)."""
     k = max(copies - 1, 1)
     return np.sqrt((1.0 + 1.0 / np.maximum(windows, 1)) / (1.0 + 1.0 / k))
 
 
-def run_error(fill_errors: dict | None, name: str, start: int, length: int):
-    """``(error, bound)`` of the samples ``start .. start + length − 1`` of ``name`` from
-    the estimates of the fills there (``Motion.fill_errors``: ``{name: [[start, length,
-    error, bound, ...], ...]}``): the length-weighted RMS of their estimates and the
-    largest bound; None when part of the span has no estimate. Entries of gaps left
-    unfilled (a sixth element 0) are not fills."""
-    inside = [e for e in (fill_errors or {}).get(name, ())
-              if start <= e[0] and e[0] + e[1] <= start + length and (len(e) < 6 or e[5])]
-    n = sum(e[1] for e in inside)
-    if not inside or n < length:
-        return None
-    return (float(np.sqrt(sum(e[1] * e[2] ** 2 for e in inside) / n)),
-            float(max(e[3] for e in inside)))
+class FillIndex:
+    """``Motion.fill_errors`` (``{name: [[start, length, error, bound, ..., written],
+    ...]}``) indexed by start per name, for many :meth:`error` look-ups (a report asks
+    once per gap: thousands of spike holes)."""
+
+    def __init__(self, fill_errors: dict | None):
+        self._by_name = {}
+        for name, entries in (fill_errors or {}).items():
+            fills = sorted((e for e in entries if len(e) < 6 or e[5]), key=lambda e: e[0])
+            self._by_name[name] = (np.array([e[0] for e in fills], dtype=np.int64), fills)
+
+    def error(self, name: str, start: int, length: int):
+        """``(error, bound)`` of the samples ``start .. start + length − 1`` of ``name``:
+        the length-weighted RMS of the estimates of the fills there and the largest bound;
+        None when part of the span has no estimate (gaps left unfilled are no fills)."""
+        starts, fills = self._by_name.get(name, (np.zeros(0, np.int64), []))
+        lo, hi = np.searchsorted(starts, [start, start + length])
+        inside = [e for e in fills[lo:hi] if e[0] + e[1] <= start + length]
+        n = sum(e[1] for e in inside)
+        if not inside or n < length:
+            return None
+        return (float(np.sqrt(sum(e[1] * e[2] ** 2 for e in inside) / n)),
+                float(max(e[3] for e in inside)))
 
 
 #: why a fill has no estimate: no window of its length could be cut
@@ -206,13 +227,19 @@ def window_fill_errors(pos: np.ndarray, gaps, windows, fill_copy) -> np.ndarray:
     (:func:`validation_windows`): ``fill_copy(cut_positions, synth)`` fills one copy
     (positions with the copy's windows NaN; ``synth`` its windows as ``(j, start,
     stop)``) and returns the filled positions (T, J, 3); each window's error is measured
-    against ``pos``. NaN where a gap has no window in a copy."""
+    against ``pos`` (all windows of a copy at once). NaN where a gap has no window in a
+    copy."""
     err = np.full((len(gaps), max(len(windows), 1)), np.nan)
     for c, (cut, synth) in enumerate(windows):
         spans = [(gaps[g][0], u, v) for g, u, v in synth]
         filled = fill_copy(np.where(cut[..., None], pos, np.nan), spans)
-        for (g, _, _), (j, u, v) in zip(synth, spans):
-            err[g, c] = rms_error(filled[u:v, j], pos[u:v, j])
+        j, u, v = (np.array(x, dtype=np.intp) for x in zip(*spans))
+        n = v - u
+        rows = np.repeat(u - np.cumsum(n) + n, n) + np.arange(n.sum())
+        cols = np.repeat(j, n)
+        sq = np.sum((filled[rows, cols] - pos[rows, cols]) ** 2, axis=1)
+        starts = np.cumsum(n) - n
+        err[[g for g, _, _ in synth], c] = np.sqrt(np.add.reduceat(sq, starts) / n)
     return err
 
 
