@@ -10,7 +10,7 @@ from mocapfix.cleaners.base import FILL_ERRORS, REJECTED_FILLS, Cleaner, FillGat
 from mocapfix.gaps import gap_report, runs
 from mocapfix.motion import Motion
 from mocapfix.solvers import fill_error
-from mocapfix.solvers.segments import INTERPOLATORS, interpolate_gaps
+from mocapfix.solvers.segments import INTERPOLATORS, fillable, interpolate_gaps
 
 #: validation windows per filled gap (as ``fill_ensemble``'s ``validation_copies``)
 VALIDATION_COPIES = 2
@@ -59,7 +59,15 @@ class Fill(Cleaner):
             return interpolate_gaps(positions.reshape(T, -1), self["method"], max_gap,
                                     times)[0].reshape(positions.shape)
 
-        filled = interpolate(pos)
+        # the markers with a gap to fill: not one an earlier step left as too uncertain
+        # (a file whose only gaps are those is not interpolated at all)
+        work = fillable(motion.missing, max_gap)
+        if gate is not None and gate.leave is not None:
+            work &= ~gate.leave
+        cols = np.flatnonzero(work.any(axis=0))
+        filled = pos.copy()
+        if len(cols):
+            filled[:, cols] = interpolate(pos[:, cols])
         if gate is not None and gate.leave is not None:
             filled[gate.leave] = np.nan         # left as too uncertain by an earlier step
         trust = self._judge(motion, filled, gate, interpolate)

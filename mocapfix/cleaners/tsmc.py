@@ -559,9 +559,12 @@ class TSMC(Cleaner):
             out[~observed] = np.nan                 # the bridges are not fills
             written[:] = False
         out[~trusted & rows[None, :] & ~frame_ok[:, None]] = np.nan   # too few markers seen
-        outside = implausible_runs(out, written, pos[trusted])
-        jumped = segments.discontinuous_runs(out, written & ~outside,
-                                             segments.largest_steps(pos, trusted), self["max_step"])
+        outside = jumped = np.zeros(written.shape, bool)
+        if written.any():
+            outside = implausible_runs(out, written, pos[trusted])
+            jumped = segments.discontinuous_runs(out, written & ~outside,
+                                                 segments.largest_steps(pos, trusted),
+                                                 self["max_step"])
         rejected = outside | jumped
         out[rejected] = np.nan
         untrusted = observed & ~trusted
