@@ -23,7 +23,7 @@ the share of the gap samples and the RMS error of those fills.
 
     python benchmarks/fill_calibration.py [--seeds 5] [--max-frames 1200] [--only FILE ...]
 
-Run time: about 4 minutes with 5 seeds on the shared 2-core machine (one process).
+Run time: about 100 s with 5 seeds on the shared 2-core machine (one process).
 """
 from __future__ import annotations
 
