@@ -229,17 +229,21 @@ def _fmt_tick(v: float) -> str:
 
 
 def svg_trajectory(before: np.ndarray, after: np.ndarray, filled: np.ndarray,
-                   missing_before: np.ndarray, fps: float, title: str, unit_mm: float) -> str:
-    """Inline SVG: x, y, z over time before (grey) and after (colour), and the distance
-    between them (the change cleaning made, mm); missing spans shaded red, filled green.
-    Every panel has labelled axes with ticks (time in s, position in mm)."""
+                   missing_before: np.ndarray, fps: float, title: str, unit_mm: float,
+                   labels: tuple[str, ...] = ("x (mm)", "y (mm)", "z (mm)", "change (mm)"),
+                   start_s: float = 0.0) -> str:
+    """Inline SVG: three coordinates over time before (grey) and after (colour), and the
+    distance between them (the change cleaning made); missing spans shaded red, filled
+    green. Every panel has labelled axes with ticks (time in s from ``start_s``; ``labels``
+    name the three coordinates and the change, in mm unless they say otherwise: the values
+    are multiplied by ``unit_mm``)."""
     W, H, left, right, top_pad, bottom = 760, 150, 64, 12, 10, 26
     T = len(after)
     duration = (T - 1) / fps if fps and T > 1 else float(max(T - 1, 1))
     diff = np.linalg.norm(after - before, axis=1) * unit_mm
-    panels = [(f"{'xyz'[a]} (mm)", before[:, a] * unit_mm, after[:, a] * unit_mm, c)
+    panels = [(labels[a], before[:, a] * unit_mm, after[:, a] * unit_mm, c)
               for a, c in enumerate(("#c0392b", "#27ae60", "#2c6fbb"))]
-    panels.append(("change (mm)", None, diff, "#8e44ad"))
+    panels.append((labels[3], None, diff, "#8e44ad"))
     height = H * len(panels)
     parts = [f'<svg xmlns="http://www.w3.org/2000/svg" class="plot" width="{W}" height="{height}" '
              f'viewBox="0 0 {W} {height}" role="img"><title>{html.escape(title)}</title>']
@@ -275,8 +279,8 @@ def svg_trajectory(before: np.ndarray, after: np.ndarray, filled: np.ndarray,
             parts.append(f'<line x1="{x0 - 4}" y1="{y:.1f}" x2="{x0}" y2="{y:.1f}" stroke="#333"/>'
                          f'<text class="tick y" x="{x0 - 6}" y="{y + 4:.1f}" font-size="10" '
                          f'text-anchor="end">{_fmt_tick(v)}</text>')
-        for v in _ticks(0.0, duration, 6):
-            x = X(v * fps) if fps else X(v)
+        for v in _ticks(start_s, start_s + duration, 6):
+            x = X((v - start_s) * fps) if fps else X(v - start_s)
             parts.append(f'<line x1="{x:.1f}" y1="{yb0:.1f}" x2="{x:.1f}" y2="{yb0 + 4:.1f}" stroke="#333"/>'
                          f'<text class="tick x" x="{x:.1f}" y="{yb0 + 15:.1f}" font-size="10" '
                          f'text-anchor="middle">{_fmt_tick(v)}</text>')
