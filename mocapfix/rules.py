@@ -526,9 +526,10 @@ def parse_rules(data, source: str = "<rules>", stage: str = "input", _chain: tup
         if seen:
             raise ConfigError(f"{source}: 'extends' goes round in a circle: "
                               f"{' -> '.join((*chain[chain.index(seen[0]):], str(path)))}")
-        parent_rules = load_rules(path, stage, chain)
-        rules += parent_rules.rules
-        unlabelled = parent_rules.unlabelled if parent_rules.unlabelled != Unlabelled() else unlabelled
+        parent = load_rules(path, stage, chain)
+        rules += parent.rules
+        if parent.unlabelled != Unlabelled():       # a parent that set it; the last one wins
+            unlabelled = parent.unlabelled
     if "unlabelled" in data:
         unlabelled = Unlabelled.parse(data["unlabelled"], source, verb="judge")
     formats = _formats(data.get("formats"), source)

@@ -68,15 +68,6 @@ class Selection:
         return out
 
 
-def cleanable(motion: Motion, *selections: "Selection | None",
-              unlabelled: Unlabelled = DEFAULT_POLICY) -> np.ndarray:
-    """(J,) True for the points the pipeline may clean: markers (not model outputs, not
-    unlabelled trajectories unless ``unlabelled`` cleans them) that every given selection
-    keeps (:func:`not_cleaned` says why the others are left)."""
-    return np.array([why is None for why in not_cleaned(motion, *selections,
-                                                         unlabelled=unlabelled)], bool)
-
-
 #: the reason :func:`not_cleaned` gives for a point a selection leaves out
 EXCLUDED = "excluded by the config"
 

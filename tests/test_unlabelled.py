@@ -21,7 +21,7 @@ from mocapfix.errors import ConfigError
 from mocapfix.motion import Motion
 from mocapfix.pipeline import default_config_path, load_config, loads_config
 from mocapfix.report import build_report, to_html, to_markdown
-from mocapfix.rules import default_rules, loads_rules
+from mocapfix.rules import default_rules, load_rules, loads_rules
 from mocapfix.selection import not_cleaned, take
 from mocapfix.unlabelled import name_convention
 
@@ -262,10 +262,18 @@ def test_unlabelled_config_round_trips_and_bad_values_name_the_line():
             loads_config(text, "cfg")
 
 
-def test_rules_files_take_the_judge_knob():
+def test_rules_files_take_the_judge_knob(tmp_path):
     rules = loads_rules("version: 1\nunlabelled: {judge: true, min_seen: 1 %}\nrules: []\n")
     assert rules.unlabelled.clean and rules.unlabelled.min_seen == 0.01
     assert not default_rules().unlabelled.clean
+    parent = tmp_path / "judging.yaml"
+    parent.write_text("version: 1\nunlabelled: {judge: true}\nrules: []\n")
+    child = tmp_path / "child.yaml"
+    child.write_text(f"version: 1\nextends: [{parent}]\nrules: []\n")
+    assert load_rules(child).unlabelled.clean                     # inherited
+    child.write_text(f"version: 1\nextends: [{parent}]\nunlabelled: {{judge: false}}\n")
+    assert not load_rules(child).unlabelled.clean                 # the file's own wins
+    assert load_rules(parent).with_fail_on(["missing=20%"]).unlabelled.clean  # --fail-on keeps it
     with pytest.raises(ConfigError, match=r"rules: unlabelled \(line 3\): unknown key\(s\) 'clean'"):
         loads_rules("version: 1\nunlabelled:\n  clean: true\nrules: []\n", "rules")
 
