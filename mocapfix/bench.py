@@ -4,7 +4,9 @@ whole pipelines on them, and measure the error against the clean capture.
 How a run goes (one clean file, one protocol setting, one seed):
 
 1. ``truth`` = the file's positions as read (for ASF/AMC and BVH: the forward-kinematics
-   joint positions of the stored rotations).
+   joint positions of the stored rotations), less its unlabelled trajectories
+   (:mod:`mocapfix.unlabelled`: HDM05's ``*0``-``*2``; no pipeline cleans them by default,
+   a note names them).
 2. The truth is corrupted by :func:`mocapfix.corrupt.apply_protocol` (seed → the same
    corruption for every method: comparisons are paired).
 3. The corrupted positions are handed to every method in a Motion that is the file's
@@ -57,6 +59,7 @@ from mocapfix.errors import ConfigError, MocapfixError
 from mocapfix.executors import ExecutorSpec
 from mocapfix.motion import Motion
 from mocapfix.pipeline import Pipeline, load_config, parse_config
+from mocapfix.selection import without_unlabelled
 
 #: baseline pipelines, always benchmarked: name → config dict (``none`` runs nothing).
 BASELINES: dict[str, dict | None] = {
@@ -458,6 +461,12 @@ def run(files, protocol: str, methods: list[Method], seeds: int | list[int] = 3,
     for f in files:
         motion = f if isinstance(f, Motion) else formats.read(f, **(read_options or {}))
         label = str(f) if not isinstance(f, Motion) else (motion.path or "<motion>")
+        motion, dropped = without_unlabelled(motion)
+        if dropped:
+            result.notes.append(f"{label}: {len(dropped)} unlabelled trajectories left out of "
+                                f"the truth ({', '.join(dropped[:8])}"
+                                f"{', …' if len(dropped) > 8 else ''}): no pipeline cleans them "
+                                "by default")
         if np.isnan(motion.positions).all():
             raise MocapfixError(f"{label}: no sample present, nothing to benchmark")
         result.files.append(label)

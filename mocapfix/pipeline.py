@@ -13,6 +13,9 @@ Config shape (safe-loaded)::
         exclude: ["Probe*"]         # optional: markers this step leaves alone
     markers: ["*"]                   # optional: markers the whole pipeline cleans
     exclude: [RASI]                  # optional: markers the whole pipeline leaves alone
+    unlabelled:                      # optional: unlabelled trajectories (mocapfix.unlabelled)
+      clean: false                   # true: clean them as markers (default false)
+      min_seen: 10 %                 # seen on less of the take: unlabelled (0: off)
     report:                          # optional thresholds of the quality report
       warn_missing_after: 0.0        # keys: mocapfix.rules.REPORT_KEYS
       ...
@@ -36,14 +39,15 @@ from mocapfix.errors import ConfigError
 from mocapfix.formats import NAMES
 from mocapfix.gaps import take_frames
 from mocapfix.motion import Motion
-from mocapfix.selection import Selection, cleanable, keep_rig_joints, moved_channels, put, take
+from mocapfix.selection import Selection, keep_rig_joints, moved_channels, not_cleaned, put, take
 from mocapfix.solvers.rigid import norms
+from mocapfix.unlabelled import Unlabelled
 from mocapfix.yamlsafe import load_yaml as safe_load_yaml
 from mocapfix.yamlsafe import read_bounded
 
 CONFIG_VERSION = 1
 _STEP_KEYS = {"cleaner", "formats", "name", "markers", "exclude"}
-_TOP_KEYS = {"version", "pipeline", "report", "markers", "exclude"}
+_TOP_KEYS = {"version", "pipeline", "report", "markers", "exclude", "unlabelled"}
 
 
 class _LineLoader(yaml.SafeLoader):
@@ -91,12 +95,14 @@ class Pipeline:
     report: dict = field(default_factory=dict)
     source: str | None = None
     select: Selection | None = None
+    unlabelled: Unlabelled = field(default_factory=Unlabelled)
 
     def config(self) -> dict:
         """The effective config (every parameter, defaults included) as a plain dict."""
         out = {"version": CONFIG_VERSION, "pipeline": [s.config() for s in self.steps]}
         if self.select is not None:
             out.update(self.select.config())
+        out["unlabelled"] = self.unlabelled.config()
         if self.report:
             out["report"] = dict(self.report)
         return out
@@ -109,24 +115,36 @@ class Pipeline:
         return list(dict.fromkeys(path for step in self.steps if isinstance(step.cleaner, FittedCleaner)
                                   for path in step.cleaner.model_files()))
 
+    def not_cleaned(self, motion: Motion) -> list[str | None]:
+        """Per point, why the whole pipeline leaves it alone (None: cleaned): model outputs,
+        its ``markers:``/``exclude:``, unlabelled trajectories by its ``unlabelled:``
+        (:func:`mocapfix.selection.not_cleaned`)."""
+        return not_cleaned(motion, self.select, unlabelled=self.unlabelled)
+
     def run(self, motion: Motion) -> tuple[Motion, list["StepRecord"]]:
+        """Run the steps in turn. Which points the pipeline cleans is decided once, on the
+        motion as given: a step that flags samples of a marker does not make it a rarely
+        seen, unlabelled trajectory for the steps after it."""
         records = []
+        cleaned = np.array([why is None for why in self.not_cleaned(motion)], bool)
         for step in self.steps:
             if not step.applies(motion):
                 records.append(StepRecord.not_run(step, motion, "not for this format"))
                 continue
             started = time.perf_counter()
-            out, info = self._apply_step(step, motion)
+            out, info = self._apply_step(step, motion, cleaned)
             records.append(StepRecord.compare(step, motion, out, info, time.perf_counter() - started))
             motion = out
         return motion, records
 
-    def _apply_step(self, step: Step, motion: Motion) -> tuple[Motion, dict]:
-        """Run one step on the markers it may clean (see :mod:`mocapfix.selection`) over
-        the frames of the take (:func:`~mocapfix.gaps.take_frames`: an export's empty
-        first and last frames hold nothing to clean, fill or count); the other points and
-        frames come back unchanged."""
-        cols = cleanable(motion, self.select, step.select)
+    def _apply_step(self, step: Step, motion: Motion, cleaned: np.ndarray) -> tuple[Motion, dict]:
+        """Run one step on the markers it may clean (``cleaned`` (J,): those the pipeline
+        cleans, less those the step's own selection leaves out; see
+        :mod:`mocapfix.selection`) over the frames of the take
+        (:func:`~mocapfix.gaps.take_frames`: an export's empty first and last frames hold
+        nothing to clean, fill or count); the other points and frames come back
+        unchanged."""
+        cols = cleaned if step.select is None else cleaned & step.select.mask(motion.names)
         if not cols.any():
             return motion.copy(), {"skipped": "no marker selected"}
         span = take_frames(motion.missing, cols)
@@ -308,7 +326,8 @@ def parse_config(data, source: str = "<config>") -> Pipeline:
     from mocapfix.rules import validate_report_section
 
     report = validate_report_section(data.get("report"), source)
-    return Pipeline(steps, report, source, Selection.parse(data, source))
+    return Pipeline(steps, report, source, Selection.parse(data, source),
+                    Unlabelled.parse(data.get("unlabelled"), source))
 
 
 def _check_step_params(name: str, raw: dict, params: dict, where: str) -> None:

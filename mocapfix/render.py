@@ -20,6 +20,7 @@ from mocapfix.errors import name_the_file, one_line
 from mocapfix.gaps import runs
 from mocapfix.measure import LONG_FILL_S
 from mocapfix.rules import METRICS, STATUS_ORDER
+from mocapfix.unlabelled import is_unlabelled
 
 
 def to_json(report: dict) -> str:
@@ -98,11 +99,27 @@ def _gaps_left(report: dict, shown: int = 12) -> list[str]:
     return out
 
 
+def _unlabelled(report: dict, shown: int = 40) -> list[str]:
+    """Markdown section listing the unlabelled trajectories with the reason of each (none:
+    no section)."""
+    rows = [p for p in report.get("not_cleaned") or [] if is_unlabelled(p["why"])]
+    if not rows:
+        return []
+    out = ["", "## Unlabelled trajectories (not markers of the set: passed through unchanged, "
+           "not graded)", "", "| trajectory | why |", "|---|---|"]
+    out += [f"| {_cell(p['name'])} | {_cell(p['why'])} |" for p in rows[:shown]]
+    if len(rows) > shown:
+        out.append(f"| … (+{len(rows) - shown}; the JSON report lists all) | |")
+    return out
+
+
 def _not_cleaned(report: dict, shown: int = 12) -> list[str]:
-    """Markdown section naming the points left alone by design, grouped by reason."""
+    """Markdown section naming the other points left alone by design (model outputs,
+    points the config excludes), grouped by reason."""
     by_why: dict[str, list[str]] = {}
     for p in report.get("not_cleaned") or []:
-        by_why.setdefault(p["why"], []).append(p["name"])
+        if not is_unlabelled(p["why"]):
+            by_why.setdefault(p["why"], []).append(p["name"])
     if not by_why:
         return []
     rig = report.get("file", {}).get("format") in ("bvh", "asfamc")
@@ -159,7 +176,9 @@ def to_markdown(report: dict) -> str:
            f"long fills (> {LONG_FILL_S:g} s): {f.get('long_fills', 0)}",
            f"- joints OK / WARN / FAIL: {f['joints_by_status']['OK']} / "
            f"{f['joints_by_status']['WARN']} / {f['joints_by_status']['FAIL']}"
-           + (f" ({f['points_not_cleaned']} more points not cleaned: see below)"
+           + (f" ({f['points_not_cleaned']} more points not cleaned"
+              + (f", {f['points_unlabelled']} of them unlabelled trajectories"
+                 if f.get("points_unlabelled") else "") + ": see below)"
               if f.get("points_not_cleaned") else "")]
     if "writeback_residual_mm" in f:
         wb = f["writeback_residual_mm"]
@@ -194,6 +213,7 @@ def to_markdown(report: dict) -> str:
             f"| {_cell('; '.join(j['reasons'])) or '–'} |")
     out += _long_fills(report)
     out += _gaps_left(report)
+    out += _unlabelled(report)
     out += _not_cleaned(report)
     rules = report.get("rules") or []
     if rules:
@@ -398,6 +418,11 @@ def check_line(result: dict, verbose: bool = False) -> str:
     head = f"{status:<5} {path}"
     if verbose:
         lines = [head] + [f"      {f['level']}: {one_line(f['message'])}" for f in findings]
+        unlabelled = (result.get("file") or {}).get("unlabelled") or []
+        if unlabelled:
+            lines.append(f"      not judged: {len(unlabelled)} unlabelled trajectories ("
+                         + one_line(", ".join(u["name"] for u in unlabelled[:8]))
+                         + (", …" if len(unlabelled) > 8 else "") + ")")
         wc = result.get("would_clean")
         if wc and "error" not in wc:
             lines.append(f"      would clean: fill {wc['samples_filled']} samples, flag "
