@@ -88,9 +88,10 @@ def main():
 
             record("pma", build("pma").apply(corrupted)[0].positions)
             m = corrupted
+            cleaned = np.array([why is None for why in default.not_cleaned(m)], bool)
             for step in default.steps:
                 if step.applies(m):
-                    m = default._apply_step(step, m)[0]
+                    m = default._apply_step(step, m, cleaned)[0]
                     record(f"after {step.cleaner.name}", m.positions)
             record("default", m.positions)
             for key, params in MEMBERS.items():

@@ -4,7 +4,9 @@ whole pipelines on them, and measure the error against the clean capture.
 How a run goes (one clean file, one protocol setting, one seed):
 
 1. ``truth`` = the file's positions as read (for ASF/AMC and BVH: the forward-kinematics
-   joint positions of the stored rotations).
+   joint positions of the stored rotations), less its unlabelled trajectories
+   (:mod:`mocapfix.unlabelled`: HDM05's ``*0``-``*2``; no pipeline cleans them by default,
+   a note names them).
 2. The truth is corrupted by :func:`mocapfix.corrupt.apply_protocol` (seed → the same
    corruption for every method: comparisons are paired).
 3. The corrupted positions are handed to every method in a Motion that is the file's
@@ -51,12 +53,13 @@ from pathlib import Path
 
 import numpy as np
 
-from mocapfix import corrupt, metrics
+from mocapfix import bench_harm, corrupt, metrics
 from mocapfix.bench_tasks import method_in_worker, run_blocks
 from mocapfix.errors import ConfigError, MocapfixError
 from mocapfix.executors import ExecutorSpec
 from mocapfix.motion import Motion
 from mocapfix.pipeline import Pipeline, load_config, parse_config
+from mocapfix.selection import without_unlabelled
 
 #: baseline pipelines, always benchmarked: name → config dict (``none`` runs nothing).
 BASELINES: dict[str, dict | None] = {
@@ -103,6 +106,7 @@ METRICS: dict[str, list[tuple[str, str, int]]] = {
                   ("max_mm", "max mm", 1)],
     "rotations": [("pos_err_pct", "joint error % height", 3), ("pos_err_mm", "joint error mm", 2),
                   ("deg_err", "deg/channel", 3), ("writeback_mm", "write-back max mm", 2)],
+    "harm": bench_harm.METRICS,
 }
 _UNFILLED = ("unfilled_pct", "unfilled %", 1)
 
@@ -139,6 +143,11 @@ PROTOCOL_NOTES = {
                  "frames from 2 % of the frames; mixed. Scored on what `mocapfix clean` writes "
                  "(after write-back): joint error in % of skeleton height and mm, mean degrees "
                  "per rotation channel, write-back residual.",
+    "harm": "Nothing injected (mocapfix.bench_harm): each method on the file as read, scored by "
+            "what `mocapfix clean` would change — displacement of the samples seen (RMS, 99.9th "
+            "percentile, max, share moved > 5 mm), samples judged wrong, jitter out/in, samples "
+            "lost and samples written that were missing (by run length), and every change over "
+            "10 mm as a case with the take's evidence for it.",
 }
 
 
@@ -362,6 +371,8 @@ class BenchResult:
         return "\n".join(lines)
 
     def to_markdown(self, per_file: bool = False) -> str:
+        if self.protocol == "harm":           # per file always: a mean hides the damage
+            return bench_harm.to_markdown(self)
         key = METRICS[self.protocol][0][1]
         parts = [f"## `{self.protocol}`", "", PROTOCOL_NOTES[self.protocol], "",
                  f"Files: {', '.join(Path(f).name for f in self.files)}; seeds: "
@@ -445,12 +456,26 @@ def run(files, protocol: str, methods: list[Method], seeds: int | list[int] = 3,
     seed_list = list(range(seeds)) if isinstance(seeds, int) else list(seeds)
     if not seed_list:
         raise ConfigError("at least one seed is needed")
+    if protocol == "harm":
+        if len(seed_list) > 1:       # nothing random: every seed would be the same run
+            notes = [*(notes or []), "harm injects nothing: one run per file (seeds ignored)"]
+            seed_list = seed_list[:1]
+        oracles = [m.name for m in methods if m.kind == "oracle"]
+        if oracles:
+            raise ConfigError(f"{', '.join(oracles)}: an oracle-tuned method has no truth to "
+                              "tune on in the harm protocol")
     result = BenchResult(protocol, [], seed_list, settings, [m.describe() for m in methods],
                          list(notes or []))
     motions = []
     for f in files:
         motion = f if isinstance(f, Motion) else formats.read(f, **(read_options or {}))
         label = str(f) if not isinstance(f, Motion) else (motion.path or "<motion>")
+        motion, dropped = without_unlabelled(motion)
+        if dropped:
+            result.notes.append(f"{label}: {len(dropped)} unlabelled trajectories left out of "
+                                f"the truth ({', '.join(dropped[:8])}"
+                                f"{', …' if len(dropped) > 8 else ''}): no pipeline cleans them "
+                                "by default")
         if np.isnan(motion.positions).all():
             raise MocapfixError(f"{label}: no sample present, nothing to benchmark")
         result.files.append(label)

@@ -30,7 +30,8 @@ def _debug(ctx) -> bool:
 @click.command("bench")
 @click.argument("clean_files", nargs=-1, required=True, type=GivenPath(dir_okay=False))
 @click.option("--protocol", required=True,
-              type=click.Choice(["feng2015", "yang2019", "feng2014", "occlusion", "kinect", "rotations"]),
+              type=click.Choice(["feng2015", "yang2019", "feng2014", "occlusion", "kinect", "rotations",
+                                 "harm"]),
               help="Corruption protocol (see the README, 'Benchmarks').")
 @click.option("--methods", default=None,
               help="Comma-separated registered cleaners and/or baselines (none, "

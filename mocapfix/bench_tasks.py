@@ -24,7 +24,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from mocapfix import corrupt
+from mocapfix import bench_harm, corrupt
 from mocapfix.errors import MocapfixError
 
 
@@ -69,13 +69,18 @@ class BlockTask:
                 # its own copy: it keeps its last choice, and a Dask worker's threads
                 # may share this task object
                 method = copy.copy(method)
-            # rotations: the methods get the corrupted channels (bench_rotations)
-            inp = corrupted.copy() if protocol == "rotations" else cleaner_input(motion, corrupted)
+            # rotations: the methods get the corrupted channels (bench_rotations); harm:
+            # the file as read, whole (bench_harm)
+            inp = (corrupted.copy() if protocol in ("rotations", "harm")
+                   else cleaner_input(motion, corrupted))
             started, cpu_started = time.perf_counter(), time.process_time()
             try:
                 # only the oracle-tuned baselines (bench_oracle) see the truth
-                out, noop = (method.run(inp, truth=motion) if method.kind == "oracle"
-                             else method.run(inp))
+                if protocol == "harm":
+                    out, noop = bench_harm.clean(method, inp), None
+                else:
+                    out, noop = (method.run(inp, truth=motion) if method.kind == "oracle"
+                                 else method.run(inp))
             except Exception as exc:  # noqa: BLE001 — a failing method is a result
                 runs.append({**base, "method": method.name,
                              "seconds": time.perf_counter() - started,
@@ -84,14 +89,19 @@ class BlockTask:
                 continue
             seconds = time.perf_counter() - started
             cpu = time.process_time() - cpu_started
+            found = None
             if protocol == "rotations":
                 from mocapfix import bench_rotations
 
                 scores = bench_rotations.evaluate(motion, out)
+            elif protocol == "harm":
+                scores, found = bench_harm.evaluate(out)
             else:
                 scores = evaluate(protocol, motion, out.positions, mask)
             rec = {**base, "method": method.name, "seconds": seconds, "cpu_seconds": cpu,
                    "metrics": _finite(scores)}
+            if found is not None:
+                rec["cases"] = found
             if noop:
                 rec["skipped"] = noop
             if getattr(method, "last_choice", None):

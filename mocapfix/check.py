@@ -18,10 +18,11 @@ EXIT_PASS, EXIT_FAILED, EXIT_USAGE, EXIT_UNREADABLE = 0, 1, 2, 3
 
 def check_motion(motion, rules: RuleSet, pipeline=None) -> dict:
     """Measure and judge one motion; with ``pipeline``, also what cleaning would do (in
-    memory, nothing written)."""
+    memory, nothing written). Unlabelled trajectories are passed over as the rules'
+    ``unlabelled:`` says (by default: not judged, listed in ``file["unlabelled"]``)."""
     from mocapfix.measure import measure_input
 
-    measured = measure_input(motion)
+    measured = measure_input(motion, unlabelled=rules.unlabelled)
     verdict = rules.judge(measured)
     result = {"path": motion.path, "format": motion.format, "status": verdict.status,
               "findings": [f.as_dict() for f in verdict.findings],

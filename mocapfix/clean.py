@@ -16,7 +16,7 @@ from mocapfix.fileio import NAME_MAX, atomic_write_text
 from mocapfix.motion import Motion
 from mocapfix.pipeline import Pipeline
 from mocapfix.report import CleanResult, build_report, to_html, to_json, to_markdown
-from mocapfix.selection import not_cleaned, own_channels
+from mocapfix.selection import own_channels
 from mocapfix.writeback import write_back
 
 REPORT_KINDS = ("json", "md", "html")
@@ -30,7 +30,7 @@ def clean_motion(motion: Motion, pipeline: Pipeline) -> CleanResult:
     started = time.perf_counter()
     cleaned, records = pipeline.run(motion)
     residual = None
-    why = not_cleaned(motion, pipeline.select)
+    why = pipeline.not_cleaned(motion)
     if cleaned.rig is not None and cleaned.channels is not None:
         channels, positions, residual = write_back(cleaned)
         excluded = np.array([w is not None for w in why], bool)

@@ -364,6 +364,8 @@ PROTOCOLS: dict[str, dict[str, dict]] = {
     "occlusion": {s: {"scenario": s} for s in OCCLUSION_SCENARIOS},
     # Rotation channels of BVH/AMC (mocapfix.bench_rotations).
     "rotations": {s: {"setting": s} for s in ("clean", "jitter", "spikes", "mixed")},
+    # Nothing: the file as read (mocapfix.bench_harm scores what a method changes).
+    "harm": {"as-read": {}},
 }
 
 
@@ -377,6 +379,8 @@ def apply_protocol(motion: Motion, protocol: str, setting: str, seed: int = 0):
     if setting not in settings:
         raise ValueError(f"unknown {protocol} setting {setting!r} (known: {', '.join(settings)})")
     kw = settings[setting]
+    if protocol == "harm":
+        return motion.copy(), np.zeros(motion.positions.shape[:2], bool)
     if protocol == "occlusion":
         return occlusion(motion, kw["scenario"], seed)
     if protocol == "rotations":

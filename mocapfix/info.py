@@ -1,5 +1,6 @@
-"""What ``mocapfix info`` says about a file: shape, rate, units, markers, gaps, and per
-format what the file holds besides (C3D: analog channels, events, force plates; Kinect:
+"""What ``mocapfix info`` says about a file: shape, rate, units, markers, unlabelled
+trajectories (:mod:`mocapfix.unlabelled`: counted apart, not in the missing figures),
+gaps, and per format what the file holds besides (C3D: analog channels, events, force plates; Kinect:
 tracking state and time stamps). Gap figures come from :mod:`mocapfix.measure`, the same
 measurements ``check`` and the clean report use."""
 from __future__ import annotations
@@ -9,6 +10,7 @@ import numpy as np
 from mocapfix.errors import one_line
 from mocapfix.measure import measure_input
 from mocapfix.motion import Motion
+from mocapfix.unlabelled import UNLABELLED
 
 
 def _strings(source, key) -> list[str]:
@@ -62,7 +64,8 @@ def summarise(motion: Motion) -> dict:
         "fps": round(float(motion.fps), 6),
         "duration_s": round(float(motion.duration), 6),
         "joints": f["joints"],
-        "model_outputs": f.get("points_not_cleaned", 0),
+        "model_outputs": sum(kind != "marker" for kind in motion.kinds or ()),
+        "unlabelled": f.get("unlabelled", []),
         "names": list(motion.names),
         "units": motion.units,
         "skeleton": motion.skeleton is not None or motion.rig is not None,
@@ -111,6 +114,8 @@ def format_text(summary: dict, verbose: bool = False) -> str:
         f"  format      {s['format']}",
         f"  frames      {s['frames']} at {s['fps']:g} fps ({s['duration_s']:.2f} s)",
         f"  {'markers' if s['format'] == 'c3d' else 'joints':<11} {s['joints']}"
+        + (f" + {len(s['unlabelled'])} unlabelled trajector{'y' if len(s['unlabelled']) == 1 else 'ies'}"
+           if s.get("unlabelled") else "")
         + (f" + {s['model_outputs']} model outputs" if s.get("model_outputs") else "")
         + f"  (units {s['units']}; "
         f"skeleton {'yes' if s['skeleton'] else 'no'}; rotations {'yes' if s['rotations'] else 'no'})",
@@ -119,6 +124,10 @@ def format_text(summary: dict, verbose: bool = False) -> str:
         f"({s['interior_gaps']} interior), longest {s['longest_gap_frames']} frames"
         f" ({s['longest_gap_s'] or 0:.2f} s)" + _take(s),
     ]
+    if s.get("unlabelled"):
+        lines.append("  unlabelled  not cleaned or judged by default: " + _list(
+            [f"{u['name']} ({u['why'].removeprefix(UNLABELLED).strip(' ()')})"
+             for u in s["unlabelled"]], 6 if not verbose else limit))
     if s["never_observed"]:
         lines.append(f"  never seen  {_list(s['never_observed'], 8 if not verbose else limit)}")
     if s["empty_frames"]:

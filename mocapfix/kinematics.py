@@ -65,6 +65,26 @@ def euler_to_matrix(axes: str, angles: np.ndarray) -> np.ndarray:
     return out
 
 
+def descendants(parents: np.ndarray) -> list[np.ndarray]:
+    """Per joint of a hierarchy ordered parents first, the joints below it (sorted): those
+    whose positions its rotation moves."""
+    below: list[list[int]] = [[] for _ in parents]
+    for j in range(len(parents) - 1, -1, -1):     # children before their parents
+        p = parents[j]
+        if p >= 0:
+            below[p] += [j, *below[j]]
+    return [np.array(sorted(b), dtype=np.intp) for b in below]
+
+
+def moved_by_rotation(rig) -> list[np.ndarray]:
+    """Per joint of ``rig``, the joints its rotation moves: those below it and, where its
+    offset is in its own frame (an ASF bone, whose joint is the bone's end), itself."""
+    below = descendants(rig.parents)
+    own = np.asarray(rig.offset_in_own_frame, bool)
+    return [np.union1d(below[j], [j]).astype(np.intp) if own[j] else below[j]
+            for j in range(rig.n_joints)]
+
+
 def nearest_branch(angles: np.ndarray, reference: np.ndarray, degrees: bool = True) -> np.ndarray:
     """Shift each angle by whole turns to lie nearest ``reference`` (same shape), so that a
     re-decomposed rotation keeps the file's Euler branch and never jumps by 360°."""

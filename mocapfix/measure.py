@@ -29,7 +29,8 @@ from mocapfix.solvers.fill_error import FillIndex
 from mocapfix.gaps import runs, take_frames
 from mocapfix.metrics import bone_lengths, rms_acceleration
 from mocapfix.motion import Motion
-from mocapfix.selection import not_cleaned, take
+from mocapfix.selection import DEFAULT_POLICY, not_cleaned, take
+from mocapfix.unlabelled import Unlabelled, is_unlabelled
 
 #: an interval longer than this many times the median is a dropped-frame gap
 GAP_FACTOR = 1.5
@@ -169,12 +170,15 @@ def gap_runs(missing: np.ndarray):
     return count, longest, (col, start, length)
 
 
-def measure_input(motion: Motion, *, swaps: bool = True, outliers: bool = True) -> dict:
+def measure_input(motion: Motion, *, swaps: bool = True, outliers: bool = True,
+                  unlabelled: Unlabelled = DEFAULT_POLICY) -> dict:
     """Measurements of a capture as read: ``{"file": {...}, "joints": [{...}]}``. Model
-    outputs a C3D file lists (``Motion.kinds``) are measured but carry ``"skipped"`` (the
-    rules pass them over) and are left out of the file figures."""
+    outputs a C3D file lists (``Motion.kinds``) and unlabelled trajectories (by the policy
+    ``unlabelled``, a rules file's) are measured but carry ``"skipped"`` (the rules pass
+    them over) and are left out of the file figures; ``file["unlabelled"]`` lists the
+    latter with the reason."""
     T, J = motion.positions.shape[:2]
-    why = not_cleaned(motion)
+    why = not_cleaned(motion, unlabelled=unlabelled)
     marker = np.array([w is None for w in why], bool)
     fps = float(motion.fps) if motion.fps and np.isfinite(motion.fps) else float("nan")
     missing = motion.missing
@@ -237,6 +241,7 @@ def measure_input(motion: Motion, *, swaps: bool = True, outliers: bool = True) 
     }
     if not marker.all():
         file["points_not_cleaned"] = int((~marker).sum())
+    _list_unlabelled(file, motion.names, why)
     _mark_outside_take(file, span, T)
     if motion.confidence is not None and motion.confidence.size:
         conf = motion.confidence
@@ -351,6 +356,14 @@ def _empty_frames(missing: np.ndarray, observed: np.ndarray) -> list[list[int]]:
     return [[int(s), int(n)] for s, n in zip(start, length)]
 
 
+def _list_unlabelled(file: dict, names, why) -> None:
+    """``file["unlabelled"]``: the unlabelled trajectories, ``[{"name", "why"}]`` (nothing
+    when there are none)."""
+    found = [{"name": n, "why": w} for n, w in zip(names, why) if is_unlabelled(w)]
+    if found:
+        file["unlabelled"] = found
+
+
 def _mark_outside_take(file: dict, span: slice, T: int) -> None:
     """Record in the file figures which frames lie before and after the take ``span``
     (``frames_outside_take``: ``[start, length]``), with a note; nothing when none do."""
@@ -365,7 +378,8 @@ def _mark_outside_take(file: dict, span: slice, T: int) -> None:
 def measure_cleaning(result: CleanResult) -> dict:
     """Per-joint and per-file figures of a cleaned file (no status: see rules). Only the
     points the pipeline cleaned are measured and counted; the others (model outputs,
-    points the config excludes) are listed under ``not_cleaned`` with the reason."""
+    unlabelled trajectories, points the config excludes) are listed under ``not_cleaned``
+    with the reason (``file["points_unlabelled"]`` counts the unlabelled ones)."""
     before, after, records = result.original, result.cleaned, result.records
     T, J = before.positions.shape[:2]
     # without the pipeline's own selection (a result built by hand): the model outputs
@@ -498,6 +512,9 @@ def measure_cleaning(result: CleanResult) -> dict:
         file["points_not_cleaned"] = int((~graded).sum())
         out["not_cleaned"] = [{"name": before.names[j], "why": why[j]}
                               for j in np.flatnonzero(~graded)]
+        unlabelled = sum(is_unlabelled(w) for w in why)
+        if unlabelled:
+            file["points_unlabelled"] = unlabelled
     if len(bones):
         out["bones"] = [{"bone": f"{before.names[a]}-{before.names[b]}",
                          "variation_before": finite(vb), "variation_after": finite(va)}

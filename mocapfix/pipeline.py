@@ -15,6 +15,9 @@ Config shape (safe-loaded)::
     exclude: [RASI]                  # optional: markers the whole pipeline leaves alone
     max_fill_error: 20 mm            # optional: a fill is written only when its calibrated
                                      # 90 % error bound is at most this (null: every fill)
+    unlabelled:                      # optional: unlabelled trajectories (mocapfix.unlabelled)
+      clean: false                   # true: clean them as markers (default false)
+      min_seen: 10 %                 # seen on less of the take: unlabelled (0: off)
     report:                          # optional thresholds of the quality report
       warn_missing_after: 0.0        # keys: mocapfix.rules.REPORT_KEYS
       ...
@@ -52,15 +55,17 @@ from mocapfix.formats import NAMES
 from mocapfix.gaps import runs, take_frames
 from mocapfix.motion import Motion
 from mocapfix.quantity import Quantity, parse_quantity
+from mocapfix.selection import Selection, keep_rig_joints, moved_channels, not_cleaned, put, take
 from mocapfix.solvers.fill_error import uncertain_reason
-from mocapfix.selection import Selection, cleanable, keep_rig_joints, moved_channels, put, take
 from mocapfix.solvers.rigid import norms
+from mocapfix.unlabelled import Unlabelled
 from mocapfix.yamlsafe import load_yaml as safe_load_yaml
 from mocapfix.yamlsafe import read_bounded
 
 CONFIG_VERSION = 1
 _STEP_KEYS = {"cleaner", "formats", "name", "markers", "exclude"}
-_TOP_KEYS = {"version", "pipeline", "report", "markers", "exclude", "max_fill_error"}
+_TOP_KEYS = {"version", "pipeline", "report", "markers", "exclude", "unlabelled",
+             "max_fill_error"}
 #: the default of ``max_fill_error``: the size of the soft-tissue artefact of skin markers
 #: (10–20 mm; Leardini et al. 2005, Gait Posture 21:212), which inverse-kinematics solvers
 #: already absorb; a fill that may be further off than that is not written as data
@@ -128,6 +133,7 @@ class Pipeline:
     report: dict = field(default_factory=dict)
     source: str | None = None
     select: Selection | None = None
+    unlabelled: Unlabelled = field(default_factory=Unlabelled)
     #: the largest calibrated 90 % error bound of a fill written (None: every fill)
     max_fill_error: Quantity | None = field(
         default_factory=lambda: parse_max_fill_error(DEFAULT_MAX_FILL_ERROR, "max_fill_error"))
@@ -137,6 +143,7 @@ class Pipeline:
         out = {"version": CONFIG_VERSION, "pipeline": [s.config() for s in self.steps]}
         if self.select is not None:
             out.update(self.select.config())
+        out["unlabelled"] = self.unlabelled.config()
         out["max_fill_error"] = None if self.max_fill_error is None else str(self.max_fill_error)
         if self.report:
             out["report"] = dict(self.report)
@@ -150,8 +157,18 @@ class Pipeline:
         return list(dict.fromkeys(path for step in self.steps if isinstance(step.cleaner, FittedCleaner)
                                   for path in step.cleaner.model_files()))
 
+    def not_cleaned(self, motion: Motion) -> list[str | None]:
+        """Per point, why the whole pipeline leaves it alone (None: cleaned): model outputs,
+        its ``markers:``/``exclude:``, unlabelled trajectories by its ``unlabelled:``
+        (:func:`mocapfix.selection.not_cleaned`)."""
+        return not_cleaned(motion, self.select, unlabelled=self.unlabelled)
+
     def run(self, motion: Motion) -> tuple[Motion, list["StepRecord"]]:
+        """Run the steps in turn. Which points the pipeline cleans is decided once, on the
+        motion as given: a step that flags samples of a marker does not make it a rarely
+        seen, unlabelled trajectory for the steps after it."""
         records = []
+        cleaned = np.array([why is None for why in self.not_cleaned(motion)], bool)
         gated = self.max_fill_error is not None and motion.format in GATED_FORMATS
         # samples a step left as too uncertain to fill: no later step fills them
         settled = np.zeros(motion.positions.shape[:2], bool) if gated else None
@@ -160,7 +177,7 @@ class Pipeline:
                 records.append(StepRecord.not_run(step, motion, "not for this format"))
                 continue
             started = time.perf_counter()
-            out, info = self._apply_step(step, motion, settled)
+            out, info = self._apply_step(step, motion, cleaned, settled)
             if gated:
                 out, info = self._gate(step, motion, out, info, settled)
             records.append(StepRecord.compare(step, motion, out, info, time.perf_counter() - started))
@@ -206,14 +223,16 @@ class Pipeline:
                     settled[int(entry[0]):int(entry[0]) + int(entry[1]), index[name]] = True
         return after, info
 
-    def _apply_step(self, step: Step, motion: Motion,
+    def _apply_step(self, step: Step, motion: Motion, cleaned: np.ndarray,
                     settled: np.ndarray | None = None) -> tuple[Motion, dict]:
-        """Run one step on the markers it may clean (see :mod:`mocapfix.selection`) over
-        the frames of the take (:func:`~mocapfix.gaps.take_frames`: an export's empty
-        first and last frames hold nothing to clean, fill or count); the other points and
-        frames come back unchanged. ``settled``: the fill gate is on, and these samples
-        were left as too uncertain to fill (None: no gate)."""
-        cols = cleanable(motion, self.select, step.select)
+        """Run one step on the markers it may clean (``cleaned`` (J,): those the pipeline
+        cleans, less those the step's own selection leaves out; see
+        :mod:`mocapfix.selection`) over the frames of the take
+        (:func:`~mocapfix.gaps.take_frames`: an export's empty first and last frames hold
+        nothing to clean, fill or count); the other points and frames come back
+        unchanged. ``settled``: the fill gate is on, and these samples were left as too
+        uncertain to fill (None: no gate)."""
+        cols = cleaned if step.select is None else cleaned & step.select.mask(motion.names)
         if not cols.any():
             return motion.copy(), {"skipped": "no marker selected"}
         span = take_frames(motion.missing, cols)
@@ -442,6 +461,7 @@ def parse_config(data, source: str = "<config>") -> Pipeline:
         UNIT_WARNINGS.append(f"{where}: {raw} has no unit; read as '{raw} mm' — write the "
                              "unit to say so")
     return Pipeline(steps, report, source, Selection.parse(data, source),
+                    Unlabelled.parse(data.get("unlabelled"), source),
                     parse_max_fill_error(_strip_lines(raw), where))
 
 

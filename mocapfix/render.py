@@ -20,6 +20,7 @@ from mocapfix.errors import name_the_file, one_line
 from mocapfix.gaps import runs
 from mocapfix.measure import LONG_FILL_S
 from mocapfix.rules import METRICS, STATUS_ORDER
+from mocapfix.unlabelled import is_unlabelled
 
 
 def to_json(report: dict) -> str:
@@ -109,11 +110,27 @@ def _gaps_left(report: dict, shown: int = 12) -> list[str]:
     return out
 
 
+def _unlabelled(report: dict, shown: int = 40) -> list[str]:
+    """Markdown section listing the unlabelled trajectories with the reason of each (none:
+    no section)."""
+    rows = [p for p in report.get("not_cleaned") or [] if is_unlabelled(p["why"])]
+    if not rows:
+        return []
+    out = ["", "## Unlabelled trajectories (not markers of the set: passed through unchanged, "
+           "not graded)", "", "| trajectory | why |", "|---|---|"]
+    out += [f"| {_cell(p['name'])} | {_cell(p['why'])} |" for p in rows[:shown]]
+    if len(rows) > shown:
+        out.append(f"| … (+{len(rows) - shown}; the JSON report lists all) | |")
+    return out
+
+
 def _not_cleaned(report: dict, shown: int = 12) -> list[str]:
-    """Markdown section naming the points left alone by design, grouped by reason."""
+    """Markdown section naming the other points left alone by design (model outputs,
+    points the config excludes), grouped by reason."""
     by_why: dict[str, list[str]] = {}
     for p in report.get("not_cleaned") or []:
-        by_why.setdefault(p["why"], []).append(p["name"])
+        if not is_unlabelled(p["why"]):
+            by_why.setdefault(p["why"], []).append(p["name"])
     if not by_why:
         return []
     rig = report.get("file", {}).get("format") in ("bvh", "asfamc")
@@ -171,7 +188,9 @@ def to_markdown(report: dict) -> str:
            _fill_summary(f),
            f"- joints OK / WARN / FAIL: {f['joints_by_status']['OK']} / "
            f"{f['joints_by_status']['WARN']} / {f['joints_by_status']['FAIL']}"
-           + (f" ({f['points_not_cleaned']} more points not cleaned: see below)"
+           + (f" ({f['points_not_cleaned']} more points not cleaned"
+              + (f", {f['points_unlabelled']} of them unlabelled trajectories"
+                 if f.get("points_unlabelled") else "") + ": see below)"
               if f.get("points_not_cleaned") else "")]
     if "writeback_residual_mm" in f:
         wb = f["writeback_residual_mm"]
@@ -206,6 +225,7 @@ def to_markdown(report: dict) -> str:
             f"| {_cell('; '.join(j['reasons'])) or '–'} |")
     out += _long_fills(report)
     out += _gaps_left(report)
+    out += _unlabelled(report)
     out += _not_cleaned(report)
     rules = report.get("rules") or []
     if rules:
@@ -241,17 +261,21 @@ def _fmt_tick(v: float) -> str:
 
 
 def svg_trajectory(before: np.ndarray, after: np.ndarray, filled: np.ndarray,
-                   missing_before: np.ndarray, fps: float, title: str, unit_mm: float) -> str:
-    """Inline SVG: x, y, z over time before (grey) and after (colour), and the distance
-    between them (the change cleaning made, mm); missing spans shaded red, filled green.
-    Every panel has labelled axes with ticks (time in s, position in mm)."""
+                   missing_before: np.ndarray, fps: float, title: str, unit_mm: float,
+                   labels: tuple[str, ...] = ("x (mm)", "y (mm)", "z (mm)", "change (mm)"),
+                   start_s: float = 0.0) -> str:
+    """Inline SVG: three coordinates over time before (grey) and after (colour), and the
+    distance between them (the change cleaning made); missing spans shaded red, filled
+    green. Every panel has labelled axes with ticks (time in s from ``start_s``; ``labels``
+    name the three coordinates and the change, in mm unless they say otherwise: the values
+    are multiplied by ``unit_mm``)."""
     W, H, left, right, top_pad, bottom = 760, 150, 64, 12, 10, 26
     T = len(after)
     duration = (T - 1) / fps if fps and T > 1 else float(max(T - 1, 1))
     diff = np.linalg.norm(after - before, axis=1) * unit_mm
-    panels = [(f"{'xyz'[a]} (mm)", before[:, a] * unit_mm, after[:, a] * unit_mm, c)
+    panels = [(labels[a], before[:, a] * unit_mm, after[:, a] * unit_mm, c)
               for a, c in enumerate(("#c0392b", "#27ae60", "#2c6fbb"))]
-    panels.append(("change (mm)", None, diff, "#8e44ad"))
+    panels.append((labels[3], None, diff, "#8e44ad"))
     height = H * len(panels)
     parts = [f'<svg xmlns="http://www.w3.org/2000/svg" class="plot" width="{W}" height="{height}" '
              f'viewBox="0 0 {W} {height}" role="img"><title>{html.escape(title)}</title>']
@@ -287,8 +311,8 @@ def svg_trajectory(before: np.ndarray, after: np.ndarray, filled: np.ndarray,
             parts.append(f'<line x1="{x0 - 4}" y1="{y:.1f}" x2="{x0}" y2="{y:.1f}" stroke="#333"/>'
                          f'<text class="tick y" x="{x0 - 6}" y="{y + 4:.1f}" font-size="10" '
                          f'text-anchor="end">{_fmt_tick(v)}</text>')
-        for v in _ticks(0.0, duration, 6):
-            x = X(v * fps) if fps else X(v)
+        for v in _ticks(start_s, start_s + duration, 6):
+            x = X((v - start_s) * fps) if fps else X(v - start_s)
             parts.append(f'<line x1="{x:.1f}" y1="{yb0:.1f}" x2="{x:.1f}" y2="{yb0 + 4:.1f}" stroke="#333"/>'
                          f'<text class="tick x" x="{x:.1f}" y="{yb0 + 15:.1f}" font-size="10" '
                          f'text-anchor="middle">{_fmt_tick(v)}</text>')
@@ -406,6 +430,11 @@ def check_line(result: dict, verbose: bool = False) -> str:
     head = f"{status:<5} {path}"
     if verbose:
         lines = [head] + [f"      {f['level']}: {one_line(f['message'])}" for f in findings]
+        unlabelled = (result.get("file") or {}).get("unlabelled") or []
+        if unlabelled:
+            lines.append(f"      not judged: {len(unlabelled)} unlabelled trajectories ("
+                         + one_line(", ".join(u["name"] for u in unlabelled[:8]))
+                         + (", …" if len(unlabelled) > 8 else "") + ")")
         wc = result.get("would_clean")
         if wc and "error" not in wc:
             lines.append(f"      would clean: fill {wc['samples_filled']} samples, flag "

@@ -15,9 +15,11 @@ JSON schema ``mocapfix.report/1``::
 
 ``joints`` holds the points the pipeline cleaned, and only they are graded and counted in
 the file summary; points it left alone by design — C3D model outputs (angles, forces,
-moments, powers, ...) and markers the config's pipeline-wide ``exclude:`` leaves out —
-are listed under ``not_cleaned`` with the reason (``file.points_not_cleaned`` counts them;
-both absent when every point was cleaned).
+moments, powers, ...), unlabelled trajectories (``"unlabelled trajectory (Vicon *N
+name)"``, ``"unlabelled trajectory (seen on 21 of 700 frames of the take, ...)"``:
+:mod:`mocapfix.unlabelled`) and markers the config's pipeline-wide ``exclude:`` leaves
+out — are listed under ``not_cleaned`` with the reason (``file.points_not_cleaned``
+counts them, ``file.points_unlabelled`` the unlabelled ones; absent when there are none).
 
 A filled gap is ``long`` when it spans more than ``measure.LONG_FILL_S`` (0.5 s); its
 ``confidence`` is the mean per-sample fill confidence (``None`` when the filler gives
@@ -39,6 +41,7 @@ from mocapfix.measure import CleanResult, measure_cleaning
 from mocapfix.render import markdown_to_html, to_html, to_json, to_markdown
 from mocapfix.rules import DEFAULT_THRESHOLDS, STATUS_ORDER, report_rules, report_thresholds
 from mocapfix.selection import EXCLUDED
+from mocapfix.unlabelled import is_unlabelled
 
 SCHEMA = "mocapfix.report/1"
 
@@ -65,6 +68,10 @@ def build_report(result: CleanResult, thresholds: dict | None = None) -> dict:
         file["reasons"] = ["WARN: " + file["notes"][-1]]      # the line's -v says why
         if STATUS_ORDER[file["status"]] < STATUS_ORDER["WARN"]:
             file["status"] = "WARN"
+    elif not measured["joints"] and any(is_unlabelled(p["why"]) for p in measured.get("not_cleaned", [])):
+        file["notes"].append("every marker of this file is an unlabelled trajectory: nothing "
+                             "was cleaned or graded (a config's unlabelled: {clean: true} "
+                             "cleans them)")
     file["joints_by_status"] = {k: sum(j["status"] == k for j in measured["joints"])
                                 for k in STATUS_ORDER}
     report = {"schema": SCHEMA, "file": file, "steps": measured["steps"],

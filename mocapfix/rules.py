@@ -10,6 +10,9 @@ Rules file::
     extends: [kinect]          # optional: preset names or paths whose rules come first
     formats: [kinect]          # optional: default format filter of the rules below
     exclude: ["*Angles"]       # optional: default include/exclude of the rules below
+    unlabelled:                # optional: unlabelled trajectories (mocapfix.unlabelled)
+      judge: false             # true: judge them as markers (default: passed over)
+      min_seen: 10 %           # seen on less of the take: unlabelled (0: off)
     rules:
       - metric: missing        # what to judge (see METRICS / `mocapfix configs --rules`)
         scope: joint           # joint (each joint/marker) or file (aggregated); default joint
@@ -40,12 +43,13 @@ from pathlib import Path
 from mocapfix.errors import ConfigError
 from mocapfix.formats import NAMES
 from mocapfix.presets import resolve_preset
+from mocapfix.unlabelled import Unlabelled
 from mocapfix.yamlsafe import read_bounded
 
 STATUS_ORDER = {"OK": 0, "WARN": 1, "FAIL": 2}
 RULES_VERSION = 1
 _RULE_KEYS = {"metric", "scope", "warn", "fail", "formats", "include", "exclude", "name"}
-_TOP_KEYS = {"version", "extends", "formats", "include", "exclude", "rules"}
+_TOP_KEYS = {"version", "extends", "formats", "include", "exclude", "rules", "unlabelled"}
 RULES_DIR = Path(__file__).resolve().parent / "configs" / "rules"
 
 
@@ -374,8 +378,13 @@ def parse_rule(raw, where: str, stage: str | None = None, formats=None, include=
 
 @dataclass
 class RuleSet:
+    """Rules, and what ``check`` does with unlabelled trajectories (``unlabelled``: passed
+    over unless its ``judge`` is set; a file's own ``unlabelled:`` wins over those of the
+    files it extends)."""
+
     rules: list
     source: str = "<rules>"
+    unlabelled: Unlabelled = field(default_factory=Unlabelled)
 
     def __len__(self):
         return len(self.rules)
@@ -401,7 +410,7 @@ class RuleSet:
             else:
                 rules.append(parse_rule({"metric": key, "fail": _number(value)},
                                         f"--fail-on {item}", stage))
-        return RuleSet(rules, self.source)
+        return replace(self, rules=rules)
 
     def judge(self, measured: dict) -> Judgement:
         """Judge ``{"file": {...}, "joints": [...]}`` (either stage). Joints marked
@@ -506,6 +515,7 @@ def parse_rules(data, source: str = "<rules>", stage: str = "input", _chain: tup
     if isinstance(version, bool) or version != RULES_VERSION:    # (True == 1 in Python)
         raise ConfigError(f"{source}: unsupported rules version {version!r} (this mocapfix reads {RULES_VERSION})")
     rules: list[Rule] = []
+    unlabelled = Unlabelled()
     extends = data.get("extends") or []
     if isinstance(extends, str):
         extends = [extends]
@@ -521,7 +531,12 @@ def parse_rules(data, source: str = "<rules>", stage: str = "input", _chain: tup
         if seen:
             raise ConfigError(f"{source}: 'extends' goes round in a circle: "
                               f"{' -> '.join((*chain[chain.index(seen[0]):], str(path)))}")
-        rules += load_rules(path, stage, chain).rules
+        parent = load_rules(path, stage, chain)
+        rules += parent.rules
+        if parent.unlabelled != Unlabelled():       # a parent that set it; the last one wins
+            unlabelled = parent.unlabelled
+    if "unlabelled" in data:
+        unlabelled = Unlabelled.parse(data["unlabelled"], source, verb="judge")
     formats = _formats(data.get("formats"), source)
     include, exclude = _patterns(data, "include", source), _patterns(data, "exclude", source)
     items = data.get("rules") or []
@@ -529,7 +544,7 @@ def parse_rules(data, source: str = "<rules>", stage: str = "input", _chain: tup
         raise ConfigError(f"{source}{_key_line(data, 'rules')}: 'rules' must be a list")
     for n, raw in enumerate(items, start=1):
         rules.append(parse_rule(raw, f"{source}: rule {n}", stage, formats, include, exclude))
-    return RuleSet(rules, source)
+    return RuleSet(rules, source, unlabelled)
 
 
 def loads_rules(text: str, source: str = "<rules>", stage: str = "input") -> RuleSet:

@@ -1,8 +1,10 @@
 """Which markers a pipeline or one of its steps cleans: ``markers:`` and ``exclude:`` in a
 config (exact names or shell-style glob patterns, ``*``, ``?``, ``[abc]``, matched
-case-sensitively against the whole name, e.g. ``"Probe*"``, ``"*:C7"``), and the points a
+case-sensitively against the whole name, e.g. ``"Probe*"``, ``"*:C7"``), the points a
 file says are not markers (``Motion.kinds``: C3D model outputs such as POINT:ANGLES),
-which are never cleaned.
+which are never cleaned, and unlabelled trajectories (vendors' placeholder names, points
+seen on a small share of the take: :mod:`mocapfix.unlabelled`), which are not cleaned
+unless the config says so.
 
 Running a step on a selection hands the cleaner a Motion with only the selected columns
 and writes its result back into the full motion; the rest is returned bit-identical. On a
@@ -19,6 +21,10 @@ import numpy as np
 
 from mocapfix.errors import ConfigError
 from mocapfix.motion import Motion, Skeleton
+from mocapfix.unlabelled import Unlabelled, is_unlabelled
+
+#: the unlabelled-trajectory policy of a caller that names none: not cleaned, not judged
+DEFAULT_POLICY = Unlabelled()
 
 
 @dataclass(frozen=True)
@@ -62,25 +68,27 @@ class Selection:
         return out
 
 
-def cleanable(motion: Motion, *selections: "Selection | None") -> np.ndarray:
-    """(J,) True for the points the pipeline may clean: markers (not model outputs) that
-    every given selection keeps (:func:`not_cleaned` says why the others are left)."""
-    return np.array([why is None for why in not_cleaned(motion, *selections)], bool)
-
-
 #: the reason :func:`not_cleaned` gives for a point a selection leaves out
 EXCLUDED = "excluded by the config"
 
 
-def not_cleaned(motion: Motion, *selections: "Selection | None") -> list[str | None]:
+def not_cleaned(motion: Motion, *selections: "Selection | None",
+                unlabelled: Unlabelled = DEFAULT_POLICY) -> list[str | None]:
     """Per point, why the pipeline leaves it alone (None: it is cleaned): a model output
-    the file lists (``"model output (force)"``) or a point a given ``markers:``/``exclude:``
-    selection leaves out. The report grades only the points cleaned."""
+    the file lists (``"model output (force)"``), an unlabelled trajectory
+    (``"unlabelled trajectory (Vicon *N name)"``, see :mod:`mocapfix.unlabelled`; by the
+    policy ``unlabelled``) or a point a given ``markers:``/``exclude:`` selection leaves
+    out. The report grades only the points cleaned."""
     out: list[str | None] = [None] * motion.n_joints
     for sel in selections:
         if sel is not None:
             for j in np.flatnonzero(~sel.mask(motion.names)):
                 out[j] = EXCLUDED
+    markers = np.ones(motion.n_joints, bool)
+    if motion.kinds is not None:
+        markers = np.array([kind == "marker" for kind in motion.kinds], bool)
+    for j, why in enumerate(unlabelled.reasons(motion, markers)):
+        out[j] = why or out[j]
     if motion.kinds is not None:
         for j, kind in enumerate(motion.kinds):
             if kind != "marker":
@@ -160,6 +168,17 @@ def take(motion: Motion, cols: np.ndarray) -> Motion:
         confidence=None if motion.confidence is None else motion.confidence[:, idx].copy(),
         kinds=None if motion.kinds is None else [motion.kinds[i] for i in idx],
         skeleton=skeleton)
+
+
+def without_unlabelled(motion: Motion) -> tuple[Motion, list[str]]:
+    """``motion`` without the trajectories the default policy finds unlabelled, and their
+    names: the truth a benchmark measures methods against (no pipeline cleans them by
+    default, so an error there would measure the policy, not a method). ``motion`` itself
+    when it has none."""
+    drop = np.array([is_unlabelled(w) for w in not_cleaned(motion)], bool)
+    if not drop.any():
+        return motion, []
+    return take(motion, ~drop), [n for n, d in zip(motion.names, drop) if d]
 
 
 def put(motion: Motion, cols: np.ndarray, part: Motion) -> Motion:

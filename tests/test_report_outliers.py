@@ -69,16 +69,25 @@ def test_replaced_frames_map_to_samples_by_name_and_skip_what_cannot_be_placed()
 def test_a_bvh_joint_re_made_where_its_parent_was_is_moved_by_the_parent():
     """In BVH a joint's own rotation turns the joints below it, not itself: when a joint
     and its parent are both re-made at a frame, the parent is named as the cause of the
-    joint's move (bvh-python's test file: LeftFoot and LeftToeBase re-made at frames
-    62-65, LeftToeBase moved 34 mm at frame 64)."""
+    joint's move (bvh-python's test file with a 35° glitch put by hand on LeftFoot and
+    LeftToeBase at frames 40-41; the file as read has none the limb's path contradicts)."""
     from mocapfix.pipeline import load_config
     from mocapfix.presets import resolve_config
 
     m = formats.read(shared("bvh/bvhpython_test_freebvh.bvh"))
     pipe = load_config(resolve_config("default"))
-    report = build_report(clean_motion(m, pipe), pipe.report)
+    as_read = build_report(clean_motion(m, pipe), pipe.report)
+    step = next(s for s in as_read["steps"] if s["cleaner"] == "rotation_outliers")
+    assert not step["info"].get("replaced_frames")
+    ch = m.channels.copy()
+    for name in ("mixamorig:LeftFoot", "mixamorig:LeftToeBase"):
+        j = m.names.index(name)              # about X: the toe's end sits on its Z axis
+        ch[40:42, m.rig.rot_columns[j][m.rig.rot_axes[j].upper().index("X")]] += 35.0
+    report = build_report(clean_motion(m.replace(channels=ch, positions=m.rig.positions(ch)), pipe),
+                          pipe.report)
     replaced = next(s for s in report["steps"] if s["cleaner"] == "rotation_outliers")["info"]["replaced_frames"]
     toe = _joint(report, "mixamorig:LeftToeBase")
     frame = toe["correction_mm"]["frame"]
+    assert frame in (40, 41) and toe["correction_mm"]["max"] > 10
     assert frame in replaced["mixamorig:LeftToeBase"] and frame in replaced["mixamorig:LeftFoot"]
     assert toe["correction_mm"]["cause"] == "where mixamorig:LeftFoot was judged an outlier and rebuilt"

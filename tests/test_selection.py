@@ -150,10 +150,12 @@ def test_pipeline_exclude_takes_markers_out_of_the_grading():
     assert set(probes) <= failing
     _, excluded = _clean_report(path, "exclude: ['Probe*']\npipeline:\n"
                                 "  - {cleaner: fill, method: linear, max_gap: 0.5 s}\n")
-    assert [p["name"] for p in excluded["not_cleaned"]] == probes
-    assert {p["why"] for p in excluded["not_cleaned"]} == {"excluded by the config"}
-    assert not set(probes) & {j["name"] for j in excluded["joints"]}
-    assert excluded["file"]["joints"] == motion.n_joints - 6
+    why = {p["name"]: p["why"] for p in excluded["not_cleaned"]}
+    assert {n: why[n] for n in probes} == dict.fromkeys(probes, "excluded by the config")
+    # the file's other point left alone: Sternum, seen on 3 % of the take (tests/test_unlabelled.py)
+    assert set(why) - set(probes) == {"Sternum"}
+    assert not set(why) & {j["name"] for j in excluded["joints"]}
+    assert excluded["file"]["joints"] == motion.n_joints - 7
 
 
 def test_markdown_report_names_what_was_not_cleaned():

@@ -60,8 +60,11 @@ Written for mocapfix (issue 12); each stage cites the method it uses:
    penalty on the d-th derivative leaves accelerations alone for d = 3.
 5. **Outliers.** Samples whose residual exceeds ``max(outlier_k max(σ, σ_local),
    min_outlier)`` (σ_local: median residual over ±3 samples / 1.5382, Hampel's local
-   scale, so a stretch the smooth cannot follow is not called an outlier) get weight 0 and the joint is refitted (``passes`` rounds): tracked is trusted unless the
-   geometry says otherwise. Their fitted value replaces them. A sample more than 100 m
+   scale, so a stretch the smooth cannot follow is not called an outlier) and that the
+   joint's own path contradicts (:func:`mocapfix.solvers.glitches.contradicted_by_path`:
+   a spike thrown out and back, not a fast turn the smooth cuts) get weight 0 and the
+   joint is refitted (``passes`` rounds): tracked is trusted unless the geometry says
+   otherwise. Their fitted value replaces them. A sample more than 100 m
    from its joint's median position (a corrupt field) is taken out before step 1, as if
    missing, and reported as an outlier.
 6. **Untrusted samples from the parent** (``limb_frame``): missing and outlier samples
@@ -131,6 +134,7 @@ from mocapfix.errors import ConfigError
 from mocapfix.formats.kinect_layouts import normalise_name
 from mocapfix.motion import Motion
 from mocapfix.solvers import run_offsets, svshrink, whittaker
+from mocapfix.solvers.glitches import contradicted_by_path
 from mocapfix.solvers.bone_projection import (median_lengths, project_lengths, steady_pairs,
                                                two_bone_pairs)
 from mocapfix.solvers.localfit import moving_median
@@ -650,6 +654,8 @@ class KinectSkeleton(Cleaner):
             base = np.maximum(np.where(tracked, sigma, sigma_inf), local)
             limit = np.maximum(self["outlier_k"] * base, floor)
             new = observed & (res > limit) & ~flagged
+            # off the smooth is a suspicion; the joint's own path must contradict it
+            new &= contradicted_by_path(P, new | flagged)
             if not new.any():
                 break
             flagged |= new

@@ -90,7 +90,7 @@ import numpy as np
 from mocapfix.cleaners import register
 from mocapfix.cleaners.base import NOT_ESTIMATED, REJECTED_FILLS, Cleaner, FillGate, Param
 from mocapfix.motion import Motion, missing_samples
-from mocapfix.solvers import dct, segments
+from mocapfix.solvers import dct, glitches, segments
 from mocapfix.solvers.localfit import moving_median
 from mocapfix.solvers.lowrank import leave_block_out_residual, ppca_fit, svt
 from mocapfix.solvers.pca_gapfill import fill_gaps_pca
@@ -258,7 +258,10 @@ class Trust(Cleaner):
     """Trust-data detection (Feng 2014, Algorithm 1): robust GCV smoothing per channel,
     samples far from the smooth (or with low reader confidence) are untrusted and made
     missing (``untrusted: flag``), replaced by the smooth (``replace``, eq. 20) or only
-    counted (``keep``). See the module docstring."""
+    counted (``keep``). See the module docstring. A sample far from the smooth stays
+    trusted unless its marker's own path contradicts it
+    (:func:`mocapfix.solvers.glitches.contradicted_by_path`: a spike thrown out and back,
+    not a fast turn the smooth cuts); the count of those is ``kept_by_path``."""
 
     name = "trust"
     single_thread_blas = True
@@ -307,7 +310,11 @@ class Trust(Cleaner):
             pos, weights, self["threshold"], self.length("min_threshold", motion),
             self.length("max_threshold", motion), self["iterations"], _pad_frames(self, motion),
             welsch)
-        untrusted = observed & ~trusted
+        # far from the robust smooth is a suspicion; the marker's own path must contradict
+        # it (a spike thrown out and back, not a fast turn the smooth cuts)
+        far = observed & (weights > 0) & ~trusted
+        kept = far & ~glitches.contradicted_by_path(pos, far)
+        untrusted = observed & ~trusted & ~kept
         out = pos.copy()
         if self["untrusted"] == "flag":
             out[untrusted] = np.nan
@@ -319,6 +326,7 @@ class Trust(Cleaner):
             "untrusted": int(per.sum()),
             "untrusted_low_confidence": int((observed & ~confident).sum()),
             "untrusted_gross": int(gross.sum()),
+            "kept_by_path": int(kept.sum()),
             "untrusted_per_joint": {motion.names[j]: int(per[j]) for j in np.flatnonzero(per)},
             "threshold_mm": {"median": round(float(np.median(theta)) * mm, 3),
                              "max": round(float(np.max(theta)) * mm, 3)},

@@ -199,6 +199,127 @@ def recurring(X: np.ndarray, mask: np.ndarray, *, side: int = 4, ratio: float = 
     return out
 
 
+#: a repair is evidence-based when it leaves at most this share of the summed squared
+#: acceleration around it (:func:`limb_contradicts`)
+EVIDENCE_RATIO = 0.25
+#: frames on each side of a repaired run in which its acceleration is measured
+EVIDENCE_CONTEXT = 2
+
+
+def acceleration_share(before: np.ndarray, after: np.ndarray) -> float:
+    """The summed squared second difference (acceleration) of the positions ``after``
+    (W, D, 3) over that of ``before``: how much of a window's roughness a repair leaves
+    (NaN samples left out; inf when ``before`` has none to lose, or fewer than three
+    frames)."""
+    if len(before) < 3:
+        return np.inf
+    rough_before = np.nansum(np.diff(before, n=2, axis=0) ** 2)
+    rough_after = np.nansum(np.diff(after, n=2, axis=0) ** 2)
+    return float(rough_after / rough_before) if rough_before > 0 else np.inf
+
+
+def limb_contradicts(before: np.ndarray, after: np.ndarray, *, ratio: float = EVIDENCE_RATIO) -> bool:
+    """Whether a repair is evidence-based in world space: the positions of the points it
+    moves (the joints below a re-made joint, or a marker) over a window around it,
+    ``before`` and ``after`` (W, D, 3), and the repair leaves at most ``ratio`` of their
+    summed squared acceleration (:func:`acceleration_share`). A glitch throws the points
+    out and back (large accelerations that the repair removes); real fast motion moves
+    them along a smooth path, which a wrong repair breaks (the repair then adds
+    acceleration). Fewer than three frames: no evidence (False)."""
+    return acceleration_share(before, after) <= ratio
+
+
+def contradicted_by_path(P: np.ndarray, mask: np.ndarray, *, ratio: float = EVIDENCE_RATIO,
+                         context: int = EVIDENCE_CONTEXT) -> np.ndarray:
+    """``mask`` (T, J) of samples judged wrong on point paths ``P`` (T, J, 3), without the
+    runs the path itself does not contradict. Each run is repaired for the test by the
+    cubic through the point's two samples on each side of it (every run of ``mask``
+    bridged by straight lines first) and kept only when that repair leaves at most
+    ``ratio`` of the path's summed squared acceleration over the run and ``context``
+    frames on each side, the other runs there repaired alike (:func:`limb_contradicts`):
+    a spike thrown out and back goes, a fast turn of real motion — whose peak a curve
+    through its neighbours cuts — stays. A run at an end of the
+    point's samples is repaired by the straight line through the two samples beyond it;
+    with fewer there is no evidence and the run is dropped from the mask. Numpy only (the
+    default C3D chain loads no SciPy)."""
+    T, J = mask.shape
+    keep = np.asarray(mask, dtype=bool).copy()
+    if not keep.any():
+        return keep
+    P = np.asarray(P, dtype=np.float64)
+    X = np.where(np.repeat(keep, 3, axis=1), np.nan, P.reshape(T, 3 * J))
+    seen = ~np.isnan(X[:, 0::3])
+    repaired = linear_bridge(X).reshape(T, J, 3)
+    # each run is judged with the other runs near it repaired: a spike two frames away
+    # would otherwise stay in both paths and hide what this run's repair does
+    context_path = np.where(keep[..., None], repaired, P)
+    col, start, length = runs(keep)
+    for j, s, n in zip(col, start, length):
+        a, b = max(s - context, 0), min(s + n + context, T)
+        before = context_path[a:b, j].copy()
+        before[s - a:s - a + n] = P[s:s + n, j]
+        if seen[:s, j].any() and seen[s + n:, j].any():
+            run = _cubic_across(context_path[:, j], s, n)
+        else:
+            run = _extrapolated(X[:, 3 * j:3 * j + 3], s, n)
+        if run is None:
+            keep[s:s + n, j] = False
+            continue
+        after = before.copy()
+        after[s - a:s - a + n] = run
+        if not limb_contradicts(before[:, None], after[:, None], ratio=ratio):
+            keep[s:s + n, j] = False
+    return keep
+
+
+def _cubic_across(x: np.ndarray, start: int, length: int) -> np.ndarray:
+    """Samples ``start .. start + length`` of a (T, 3) path on the cubic through the two
+    samples on each side of them (the straight line between the nearest where those are
+    not all there): a fast curve at a low frame rate bends between its samples, which a
+    line would cut."""
+    idx = np.r_[start - 2, start - 1, start + length, start + length + 1]
+    if idx[0] >= 0 and idx[-1] < len(x) and not np.isnan(x[idx]).any():
+        return _cubic_weights(length, 2) @ x[idx]
+    gap = x.copy()
+    gap[start:start + length] = np.nan
+    return linear_bridge(gap)[start:start + length]
+
+
+def _extrapolated(x: np.ndarray, start: int, length: int) -> np.ndarray | None:
+    """Samples ``start .. start + length`` of a (T, 3) path on the straight line through
+    the two samples of ``x`` next to them (after them when there are two, else before);
+    None when neither side has two."""
+    seen = np.flatnonzero(~np.isnan(x).any(axis=1))
+    after = seen[seen >= start + length][:2]
+    before = seen[seen < start][-2:]
+    pair = after if len(after) == 2 else before if len(before) == 2 else None
+    if pair is None:
+        return None
+    t = np.arange(start, start + length)[:, None]
+    slope = (x[pair[1]] - x[pair[0]]) / (pair[1] - pair[0])
+    return x[pair[0]] + (t - pair[0]) * slope
+
+
+def overlapping_runs(found: list[tuple[int, int, int]], moves: list[set], context: int) -> list[list]:
+    """``found`` runs ``(point, start, length)`` in groups judged together: two runs
+    belong together when their frames, ``context`` frames wider, overlap and their points
+    move a point in common (``moves[point]``: the points a change at it moves; a rig
+    joint moves the joints below it). Runs are taken in time order, and a group no later
+    run can reach is closed, so the cost grows with the runs, not their square."""
+    done: list[list] = []
+    open_: list[tuple[int, list]] = []              # (last frame reached + context, group)
+    for run in sorted(found, key=lambda r: r[1]):
+        n, s, L = run
+        done += [g for end, g in open_ if end <= s - context]
+        open_ = [(end, g) for end, g in open_ if end > s - context]
+        hits = [k for k, (_, g) in enumerate(open_)
+                if any(t + M + context > s - context and moves[n] & moves[m] for m, t, M in g)]
+        merged = [run] + [r for k in hits for r in open_[k][1]]
+        end = max([s + L + context] + [open_[k][0] for k in hits])
+        open_ = [item for k, item in enumerate(open_) if k not in hits] + [(end, merged)]
+    return done + [g for _, g in open_]
+
+
 def steps(X: np.ndarray, noise, *, groups: np.ndarray | None = None,
           threshold: float = 6.0) -> np.ndarray:
     """(T − 1, G) mask of steps: a frame-to-frame change t → t + 1 of a group of columns

@@ -29,6 +29,7 @@ import numpy as np
 from numpy.lib.stride_tricks import as_strided
 
 from mocapfix.solvers.glitches import despike
+from mocapfix.solvers.noise import difference_noise
 from mocapfix.solvers.segments import linear_bridge
 
 
@@ -222,24 +223,10 @@ def robust_reconstruct(Y: np.ndarray, E: np.ndarray, m: int, *, lam: float = 0.1
 
 
 def channel_noise(X: np.ndarray, *, shape: np.ndarray | None = None) -> np.ndarray:
-    """σ̂ of white noise per channel of X (T, L), NaN-aware: the channel's median absolute
-    second difference / 0.6745 / √6 (a second difference of white noise has variance 6σ²);
-    0 for a channel without a second difference. ``shape`` (T, L): noise whose standard
-    deviation is σ · shape (e.g. quaternion components,
-    :func:`mocapfix.solvers.rotchannels.noise_shape`); each second difference is divided
-    by the shape at its centre, and samples where it is below 0.3 are left out. The
-    medians come from one sort of all channels (NaN sorts last), not a NaN-median per
-    channel."""
-    d2 = np.abs(X[2:] - 2 * X[1:-1] + X[:-2])
-    if shape is not None:
-        mid = np.asarray(shape, dtype=np.float64)[1:-1]
-        d2 = np.where(mid >= 0.3, d2 / np.maximum(mid, 1e-12), np.nan)
-    d2 = np.sort(d2, axis=0)
-    k = np.isfinite(d2).sum(axis=0)
-    cols = np.arange(d2.shape[1])
-    lo, hi = np.maximum(k - 1, 0) // 2, np.minimum(k // 2, max(len(d2) - 1, 0))
-    med = 0.5 * (d2[lo, cols] + d2[hi, cols]) if len(d2) else np.zeros(X.shape[1])
-    return np.where(k > 0, np.nan_to_num(med), 0.0) / 0.6745 / np.sqrt(6.0)
+    """σ̂ of white noise per channel of X (T, L) from its second differences (a second
+    difference of white noise has variance 6σ²): :func:`mocapfix.solvers.noise.difference_noise`
+    at order 2, ``shape`` as there."""
+    return difference_noise(X, 2, shape=shape)
 
 
 def noise_level(X: np.ndarray, *, shape: np.ndarray | None = None) -> float:
