@@ -40,31 +40,79 @@ from versus_peers import REPO, captures  # noqa: E402
 
 from mocapfix.corrupt import occlusion_gaps  # noqa: E402
 from mocapfix.pipeline import load_config  # noqa: E402
+from mocapfix.solvers import fill_error  # noqa: E402
 
 REGIMES = {"0.1–1.5 s": 1.5, "0.1–3 s": 3.0}
 
 
-def fill_outcomes(cleaned, truth, gaps) -> list[tuple[float, float, float, int]]:
-    """``(estimate, bound, true error, length)`` in mm of every fill ``cleaned`` carries an
-    estimate for (``Motion.fill_errors``) of samples missing in the input (``gaps``, the
-    occlusion mask; not the samples ``trust`` judged wrong in the capture itself, whose
-    truth is the glitch)."""
+def fill_outcomes(cleaned, truth, gaps) -> list[tuple[float, float, float, int, bool]]:
+    """``(estimate, bound, true error, length, extrapolated)`` (mm) of every fill
+    ``cleaned`` carries an estimate for (``Motion.fill_errors``) of samples missing in the
+    input (``gaps``, the occlusion mask; not the samples ``trust`` judged wrong in the
+    capture itself, whose truth is the glitch)."""
     mm = truth.metres_per_unit * 1e3
     out = []
     for name, entries in (cleaned.fill_errors or {}).items():
         j = cleaned.names.index(name)
-        for s, n, err, bound, _, written in entries:
+        for s, n, err, bound, _, written, far in entries:
             if not written or not gaps[s:s + n, j].all():
                 continue
             d = np.linalg.norm(cleaned.positions[s:s + n, j] - truth.positions[s:s + n, j], axis=1)
-            out.append((err, bound, float(np.sqrt(np.mean(d ** 2))) * mm, n))
+            out.append((err, bound, float(np.sqrt(np.mean(d ** 2))) * mm, n, far))
     return out
 
 
-def factors(records) -> list[float]:
-    """The bound factors the steps calibrated on the capture's own windows."""
-    return [f for r in records for f, whence in ((r.info or {}).get("fill_error_factors") or {}).values()
+def factors(records, extrapolated: bool = False) -> list[float]:
+    """The bound factors the steps calibrated on the capture's own windows (of the
+    extrapolated estimates, or of the others)."""
+    return [f for r in records
+            for what, (f, whence) in ((r.info or {}).get("fill_error_factors") or {}).items()
+            if whence == "this capture" and what.endswith(", extrapolated") == extrapolated]
+
+
+def slopes(records) -> list[float]:
+    """The growth exponents the steps fitted on the capture's own probes."""
+    return [p for r in records for p, whence in ((r.info or {}).get("fill_error_slopes") or {}).values()
             if whence == "this capture"]
+
+
+class Pooled:
+    """The scores and growth pairs every step calibrates on (gathered by wrapping the
+    kernels of :mod:`mocapfix.solvers.fill_error`), for the pooled priors."""
+
+    def __init__(self):
+        self.scores, self.extrapolation, self.rise, self.span = [], [], [], []
+        originals = {k: getattr(fill_error, k) for k in ("scores", "extrapolation_scores",
+                                                         "growth_exponent")}
+
+        def scores(*a, **k):
+            out = originals["scores"](*a, **k)
+            self.scores.append(out)
+            return out
+
+        def extrapolation_scores(*a, **k):
+            out = originals["extrapolation_scores"](*a, **k)
+            self.extrapolation.append(out)
+            return out
+
+        def growth_exponent(rise, span, *a, **k):
+            self.rise.append(np.asarray(rise, float))
+            self.span.append(np.asarray(span, float))
+            return originals["growth_exponent"](rise, span, *a, **k)
+
+        fill_error.scores = scores
+        fill_error.extrapolation_scores = extrapolation_scores
+        fill_error.growth_exponent = growth_exponent
+
+    def report(self) -> str:
+        quantile = lambda s: fill_error.conformal_factor(np.concatenate(s or [np.zeros(0)]),  # noqa: E731
+                                                         minimum=1, prior=np.nan)[0]
+        rise, span = np.concatenate(self.rise or [np.zeros(0)]), np.concatenate(self.span or [np.zeros(0)])
+        slope = float(np.sum(rise * span) / np.sum(span ** 2)) if len(span) else float("nan")
+        return (f"pooled 90 % conformal quantiles: windows {quantile(self.scores):.2f} "
+                f"({sum(map(len, self.scores))} scores), extrapolation "
+                f"{quantile(self.extrapolation):.2f} ({sum(map(len, self.extrapolation))} scores); "
+                f"pooled growth exponent {slope:.2f} ({len(span)} probed gaps)")
 
 
 def main():
@@ -72,7 +120,10 @@ def main():
     ap.add_argument("--seeds", type=int, default=5)
     ap.add_argument("--max-frames", type=int, default=1200)
     ap.add_argument("--only", nargs="*")
+    ap.add_argument("--priors", action="store_true", help="also print the pooled priors "
+                    "(score quantiles and growth exponent over every capture's calibration)")
     args = ap.parse_args()
+    pooled = Pooled() if args.priors else None
     gated = load_config(REPO / "configs" / "default.yaml")
     ungated = load_config(REPO / "configs" / "default.yaml")
     ungated.max_fill_error = None
@@ -80,32 +131,36 @@ def main():
     rows = []
     for name, label, clean in captures(args.max_frames, only=args.only):
         for regime, max_s in REGIMES.items():
-            every, written, facs = [], [], []
+            every, written, facs, far, grow = [], [], [], [], []
             left = samples = 0
             for seed in range(args.seeds):
                 corrupted, mask = occlusion_gaps(clean, np.random.default_rng(seed), max_s=max_s)
                 out, records = ungated.run(corrupted)
                 every += fill_outcomes(out, clean, mask)
                 facs += factors(records)
+                far += factors(records, extrapolated=True)
+                grow += slopes(records)
                 out, _ = gated.run(corrupted)
                 written += fill_outcomes(out, clean, mask)
                 left += int(out.missing[mask].sum())
                 samples += int(mask.sum())
-            rows.append((label, regime, every, written, facs, 100.0 * left / max(samples, 1),
-                         samples))
+            rows.append((label, regime, every, written, (facs, far, grow),
+                         100.0 * left / max(samples, 1), samples))
             print(f"{label} {regime}: {coverage(every)} all, {coverage(written)} written",
                   flush=True)
     print(f"\n### Fill error bounds — coverage of the 90 % bound ({args.seeds} seeds, "
           f"occlusion gaps, configs/default.yaml)\n")
     print("| capture | gaps | fills | covered | median estimate mm | median true mm | "
-          "bound factors | written (20 mm gate) | covered | samples left unfilled |")
-    print("|---|---|---:|---:|---:|---:|---|---:|---:|---:|")
-    for label, regime, every, written, facs, left, _ in rows:
-        est = np.median([e for e, *_ in every]) if every else float("nan")
-        true = np.median([t for _, _, t, _ in every]) if every else float("nan")
-        fr = f"{min(facs):.1f}–{max(facs):.1f}" if facs else "prior"
+          "bound factors | extrapolated fills | covered | factors | exponents | "
+          "written (20 mm gate) | covered | samples left unfilled |")
+    print("|---|---|---:|---:|---:|---:|---|---:|---:|---|---|---:|---:|---:|")
+    for label, regime, every, written, (facs, far, grow), left, _ in rows:
+        est = np.median([o[0] for o in every]) if every else float("nan")
+        true = np.median([o[2] for o in every]) if every else float("nan")
+        extra = [o for o in every if o[4]]
         print(f"| {label} | {regime} | {len(every)} | {coverage(every)} | {est:.2f} | "
-              f"{true:.2f} | {fr} | {len(written)} | {coverage(written)} | {left:.1f} % |")
+              f"{true:.2f} | {spread(facs)} | {len(extra)} | {coverage(extra)} | {spread(far)} | "
+              f"{spread(grow, 2)} | {len(written)} | {coverage(written)} | {left:.1f} % |")
     print(f"\n### What a threshold would write (every fill's bound, {args.seeds} seeds): share of "
           "the gap samples written / RMSE of the fills written, mm\n")
     print("| capture | gaps | " + " | ".join(f"≤ {t:g} mm" for t in THRESHOLDS) + " | every fill |")
@@ -115,8 +170,17 @@ def main():
         print(f"| {label} | {regime} | " + " | ".join(cells) + " |")
     allf = [f for r in rows for f in r[2]]
     allw = [f for r in rows for f in r[3]]
-    print(f"\nall captures: {coverage(allf)} of {len(allf)} fills covered; written "
-          f"{coverage(allw)} of {len(allw)}; {time.perf_counter() - started:.0f} s")
+    alle = [f for f in allf if f[4]]
+    print(f"\nall captures: {coverage(allf)} of {len(allf)} fills covered ({coverage(alle)} of "
+          f"the {len(alle)} extrapolated); written {coverage(allw)} of {len(allw)}; "
+          f"{time.perf_counter() - started:.0f} s")
+    if pooled:
+        print(pooled.report())
+
+
+def spread(values, digits: int = 1) -> str:
+    """``"lo–hi"`` of ``values``, "prior" when there are none."""
+    return f"{min(values):.{digits}f}–{max(values):.{digits}f}" if values else "prior"
 
 
 #: thresholds whose effect the second table shows
@@ -126,7 +190,7 @@ THRESHOLDS = (10.0, 20.0, 30.0, 50.0)
 def written_at(outcomes, threshold: float, samples: int) -> str:
     """The share of ``samples`` gap samples the fills with a bound ≤ ``threshold`` hold,
     and their RMS error (from the true errors), as ``"61 % / 3.2"``."""
-    kept = [(t, n) for _, b, t, n in outcomes if b <= threshold]
+    kept = [(t, n) for _, b, t, n, _ in outcomes if b <= threshold]
     n = sum(k for _, k in kept)
     if not n:
         return "0 % / –"
@@ -138,7 +202,7 @@ def coverage(outcomes) -> str:
     """The share of fills whose true error is at most their bound, as a percentage."""
     if not outcomes:
         return "–"
-    return f"{100.0 * np.mean([t <= b for _, b, t, _ in outcomes]):.1f} %"
+    return f"{100.0 * np.mean([t <= b for _, b, t, *_ in outcomes]):.1f} %"
 
 
 if __name__ == "__main__":

@@ -273,8 +273,9 @@ LONG_FILL_S = 0.5
 def _rejected_fills(records, names) -> dict:
     """Per point index, the fills steps made and did not write (their ``info``'s
     :data:`~mocapfix.cleaners.base.REJECTED_FILLS`): ``[(start, length, step, why, error_mm,
-    bound_mm, uncertain), ...]`` (``uncertain``: left as too uncertain to fill, with the
-    fill's estimate and bound, None where it had none)."""
+    bound_mm, uncertain, extrapolated), ...]`` (``uncertain``: left as too uncertain to
+    fill, with the fill's estimate and bound, None where it had none; ``extrapolated``:
+    that estimate came from windows shorter than the gap)."""
     index = {n: i for i, n in enumerate(names)}
     out: dict = {}
     for rec in records:
@@ -282,18 +283,21 @@ def _rejected_fills(records, names) -> dict:
             if name in index:
                 out.setdefault(index[name], []).extend(
                     (int(e[0]), int(e[1]), rec.step, str(e[2]),
-                     *(e[3:5] if len(e) >= 5 else (None, None)), len(e) >= 5) for e in entries)
+                     *(e[3:5] if len(e) >= 5 else (None, None)), len(e) >= 5,
+                     bool(len(e) > 5 and e[5])) for e in entries)
     return out
 
 
 def _fill_error(index: FillIndex, name: str, start: int, length: int) -> dict:
     """The estimated error and 90 % bound (mm) of the fill of one gap (the pipeline's
-    ``Motion.fill_errors``, :class:`mocapfix.solvers.fill_error.FillIndex`); None for
-    both when part of it has no estimate."""
+    ``Motion.fill_errors``, :class:`mocapfix.solvers.fill_error.FillIndex`), and whether
+    the estimate was extrapolated from windows shorter than the gap; None for the three
+    when part of it has no estimate."""
     found = index.error(name, start, length)
     if found is None:
-        return {"error_mm": None, "bound_mm": None}
-    return {"error_mm": finite(found[0], 3), "bound_mm": finite(found[1], 3)}
+        return {"error_mm": None, "bound_mm": None, "extrapolated": None}
+    return {"error_mm": finite(found[0], 3), "bound_mm": finite(found[1], 3),
+            "extrapolated": found[2]}
 
 
 def _left_uncertain(refused: dict, missing_after: np.ndarray) -> np.ndarray:
@@ -301,7 +305,7 @@ def _left_uncertain(refused: dict, missing_after: np.ndarray) -> np.ndarray:
     rejection with an estimate slot: :class:`mocapfix.cleaners.base.FillGate`)."""
     out = np.zeros(missing_after.shape, bool)
     for j, entries in refused.items():
-        for a, m, *_, uncertain in entries:
+        for a, m, *_, uncertain, _ in entries:
             if uncertain:
                 out[a:a + m, j] = True
     return out & missing_after
@@ -434,8 +438,9 @@ def measure_cleaning(result: CleanResult) -> dict:
                 left = {"start": int(s), "length": int(n),
                         "filled_frames": int((span_who >= 0).sum())}
                 refusals = [{"step": step, "why": reason,
-                             **({"error_mm": err, "bound_mm": bound} if err is not None else {})}
-                            for a, m, step, reason, err, bound, _ in refused.get(j, ())
+                             **({"error_mm": err, "bound_mm": bound, "extrapolated": far}
+                                if err is not None else {})}
+                            for a, m, step, reason, err, bound, _, far in refused.get(j, ())
                             if a < s + n and s < a + m]
                 if refusals:
                     left["rejected_by"] = refusals
@@ -497,6 +502,8 @@ def measure_cleaning(result: CleanResult) -> dict:
                                   if j["fill_bound_mm"] is not None), default=None),
         "fills_without_estimate": int(sum(g["bound_mm"] is None for j in joints
                                           for g in j["gaps"]["filled"])),
+        "fills_extrapolated": int(sum(bool(g["extrapolated"]) for j in joints
+                                      for g in j["gaps"]["filled"])),
         "samples_left_uncertain": int(left_uncertain[:, graded].sum()),
         "seconds": finite(result.seconds),
         "notes": list(before.notes) + [n for n in after.notes if n not in before.notes],

@@ -83,9 +83,10 @@ class Motion:
     notes: list[str] = field(default_factory=list)
     kinds: list[str] | None = None
     #: the error estimates of the fills a pipeline wrote, and of the gaps it left as too
-    #: uncertain to fill, ``{name: [[start, length, error_mm, bound_mm, step, written],
-    #: ...]}`` (set by :meth:`mocapfix.pipeline.Pipeline.run`; error and bound None where
-    #: a left gap had no estimate; the report and the C3D writer list them)
+    #: uncertain to fill, ``{name: [[start, length, error_mm, bound_mm, step, written,
+    #: extrapolated], ...]}`` (set by :meth:`mocapfix.pipeline.Pipeline.run`; error and
+    #: bound None where a left gap had no estimate; ``extrapolated``: the estimate came
+    #: from windows shorter than the gap; the report and the C3D writer list them)
     fill_errors: dict | None = None
 
     def __post_init__(self):

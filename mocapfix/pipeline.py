@@ -306,12 +306,13 @@ def _shift_frames(info: dict, offset: int) -> dict:
 
 
 def written_fill_errors(motion: Motion, records) -> dict:
-    """``{name: [[start, length, error_mm, bound_mm, step, written], ...]}``: the
-    estimates the steps gave (:data:`FILL_ERRORS`) of the fills ``motion`` (the
+    """``{name: [[start, length, error_mm, bound_mm, step, written, extrapolated], ...]}``:
+    the estimates the steps gave (:data:`FILL_ERRORS`) of the fills ``motion`` (the
     pipeline's output) holds, the last step's where two estimated the same samples
     (``written`` 1), and the gaps left as too uncertain to fill that are still missing,
     with their estimate and bound when they had one (``written`` 0; from the steps'
-    :data:`REJECTED_FILLS`)."""
+    :data:`REJECTED_FILLS`); ``extrapolated``: the estimate was extrapolated from windows
+    shorter than the gap (:func:`mocapfix.solvers.fill_error.extrapolated_bounds`)."""
     missing = motion.missing
     index = {name: j for j, name in enumerate(motion.names)}
     out: dict = {}
@@ -319,18 +320,20 @@ def written_fill_errors(motion: Motion, records) -> dict:
     for rec in reversed(records):
         for name, entries in ((rec.info or {}).get(FILL_ERRORS) or {}).items():
             j = index.get(name)
-            for s, n, err, bound in (e[:4] for e in entries):
+            for s, n, err, bound, *far in entries:
                 span = slice(int(s), int(s) + int(n))
                 if j is None or missing[span, j].any() or taken[span, j].any():
                     continue
                 taken[span, j] = True
-                out.setdefault(name, []).append([int(s), int(n), err, bound, rec.step, 1])
+                out.setdefault(name, []).append([int(s), int(n), err, bound, rec.step, 1,
+                                                 bool(far and far[0])])
     for rec in records:
         for name, entries in ((rec.info or {}).get(REJECTED_FILLS) or {}).items():
             j = index.get(name)
             for e in entries:
                 if j is not None and len(e) >= 5 and missing[int(e[0]):int(e[0]) + int(e[1]), j].all():
-                    out.setdefault(name, []).append([int(e[0]), int(e[1]), e[3], e[4], rec.step, 0])
+                    out.setdefault(name, []).append([int(e[0]), int(e[1]), e[3], e[4], rec.step, 0,
+                                                     bool(len(e) > 5 and e[5])])
     return out
 
 

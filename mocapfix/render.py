@@ -72,7 +72,8 @@ def _long_fills(report: dict) -> list[str]:
         conf = "–" if g.get("confidence") is None else f"{g['confidence']:.2f}"
         out.append(f"| {_cell(name)} | {g['start']}–{g['start'] + g['length'] - 1} "
                    f"| {g['seconds']:.2f} | {conf} | {_num(g.get('error_mm'))} "
-                   f"| {_num(g.get('bound_mm'))} | {g['filled_by']} |")
+                   f"| {_num(g.get('bound_mm'))}{' (extrapolated)' if g.get('extrapolated') else ''} "
+                   f"| {g['filled_by']} |")
     return out
 
 

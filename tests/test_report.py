@@ -43,6 +43,7 @@ def test_report_names_the_filler_and_counts():
     # apart), the bound of its order, below the default gate (20 mm), so it is written
     assert len(filled) == 1 and filled[0].pop("error_mm") <= 0.5
     assert 0.0 < filled[0].pop("bound_mm") < 20.0
+    assert filled[0].pop("extrapolated") is False      # windows of its own length were cut
     assert filled == [{"start": 50, "length": 10, "seconds": 0.1, "long": False,
                        "confidence": None, "filled_by": "step 1 (fill)"}]
     assert report["file"]["long_fills"] == 0

@@ -32,12 +32,14 @@ _PHYSICAL = {"length", "time", "frequency"}
 REPLACED_FRAMES = "replaced_frames"
 #: the info key of the fills a step made and did not write, with why:
 #: ``{name: [[start, length, why], ...]}`` (the report says why such a gap is left); a
-#: gap left because its fill could not be trusted (:class:`FillGate`) has five entries,
-#: ``[start, length, why, error_mm, bound_mm]`` (None when there is no estimate), and no
-#: later step fills it
+#: gap left because its fill could not be trusted (:class:`FillGate`) has five or six
+#: entries, ``[start, length, why, error_mm, bound_mm, extrapolated]`` (None when there is
+#: no estimate; ``extrapolated``: see :data:`FILL_ERRORS`), and no later step fills it
 REJECTED_FILLS = "rejected_fills"
 #: the info key of the error estimates of a step's fills (:mod:`mocapfix.solvers.fill_error`):
-#: ``{name: [[start, length, error_mm, bound_mm], ...]}``, one entry per filled run
+#: ``{name: [[start, length, error_mm, bound_mm, extrapolated], ...]}``, one entry per
+#: filled run (``extrapolated``, optional: the estimate came from windows shorter than the
+#: gap, :func:`mocapfix.solvers.fill_error.extrapolated_bounds`)
 FILL_ERRORS = "fill_errors"
 
 #: what a step that cannot estimate its fills' error says when it fills nothing under the

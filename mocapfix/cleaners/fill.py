@@ -73,7 +73,8 @@ class Fill(Cleaner):
         trust = self._judge(motion, filled, gate, interpolate)
         out = motion.replace(positions=filled)
         info = gap_report(motion.missing, out.missing, motion.fps)
-        info.update({FILL_ERRORS: trust.written, "fill_error_factors": trust.factors})
+        info.update({FILL_ERRORS: trust.written, "fill_error_factors": trust.factors,
+                     "fill_error_slopes": trust.slopes})
         if trust.rejected:
             info[REJECTED_FILLS] = trust.rejected
         return out, info
@@ -94,9 +95,9 @@ class Fill(Cleaner):
         index = np.full(pos.shape[1], -1)
         index[cols] = np.arange(len(cols))
         local = [(int(index[g[0]]), g[1], g[2]) for g in gaps]
-        windows = fill_error.validation_windows(observed[:, cols], local, VALIDATION_COPIES)
-        trust.estimate(gaps, fill_error.window_fill_errors(
-            pos[:, cols], local, windows, lambda cut, spans: interpolate(cut)),
+        plan = fill_error.window_plan(observed[:, cols], local, VALIDATION_COPIES)
+        trust.estimate(gaps, plan, fill_error.window_fill_errors(
+            pos[:, cols], local, plan.windows, lambda cut, spans: interpolate(cut)),
             "interpolation")
         for g in gaps:
             if not trust.allows(g):

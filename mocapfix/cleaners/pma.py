@@ -165,7 +165,7 @@ class PMA(Cleaner):
             # makes them, the refill rounds reuse them (a reference only fixes a frame's
             # orientation)
             references: dict = {}
-            members, validated, windows = self._validated_fills(
+            members, validated, windows, plan = self._validated_fills(
                 work, observed, gaps, external, local, mu, sd, references=references,
                 skip_unsupported=not external, skip_unvalidated=gate is not None,
                 with_windows=True)
@@ -180,8 +180,9 @@ class PMA(Cleaner):
         combined = [self._combine(pos, gap, cand, fills, verr, mu, sd, floor, box, top)
                     for gap, (cand, fills), verr in zip(gaps, members, validated)]
         if validate:
-            cross, fitted = self._window_errors(pos, gaps, windows, mu, sd, floor, box, top)
-            trust.estimate(gaps, cross, "the members", fitted=fitted)
+            cross, fitted = self._window_errors(pos, gaps, windows, len(plan.windows), mu, sd,
+                                                floor, box, top)
+            trust.estimate(gaps, plan, cross, "the members", fitted=fitted)
         if self["refill"] > 0 and self["weights"] != "plausibility":
             combined = self._refill(work, observed, gaps, local, mu, sd, floor, box,
                                     members, validated, combined, info, references, top,
@@ -191,11 +192,15 @@ class PMA(Cleaner):
         for (j, s, e), result, (cand, _), tested in zip(gaps, combined, members, windows):
             n = e - s
             if result is None:
-                if not len(cand):
+                # under the gate a gap with no window was not fitted (no members, no
+                # candidates listed): it is left as too uncertain, unless no other marker
+                # is seen through it either
+                if gate is not None and not tested and (
+                        len(cand) or len(pma.candidates(observed, sd, j, s, e))):
+                    trust.refuse((j, s, e))
+                elif not len(cand):
                     info[REJECTED_FILLS].setdefault(motion.names[j], []).append(
                         [int(s), int(n), "no other marker is seen through it"])
-                elif gate is not None and not tested:
-                    trust.refuse((j, s, e))
                 continue
             avg, spread, names, w = result
             if avg is None:
@@ -222,12 +227,13 @@ class PMA(Cleaner):
         if info["gaps_filled"]:
             averaged = max(sum(weight_sum.values()), 1e-12)     # one unit per averaged gap
             info["weights_mean"] = {k: round(v / averaged, 3) for k, v in weight_sum.items()}
-        info.update({FILL_ERRORS: trust.written, "fill_error_factors": trust.factors})
+        info.update({FILL_ERRORS: trust.written, "fill_error_factors": trust.factors,
+                     "fill_error_slopes": trust.slopes})
         if gate is not None:
             info["gaps_too_uncertain"] = trust.count
         return motion.replace(positions=out, confidence=conf), info
 
-    def _window_errors(self, pos, gaps, windows, mu, sd, floor, box, top):
+    def _window_errors(self, pos, gaps, windows, copies, mu, sd, floor, box, top):
         """Two (G, copies) errors of the combined fill (:meth:`_combine`: the weighted
         average, the soft constraint, the jump screen) on each gap's validation windows:
         its members weighted by their errors on the gap's *other* windows (cross-fitted:
@@ -237,7 +243,6 @@ class PMA(Cleaner):
         its windows, as the real gap's fill is (the errors its estimate is made of).
         NaN where the window's fill leaves the capture volume or a copy has no window for
         the gap."""
-        copies = max((w[0] for ws in windows for w in ws), default=-1) + 1
         cross = np.full((len(gaps), max(copies, 1)), np.nan)
         fitted = cross.copy()
         cut_positions: dict = {}
@@ -465,9 +470,9 @@ class PMA(Cleaner):
             pma.hermite_short_gaps(cut_positions, ~missing_samples(cut_positions), spans)
             return cut_positions
 
-        windows = fill_error.validation_windows(observed, small, self["validation_copies"])
-        trust.estimate(small, fill_error.window_fill_errors(out, small, windows, hermite),
-                       "cubic Hermite")
+        plan = fill_error.window_plan(observed, small, self["validation_copies"])
+        trust.estimate(small, plan, fill_error.window_fill_errors(out, small, plan.windows,
+                                                                  hermite), "cubic Hermite")
         done = pma.hermite_short_gaps(out, observed, [g for g in small if trust.allows(g)])
         if done:
             g = np.array(done, dtype=np.intp)
@@ -478,11 +483,12 @@ class PMA(Cleaner):
         done = set(done)
         return [g for g in gaps if g not in done]
 
-    def _validation_windows(self, observed, gaps, copies=None):
-        """The synthetic gaps that validate the members
-        (:func:`mocapfix.solvers.fill_error.validation_windows`), ``copies`` (default
-        ``validation_copies``) of them per gap."""
-        return fill_error.validation_windows(observed, gaps, copies or self["validation_copies"])
+    def _validation_windows(self, observed, gaps, copies=None, probes=False):
+        """The synthetic gaps that validate the members, ``copies`` (default
+        ``validation_copies``) of them per gap, with ``probes`` for the extrapolated
+        estimates (:func:`mocapfix.solvers.fill_error.window_plan`)."""
+        return fill_error.window_plan(observed, gaps, copies or self["validation_copies"],
+                                      probes=probes)
 
     def _validated_fills(self, motion, observed, gaps, external, local, mu, sd, copies=None,
                          references=None, skip_unsupported=False, skip_unvalidated=False,
@@ -503,7 +509,8 @@ class PMA(Cleaner):
         ``with_windows``: also return, per gap, its windows with the members' fills there
         (:func:`mocapfix.solvers.pma.validated_member_fills`)."""
         pos = motion.positions
-        windows = self._validation_windows(observed, gaps, copies)
+        plan = self._validation_windows(observed, gaps, copies, probes=with_windows)
+        windows = plan.windows
         keep = np.ones(len(gaps), bool)
         if skip_unsupported:
             keep = np.array([len(pma.candidates(observed, sd, *g)) > 0 for g in gaps], bool)
@@ -528,7 +535,7 @@ class PMA(Cleaner):
             copy_external=copy_external if external else None, references=references))
         rows = [next(rows) if k else (np.array([], dtype=np.intp), {}, {}, []) for k in keep]
         out = [(cand, fills) for cand, fills, _, _ in rows], [errs for _, _, errs, _ in rows]
-        return (*out, [w for *_, w in rows]) if with_windows else out
+        return (*out, [w for *_, w in rows], plan) if with_windows else out
 
 
 def _defaults(params, **new):

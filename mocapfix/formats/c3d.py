@@ -954,13 +954,16 @@ def _old_fills(source: C3DSource) -> list[tuple]:
     for key in ("FILL_ERROR", "FILL_BOUND"):
         values = joined(key, float)
         cols.append(values[:n] + [-1.0] * (n - len(values[:n])))
+    # FILL_EXTRAPOLATED: 0 for runs listed by a mocapfix that wrote none
+    values = joined("FILL_EXTRAPOLATED", int)
+    cols.append(values[:n] + [0] * (n - len(values[:n])))
     return [tuple(c[i] for c in cols) for i in range(n)]
 
 
 def _left_runs(motion: Motion, missing: np.ndarray) -> list[tuple]:
-    """``(point, start, length, error_mm, bound_mm)`` of every gap the pipeline left as too
-    uncertain to fill (``Motion.fill_errors`` entries not written) that is still missing
-    in ``missing`` (-1 for an estimate it had none of)."""
+    """``(point, start, length, error_mm, bound_mm, extrapolated)`` of every gap the
+    pipeline left as too uncertain to fill (``Motion.fill_errors`` entries not written)
+    that is still missing in ``missing`` (-1 for an estimate it had none of)."""
     index = {name: j for j, name in enumerate(motion.names)}
     out = []
     for name, entries in (motion.fill_errors or {}).items():
@@ -968,7 +971,7 @@ def _left_runs(motion: Motion, missing: np.ndarray) -> list[tuple]:
             j = index.get(name)
             if len(e) >= 6 and not e[5] and j is not None and missing[e[0]:e[0] + e[1], j].all():
                 out.append((j, int(e[0]), int(e[1]), -1.0 if e[2] is None else float(e[2]),
-                            -1.0 if e[3] is None else float(e[3])))
+                            -1.0 if e[3] is None else float(e[3]), int(len(e) > 6 and e[6])))
     return sorted(out, key=lambda r: (r[1], r[0]))
 
 
@@ -979,11 +982,12 @@ def _fill_params(motion: Motion, source: C3DSource, filled: np.ndarray,
     FILL_CONFIDENCE (mean ``Motion.confidence`` over the run, 0–1), FILL_LONG (1 when the
     run spans more than LONG_FILL_S seconds: rebuilt from a model, not bridged), plus
     FILL_ERROR / FILL_BOUND (the run's estimated RMS error and its calibrated 90 % bound,
-    mm, :mod:`mocapfix.solvers.fill_error`; -1: no estimate), plus FILL_COUNT and
+    mm, :mod:`mocapfix.solvers.fill_error`; -1: no estimate), FILL_EXTRAPOLATED (1 when
+    that estimate was extrapolated from windows shorter than the run), plus FILL_COUNT and
     LONG_FILL_S. Fills listed by an earlier run are kept. The gaps left as too uncertain
     to fill (``left``, :func:`_left_runs`: residual -1 in the file) are listed as
     LEFT_POINTS, LEFT_FIRST / LEFT_LAST, LEFT_ERROR / LEFT_BOUND (what their fill's error
-    was estimated to be) and LEFT_COUNT."""
+    was estimated to be), LEFT_EXTRAPOLATED and LEFT_COUNT."""
     from mocapfix.gaps import runs
     from mocapfix.measure import LONG_FILL_S
     from mocapfix.solvers.fill_error import FillIndex
@@ -997,17 +1001,18 @@ def _fill_params(motion: Motion, source: C3DSource, filled: np.ndarray,
         mean = float(np.nanmean(conf[s:s + n, c])) if np.isfinite(conf[s:s + n, c]).any() else 0.0
         rows.append((source.names[c], float(first + s), float(first + s + n - 1), mean,
                      int(n / motion.fps > LONG_FILL_S),
-                     *(estimates.error(motion.names[c], s, n) or (-1.0, -1.0))))
+                     *(estimates.error(motion.names[c], s, n) or (-1.0, -1.0, False))))
     f32 = lambda name, v: (name, 4, (len(v),), np.asarray(v, "<f4").tobytes(), "")  # noqa: E731
+    i8 = lambda name, v: (name, 1, (len(v),), np.asarray(v, "<i1").tobytes(), "")  # noqa: E731
     params = _chunked("FILL_POINTS", [r[0] for r in rows],
                       lambda name, v: (name, -1, *string_value(v, "replace"), "label of each filled run"))
     params += _chunked("FILL_FIRST", [r[1] for r in rows], f32)
     params += _chunked("FILL_LAST", [r[2] for r in rows], f32)
     params += _chunked("FILL_CONFIDENCE", [r[3] for r in rows], f32)
-    params += _chunked("FILL_LONG", [r[4] for r in rows],
-                       lambda name, v: (name, 1, (len(v),), np.asarray(v, "<i1").tobytes(), ""))
+    params += _chunked("FILL_LONG", [r[4] for r in rows], i8)
     params += _chunked("FILL_ERROR", [r[5] for r in rows], f32)
     params += _chunked("FILL_BOUND", [r[6] for r in rows], f32)
+    params += _chunked("FILL_EXTRAPOLATED", [int(r[7]) for r in rows], i8)
     if left:
         params += _chunked("LEFT_POINTS", [source.names[r[0]] for r in left],
                            lambda name, v: (name, -1, *string_value(v, "replace"),
@@ -1016,6 +1021,7 @@ def _fill_params(motion: Motion, source: C3DSource, filled: np.ndarray,
         params += _chunked("LEFT_LAST", [float(first + r[1] + r[2] - 1) for r in left], f32)
         params += _chunked("LEFT_ERROR", [r[3] for r in left], f32)
         params += _chunked("LEFT_BOUND", [r[4] for r in left], f32)
+        params += _chunked("LEFT_EXTRAPOLATED", [r[5] for r in left], i8)
         params += [("LEFT_COUNT", 4, (), struct.pack("<f", float(len(left))),
                     "gaps left as too uncertain to fill")]
     params += [("FILL_COUNT", 4, (), struct.pack("<f", float(len(rows))), "filled runs listed"),

@@ -32,12 +32,39 @@ per gap, the gap's estimate averages two where a score's rests on one, so the qu
 is scaled down to what one more draw against an average of two needs
 (:func:`averaging_exponent`; measured coverage: benchmarks/RESULTS.md, "Fill error
 bounds").
+
+**Gaps longer than any window (extrapolated estimates).** A gap whose marker was never
+seen as long as the gap has no window of its length: in a short trial (a 3–5 s gait
+trial, a 1.7 s clip) that is most long gaps. Such a gap of ``n`` frames is validated on
+windows of ``m`` frames, the longest its marker allows, and its error extrapolated by a
+growth law measured on this capture, ``error ∝ length^p`` (:func:`growth_exponent`):
+estimate = the windows' geometric mean × ``(n/m)^p``. ``p`` comes from *probes*, windows
+of ``m/r`` frames on the same marker (``r = n/m``): a probe is to its window what the
+window is to the gap. So each window is a test case of the extrapolation whose truth is
+known — its error over its probes' estimate × ``r^p`` is a score — and the extrapolated
+bound is the estimate times the conformal quantile of those scores, calibrated apart from
+the ordinary ones (:func:`extrapolated_bounds`): a capture on which extrapolation strays
+more gets wider extrapolated bounds, and a misfit of the law at these ratios is in the
+scores. Measured on the captures of benchmarks/fill_calibration.py, error does grow as a
+power of the length over these ratios with exponents 0.05–1.5 per capture (pooled 0.63),
+and more slowly at the gap's scale than at the probes' (the law fitted on the shorter
+lengths over-predicts the gap's error: a median true / estimate of 0.55 for
+extrapolated fills), so the bounds err on the safe side. A gap more than
+:data:`MAX_RATIO` times as long as its marker's longest window gets no estimate.
+
+**A physical floor.** No bound is below :data:`BOUND_FLOOR_M`: optical marker positions
+are not known to better than about a millimetre (the white noise measured on the raw,
+unfiltered shared captures is 0.7–1.2 mm in 3-D; smoothed exports show less, smoothed
+rather than more accurate), so a bound under it claims what no capture can check.
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
+
+from mocapfix.gaps import runs
 
 #: the coverage of the bound
 LEVEL = 0.9
@@ -52,28 +79,49 @@ PRIOR_FACTOR = 2.9
 #: a fraction of a millimetre (a 2-frame hole in a slow marker) would otherwise make
 #: ratios of noise
 ERROR_FLOOR_M = 0.0005
+#: bounds below this (metres) are raised to it: the accuracy of an optical marker position
+#: (module docstring). On the Vicon PiG block of benchmarks/fill_calibration.py, whose
+#: estimates sit at :data:`ERROR_FLOOR_M`, it lifts the coverage of the 1.5 s gaps' fills
+#: from 78.9 % to 85.4 %; the misses left are of 1–10 mm
+BOUND_FLOOR_M = 0.001
+#: the farthest an estimate is extrapolated: a gap at most this many times as long as the
+#: longest window its marker allows gets an extrapolated estimate, a longer one none. On
+#: benchmarks/fill_calibration.py with the cap at 8 (five seeds), the extrapolated bounds
+#: covered 93–98 % of the fills in each ratio band up to 4 and 30 of 30 at 4–6, 87.5 % of
+#: the 24 at 6–8 at a median bound 5.7× their true error: past 6 the evidence thins and
+#: the bounds say little
+MAX_RATIO = 6.0
+#: fewest gaps with probes for a capture's own growth exponent; with fewer the estimates
+#: use :data:`PRIOR_SLOPE`
+MIN_SLOPES = 3
+#: the growth exponent used when a capture has too few probed gaps: the least-squares
+#: exponent of the probes pooled over the captures of benchmarks/fill_calibration.py (five
+#: seeds, both gap ranges, 546 probed gaps: 0.63)
+PRIOR_SLOPE = 0.6
 
 
-def validation_windows(observed: np.ndarray, gaps, copies: int, seed: int = 0):
+def validation_windows(observed: np.ndarray, gaps, copies: int, seed: int = 0,
+                       lengths=None):
     """The synthetic gaps that validate fills: ``copies`` times, per gap ``(j, s, e)`` a
-    window of the gap's length cut at a random (seeded) place where marker ``j`` and the
-    frames bounding the window were seen (windows of one marker in one copy do not
-    overlap). Returns per copy ``(cut, windows)``: the observed mask with the copy's
-    windows cut, and the windows as ``(gap index, start, stop)``. A gap whose marker has
-    no such stretch gets no window; copies stop when no gap gets one. The places a window
-    of one marker and length may start are found once and struck out as windows are cut
-    (thousands of spike holes cost one pass over their marker, not one each)."""
+    window of the gap's length (``lengths``: of that many frames per gap instead, 0 for
+    none) cut at a random (seeded) place where marker ``j`` and the frames bounding the
+    window were seen (windows of one marker in one copy do not overlap). Returns per copy
+    ``(cut, windows)``: the observed mask with the copy's windows cut, and the windows as
+    ``(gap index, start, stop)``. A gap whose marker has no such stretch gets no window;
+    copies stop when no gap gets one. The places a window of one marker and length may
+    start are found once and struck out as windows are cut (thousands of spike holes cost
+    one pass over their marker, not one each)."""
     T = observed.shape[0]
     rng = np.random.default_rng(seed)
     seen_rows = np.ascontiguousarray(observed.T)
+    sizes = [e - s for _, s, e in gaps] if lengths is None else [int(n) for n in lengths]
     out = []
     for _ in range(copies):
         cut_rows = seen_rows.copy()
         synth = []
         starts: dict = {}          # marker → length → where a window may start (1..T−n−1)
-        for gi, (j, s, e) in enumerate(gaps):
-            n = e - s
-            if T - n - 1 < 1:
+        for gi, ((j, _, _), n) in enumerate(zip(gaps, sizes)):
+            if n < 1 or T - n - 1 < 1:
                 continue
             mine = starts.setdefault(j, {})
             if n not in mine:
@@ -94,6 +142,142 @@ def validation_windows(observed: np.ndarray, gaps, copies: int, seed: int = 0):
             break
         out.append((np.ascontiguousarray(cut_rows.T), synth))
     return out
+
+
+def longest_windows(observed: np.ndarray) -> np.ndarray:
+    """(J,) the longest validation window each marker of ``observed`` (T, J) allows: its
+    longest run of seen frames less the two frames that bound a window (0 for none)."""
+    col, _, length = runs(observed)
+    out = np.zeros(observed.shape[1], dtype=np.int64)
+    np.maximum.at(out, col, length - 2)
+    return np.maximum(out, 0)
+
+
+@dataclasses.dataclass
+class WindowPlan:
+    """The validation windows of a list of gaps (:func:`window_plan`): ``windows`` as
+    :func:`validation_windows` gives them, copies of three kinds in this order —
+    ``ordinary`` (the gaps' own length), ``extrapolated`` (the gaps longer than any
+    window: the longest their marker allows) and ``probes`` (shorter windows of the
+    extrapolated gaps' markers); each a slice of the copies. Per gap: ``ratio``, its length
+    over its windows' (1 for an ordinary gap, NaN for a gap with none), and
+    ``probe_ratio``, its windows' length over its probes' (NaN without probes)."""
+    windows: list
+    ordinary: slice
+    extrapolated: slice
+    probes: slice
+    ratio: np.ndarray
+    probe_ratio: np.ndarray
+
+
+def window_plan(observed: np.ndarray, gaps, copies: int, seed: int = 0,
+                cap: float = MAX_RATIO, probes: bool = True) -> WindowPlan:
+    """The validation windows of ``gaps`` (:func:`validation_windows`, ``copies`` per gap):
+    a gap whose marker was seen as long as the gap gets windows of its length; one longer
+    than the longest window ``m`` its marker allows (:func:`longest_windows`) but at most
+    ``cap`` times as long gets windows of ``m`` frames, in copies of their own, and with
+    ``probes`` also probe windows of ``m / r`` frames (``r``: the gap's length over ``m``;
+    at least 1 frame and less than ``m``), in copies of their own: a probe is to its
+    window what the window is to the gap, so the error of a window predicted from its
+    probes is a test case of the extrapolation with a known truth
+    (:func:`extrapolated_bounds`). A gap longer than ``cap`` × ``m`` gets none. The
+    ordinary copies are what :func:`validation_windows` gives without the extrapolated
+    gaps (the same seed: their windows are the same)."""
+    gaps = list(gaps)
+    n = np.array([e - s for _, s, e in gaps], dtype=np.int64).reshape(-1)
+    longest = longest_windows(observed)[np.array([j for j, _, _ in gaps], dtype=np.intp)]
+    own = n <= longest
+    far = ~own & (n <= cap * longest) & (longest >= 1)
+    m = np.where(far, longest, 0)
+    probe = np.where(far & (m >= 2), np.clip(np.rint(m * m / np.maximum(n, 1)), 1, m - 1), 0)
+    windows = validation_windows(observed, gaps, copies, seed, lengths=np.where(own, n, 0))
+    a = len(windows)
+    if far.any():
+        windows += validation_windows(observed, gaps, copies, seed + 1, lengths=m)
+    b = len(windows)
+    if probes and (probe > 0).any():
+        windows += validation_windows(observed, gaps, copies, seed + 2, lengths=probe)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = np.where(own, 1.0, np.where(far, n / np.maximum(m, 1), np.nan))
+        probe_ratio = np.where(probe > 0, m / np.maximum(probe, 1), np.nan)
+    return WindowPlan(windows, slice(0, a), slice(a, b), slice(b, len(windows)), ratio,
+                      probe_ratio)
+
+
+def growth_exponent(rise: np.ndarray, span: np.ndarray, minimum: int = MIN_SLOPES,
+                    prior: float = PRIOR_SLOPE) -> tuple[float, bool, np.ndarray]:
+    """The exponent ``p`` of the growth law ``error ∝ length^p`` from pairs of window
+    lengths: ``rise`` the log of a window's error over its probes', ``span`` the log of
+    their lengths' ratio (both (K,)). The least-squares slope through the origin
+    (Σ rise·span / Σ span²: pairs of close lengths weigh little), clipped to 0..3 (a
+    longer gap is not easier); ``(prior, False, prior × 1)`` with fewer than ``minimum``
+    pairs. Also per pair the slope fitted without it (what a pair's score is judged
+    with: :func:`extrapolated_bounds`)."""
+    rise, span = np.asarray(rise, float), np.asarray(span, float)
+    if len(rise) < minimum:
+        return prior, False, np.full(len(rise), prior)
+    sxy, sxx = float(np.sum(rise * span)), float(np.sum(span ** 2))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        loo = np.where(sxx - span ** 2 > 0, (sxy - rise * span) / (sxx - span ** 2), prior)
+    return float(np.clip(sxy / sxx, 0.0, 3.0)), True, np.clip(loo, 0.0, 3.0)
+
+
+def extrapolated_bounds(window_errors: np.ndarray, probe_errors: np.ndarray,
+                        ratio: np.ndarray, probe_ratio: np.ndarray, floor: float,
+                        level: float = LEVEL, fitted: np.ndarray | None = None,
+                        fitted_probes: np.ndarray | None = None, prior: float = PRIOR_FACTOR):
+    """Per gap ``(estimate, bound)`` of gaps longer than their windows, and the factor,
+    whether it came from these gaps, the growth exponent and whether it did.
+
+    ``window_errors`` (G, C): the errors on each gap's windows, ``ratio`` times shorter
+    than the gap; ``probe_errors`` (G, C'): on its probes, ``probe_ratio`` times shorter
+    than the windows (:func:`window_plan`); ``fitted``/``fitted_probes``: see
+    :func:`scores`. **Law**: error ∝ length^p, ``p`` fitted on this capture from each
+    gap's windows and probes (:func:`growth_exponent`); the estimate is the windows'
+    geometric mean × ``ratio^p``. **Bound** (split conformal, as :func:`bounds`): each
+    window is a test case of the extrapolation whose truth is known — its (cross-fitted)
+    error over its probes' geometric mean × ``probe_ratio^p`` (``p`` fitted without that
+    gap) is a score, made as the real gap's estimate is made (one draw against an average
+    of as many shorter windows, scaled up by the same ratio), so its quantile holds how
+    far an extrapolation by such ratios strays on this capture, growth-law misfit
+    included. With fewer than :data:`MIN_SCORES` scores, ``prior``: the capture's factor
+    for its ordinary windows (:class:`FillTrust`) — an extrapolated estimate is no more
+    certain than one from windows of the gap's length; the pooled quantile of the
+    extrapolation scores (1.94) is set by the many tight scores of the Vicon and Qualisys
+    clips, and with it the extrapolated fills of CMU 85_02 (3 s gaps) were covered 78.9 %
+    of the time, against 89.5 % with the capture's own window factor. NaN for gaps with
+    no window."""
+    e = np.asarray(window_errors, dtype=float).reshape(len(window_errors), -1)
+    f = e if fitted is None else np.asarray(fitted, dtype=float).reshape(e.shape)
+    pe = np.asarray(probe_errors, dtype=float)
+    fp = pe if fitted_probes is None else np.asarray(fitted_probes, dtype=float)
+    est = estimates(f, floor)
+    probe = estimates(fp, floor) if pe.size else np.full(len(e), np.nan)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        rise = np.log(est / probe)
+        span = np.log(np.asarray(probe_ratio, dtype=float))
+    paired = np.isfinite(rise) & np.isfinite(span) & (span > 0)
+    slope, own_slope, loo = growth_exponent(rise[paired], span[paired])
+    factor, own = conformal_factor(
+        extrapolation_scores(e[paired], probe[paired], span[paired], loo, floor), level,
+        prior=prior)
+    est = est * np.asarray(ratio, dtype=float) ** slope
+    return est, factor * np.maximum(est, floor), factor, own, slope, own_slope
+
+
+def extrapolation_scores(window_errors: np.ndarray, probe_estimates: np.ndarray,
+                         span: np.ndarray, slopes: np.ndarray, floor: float) -> np.ndarray:
+    """The nonconformity scores of extrapolation: each window's error (G, C; floored at
+    ``floor``) over the estimate its gap's probes extrapolate to its length,
+    ``probe_estimates × exp(span × slopes)`` (``span``: log of the windows' length over
+    the probes'; ``slopes``: the growth exponent each gap is judged with), for every
+    window there is."""
+    e = np.asarray(window_errors, dtype=float)
+    predicted = np.asarray(probe_estimates, float) * np.exp(np.asarray(span, float)
+                                                           * np.asarray(slopes, float))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        test = np.maximum(e, floor) / predicted[:, None]
+    return test[np.isfinite(test)]
 
 
 def rms_error(fill: np.ndarray, truth: np.ndarray) -> float:
@@ -186,9 +370,9 @@ def averaging_exponent(windows: np.ndarray, copies: int) -> np.ndarray:
 
 
 class FillIndex:
-    """``Motion.fill_errors`` (``{name: [[start, length, error, bound, ..., written],
-    ...]}``) indexed by start per name, for many :meth:`error` look-ups (a report asks
-    once per gap: thousands of spike holes)."""
+    """``Motion.fill_errors`` (``{name: [[start, length, error, bound, step, written,
+    extrapolated], ...]}``) indexed by start per name, for many :meth:`error` look-ups (a
+    report asks once per gap: thousands of spike holes)."""
 
     def __init__(self, fill_errors: dict | None):
         self._by_name = {}
@@ -197,8 +381,9 @@ class FillIndex:
             self._by_name[name] = (np.array([e[0] for e in fills], dtype=np.int64), fills)
 
     def error(self, name: str, start: int, length: int):
-        """``(error, bound)`` of the samples ``start .. start + length − 1`` of ``name``:
-        the length-weighted RMS of the estimates of the fills there and the largest bound;
+        """``(error, bound, extrapolated)`` of the samples ``start .. start + length − 1``
+        of ``name``: the length-weighted RMS of the estimates of the fills there, the
+        largest bound, and whether one of them was extrapolated (:func:`extrapolated_bounds`);
         None when part of the span has no estimate (gaps left unfilled are no fills)."""
         starts, fills = self._by_name.get(name, (np.zeros(0, np.int64), []))
         lo, hi = np.searchsorted(starts, [start, start + length])
@@ -207,11 +392,12 @@ class FillIndex:
         if not inside or n < length:
             return None
         return (float(np.sqrt(sum(e[1] * e[2] ** 2 for e in inside) / n)),
-                float(max(e[3] for e in inside)))
+                float(max(e[3] for e in inside)), any(len(e) > 6 and e[6] for e in inside))
 
 
-#: why a fill has no estimate: no window of its length could be cut
-NO_ESTIMATE = "no stretch of the marker as long as the gap was seen to test a fill on"
+#: why a fill has no estimate: no window of its length, nor of a sixth of it, could be cut
+NO_ESTIMATE = (f"no stretch of the marker as long as 1/{MAX_RATIO:g} of the gap was seen to "
+               "test a fill on")
 
 
 def uncertain_reason(error_mm: float | None, bound_mm: float | None, why: str = "") -> str:
@@ -257,23 +443,46 @@ class FillTrust:
         self.limit = None if gate is None else gate.max_error(motion)
         self.mm = motion.metres_per_unit * 1e3
         self.floor = ERROR_FLOOR_M / motion.metres_per_unit
+        self.bound_floor = BOUND_FLOOR_M / motion.metres_per_unit
         self.bounds: dict = {}
         self.factors: dict = {}
+        self.slopes: dict = {}
         self.rejected: dict = {}
         self.written: dict = {}
         self._refused: set = set()
 
-    def estimate(self, gaps, window_errors, what: str, fitted=None) -> None:
-        """The estimates and bounds of ``gaps`` from their windows' errors (G, copies),
-        calibrated on those windows (one group of fills, ``what``; ``fitted``: see
-        :func:`scores`)."""
+    def estimate(self, gaps, plan: WindowPlan, window_errors, what: str, fitted=None) -> None:
+        """The estimates and bounds of ``gaps`` from their windows' errors (G, copies of
+        ``plan``, :func:`window_plan`), calibrated on those windows (one group of fills,
+        ``what``; ``fitted``: see :func:`scores`): the gaps with windows of their length by
+        :func:`bounds`, the longer ones by :func:`extrapolated_bounds`; every bound at
+        least :data:`BOUND_FLOOR_M`."""
         if not len(gaps):
             return
-        est, bound, factor, own = bounds(window_errors, self.floor, fitted=fitted)
-        self.factors[what] = [round(factor, 3), "this capture" if own else "prior"]
-        for g, x, b in zip(gaps, est, bound):
+        e = np.asarray(window_errors, dtype=float).reshape(len(gaps), -1)
+        f = e if fitted is None else np.asarray(fitted, dtype=float).reshape(e.shape)
+        ordinary = plan.ratio == 1.0
+        far = np.isfinite(plan.ratio) & ~ordinary
+        est = np.full(len(gaps), np.nan)
+        bound = est.copy()
+        factor = PRIOR_FACTOR
+        if ordinary.any():
+            cols = plan.ordinary
+            est[ordinary], bound[ordinary], factor, own = bounds(
+                e[ordinary, cols], self.floor, fitted=f[ordinary, cols])
+            self.factors[what] = [round(factor, 3), "this capture" if own else "prior"]
+        if far.any():
+            cols, probes = plan.extrapolated, plan.probes
+            est[far], bound[far], factor, own, slope, own_slope = extrapolated_bounds(
+                e[far, cols], e[far, probes], plan.ratio[far], plan.probe_ratio[far],
+                self.floor, fitted=f[far, cols], fitted_probes=f[far, probes], prior=factor)
+            self.factors[what + ", extrapolated"] = [round(factor, 3),
+                                                    "this capture" if own else "prior"]
+            self.slopes[what] = [round(slope, 3), "this capture" if own_slope else "prior"]
+        bound = np.maximum(bound, self.bound_floor)
+        for g, x, b, r in zip(gaps, est, bound, plan.ratio):
             if np.isfinite(x):
-                self.bounds[tuple(g)] = (float(x), float(b))
+                self.bounds[tuple(g)] = (float(x), float(b), bool(r > 1.0))
 
     def trusted(self, gap) -> bool:
         """The gap's fill may be written: no gate, or a bound within its threshold."""
@@ -291,7 +500,8 @@ class FillTrust:
         if eb is not None:
             j, s, e = gap
             self.written.setdefault(self.names[j], []).append(
-                [int(s), int(e - s), round(eb[0] * self.mm, 3), round(eb[1] * self.mm, 3)])
+                [int(s), int(e - s), round(eb[0] * self.mm, 3), round(eb[1] * self.mm, 3),
+                 eb[2]])
         return True
 
     def refuse(self, gap, why: str = "") -> None:
@@ -301,7 +511,8 @@ class FillTrust:
         err, bound = (None, None) if eb is None else (round(eb[0] * self.mm, 3),
                                                       round(eb[1] * self.mm, 3))
         self.rejected.setdefault(self.names[j], []).append(
-            [int(s), int(e - s), uncertain_reason(err, bound, why), err, bound])
+            [int(s), int(e - s), uncertain_reason(err, bound, why), err, bound,
+             eb is not None and eb[2]])
         self._refused.add(tuple(gap))
 
     def refused(self, gap) -> bool:
