@@ -48,8 +48,8 @@ more gets wider extrapolated bounds, and a misfit of the law at these ratios is 
 scores. Measured on the captures of benchmarks/fill_calibration.py, error does grow as a
 power of the length over these ratios with exponents 0.05–1.5 per capture (pooled 0.63),
 and more slowly at the gap's scale than at the probes' (the law fitted on the shorter
-lengths over-predicts the gap's error: a median true / estimate of 0.55 for
-extrapolated fills), so the bounds err on the safe side. A gap more than
+lengths over-predicts the gap's error: the median true error / estimate of the
+extrapolated fills is 0.43–0.71 by band of ratio), so the bounds err on the safe side. A gap more than
 :data:`MAX_RATIO` times as long as its marker's longest window gets no estimate.
 
 **A physical floor.** No bound is below :data:`BOUND_FLOOR_M`: optical marker positions
@@ -87,7 +87,7 @@ BOUND_FLOOR_M = 0.001
 #: the farthest an estimate is extrapolated: a gap at most this many times as long as the
 #: longest window its marker allows gets an extrapolated estimate, a longer one none. On
 #: benchmarks/fill_calibration.py with the cap at 8 (five seeds), the extrapolated bounds
-#: covered 93–98 % of the fills in each ratio band up to 4 and 30 of 30 at 4–6, 87.5 % of
+#: covered 93–96 % of the fills in each ratio band up to 4 and 30 of 30 at 4–6, 87.5 % of
 #: the 24 at 6–8 at a median bound 5.7× their true error: past 6 the evidence thins and
 #: the bounds say little
 MAX_RATIO = 6.0
