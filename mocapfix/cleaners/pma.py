@@ -20,7 +20,9 @@ Every fill also gets an estimated error and a calibrated 90 % bound
 (:mod:`mocapfix.solvers.fill_error`): the combined fill — the same weighted average, soft
 constraint and jump screen — is made on each of the gap's validation windows with the
 members weighted on the gap's other windows, and its error there measured; the short
-gaps' cubic Hermite curves are measured on windows of their own. Under the pipeline's
+gaps' cubic Hermite curves are measured on windows of their own. A gap longer than any
+window of its marker is measured on the longest and its error extrapolated
+(:func:`mocapfix.solvers.fill_error.extrapolated_bounds`). Under the pipeline's
 ``max_fill_error`` (:class:`mocapfix.cleaners.base.FillGate`) a gap whose bound exceeds
 it is left missing (``rejected_fills``, with its estimate and bound), a gap with no
 window is not fitted at all, and neither is refilled nor lent to the refill rounds;
@@ -504,10 +506,12 @@ class PMA(Cleaner):
         all: 4.9 → 0.05 s, measured on the whole file; the pipeline now runs steps on the
         take, so in a clean this is the case of a whole-body dropout inside it); the other
         gaps' windows and fills stay as they were. ``skip_unvalidated``: likewise a gap
-        that gets no validation window (its marker is never seen as long as the gap): under
-        a :class:`FillGate` its fill has no estimate and would not be written.
+        that gets no validation window (its marker is never seen as long as a sixth of
+        the gap: :func:`mocapfix.solvers.fill_error.window_plan`): under a
+        :class:`FillGate` its fill has no estimate and would not be written.
         ``with_windows``: also return, per gap, its windows with the members' fills there
-        (:func:`mocapfix.solvers.pma.validated_member_fills`)."""
+        (:func:`mocapfix.solvers.pma.validated_member_fills`), and the windows' plan (with
+        the probes of the extrapolated estimates)."""
         pos = motion.positions
         plan = self._validation_windows(observed, gaps, copies, probes=with_windows)
         windows = plan.windows

@@ -210,7 +210,7 @@ def growth_exponent(rise: np.ndarray, span: np.ndarray, minimum: int = MIN_SLOPE
     lengths: ``rise`` the log of a window's error over its probes', ``span`` the log of
     their lengths' ratio (both (K,)). The least-squares slope through the origin
     (Σ rise·span / Σ span²: pairs of close lengths weigh little), clipped to 0..3 (a
-    longer gap is not easier); ``(prior, False, prior × 1)`` with fewer than ``minimum``
+    longer gap is not easier); ``prior`` (and ``False``) with fewer than ``minimum``
     pairs. Also per pair the slope fitted without it (what a pair's score is judged
     with: :func:`extrapolated_bounds`)."""
     rise, span = np.asarray(rise, float), np.asarray(span, float)
