@@ -128,7 +128,11 @@ def test_default_clean_fills_no_run_that_jumps_three_times_the_markers_largest_s
 def test_fill_ensemble_refills_without_the_member_that_jumped_on_a_real_capture():
     """numediart_03_rolling, LR_HME (elbow) loses 218 frames while the arm rolls: a GRNN
     member, far from the poses it was trained on, follows its nearest training pose and
-    jumps when that changes. The default averages that gap again without it."""
+    jumps when that changes. The default averages that gap again without it. (The gap is
+    longer than any stretch the elbow is seen in this slice: its members are weighted on
+    windows of the longest stretch, extrapolated estimates; without the screen the fill
+    jumps by 4.8× the marker's largest step, beyond the screen's 3×, 5× or more when the
+    gap had no window and its members were weighted by plausibility.)"""
     motion = read(shared("c3d/numediart_03_rolling.c3d")).slice_frames(1500, 2305)
     j = motion.names.index("LR_HME")
     seen = ~motion.missing
@@ -141,7 +145,7 @@ def test_fill_ensemble_refills_without_the_member_that_jumped_on_a_real_capture(
         return steepest_step(P[s:e, j], P[s - 1, j], P[e, j]) / top
 
     assert ratio(build("fill_ensemble")) <= 1.0
-    assert ratio(build("fill_ensemble", max_step=0.0)) > 5.0
+    assert ratio(build("fill_ensemble", max_step=0.0)) > 3.0
 
 
 def test_the_report_says_which_step_refused_a_gaps_fill_and_why(tmp_path):
