@@ -180,16 +180,19 @@ def window_plan(observed: np.ndarray, gaps, copies: int, seed: int = 0,
     at least 1 frame and less than ``m``), in copies of their own: a probe is to its
     window what the window is to the gap, so the error of a window predicted from its
     probes is a test case of the extrapolation with a known truth
-    (:func:`extrapolated_bounds`). A gap longer than ``cap`` × ``m`` gets none. The
+    (:func:`extrapolated_bounds`). A gap longer than ``cap`` × ``m`` gets none, and so
+    does one whose marker allows windows of one frame only (no probe, no test case of
+    its own: ktk_racing_full's Sternum, seen in bursts of 1–3 frames, would have had its
+    first 5 frames filled from 1-frame windows). The
     ordinary copies are what :func:`validation_windows` gives without the extrapolated
     gaps (the same seed: their windows are the same)."""
     gaps = list(gaps)
     n = np.array([e - s for _, s, e in gaps], dtype=np.int64).reshape(-1)
     longest = longest_windows(observed)[np.array([j for j, _, _ in gaps], dtype=np.intp)]
     own = n <= longest
-    far = ~own & (n <= cap * longest) & (longest >= 1)
+    far = ~own & (n <= cap * longest) & (longest >= 2)
     m = np.where(far, longest, 0)
-    probe = np.where(far & (m >= 2), np.clip(np.rint(m * m / np.maximum(n, 1)), 1, m - 1), 0)
+    probe = np.where(far, np.clip(np.rint(m * m / np.maximum(n, 1)), 1, m - 1), 0)
     windows = validation_windows(observed, gaps, copies, seed, lengths=np.where(own, n, 0))
     a = len(windows)
     if far.any():
@@ -395,7 +398,8 @@ class FillIndex:
                 float(max(e[3] for e in inside)), any(len(e) > 6 and e[6] for e in inside))
 
 
-#: why a fill has no estimate: no window of its length, nor of a sixth of it, could be cut
+#: why a fill has no estimate: no window of its length, nor of a sixth of it (and of 2
+#: frames at least), could be cut
 NO_ESTIMATE = (f"no stretch of the marker as long as 1/{MAX_RATIO:g} of the gap was seen to "
                "test a fill on")
 
