@@ -2,9 +2,9 @@
 
 The paper does not define its SNR, nor the size of its outliers; it reports Gaussian,
 wavelet and Kalman baselines "tuned … best results" (§IV-A). This script corrupts CMU
-dance trials under each candidate SNR definition (:data:`mocapfix.corrupt.FENG2015_SNR_DEFINITIONS`)
+dance trials under each candidate SNR definition (:data:`mocapfix.bench.corrupt.FENG2015_SNR_DEFINITIONS`)
 and each candidate outlier half-width, runs the oracle-tuned baselines of
-:mod:`mocapfix.bench_oracle` (best grid value per run, by the error against the truth,
+:mod:`mocapfix.bench.oracle` (best grid value per run, by the error against the truth,
 as the paper's "best results") and prints, per setting × baseline, ours vs the paper's
 dance row and the ratio. The definitions in use are marked ``*``.
 
@@ -35,9 +35,11 @@ import numpy as np  # noqa: E402
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
-from mocapfix import corrupt, formats, metrics  # noqa: E402
+from mocapfix import formats  # noqa: E402
+from mocapfix.bench import corrupt
+from mocapfix.core import metrics
 from mocapfix.bench import cleaner_input  # noqa: E402
-from mocapfix.bench_oracle import tuned_method  # noqa: E402
+from mocapfix.bench.oracle import tuned_method  # noqa: E402
 
 SHARED = REPO.parent / "shared"
 DANCE = [SHARED / "data" / "asfamc" / f for f in ("05_02.amc", "05_10.amc")]
@@ -156,12 +158,12 @@ INTRO = """\
 The paper (§V-A) defines neither its SNR nor its outlier size, and reports its Gaussian,
 wavelet and Kalman rows "tuned … best results" (§IV-A). We corrupt CMU dance trials under
 each candidate definition and run our three smoothers as **oracle-tuned** baselines
-(`mocapfix/bench_oracle.py`: each keeps, per file, setting and seed, the grid value with the
+(`mocapfix/bench/oracle.py`: each keeps, per file, setting and seed, the grid value with the
 lowest error against the clean truth — the bench methods `gaussian(tuned)`,
 `wavelet(tuned)`, `kalman(tuned)`; an upper bound, not a usable cleaner). Paper: dance rows
 of Tables I–III (their trial CMU 05_15, not among the shared files; no boxing trial is
 shared, so the boxing rows are not checked). Candidate SNR definitions
-(`mocapfix.corrupt.feng2015_noise_sigma`): `uncentred` = one σ from mean(x²) of the
+(`mocapfix.bench.corrupt.feng2015_noise_sigma`): `uncentred` = one σ from mean(x²) of the
 positions as the CMU file puts them (MATLAB `awgn(X, snr, 'measured')` on the data
 matrix); `uncentred-per-channel` = each coordinate channel's own mean(x²) (`awgn` per
 column); `centred` = the old `gaussian_snr` (one σ from the temporal variance pooled over

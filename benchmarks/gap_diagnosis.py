@@ -25,9 +25,9 @@ import numpy as np
 
 from mocapfix import read
 from mocapfix.cleaners import build
-from mocapfix.corrupt import occlusion_gaps
-from mocapfix.gaps import runs
-from mocapfix.pipeline import load_config
+from mocapfix.bench.corrupt import occlusion_gaps
+from mocapfix.core.gaps import runs
+from mocapfix.config import load_config
 
 from versus_peers import CAPTURES, DATA, REPO, complete_block
 

@@ -67,7 +67,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from kinect_priors import (_unwindow, _windows, jitter_files, kinect_corpus,  # noqa: E402
                            print_table, protocol_files)
 
-from mocapfix.formats.kinect_layouts import KINECT_V2  # noqa: E402
+from mocapfix.core.kinect_joints import KINECT_V2  # noqa: E402
 
 #: the joints that place and turn a window: pelvis, and the hip line
 _FRAME = tuple(KINECT_V2.index(n) for n in ("SpineBase", "HipLeft", "HipRight"))
@@ -212,7 +212,7 @@ def main():
     ap.add_argument("--rank", type=int, default=200)
     ap.add_argument("--no-ceiling", action="store_true", help="skip the prior trained on the test truth")
     args = ap.parse_args()
-    from mocapfix import bench_kinect as bk
+    from mocapfix.bench import kinect as bk
     from mocapfix.cleaners import build
 
     names = list(bk.kl.KINECT_V2)

@@ -8,7 +8,7 @@ Methods, each on the same corrupted files as ``mocapfix bench --protocol kinect`
 - ``window-wiener``: a Gaussian prior over windows of ``--window`` frames of the 25 Kinect
   v2 joints (pelvis-centred, turned so the hip line lies along x), its covariance
   estimated on ``../shared/training/cmu-asfamc`` mapped to Kinect joints as the protocol
-  maps its truth (:data:`mocapfix.bench_kinect.AMC_TO_KINECT`, 30 fps), its mean the
+  maps its truth (:data:`mocapfix.bench.kinect.AMC_TO_KINECT`, 30 fps), its mean the
   file's own mean window; the posterior mean of every window (noise σ per joint and depth
   from the protocol: an oracle in its favour), averaged over the overlapping windows;
 - ``mssa(trained)``: the ``mssa`` cleaner (Lou 2012) in joint-position space with bases
@@ -190,7 +190,7 @@ def without_links(motion, pairs):
 def kinect_corpus() -> list[np.ndarray]:
     """The training corpus (``TRAINING``) mapped to the 25 Kinect v2 joints as the protocol
     maps its truth, at 30 fps (both phases of the 120 Hz frames): (T, 25, 3) m each."""
-    from mocapfix import bench_kinect as bk
+    from mocapfix.bench import kinect as bk
     from mocapfix.train import discover_training, read_all
 
     train = []
@@ -210,7 +210,7 @@ def jitter_files(every, picks, seed):
     """(index, Motion read back from the Kinect v2 CSV, truth (T, 25, 3) m on its frames)
     of the jitter scenario for each picked file, built as ``mocapfix bench --protocol
     kinect`` builds them."""
-    from mocapfix import bench_kinect as bk
+    from mocapfix.bench import kinect as bk
     from mocapfix import formats
     from mocapfix.formats import kinect as kinect_format
 
@@ -243,9 +243,9 @@ def main():
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--window", type=int, default=8)
     args = ap.parse_args()
-    from mocapfix import bench_kinect as bk
+    from mocapfix.bench import kinect as bk
     from mocapfix.cleaners import build
-    from mocapfix.motion import Motion
+    from mocapfix.core.motion import Motion
 
     names = list(bk.kl.KINECT_V2)
     ix = {n: i for i, n in enumerate(names)}

@@ -23,7 +23,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 
-from mocapfix import bench_rotations as br  # noqa: E402
+from mocapfix.bench import rotations as br  # noqa: E402
 from mocapfix import formats  # noqa: E402
 from mocapfix.cleaners import build  # noqa: E402
 from mocapfix.solvers.segments import linear_bridge  # noqa: E402

@@ -59,10 +59,12 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from partlet_tables import DATA, PAPER_DANCE, SETTINGS, ksvd_model  # noqa: E402
 
-from mocapfix import corrupt, formats, metrics  # noqa: E402
+from mocapfix import formats  # noqa: E402
+from mocapfix.bench import corrupt
+from mocapfix.core import metrics
 from mocapfix.bench import cleaner_input  # noqa: E402
 from mocapfix.cleaners.partlet import noise_level, suspect_samples  # noqa: E402
-from mocapfix.pipeline import parse_config  # noqa: E402
+from mocapfix.pipeline.steps import parse_config  # noqa: E402
 from mocapfix.solvers.dct import dct, eigenvalues, idct  # noqa: E402
 
 #: strengths of the extra time smoothing of each denoiser's output (0: the output as is)

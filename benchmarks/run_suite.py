@@ -42,7 +42,7 @@ sys.path.insert(0, str(REPO))
 
 from mocapfix import bench  # noqa: E402
 from mocapfix.cleaners import registry  # noqa: E402
-from mocapfix.errors import MocapfixError  # noqa: E402
+from mocapfix.core.errors import MocapfixError  # noqa: E402
 
 FENG2015_FILES = ["05_01.amc", "05_02.amc", "60_10.amc", "90_31.amc"]
 # one trial per subject, for yang2019 and feng2014 (4,400 frames in all)
@@ -306,7 +306,7 @@ def write(results, methods, notes, wall, args):
               "eq. 27 over the corrupted samples (missing + noisy), per marker (Euclidean); "
               "if the paper's 'entries' are single coordinates its RMSE is ours / √3. The paper "
               "reports these only as bar charts (Figs. 6–9): there are no numbers to quote.",
-              "- occlusion: `mocapfix.corrupt.occlusion` (gaps 0.1–1.5 s on 25 % of markers; "
+              "- occlusion: `mocapfix.bench.corrupt.occlusion` (gaps 0.1–1.5 s on 25 % of markers; "
               "2 mm jitter + 2 % spikes of 20–100 mm; both; one swap of neighbouring markers "
               "for 0.3–1.5 s).", ""]
     parts += ["## Headline", "",

@@ -13,7 +13,7 @@ import sys
 import click
 
 from mocapfix import __version__
-from mocapfix.errors import MocapfixError, UnreadableFileError, name_the_file, one_line
+from mocapfix.core.errors import MocapfixError, UnreadableFileError, name_the_file, one_line
 
 EXIT_OK, EXIT_SOME_FAILED, EXIT_USAGE, EXIT_UNREADABLE = 0, 1, 2, 3
 
@@ -109,7 +109,7 @@ class _OneLineErrors(click.Group):
 @click.pass_context
 def main(ctx, debug):
     """Clean motion-capture files: ASF/AMC, BVH, C3D and Kinect skeleton text."""
-    from mocapfix.memory import retain_freed_memory
+    from mocapfix.core.memory import retain_freed_memory
 
     retain_freed_memory()
     _printable_file_names()
@@ -134,7 +134,7 @@ def _ctx():
 
 
 def _print_warnings(out: Out):
-    from mocapfix.pipeline import UNIT_WARNINGS
+    from mocapfix.config import UNIT_WARNINGS
 
     for w in UNIT_WARNINGS:
         out.error(f"mocapfix: warning: {w}")
@@ -142,7 +142,7 @@ def _print_warnings(out: Out):
 
 
 def _discover(inputs, include, exclude, out: Out, once_per_file: bool = False):
-    from mocapfix.batch import discover_inputs
+    from mocapfix.batch.discovery import discover_inputs
 
     found = discover_inputs(inputs, include, exclude, once_per_file=once_per_file)
     for path, why in found.skipped:
@@ -190,7 +190,7 @@ def info(inputs, as_json, fps, include, exclude):
     """Frames, rate, markers, gaps, tracking state, analog channels, events and force
     plates of each file (INPUT may be a folder). Exit 3 if a file could not be read."""
     from mocapfix.formats import read
-    from mocapfix.info import format_text, summarise
+    from mocapfix.quality.info import format_text, summarise
 
     obj = _ctx()
     debug, out = obj["debug"], Out(obj["verbosity"])
@@ -200,9 +200,9 @@ def info(inputs, as_json, fps, include, exclude):
             raise MocapfixError("no motion files found in " + ", ".join(inputs))
     except MocapfixError as exc:
         _fail(str(exc), debug, exc)
-    from mocapfix.batch import quiet_float_warnings
+    from mocapfix.batch.tasks import quiet_float_warnings
 
-    quiet_float_warnings()              # (clean and check: in each task, batch._guarded)
+    quiet_float_warnings()              # (clean and check: in each task, batch.tasks._guarded)
     summaries, failed = [], 0
     for f in found.files:
         try:
@@ -257,8 +257,8 @@ def list_configs(name, rules):
     A shipped config is named by its preset name: `mocapfix clean -c optical-c3d ...`;
     a rule set likewise: `mocapfix check -r kinect ...`. Copy one to start your own:
     `mocapfix configs optical-c3d > my.yaml`."""
-    from mocapfix.presets import CONFIG_DIR, config_names, config_summary
-    from mocapfix.rules import RULES_DIR, preset_names
+    from mocapfix.core.presets import CONFIG_DIR, RULES_DIR, config_names, config_summary
+    from mocapfix.quality.rules import preset_names
 
     folder, names = (RULES_DIR, preset_names()) if rules else (CONFIG_DIR, config_names())
     if name is None:
@@ -342,12 +342,13 @@ def clean(inputs, outdir, config_path, reports, jobs, as_json, fps, allow_inside
     """
     from pathlib import Path
 
-    from mocapfix.batch import check_output_folder, plan_outputs, run_batch, skeleton_conflicts
+    from mocapfix.batch.plan import check_output_folder, plan_outputs, skeleton_conflicts
+    from mocapfix.batch.clean import run_batch
     from mocapfix.clean import output_files, remove_outputs
-    from mocapfix.fileio import atomic_write_text, remove_stale_temporaries
-    from mocapfix.manifest import Manifest, run_key
-    from mocapfix.pipeline import load_config
-    from mocapfix.presets import resolve_config
+    from mocapfix.core.fileio import atomic_write_text, remove_stale_temporaries
+    from mocapfix.batch.manifest import Manifest, run_key
+    from mocapfix.config import load_config
+    from mocapfix.core.presets import resolve_config
 
     obj = _ctx()
     debug = obj["debug"]
@@ -522,13 +523,14 @@ def check(inputs, rules_path, junit_path, as_json, fail_on, exit_zero, would_cle
     """
     import time
 
-    from mocapfix.batch import check_output_file, run_tasks
-    from mocapfix.check import CheckTask, exit_code, summary
-    from mocapfix.fileio import atomic_write_text
-    from mocapfix.pipeline import load_config
-    from mocapfix.presets import resolve_config
-    from mocapfix.render import check_junit, check_line
-    from mocapfix.rules import load_rules, resolve_rules_path
+    from mocapfix.batch.plan import check_output_file
+    from mocapfix.batch.tasks import run_tasks
+    from mocapfix.batch.check import CheckTask, exit_code, summary
+    from mocapfix.core.fileio import atomic_write_text
+    from mocapfix.config import load_config
+    from mocapfix.core.presets import resolve_config
+    from mocapfix.quality.render import check_junit, check_line
+    from mocapfix.quality.rules import load_rules, resolve_rules_path
 
     obj = _ctx()
     debug = obj["debug"]
@@ -645,7 +647,7 @@ def train_dictionary(training, output, method, atoms, window, sample_rate, lam, 
         _fail(f"{', '.join(foreign)} {'does' if len(foreign) == 1 else 'do'} not apply to --method "
               f"{method} (only to " + ("partlet and ksvd)" if method == "mssa" else "mssa)"), debug)
     try:
-        from mocapfix.batch import check_output_file
+        from mocapfix.batch.plan import check_output_file
 
         check_output_file(output, "-o", training)
         summary = train(training, output, method, params, jobs, fps, progress,
@@ -685,7 +687,7 @@ _TRAIN_OPTIONS = {False: (("--bases", "bases"), ("--energy", "energy")),
 
 
 def _register_bench():
-    from mocapfix.bench_cli import bench
+    from mocapfix.bench.cli import bench
 
     main.add_command(bench)
 

@@ -30,7 +30,7 @@ def test_name_map_matches_registered_cleaners():
 
 
 def test_default_pipeline_loads_no_unused_heavy_module():
-    loaded = _modules_loaded_by("from mocapfix.pipeline import load_config, default_config_path\n"
+    loaded = _modules_loaded_by("from mocapfix.config import load_config, default_config_path\n"
                                 "load_config(default_config_path())\n")
     heavy = {"scipy.signal", "scipy.interpolate", "pywt", "scipy.ndimage", "scipy.linalg",
              "scipy.spatial", "mocapfix.cleaners.lowrank_isometry", "mocapfix.cleaners.partlet"}
@@ -40,7 +40,7 @@ def test_default_pipeline_loads_no_unused_heavy_module():
 def test_unknown_cleaner_names_the_known_ones():
     import pytest
 
-    from mocapfix.errors import ConfigError
+    from mocapfix.core.errors import ConfigError
 
     with pytest.raises(ConfigError, match="known: .*tsmc"):
         cleaners.build("no_such_cleaner")
@@ -52,9 +52,9 @@ def test_default_c3d_clean_loads_no_scipy():
     cost ~0.3 s of every clean."""
     loaded = _modules_loaded_by(
         "from mocapfix import read\n"
-        "from mocapfix.corrupt import occlusion\n"
+        "from mocapfix.bench.corrupt import occlusion\n"
         "from mocapfix.clean import clean_motion\n"
-        "from mocapfix.pipeline import load_config, default_config_path\n"
+        "from mocapfix.config import load_config, default_config_path\n"
         "bad, _ = occlusion(read('sample_data/walk_markers.c3d'), 'mixed', 0)\n"
         "result = clean_motion(bad, load_config(default_config_path()))\n"
         "assert result.cleaned.missing.mean() < bad.missing.mean()\n")

@@ -3,7 +3,7 @@ low-rank kernels of mocapfix.solvers.lowrank.
 
 Known answers on hand-made arrays and synthetic rigid motions; measured bounds on the
 real captures CMU 85_02 (breakdance, 810 frames) and an HDM05 slice, corrupted with
-mocapfix.corrupt.occlusion. Baselines for comparison are computed here with
+mocapfix.bench.corrupt.occlusion. Baselines for comparison are computed here with
 scipy.interpolate directly.
 """
 from __future__ import annotations
@@ -13,10 +13,10 @@ import pytest
 from scipy.interpolate import PchipInterpolator
 
 from mocapfix.cleaners import build
-from mocapfix.corrupt import occlusion
-from mocapfix.errors import ConfigError
-from mocapfix.metrics import rmse
-from mocapfix.motion import Motion
+from mocapfix.bench.corrupt import occlusion
+from mocapfix.core.errors import ConfigError
+from mocapfix.core.metrics import rmse
+from mocapfix.core.motion import Motion
 from mocapfix.solvers.lowrank import (conditional_mean_rows, impute_lowrank, lowrank_approx,
                                       missing_patterns, rank_for_variance, shrink, svt)
 from conftest import shared

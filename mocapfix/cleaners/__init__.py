@@ -12,7 +12,7 @@ from __future__ import annotations
 import importlib
 
 from mocapfix.cleaners.base import Cleaner, Param
-from mocapfix.errors import ConfigError
+from mocapfix.core.errors import ConfigError
 
 _REGISTRY: dict[str, type[Cleaner]] = {}
 _MODULES = (

@@ -130,9 +130,9 @@ import numpy as np
 
 from mocapfix.cleaners import register
 from mocapfix.cleaners.base import REPLACED_FRAMES, Cleaner, Param
-from mocapfix.errors import ConfigError
-from mocapfix.formats.kinect_layouts import normalise_name
-from mocapfix.motion import Motion
+from mocapfix.core.errors import ConfigError
+from mocapfix.core.kinect_joints import normalise_name
+from mocapfix.core.motion import Motion
 from mocapfix.solvers import run_offsets, svshrink, whittaker
 from mocapfix.solvers.glitches import contradicted_by_path
 from mocapfix.solvers.bone_projection import (median_lengths, project_lengths, steady_pairs,

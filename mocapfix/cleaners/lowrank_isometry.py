@@ -63,8 +63,8 @@ import numpy as np
 
 from mocapfix.cleaners import register
 from mocapfix.cleaners.base import Cleaner, Param
-from mocapfix.errors import ConfigError
-from mocapfix.motion import Motion
+from mocapfix.core.errors import ConfigError
+from mocapfix.core.motion import Motion
 from mocapfix.solvers import wavelet_ops
 from mocapfix.solvers.isometry import IsometrySystem, energy
 from mocapfix.solvers.lowrank import blas_single_thread, shrink, svt
@@ -475,7 +475,7 @@ class LowRankIsometry(Cleaner):
             out[inlier] = pos[inlier]
             info["inliers_kept"] = int(inlier.sum())
         if self["max_gap"] is not None:
-            from mocapfix.gaps import runs
+            from mocapfix.core.gaps import runs
             from mocapfix.solvers.segments import run_rows
 
             limit = self.frames("max_gap", motion)

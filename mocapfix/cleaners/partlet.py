@@ -133,11 +133,11 @@ import warnings
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 
-from mocapfix import bodyparts
+from mocapfix.core import bodyparts
 from mocapfix.cleaners import register
 from mocapfix.cleaners.base import FittedCleaner, Param
-from mocapfix.errors import ConfigError, MocapfixError
-from mocapfix.motion import Motion
+from mocapfix.core.errors import ConfigError, MocapfixError
+from mocapfix.core.motion import Motion
 from mocapfix.solvers import sparse
 from mocapfix.solvers.bone_projection import project_lengths
 from mocapfix.solvers.dct import gcv_smooth
@@ -583,8 +583,8 @@ class PartletDictionary(FittedCleaner):
         skeleton (by its joint names, :data:`AUTO_MODELS`), chosen per file: a batch may
         mix CMU and Kinect skeletons, and ``apply`` never changes the configured cleaner
         (it used to keep the first file's model for the whole run). Model files are read
-        once per process (:func:`mocapfix.models.load`)."""
-        from mocapfix import models
+        once per process (:func:`mocapfix.core.models.load`)."""
+        from mocapfix.core import models
 
         canon = set(bodyparts.canonical_names(motion.names))
         for key, name in AUTO_MODELS:

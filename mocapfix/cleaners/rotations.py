@@ -1,7 +1,7 @@
 """Channel-space smoothing of the rotations a BVH or AMC file stores.
 
 Position-space cleaners work on forward-kinematics joint positions and are written back
-as rotations (:mod:`mocapfix.writeback`). This cleaner instead low-passes the channels
+as rotations (:mod:`mocapfix.core.writeback`). This cleaner instead low-passes the channels
 themselves, in a continuous representation (never raw, wrapped Euler angles): each joint with
 three rotation DOFs is turned into unit quaternions (scipy ``Rotation``, intrinsic order
 of the file), signs are made continuous (q and −q are the same rotation; a flip would be
@@ -22,15 +22,15 @@ import numpy as np
 
 from mocapfix.cleaners import register
 from mocapfix.cleaners.base import REPLACED_FRAMES, Cleaner, Param
-from mocapfix.errors import ConfigError
-from mocapfix.gaps import runs
-from mocapfix.kinematics import moved_by_rotation, nearest_branch, nearest_euler
-from mocapfix.motion import Motion
+from mocapfix.core.errors import ConfigError
+from mocapfix.core.gaps import runs
+from mocapfix.core.kinematics import moved_by_rotation, nearest_branch, nearest_euler
+from mocapfix.core.motion import Motion
 from mocapfix.solvers import glitches, rotchannels, segments, sure
 from mocapfix.solvers.noise import white_noise
 from mocapfix.solvers.rotchannels import continuous_quaternions
 from mocapfix.solvers.segments import linear_bridge
-from mocapfix.writeback import solve_channels
+from mocapfix.core.writeback import solve_channels
 
 
 def _channels_from_positions(motion: Motion) -> np.ndarray:
@@ -262,7 +262,7 @@ def _contradicted_by_limbs(rig, ch: np.ndarray, new: np.ndarray, bad: np.ndarray
                            neutral: float, ratio: float) -> np.ndarray:
     """``bad`` (T, joints with rotations) without the runs the world-space motion of the
     limb does not contradict. A run of a joint's re-made channels is kept only when it
-    moves the joints its rotation moves (:func:`mocapfix.kinematics.moved_by_rotation`)
+    moves the joints its rotation moves (:func:`mocapfix.core.kinematics.moved_by_rotation`)
     by more than ``neutral`` — with no lever there is nothing in the take to test the
     channels against (the 30 Hz Bandai toes, whose end sites sit on the joint, bend at
     every toe-off) — and makes their path smoother, by

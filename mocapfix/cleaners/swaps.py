@@ -203,7 +203,7 @@ class SwapFix(Cleaner):
         T, J, _ = P.shape
         if T < 4:
             return []
-        from mocapfix.threads import parallel_map
+        from mocapfix.core.threads import parallel_map
 
         t_all = np.arange(2, T - 1)
         iu = np.triu_indices(J, k=1)

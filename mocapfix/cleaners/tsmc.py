@@ -89,7 +89,7 @@ import numpy as np
 
 from mocapfix.cleaners import register
 from mocapfix.cleaners.base import NOT_ESTIMATED, REJECTED_FILLS, Cleaner, FillGate, Param
-from mocapfix.motion import Motion, missing_samples
+from mocapfix.core.motion import Motion, missing_samples
 from mocapfix.solvers import dct, glitches, segments
 from mocapfix.solvers.localfit import moving_median
 from mocapfix.solvers.lowrank import leave_block_out_residual, ppca_fit, svt
@@ -198,8 +198,8 @@ def trust_mask(pos: np.ndarray, weights: np.ndarray, k: float, lo: float, hi: fl
                iterations: int, pad: int, welsch: float | None = None):
     """:func:`trust_mask_block` of blocks of at most :data:`TRUST_BLOCK` markers (every
     marker's detection is its own: the same blocks whatever the thread count) on the
-    task's threads (:func:`mocapfix.threads.parallel_map`), put back together."""
-    from mocapfix.threads import parallel_map
+    task's threads (:func:`mocapfix.core.threads.parallel_map`), put back together."""
+    from mocapfix.core.threads import parallel_map
 
     J = pos.shape[1]
     if J <= TRUST_BLOCK:
@@ -286,7 +286,7 @@ class Trust(Cleaner):
     )
 
     def _validate(self):
-        from mocapfix.errors import ConfigError
+        from mocapfix.core.errors import ConfigError
         if self["min_threshold"].si > self["max_threshold"].si:
             raise ConfigError(f"{self.step}: min_threshold must not exceed max_threshold")
 
@@ -548,7 +548,7 @@ class TSMC(Cleaner):
             # the noise is judged on the trusted samples with linear bridges, not on the
             # model's fills (a poor fill distorts the smooth around it); the two smooths
             # are independent: on the task's threads
-            from mocapfix.threads import parallel_map
+            from mocapfix.core.threads import parallel_map
 
             bridged = est if gate is not None else linear_bridge(np.where(omega, x, np.nan))
             (smoothed, _), (_, noise) = parallel_map(lambda args: _gcv_denoise(*args), [
