@@ -9,7 +9,12 @@ as the paper's "best results") and prints, per setting × baseline, ours vs the 
 dance row and the ratio. The definitions in use are marked ``*``.
 
     python benchmarks/feng2015_calibration.py [--training 2] [--seeds 1] [--max-frames 0]
-        [--json raw.json]      # writes benchmarks/FENG2015_CALIBRATION.md
+        [--json raw.json]      # writes benchmarks/results/feng2015_calibration.md
+
+``benchmarks/results/feng2015_calibration.md`` is generated: this script rewrites it whole
+(``benchmarks/run_suite.py`` copies it into ``results/suite.md``). The per-trial table of
+``--spread`` (printed only) and the reading of the numbers are kept by hand in
+``benchmarks/RESULTS.md``, "Feng 2015: calibrating the SNR and the outlier size".
 
 Files: the shared dance trials 05_02 and 05_10 (``../shared/data/asfamc``), plus the first
 ``--training`` subject-05 dance trials of ``../shared/training/cmu-asfamc`` (the paper's
@@ -237,16 +242,11 @@ def spread(paths, seeds, snrs, log):
     return "\n".join(lines)
 
 
-#: everything after this line of the Markdown file is kept when the tables are rewritten
-#: (the per-trial table of ``--spread`` and the reading of the numbers)
-KEEP = "<!-- kept when the script rewrites the tables above -->"
-
-
 def write_markdown(path, text):
+    """Write the generated tables, the whole file (hand-kept reading: benchmarks/RESULTS.md)."""
     path = Path(path)
-    old = path.read_text(encoding="utf-8") if path.exists() else ""
-    tail = old[old.index(KEEP):] if KEEP in old else KEEP + "\n"
-    path.write_text(text + "\n\n" + tail, encoding="utf-8")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(text.rstrip("\n") + "\n", encoding="utf-8")
 
 
 def main(argv=None):
@@ -261,8 +261,10 @@ def main(argv=None):
     ap.add_argument("--definitions", default=",".join(corrupt.FENG2015_SNR_DEFINITIONS))
     ap.add_argument("--outlier-sizes", default="25,50,60",
                     help="outlier half-widths (cm) to measure for Tables II and III")
-    ap.add_argument("--markdown", default=str(REPO / "benchmarks" / "FENG2015_CALIBRATION.md"),
-                    help="write the tables here (RESULTS.md includes this file)")
+    ap.add_argument("--markdown",
+                    default=str(REPO / "benchmarks" / "results" / "feng2015_calibration.md"),
+                    help="write the tables here (default: %(default)s; run_suite.py copies "
+                         "that file into results/suite.md)")
     ap.add_argument("--json", default=None, help="also save the raw numbers here")
     ap.add_argument("--render", default=None, metavar="JSON",
                     help="only re-render the Markdown from a saved --json")

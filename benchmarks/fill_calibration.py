@@ -39,7 +39,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from versus_peers import REPO, captures  # noqa: E402
 
 from mocapfix.bench.corrupt import occlusion_gaps  # noqa: E402
-from mocapfix.pipeline.steps import load_config  # noqa: E402
+from mocapfix.config import load_config  # noqa: E402
 
 REGIMES = {"0.1–1.5 s": 1.5, "0.1–3 s": 3.0}
 

@@ -4,10 +4,10 @@
 meant for its format, and a page that draws every case (every change over 10 mm, with the
 take's evidence for it).
 
-    python benchmarks/harm.py [--data ../shared/data] [-j 2] [--markdown benchmarks/HARM.md]
+    python benchmarks/harm.py [--data ../shared/data] [-j 2] [--markdown benchmarks/results/harm.md]
         [--plots harm-cases.html] [--folders bvh,asfamc,c3d,kinect]
 
-Writes ``benchmarks/HARM.md`` (generated: this script owns it; do not edit by hand) and,
+Writes ``benchmarks/results/harm.md`` (generated: this script owns it; do not edit by hand) and,
 with ``--plots``, one self-contained HTML page: per case, the path of the point it moved
 most (x, y, z, input grey, output in colour, the change below) over the case and 0.15 s
 (at least 6 frames) on each side, and for a rotation re-made on a BVH/AMC rig that joint's channels.
@@ -29,7 +29,7 @@ from mocapfix import bench, formats  # noqa: E402
 from mocapfix.bench import harm as bench_harm
 from mocapfix.core import presets
 from mocapfix.batch.executors import ExecutorSpec  # noqa: E402
-from mocapfix.pipeline.steps import load_config  # noqa: E402
+from mocapfix.config import load_config  # noqa: E402
 from mocapfix.quality.render import svg_trajectory  # noqa: E402
 
 #: folder of ../shared/data → the shipped configs run on its files
@@ -94,7 +94,8 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--data", type=Path, default=REPO.parent / "shared" / "data")
     ap.add_argument("-j", "--jobs", type=int, default=2)
-    ap.add_argument("--markdown", type=Path, default=REPO / "benchmarks" / "HARM.md")
+    ap.add_argument("--markdown", type=Path, default=REPO / "benchmarks" / "results" / "harm.md",
+                    help="the generated tables (default: %(default)s)")
     ap.add_argument("--plots", type=Path, default=None)
     ap.add_argument("--folders", default=",".join(FOLDERS),
                     help="comma-separated folders of --data to run (default: all)")

@@ -222,7 +222,7 @@ def feng2015_gaussian(motion: Motion, rng: np.random.Generator, snr_db: float,
     The paper does not define its SNR. Chosen (``uncentred``): one σ for the whole
     motion, σ² = mean(x²) / 10^(SNR/10) over the positions as the CMU ASF/AMC file puts
     them (MATLAB ``awgn(X, snr, 'measured')`` on the data matrix). Evidence
-    (benchmarks/feng2015_calibration.py → benchmarks/FENG2015_CALIBRATION.md): with the
+    (benchmarks/feng2015_calibration.py → benchmarks/results/feng2015_calibration.md): with the
     Gaussian, wavelet and Kalman smoothers oracle-tuned per run (the paper "tune[s] all
     model parameters … and report[s] their best results"), on four CMU dance trials, 4 of
     the 9 cells of the paper's dance rows at 30/20/10 dB are within ±25 % (10 dB: 1.28,

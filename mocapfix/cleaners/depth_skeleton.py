@@ -118,11 +118,11 @@ baseline before the rigid pairs of step 3): motion priors trained on ../shared/t
 Gaussian prior over 8-frame windows of the 25 joints, M-SSA bases, the partlet-kinect
 dictionary) measured 0.92-1.48 alone and 0.694-0.706 blended 0.2 with this cleaner's
 output; per-joint smoothing whose strength the truth picks every ±5 frames 0.751
-(``benchmarks/kinect_priors.py``). Smoothing cluster centroids (hand, foot, pelvis,
+(``benchmarks/studies/kinect_priors.py``). Smoothing cluster centroids (hand, foot, pelvis,
 shoulders) and offsets to them separately, and shrinkage across joints in a body frame or
 in 1-8 s windows, measured 8.45-8.65 mm against 8.46 (4 files, seed 0); the ICI rule
 (Katkovnik 1999) in place of the local Stein risk 8.58-10.0. A Gaussian-mixture prior over
-8-frame windows of each body part (EPLL-style; ``benchmarks/kinect_gmm_prior.py``), trained on
+8-frame windows of each body part (EPLL-style; ``benchmarks/studies/kinect_gmm_prior.py``), trained on
 the same corpus, 0.765 alone and 0.648 blended 0.3 with this cleaner's output (0.682), the
 best trained prior measured; trained on the test motions' own truth, 0.626 / 0.592: not
 shipped (a model of several MB and a blend weight for a 0.03 gain, short of 0.6)."""

@@ -111,7 +111,7 @@ penalty (no gain at the per-channel oracle), torso frame smoothing 0.1 / 0.2 s (
 5.01), the local strength for the torso frame fit too (2 seeds: 30 dB −0.4 %, 10 dB
 +1.1 %), 2 or 4 alternations (mixed), 10 FISTA iterations (30 dB 0.95).
 
-Outside this cleaner (``benchmarks/partlet_sure_pool.py``, 2 seeds): this cleaner's output,
+Outside this cleaner (``benchmarks/studies/partlet_sure_pool.py``, 2 seeds): this cleaner's output,
 the K-SVD ℓ2 one and ``tsmc``'s, each also smoothed at 8 strengths, weighted per file by
 SURE with Monte-Carlo divergences: 30 dB 0.845, 20 dB 1.95, 10 dB 4.77, at 3.7× the time;
 weighted with the truth, 10 dB no better than 4.67.

@@ -197,7 +197,7 @@ class RotationOutliers(Cleaner):
     out and back, a real turn moves it along a smooth path that re-making one joint
     breaks. On the shared takes as read this left the professionally cleaned Bandai
     takes untouched (86 mm before) and every remaining re-make one its limb's path
-    contradicts (benchmarks/HARM.md), while the ``rotations`` protocol's spikes fell from
+    contradicts (benchmarks/results/harm.md), while the ``rotations`` protocol's spikes fell from
     0.19× to 0.02× the better animator's filter (the re-makes of clean motion were most
     of the error left).
     """

@@ -39,7 +39,7 @@ masked soft-thresholding for E, the DCT solve of :mod:`mocapfix.solvers.dct` for
   85_02 (breakdance) gaps 0.98, mixed 0.96, noise 0.94. The completion does real work:
   with the completed residual set to zero (prediction + bridging only) HDM05 gaps were
   2.37 mm instead of 1.25. On skeleton joints with isolated missing samples it is the
-  wrong choice: ``feng2014`` on CMU AMC (benchmarks/TSMC.md), 40 % missing at random,
+  wrong choice: ``feng2014`` on CMU AMC (benchmarks/results/tsmc.md), 40 % missing at random,
   1.50 cm against 0.28 with ``prior: none`` (the per-frame prediction from the other
   joints, themselves often pre-filled, is rougher in time than the joint's own
   neighbours).

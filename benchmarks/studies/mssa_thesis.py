@@ -3,7 +3,7 @@ frame): (a) a walk with σ = 3° Gaussian noise on every joint angle; (b) missin
 filled in a jump. The figure plots error against window size; its values are not in the
 text, so this prints ours for comparison in words (benchmarks/RESULTS.md).
 
-    python benchmarks/mssa_thesis.py
+    python benchmarks/studies/mssa_thesis.py
 
 Walks: CMU 05_01 and 18_15 (not in the training corpus). There is no jump in the shared
 data: CMU 90_31 (acrobatics, jumps and flips; its neighbour 90_30 is in the corpus) stands
@@ -28,7 +28,8 @@ from mocapfix import formats  # noqa: E402
 from mocapfix.cleaners import build  # noqa: E402
 from mocapfix.solvers.segments import linear_bridge  # noqa: E402
 
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "asfamc"
+REPO = Path(__file__).resolve().parents[2]          # benchmarks/studies/ → the repository
+DATA = REPO.parent / "shared" / "data" / "asfamc"
 
 
 def downsample(m, k):
@@ -105,4 +106,7 @@ def main():
 
 
 if __name__ == "__main__":
+    import argparse
+
+    argparse.ArgumentParser(description=__doc__.split("\n\n")[0]).parse_args()   # --help; no options
     main()

@@ -20,7 +20,7 @@ of candidates f_k. Two ways to weight them, per file:
 feng2015 protocol (uncentred SNR, U(±50 cm) outliers), 05_02 and 05_10 whole trials,
 seeds 0–1, RMSE cm per marker (eq. 19), CPU seconds per file::
 
-    python benchmarks/partlet_sure_pool.py [--seeds 2] [--settings snr30 snr10 ...]
+    python benchmarks/studies/partlet_sure_pool.py [--seeds 2] [--settings snr30 snr10 ...]
 
 Measured (05_02 + 05_10, seeds 0–1; 2-core machine):
 
@@ -55,7 +55,7 @@ from pathlib import Path  # noqa: E402
 import numpy as np  # noqa: E402
 from scipy.optimize import minimize  # noqa: E402
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))   # benchmarks/: partlet_tables
 
 from partlet_tables import DATA, PAPER_DANCE, SETTINGS, ksvd_model  # noqa: E402
 
@@ -64,7 +64,7 @@ from mocapfix.bench import corrupt
 from mocapfix.core import metrics
 from mocapfix.bench import cleaner_input  # noqa: E402
 from mocapfix.cleaners.partlet import noise_level, suspect_samples  # noqa: E402
-from mocapfix.pipeline.steps import parse_config  # noqa: E402
+from mocapfix.config import parse_config  # noqa: E402
 from mocapfix.solvers.dct import dct, eigenvalues, idct  # noqa: E402
 
 #: strengths of the extra time smoothing of each denoiser's output (0: the output as is)

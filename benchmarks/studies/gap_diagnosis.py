@@ -14,12 +14,14 @@
 A gap is a run of occluded samples of one marker. Only the cleaners' parameters are used
 (no internals), so the script follows the cleaners as they change.
 
-    python benchmarks/gap_diagnosis.py [--seeds 2] [--max-frames 1200] [--max-s 1.5]
+    python benchmarks/studies/gap_diagnosis.py [--seeds 2] [--max-frames 1200] [--max-s 1.5]
         [--only NAME ...]
 """
 from __future__ import annotations
 
 import argparse
+import sys
+from pathlib import Path
 
 import numpy as np
 
@@ -29,7 +31,8 @@ from mocapfix.bench.corrupt import occlusion_gaps
 from mocapfix.core.gaps import runs
 from mocapfix.config import load_config
 
-from versus_peers import CAPTURES, DATA, REPO, complete_block
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))   # benchmarks/: versus_peers
+from versus_peers import CAPTURES, DATA, REPO, complete_block  # noqa: E402
 
 #: members of fill_ensemble run alone: name → cleaner parameters
 MEMBERS = {f"{m}{k}": {"members": [m], "neighbours": [k]}

@@ -23,7 +23,7 @@ Methods, each on the same corrupted files as ``mocapfix bench --protocol kinect`
 RMSE mm against the truth, mean over files, seed ``--seed``, and its ratio to the best
 of the four baselines of the protocol (mean over files, and the worst file)::
 
-    python benchmarks/kinect_priors.py [--every 3] [--seed 0] [--window 8]
+    python benchmarks/studies/kinect_priors.py [--every 3] [--seed 0] [--window 8]
 
 Measured with ``--every 1`` (all 11 files, seed 0; ~10 s; ``kinect_skeleton`` with its
 rigid pairs, validated fills and time-varying strength, 0.719 before them, when the blends
@@ -45,7 +45,7 @@ were 0.694 and 0.706):
 | kinect_skeleton without the wrist-thumb bones | 7.55 | 0.675 | 0.761 (05_10) |
 
 A Gaussian mixture over windows of each body part, the strongest trained prior measured, is
-in ``benchmarks/kinect_gmm_prior.py`` (0.765 alone, 0.648 blended).
+in ``benchmarks/studies/kinect_gmm_prior.py`` (0.765 alone, 0.648 blended).
 
 The priors trained on the 47 CMU dance/salsa/acrobatics trials do not carry to the
 walks and to the BVH skeletons (131_01/03) alone; blended they gain 0.01-0.03 of the
@@ -71,7 +71,7 @@ from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]          # benchmarks/studies/ → the repository
 DATA = REPO.parent / "shared" / "data"
 TRAINING = REPO.parent / "shared" / "training" / "cmu-asfamc"
 

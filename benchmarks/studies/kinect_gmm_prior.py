@@ -21,7 +21,7 @@ Rows: the GMM alone; ``blend 0.3`` = 0.7 · kinect_skeleton + 0.3 · GMM (0.3 th
 **test files' own truth** (it has seen the very motions; ``--rank`` capped at 150), alone
 and blended 0.5.
 
-    python benchmarks/kinect_gmm_prior.py [--every 1] [--seed 0] [--window 8]
+    python benchmarks/studies/kinect_gmm_prior.py [--every 1] [--seed 0] [--window 8]
         [--components 10] [--no-ceiling]
 
 Measured (``--every 1``, all 11 files, seed 0; training about 5 min on one core;
