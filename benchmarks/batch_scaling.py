@@ -27,7 +27,7 @@ from pathlib import Path
 
 
 from mocapfix import read, write
-from mocapfix.corrupt import occlusion
+from mocapfix.bench.corrupt import occlusion
 
 REPO = Path(__file__).resolve().parents[1]
 SHARED = REPO.parent / "shared" / "data" / "c3d" / "cmu_85_02.c3d"

@@ -10,7 +10,7 @@
    of the markers with 1–3 gaps of 0.1–1.5 s, 2 mm jitter, 2 % spikes of 20–100 mm
    (``occlusion`` ``mixed``), ``mocapfix clean`` end to end, with the peak resident memory
    of the process, each size run five times as it ships (the cores for the file's own
-   parallel loops, :mod:`mocapfix.threads`) in turn with ``MOCAPFIX_THREADS=1``: the
+   parallel loops, :mod:`mocapfix.core.threads`) in turn with ``MOCAPFIX_THREADS=1``: the
    medians and the median of the paired ratios; and the start-up cost (``mocapfix
    --version`` against ``mocapfix cleaners``, which loads every cleaner module); and per
    step, the seconds each step of the default pipeline takes at each size (from the JSON
@@ -46,7 +46,7 @@ from pathlib import Path
 import numpy as np
 
 from mocapfix import read, write
-from mocapfix.corrupt import occlusion
+from mocapfix.bench.corrupt import occlusion
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "c3d"
 #: the children's environment: bytecode cached as in an installed tool

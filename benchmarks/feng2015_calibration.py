@@ -2,14 +2,19 @@
 
 The paper does not define its SNR, nor the size of its outliers; it reports Gaussian,
 wavelet and Kalman baselines "tuned … best results" (§IV-A). This script corrupts CMU
-dance trials under each candidate SNR definition (:data:`mocapfix.corrupt.FENG2015_SNR_DEFINITIONS`)
+dance trials under each candidate SNR definition (:data:`mocapfix.bench.corrupt.FENG2015_SNR_DEFINITIONS`)
 and each candidate outlier half-width, runs the oracle-tuned baselines of
-:mod:`mocapfix.bench_oracle` (best grid value per run, by the error against the truth,
+:mod:`mocapfix.bench.oracle` (best grid value per run, by the error against the truth,
 as the paper's "best results") and prints, per setting × baseline, ours vs the paper's
 dance row and the ratio. The definitions in use are marked ``*``.
 
     python benchmarks/feng2015_calibration.py [--training 2] [--seeds 1] [--max-frames 0]
-        [--json raw.json]      # writes benchmarks/FENG2015_CALIBRATION.md
+        [--json raw.json]      # writes benchmarks/results/feng2015_calibration.md
+
+``benchmarks/results/feng2015_calibration.md`` is generated: this script rewrites it whole
+(``benchmarks/run_suite.py`` copies it into ``results/suite.md``). The per-trial table of
+``--spread`` (printed only) and the reading of the numbers are kept by hand in
+``benchmarks/RESULTS.md``, "Feng 2015: calibrating the SNR and the outlier size".
 
 Files: the shared dance trials 05_02 and 05_10 (``../shared/data/asfamc``), plus the first
 ``--training`` subject-05 dance trials of ``../shared/training/cmu-asfamc`` (the paper's
@@ -35,9 +40,11 @@ import numpy as np  # noqa: E402
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
-from mocapfix import corrupt, formats, metrics  # noqa: E402
+from mocapfix import formats  # noqa: E402
+from mocapfix.bench import corrupt
+from mocapfix.core import metrics
 from mocapfix.bench import cleaner_input  # noqa: E402
-from mocapfix.bench_oracle import tuned_method  # noqa: E402
+from mocapfix.bench.oracle import tuned_method  # noqa: E402
 
 SHARED = REPO.parent / "shared"
 DANCE = [SHARED / "data" / "asfamc" / f for f in ("05_02.amc", "05_10.amc")]
@@ -156,12 +163,12 @@ INTRO = """\
 The paper (§V-A) defines neither its SNR nor its outlier size, and reports its Gaussian,
 wavelet and Kalman rows "tuned … best results" (§IV-A). We corrupt CMU dance trials under
 each candidate definition and run our three smoothers as **oracle-tuned** baselines
-(`mocapfix/bench_oracle.py`: each keeps, per file, setting and seed, the grid value with the
+(`mocapfix/bench/oracle.py`: each keeps, per file, setting and seed, the grid value with the
 lowest error against the clean truth — the bench methods `gaussian(tuned)`,
 `wavelet(tuned)`, `kalman(tuned)`; an upper bound, not a usable cleaner). Paper: dance rows
 of Tables I–III (their trial CMU 05_15, not among the shared files; no boxing trial is
 shared, so the boxing rows are not checked). Candidate SNR definitions
-(`mocapfix.corrupt.feng2015_noise_sigma`): `uncentred` = one σ from mean(x²) of the
+(`mocapfix.bench.corrupt.feng2015_noise_sigma`): `uncentred` = one σ from mean(x²) of the
 positions as the CMU file puts them (MATLAB `awgn(X, snr, 'measured')` on the data
 matrix); `uncentred-per-channel` = each coordinate channel's own mean(x²) (`awgn` per
 column); `centred` = the old `gaussian_snr` (one σ from the temporal variance pooled over
@@ -235,16 +242,11 @@ def spread(paths, seeds, snrs, log):
     return "\n".join(lines)
 
 
-#: everything after this line of the Markdown file is kept when the tables are rewritten
-#: (the per-trial table of ``--spread`` and the reading of the numbers)
-KEEP = "<!-- kept when the script rewrites the tables above -->"
-
-
 def write_markdown(path, text):
+    """Write the generated tables, the whole file (hand-kept reading: benchmarks/RESULTS.md)."""
     path = Path(path)
-    old = path.read_text(encoding="utf-8") if path.exists() else ""
-    tail = old[old.index(KEEP):] if KEEP in old else KEEP + "\n"
-    path.write_text(text + "\n\n" + tail, encoding="utf-8")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(text.rstrip("\n") + "\n", encoding="utf-8")
 
 
 def main(argv=None):
@@ -259,8 +261,10 @@ def main(argv=None):
     ap.add_argument("--definitions", default=",".join(corrupt.FENG2015_SNR_DEFINITIONS))
     ap.add_argument("--outlier-sizes", default="25,50,60",
                     help="outlier half-widths (cm) to measure for Tables II and III")
-    ap.add_argument("--markdown", default=str(REPO / "benchmarks" / "FENG2015_CALIBRATION.md"),
-                    help="write the tables here (RESULTS.md includes this file)")
+    ap.add_argument("--markdown",
+                    default=str(REPO / "benchmarks" / "results" / "feng2015_calibration.md"),
+                    help="write the tables here (default: %(default)s; run_suite.py copies "
+                         "that file into results/suite.md)")
     ap.add_argument("--json", default=None, help="also save the raw numbers here")
     ap.add_argument("--render", default=None, metavar="JSON",
                     help="only re-render the Markdown from a saved --json")

@@ -5,7 +5,7 @@ Every fill mocapfix writes carries an estimated error and a 90 % bound
 (:mod:`mocapfix.solvers.fill_error`). Here the truth is known: the gap-free captures and
 complete blocks of :mod:`benchmarks.versus_peers` (``captures``: CMU 85_02, HDM05,
 Qualisys, Vicon PiG, OptiTrack, c3d.org s01, tennis, wheelchair, PhoeniX dance; 1,200
-frames at most) get the ``occlusion`` gaps (:func:`mocapfix.corrupt.occlusion_gaps`, a
+frames at most) get the ``occlusion`` gaps (:func:`mocapfix.bench.corrupt.occlusion_gaps`, a
 quarter of the markers lose 1–3 gaps of 0.1–1.5 s, and of 0.1–3 s), seeds 0..N−1, and
 ``configs/default.yaml`` cleans them
 
@@ -38,8 +38,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from versus_peers import REPO, captures  # noqa: E402
 
-from mocapfix.corrupt import occlusion_gaps  # noqa: E402
-from mocapfix.pipeline import load_config  # noqa: E402
+from mocapfix.bench.corrupt import occlusion_gaps  # noqa: E402
+from mocapfix.config import load_config  # noqa: E402
 from mocapfix.solvers import fill_error  # noqa: E402
 
 REGIMES = {"0.1–1.5 s": 1.5, "0.1–3 s": 3.0}

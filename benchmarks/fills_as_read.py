@@ -20,9 +20,9 @@ import numpy as np
 
 from mocapfix import read
 from mocapfix.clean import clean_motion
-from mocapfix.gaps import runs
-from mocapfix.pipeline import load_config
-from mocapfix.selection import not_cleaned
+from mocapfix.core.gaps import runs
+from mocapfix.config import load_config
+from mocapfix.pipeline.selection import not_cleaned
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "c3d"
 #: upper ends (s) of the run-length classes

@@ -24,7 +24,7 @@ DATA = REPO.parent / "shared" / "data"
 
 
 def recording(frames: int, path: Path) -> None:
-    from mocapfix import bench_kinect as bk
+    from mocapfix.bench import kinect as bk
     from mocapfix import formats
 
     src = formats.read(DATA / "asfamc" / "05_02.amc")
@@ -44,7 +44,7 @@ def main():
     ap.add_argument("--repeat", type=int, default=3)
     args = ap.parse_args()
     from mocapfix import formats
-    from mocapfix.pipeline import load_config
+    from mocapfix.config import load_config
 
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "long_kinect_v2.csv"

@@ -21,7 +21,8 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 
-from mocapfix import bench_rotations, formats  # noqa: E402
+from mocapfix import formats  # noqa: E402
+from mocapfix.bench import rotations as bench_rotations
 from mocapfix.cleaners import build  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]

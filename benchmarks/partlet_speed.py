@@ -1,7 +1,7 @@
 """Speed of partlet_dictionary (issue targets: denoising 4,500 frames × 31 joints in under
 1.5 s — the paper: 13.7 s for one walk; training on the whole corpus in under 3 minutes on
 2 cores). CPU and wall seconds; run on an otherwise idle machine. The process keeps freed
-memory as the CLI does (:mod:`mocapfix.memory`; ``--library-memory``: as an importing
+memory as the CLI does (:mod:`mocapfix.core.memory`; ``--library-memory``: as an importing
 program gets it).
 
     python benchmarks/partlet_speed.py [--repeat 3] [--train] [--library-memory]
@@ -15,7 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
-from mocapfix import corrupt, formats
+from mocapfix import formats
+from mocapfix.bench import corrupt
 from mocapfix.cleaners import build
 
 REPO = Path(__file__).resolve().parents[1]
@@ -37,10 +38,10 @@ def main():
     ap.add_argument("--train", action="store_true", help="also time training on the corpus")
     ap.add_argument("--library-memory", action="store_true",
                     help="leave the C library's memory policy as a library user gets it "
-                         "(default: the CLI's, mocapfix.memory.retain_freed_memory)")
+                         "(default: the CLI's, mocapfix.core.memory.retain_freed_memory)")
     args = ap.parse_args()
     if not args.library_memory:
-        from mocapfix.memory import retain_freed_memory
+        from mocapfix.core.memory import retain_freed_memory
 
         retain_freed_memory()
     print(f"# {os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.2f}, memory policy "

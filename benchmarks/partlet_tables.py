@@ -5,7 +5,7 @@ other cleaners and the paper's rows, on the ``feng2015`` protocol.
   ``../shared/training`` (16 other subject-05 dance trials, salsa, acrobatics…), which
   holds neither of them.
 - Baselines: Gaussian, wavelet and Kalman, each oracle-tuned per run (best grid value by
-  the error against the truth, as the paper tuned its baselines; mocapfix.bench_oracle).
+  the error against the truth, as the paper tuned its baselines; mocapfix.bench.oracle).
 - Out of sample: the CMU BVH walks (cgspeed 131_01, 131_03): a motion the training set
   does not contain, on another file format (names mapped to the ASF bones).
 
@@ -22,10 +22,12 @@ from pathlib import Path
 
 import numpy as np
 
-from mocapfix import corrupt, formats, metrics, models
+from mocapfix import formats
+from mocapfix.bench import corrupt
+from mocapfix.core import metrics, models
 from mocapfix.bench import cleaner_input
-from mocapfix.bench_oracle import TUNED, tuned_method
-from mocapfix.pipeline import parse_config
+from mocapfix.bench.oracle import TUNED, tuned_method
+from mocapfix.config import parse_config
 
 REPO = Path(__file__).resolve().parents[1]
 DATA = REPO.parent / "shared" / "data"

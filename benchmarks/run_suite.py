@@ -1,7 +1,9 @@
 """Run the standard ``mocapfix bench`` suite on the shared data and write
-``benchmarks/RESULTS.md`` (and ``benchmarks/results.json``, the summaries).
+``benchmarks/results/suite.md`` (and ``benchmarks/results/suite.json``, the summaries).
+This script owns those two files and rewrites them whole: hand-written findings go to
+``benchmarks/RESULTS.md``, which no script writes.
 
-    python benchmarks/run_suite.py [--data ../shared/data] [--seeds 3] [--jobs 2]
+    python benchmarks/run_suite.py [--data ../shared/data] [--seeds 3] [--jobs 2] [--out PATH.md]
 
 Suite (every registered cleaner run alone with its defaults, the baselines, and every
 shipped config in ``configs/`` that loads):
@@ -17,6 +19,8 @@ slower method is not started on the next (seed, setting) block and the tables sa
 many seeds it got. Every file is cut to its first ``--max-frames`` frames (default 600,
 5 s at 120 Hz) so that the slow research methods get through the paper settings. A registered cleaner that is missing, or a config that does not load, is skipped
 with a printed note. Must finish in < 15 min on 2 cores; CI does not run it.
+The tables of ``benchmarks/results/feng2015_calibration.md`` (written by
+``benchmarks/feng2015_calibration.py``) are copied in when that file exists.
 """
 from __future__ import annotations
 
@@ -38,11 +42,16 @@ import numpy as np  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 REPO = HERE.parent
+#: the generated file this script owns (the JSON summaries go beside it, ``suite.json``)
+OUT = HERE / "results" / "suite.md"
+#: written by benchmarks/feng2015_calibration.py; copied into the suite's "Against the papers"
+CALIBRATION = HERE / "results" / "feng2015_calibration.md"
 sys.path.insert(0, str(REPO))
 
 from mocapfix import bench  # noqa: E402
+from mocapfix.bench.run import _cell  # noqa: E402
 from mocapfix.cleaners import registry  # noqa: E402
-from mocapfix.errors import MocapfixError  # noqa: E402
+from mocapfix.core.errors import MocapfixError  # noqa: E402
 
 FENG2015_FILES = ["05_01.amc", "05_02.amc", "60_10.amc", "90_31.amc"]
 # one trial per subject, for yang2019 and feng2014 (4,400 frames in all)
@@ -185,7 +194,7 @@ def headline_summary(results) -> str:
     for proto, setting in HEADLINE:
         result = results[proto][0]
         key, header, dec = bench.METRICS[proto][0]
-        cells = {r["method"]: bench._cell(r, key, dec, flag_unfilled=True,
+        cells = {r["method"]: _cell(r, key, dec, flag_unfilled=True,
                                           n_seeds=len(result.seeds))
                  for r in result.summary() if r["setting"] == setting}
         secs = {}
@@ -213,7 +222,9 @@ def main(argv=None):
                     help="cleaning CPU seconds per method and protocol")
     ap.add_argument("--max-frames", type=int, default=600,
                     help="cut every file to its first N frames (default 600 = 5 s at 120 Hz)")
-    ap.add_argument("--out", default=str(HERE / "RESULTS.md"))
+    ap.add_argument("--out", default=str(OUT),
+                    help="the Markdown to write (default: %(default)s); the JSON summaries go "
+                         "beside it with the suffix .json")
     args = ap.parse_args(argv)
     data = Path(args.data)
     amc = [str(data / "asfamc" / f) for f in AMC_FILES]
@@ -306,7 +317,7 @@ def write(results, methods, notes, wall, args):
               "eq. 27 over the corrupted samples (missing + noisy), per marker (Euclidean); "
               "if the paper's 'entries' are single coordinates its RMSE is ours / √3. The paper "
               "reports these only as bar charts (Figs. 6–9): there are no numbers to quote.",
-              "- occlusion: `mocapfix.corrupt.occlusion` (gaps 0.1–1.5 s on 25 % of markers; "
+              "- occlusion: `mocapfix.bench.corrupt.occlusion` (gaps 0.1–1.5 s on 25 % of markers; "
               "2 mm jitter + 2 % spikes of 20–100 mm; both; one swap of neighbouring markers "
               "for 0.3–1.5 s).", ""]
     parts += ["## Headline", "",
@@ -324,10 +335,9 @@ def write(results, methods, notes, wall, args):
               "CMU 05_01 (walk), default parameters, our SNR/outlier reading (see above).", "",
               table, "", "Our best fully-filled method against their method, per setting:", ""]
     parts += [f"- {w}" for w in worse15] + ["", caveat(bench.corrupt.FENG2015_OUTLIER_CM), ""]
-    calibration = HERE / "FENG2015_CALIBRATION.md"       # python benchmarks/feng2015_calibration.py
-    if calibration.exists():
+    if CALIBRATION.exists():
         parts += ["### Feng 2015: calibrating the SNR and the outlier size (dance)", "",
-                  calibration.read_text(encoding="utf-8").strip(), ""]
+                  CALIBRATION.read_text(encoding="utf-8").strip(), ""]
     table, worse19 = comparison(y19, YANG2019_TOTAL, list(bench.corrupt.PROTOCOLS["yang2019"]), 4)
     parts += ["### Yang et al. 2019, Table II (Total), AJE m", "",
               "Paper: average over CMU subjects 05–140, 25 joints. Ours: mean over five "
@@ -347,7 +357,7 @@ def write(results, methods, notes, wall, args):
         summaries[p] = {k: v for k, v in result.to_dict(per_file).items() if k != "runs"}
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text("\n".join(parts), encoding="utf-8")
-    (Path(args.out).parent / "results.json").write_text(
+    Path(args.out).with_suffix(".json").write_text(
         json.dumps({"generated": now, "wall_seconds": wall, "seeds": args.seeds,
                     "protocols": summaries}, indent=1, default=str), encoding="utf-8")
 

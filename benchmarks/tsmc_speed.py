@@ -23,8 +23,8 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from mocapfix.cleaners import build  # noqa: E402
-from mocapfix.corrupt import occlusion  # noqa: E402
-from mocapfix.motion import Motion  # noqa: E402
+from mocapfix.bench.corrupt import occlusion  # noqa: E402
+from mocapfix.core.motion import Motion  # noqa: E402
 
 DATA = Path(os.environ.get("MOCAPFIX_DATA", Path(__file__).resolve().parents[2] / "shared" / "data"))
 

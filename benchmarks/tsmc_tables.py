@@ -12,10 +12,10 @@ Methods: ``none``, the always-run baselines (``linear+gaussian``, ``pca+butterwo
 of the centred channels alone), ``trust+tsmc(paper)`` (trust, then TSMC on the centred
 channels as in Feng et al. 2014, with our β, padding and bridging) and ``trust+tsmc``
 (as shipped: TSMC completes each marker's deviation from its PCA prediction), and the
-shipped default config. Writes ``benchmarks/TSMC.md``; both protocols run in parallel
-(2 processes), ~6 min on 2 cores.
+shipped default config. Writes ``benchmarks/results/tsmc.md`` (generated: this script owns
+it); both protocols run in parallel (2 processes), ~6 min on 2 cores.
 
-    python benchmarks/tsmc_tables.py [--seeds 3] [--out benchmarks/TSMC.md]
+    python benchmarks/tsmc_tables.py [--seeds 3] [--out benchmarks/results/tsmc.md]
 """
 from __future__ import annotations
 
@@ -59,7 +59,8 @@ def job(protocol: str, seeds: int):
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, default=3)
-    ap.add_argument("--out", default=str(ROOT / "benchmarks" / "TSMC.md"))
+    ap.add_argument("--out", default=str(ROOT / "benchmarks" / "results" / "tsmc.md"),
+                    help="the generated tables (default: %(default)s)")
     args = ap.parse_args(argv)
     started = time.perf_counter()
     with ProcessPoolExecutor(2) as pool:

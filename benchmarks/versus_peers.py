@@ -2,7 +2,7 @@
 """Gap filling against the published peers (issue 16), on the shared gap-free captures and
 on the complete blocks (every frame, every marker observed) of the shared vendor files.
 
-Each capture gets occlusion gaps (:func:`mocapfix.corrupt.occlusion_gaps`: a quarter of its
+Each capture gets occlusion gaps (:func:`mocapfix.bench.corrupt.occlusion_gaps`: a quarter of its
 markers lose 1–3 interior gaps) of 0.1–1.5 s and, second regime, of 0.1–3 s. Every method
 gets the same corrupted capture; the score is the RMSE (mm) over the gap samples (a sample
 left unfilled is counted in ``unfilled``, not as an error). Methods:
@@ -32,8 +32,8 @@ from pathlib import Path
 import numpy as np
 
 from mocapfix import read
-from mocapfix.corrupt import occlusion_gaps
-from mocapfix.pipeline import load_config, parse_config
+from mocapfix.bench.corrupt import occlusion_gaps
+from mocapfix.config import load_config, parse_config
 
 REPO = Path(__file__).resolve().parents[1]
 DATA = REPO.parent / "shared" / "data" / "c3d"

@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """mocapfix's shipped configs against the fill-and-filter pipelines people use today, on
 real gap-free optical captures corrupted with the ``occlusion`` protocol
-(:mod:`mocapfix.corrupt`): gaps, noise (2 mm jitter + 2 % spikes of 20–100 mm), mixed,
+(:mod:`mocapfix.bench.corrupt`): gaps, noise (2 mm jitter + 2 % spikes of 20–100 mm), mixed,
 and a marker swap.
 
 Compared, all fed the same corrupted motion:
@@ -29,9 +29,9 @@ from pathlib import Path
 import numpy as np
 
 from mocapfix import read
-from mocapfix.corrupt import OCCLUSION_SCENARIOS, occlusion
-from mocapfix.metrics import rmse, unfilled_fraction
-from mocapfix.pipeline import load_config, loads_config
+from mocapfix.bench.corrupt import OCCLUSION_SCENARIOS, occlusion
+from mocapfix.core.metrics import rmse, unfilled_fraction
+from mocapfix.config import load_config, loads_config
 
 REPO = Path(__file__).resolve().parents[1]
 DATA = REPO.parent / "shared" / "data" / "c3d"

@@ -24,7 +24,8 @@ from pathlib import Path
 
 import numpy as np
 
-from mocapfix import corrupt, read
+from mocapfix import read
+from mocapfix.bench import corrupt
 from mocapfix.bench import cleaner_input
 from mocapfix.cleaners import build
 

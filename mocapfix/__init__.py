@@ -6,9 +6,9 @@ The public Python API mirrors the command line::
     motion = mocapfix.read("trial.c3d")
     mocapfix.write(motion, "out/trial.c3d")
 """
-from mocapfix.errors import MocapfixError
-from mocapfix.motion import Motion, Skeleton
+from mocapfix.core.errors import MocapfixError
+from mocapfix.core.motion import Motion, Skeleton
+from mocapfix.core.version import __version__
 from mocapfix.formats import read, write
 
-__version__ = "0.1.0"
 __all__ = ["Motion", "Skeleton", "MocapfixError", "read", "write", "__version__"]

@@ -11,13 +11,13 @@ from pathlib import Path
 import numpy as np
 
 from mocapfix import formats
-from mocapfix.errors import UnreadableFileError
-from mocapfix.fileio import NAME_MAX, atomic_write_text
-from mocapfix.motion import Motion
-from mocapfix.pipeline import Pipeline
-from mocapfix.report import CleanResult, build_report, to_html, to_json, to_markdown
-from mocapfix.selection import own_channels
-from mocapfix.writeback import write_back
+from mocapfix.core.errors import UnreadableFileError
+from mocapfix.core.fileio import NAME_MAX, atomic_write_text
+from mocapfix.core.motion import Motion
+from mocapfix.pipeline.steps import Pipeline
+from mocapfix.quality.report import CleanResult, build_report, to_html, to_json, to_markdown
+from mocapfix.pipeline.selection import own_channels
+from mocapfix.core.writeback import write_back
 
 REPORT_KINDS = ("json", "md", "html")
 
@@ -84,7 +84,7 @@ def clean_file(source: Path, output: Path, pipeline: Pipeline, reports=("json",)
     """Read, clean, write. Returns a JSON-able summary; raises MocapfixError on failure.
 
     ``skeleton_checked``: an AMC's ASF copy was checked with its batch's
-    (:func:`mocapfix.batch.skeleton_conflicts`), so its writer does not check it alone.
+    (:func:`mocapfix.batch.plan.skeleton_conflicts`), so its writer does not check it alone.
     Every report is rendered before anything is written, and a failure while writing
     removes the output and its reports, so a failed file leaves nothing behind (but the
     ASF an AMC is written beside, which the subject's other AMCs there share). Reports of kinds

@@ -1,5 +1,5 @@
 """Command-line options shared by the batch commands (``clean``, ``check``,
-``train-dictionary`` in :mod:`mocapfix.cli`, ``bench`` in :mod:`mocapfix.bench_cli`): where
+``train-dictionary`` in :mod:`mocapfix.cli`, ``bench`` in :mod:`mocapfix.bench.cli`): where
 the work runs. A module of its own so that ``bench_cli`` can use them without importing
 ``cli`` (which registers ``bench``)."""
 from __future__ import annotations
@@ -26,22 +26,22 @@ def executors(fn):
 
 
 def executor_spec(jobs, scheduler, dask_workers):
-    """The checked :class:`mocapfix.executors.ExecutorSpec` of the three options."""
-    from mocapfix.executors import ExecutorSpec
+    """The checked :class:`mocapfix.batch.executors.ExecutorSpec` of the three options."""
+    from mocapfix.batch.executors import ExecutorSpec
 
     return ExecutorSpec(jobs, scheduler, dask_workers).check()
 
 
 class FrameRate(click.ParamType):
     """``--fps``: a frame rate in Hz, finite and within the range the readers accept
-    (:data:`mocapfix.quantity.MIN_FRAME_RATE_HZ` – ``MAX_FRAME_RATE_HZ``). A bad value is
+    (:data:`mocapfix.core.quantity.MIN_FRAME_RATE_HZ` – ``MAX_FRAME_RATE_HZ``). A bad value is
     a usage error (exit 2) before any file is read, not one error per file — and never
     ``nan``, ``inf`` or ``0`` taken silently."""
 
     name = "fps"
 
     def convert(self, value, param, ctx):
-        from mocapfix.quantity import MAX_FRAME_RATE_HZ, MIN_FRAME_RATE_HZ
+        from mocapfix.core.quantity import MAX_FRAME_RATE_HZ, MIN_FRAME_RATE_HZ
 
         if isinstance(value, float):
             rate = value

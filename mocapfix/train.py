@@ -1,6 +1,6 @@
 """``mocapfix train-dictionary``: discover training files, read them (joint positions by
 forward kinematics for BVH/AMC), fit a cleaner's model and write it as a model file
-(:mod:`mocapfix.models`) with its training provenance.
+(:mod:`mocapfix.core.models`) with its training provenance.
 
 A file that cannot be read does not stop the training: it is named, left out, listed in
 the model's provenance (``training.unread``) and makes the command exit 1, as ``clean`` does
@@ -16,10 +16,11 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from mocapfix import formats, models
+from mocapfix import formats
+from mocapfix.core import models
 from mocapfix.cleaners import build
 from mocapfix.cleaners.base import FittedCleaner
-from mocapfix.errors import MocapfixError, UnreadableFileError, name_the_file
+from mocapfix.core.errors import MocapfixError, UnreadableFileError, name_the_file
 
 #: --method → (cleaner, parameters that choose its training algorithm)
 METHODS: dict[str, tuple[str, dict]] = {
@@ -31,10 +32,10 @@ METHODS: dict[str, tuple[str, dict]] = {
 
 def discover_training(inputs, skipped: list | None = None) -> list[Path]:
     """Motion files among ``inputs`` (files, or folders searched recursively), found as
-    ``clean`` and ``check`` find them (:func:`mocapfix.batch.discover_inputs`): in folders,
+    ``clean`` and ``check`` find them (:func:`mocapfix.batch.discovery.discover_inputs`): in folders,
     text files that are not motion data (notes, exports), special files and symlink loops
     are passed over, each with its reason appended to ``skipped``."""
-    from mocapfix.batch import discover_inputs
+    from mocapfix.batch.discovery import discover_inputs
 
     found = discover_inputs(inputs, once_per_file=True)     # (a file found twice was trained on twice)
     if skipped is not None:
@@ -65,11 +66,11 @@ class ReadTask:
 def read_all(paths, jobs: int = 1, fps: float | None = None, progress=None, spec=None,
              unread: list | None = None):
     """Read every training file (in ``jobs`` local processes, or on the executor ``spec``
-    names: :class:`mocapfix.executors.ExecutorSpec`). A file that cannot be read is an error
+    names: :class:`mocapfix.batch.executors.ExecutorSpec`). A file that cannot be read is an error
     naming it; with an ``unread`` list it is appended there instead, as ``{"path", "error",
     "cause"}`` (the message, and its cause without the file name), and left out of the
     result (``None`` in its place)."""
-    from mocapfix.batch import run_tasks
+    from mocapfix.batch.tasks import run_tasks
 
     out: list = [None] * len(paths)
     for done, (n, motion) in enumerate(run_tasks(ReadTask(fps), list(paths), jobs, spec=spec), 1):

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from mocapfix.kinematics import Rig
+from mocapfix.core.kinematics import Rig
 
 OUT = Path(__file__).resolve().parents[1] / "sample_data"
 RNG_SEED = 20261122

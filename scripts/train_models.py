@@ -8,7 +8,7 @@ them). Anyone can re-run it::
   16 frames at 120 Hz, and a coarse scale of 16 samples at 30 Hz for heavy noise; used by
   ``partlet_dictionary`` with no ``model`` on CMU ASF/AMC and CMU BVH skeletons.
 - ``partlet-kinect.npz``: the same method on Kinect v2 joints made from the CMU joints
-  (:data:`mocapfix.bodyparts.ASF_TO_KINECT_V2`), for Kinect v1/v2/Azure skeletons.
+  (:data:`mocapfix.core.bodyparts.ASF_TO_KINECT_V2`), for Kinect v1/v2/Azure skeletons.
 - ``mssa-cmu.npz``: M-SSA filter bases (Lou 2012) on the rotation channels of the CMU ASF
   skeleton at 120 Hz; used by ``mssa`` with no ``model`` on files with that channel layout.
 """
@@ -20,8 +20,8 @@ from pathlib import Path
 
 import numpy as np
 
-from mocapfix import bodyparts, models
-from mocapfix.motion import Motion
+from mocapfix.core import bodyparts, models
+from mocapfix.core.motion import Motion
 from mocapfix.train import METHODS, discover_training, read_all
 from mocapfix.cleaners import build
 

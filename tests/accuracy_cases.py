@@ -52,7 +52,7 @@ TSMC_ALONE = [("swaps", {}), ("trust", {}), ("tsmc", {})]
 def truth(capture: str):
     from conftest import shared
     from mocapfix import read
-    from mocapfix.selection import without_unlabelled
+    from mocapfix.pipeline.selection import without_unlabelled
 
     path, frames = CAPTURES[capture]
     motion, _ = without_unlabelled(read(shared(path)))      # HDM05's *0-*2: not markers
@@ -61,7 +61,7 @@ def truth(capture: str):
 
 @lru_cache(maxsize=None)
 def corrupted(capture: str, scenario: str, seed: int):
-    from mocapfix.corrupt import occlusion
+    from mocapfix.bench.corrupt import occlusion
 
     return occlusion(truth(capture), scenario, seed=seed)[0]
 
@@ -105,7 +105,7 @@ def run(pipeline: str, motion):
     shipped config with its fill gate off (``max_fill_error: null``): these cases pin how
     well the default's steps repair when every fill is written; ``default_gated`` is the
     config as shipped (samples whose fill could not be trusted stay NaN)."""
-    from mocapfix.pipeline import load_config
+    from mocapfix.config import load_config
 
     if pipeline in ("default", "default_gated"):
         config = load_config(REPO / "configs" / "default.yaml")
@@ -143,7 +143,7 @@ def rmse_mm(pipeline: str, capture: str, scenario: str, seed: int) -> float:
 
 
 def _rmse_mm(pipeline: str, capture: str, scenario: str, seed: int) -> float:
-    from mocapfix.metrics import rmse
+    from mocapfix.core.metrics import rmse
 
     ref = truth(capture)
     bad = corrupted(capture, scenario, seed)

@@ -10,7 +10,7 @@ from scipy.spatial.transform import Rotation
 
 from conftest import hang_guard, need, shared, shared_files
 from mocapfix import formats
-from mocapfix.errors import UnreadableFileError, UnsupportedFeatureError, WriteError
+from mocapfix.core.errors import UnreadableFileError, UnsupportedFeatureError, WriteError
 from mocapfix.formats import asfamc
 
 #: frame counts from /work/shared/data/SOURCES.md

@@ -11,11 +11,13 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from mocapfix import bench, corrupt, metrics
-from mocapfix.bench_cli import bench as bench_cmd
+from mocapfix import bench
+from mocapfix.bench import corrupt
+from mocapfix.core import metrics
+from mocapfix.bench.cli import bench as bench_cmd
 from mocapfix.cli import main
-from mocapfix.gaps import runs
-from mocapfix.motion import Motion, Skeleton
+from mocapfix.core.gaps import runs
+from mocapfix.core.motion import Motion, Skeleton
 
 from conftest import SAMPLE_DATA, cut_amc, no_traceback
 
@@ -236,7 +238,7 @@ def test_methods_see_positions_without_rig_and_failures_are_recorded():
 
 
 def test_resolve_methods_baselines_and_unknown():
-    from mocapfix.errors import ConfigError
+    from mocapfix.core.errors import ConfigError
 
     methods, notes = bench.resolve_methods(["gaussian"])
     names = [m.name for m in methods]
@@ -250,7 +252,7 @@ def test_named_svt_baseline_is_plain_low_rank_completion():
     """``svt`` (the TSMC paper's comparison) is matrix completion: on an exactly rank-2,
     temporally rough motion with 20 % of the samples missing at random it recovers them
     (interpolation cannot), and leaves the observed samples as they are."""
-    from mocapfix.motion import Motion
+    from mocapfix.core.motion import Motion
 
     methods, _ = bench.resolve_methods(["svt", "trust+tsmc", "linear", "spline"])
     named = {m.name: m for m in methods}

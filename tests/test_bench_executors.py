@@ -12,9 +12,10 @@ import time
 from click.testing import CliRunner
 
 from conftest import SAMPLE_DATA
-from mocapfix import bench, bench_tasks, formats
-from mocapfix.bench_cli import bench as bench_cmd
-from mocapfix.pipeline import parse_config
+from mocapfix import bench, formats
+from mocapfix.bench import tasks as bench_tasks
+from mocapfix.bench.cli import bench as bench_cmd
+from mocapfix.config import parse_config
 
 C3D = SAMPLE_DATA / "walk_markers.c3d"
 TIMING = {"seconds", "cpu_seconds", "seconds_per_file", "cpu_seconds_per_file"}
@@ -163,7 +164,7 @@ def test_budget_is_checked_per_seed_and_setting_block_with_jobs():
 
 
 def test_methods_pickle_as_configs_and_parse_once_per_process(monkeypatch):
-    import mocapfix.pipeline as pl
+    import mocapfix.config as pl
 
     methods, _ = bench.resolve_methods(["gaussian", "kalman(tuned)", "svt"],
                                        [str(SAMPLE_DATA.parent / "configs" / "default.yaml")])

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from mocapfix import bench_kinect as bk
+from mocapfix.bench import kinect as bk
 from mocapfix import formats
 from mocapfix.cli import main
 from mocapfix.formats import kinect as kf

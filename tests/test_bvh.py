@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from conftest import hang_guard, need, shared, shared_files
-from mocapfix.errors import UnreadableFileError, WriteError
+from mocapfix.core.errors import UnreadableFileError, WriteError
 from mocapfix.formats import bvh
 
 # name: (joints, End Sites, channels, frames, fps, rotation orders) — from data/SOURCES.md

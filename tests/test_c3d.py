@@ -11,9 +11,9 @@ import warnings
 import numpy as np
 import pytest
 
-from mocapfix.errors import UnreadableFileError
+from mocapfix.core.errors import UnreadableFileError
 from mocapfix.formats import c3d as C
-from mocapfix.motion import Motion
+from mocapfix.core.motion import Motion
 from conftest import hang_guard, need, shared, shared_files
 
 ALL_FILES = shared_files("c3d", "*.[cC]3[dD]")
@@ -305,7 +305,7 @@ def test_filled_modified_deleted_and_still_missing_samples(name, tmp_path):
 
 
 def test_int16_overflow_is_a_write_error(tmp_path):
-    from mocapfix.errors import WriteError
+    from mocapfix.core.errors import WriteError
     motion = C.read(shared("c3d/c3dorg_s01_Eb015pi.c3d"))
     motion.positions[0, 0] = [1e7, 0, 0]
     with pytest.raises(WriteError):

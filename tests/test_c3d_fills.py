@@ -11,7 +11,7 @@ import numpy as np
 
 from mocapfix import formats
 from mocapfix.formats import c3d_params as P
-from mocapfix.pipeline import default_config_path, load_config
+from mocapfix.config import default_config_path, load_config
 from conftest import shared
 
 
@@ -162,7 +162,7 @@ def test_the_report_describes_the_fills_an_int16_file_could_not_hold(tmp_path):
     28)."""
     import json
     from mocapfix.clean import clean_file
-    from mocapfix.gaps import runs, take_frames
+    from mocapfix.core.gaps import runs, take_frames
 
     out = tmp_path / "s09.c3d"
     summary = clean_file(shared("c3d/c3dorg_s09_PlugInC3D.c3d"), out,

@@ -14,7 +14,7 @@ from click.testing import CliRunner
 
 from mocapfix.cli import main
 from mocapfix.formats import MOTION_SUFFIXES, write
-from mocapfix.motion import Motion
+from mocapfix.core.motion import Motion
 from conftest import DATA, SAMPLE_DATA, need, shared
 
 
@@ -173,7 +173,7 @@ def test_frames_where_no_marker_is_seen_at_the_ends_are_not_graded():
     Graded on the take, both pass the default rules (they failed on 60 % missing and on a
     2.3 s gap), and the measurement says which frames it left out."""
     from mocapfix import read
-    from mocapfix.measure import measure_input
+    from mocapfix.quality.measure import measure_input
 
     gait = need(DATA / "c3d" / "btk_Gait.c3d")
     opti = need(DATA / "c3d" / "btk_mocap36_optitrack.c3d")
@@ -194,7 +194,7 @@ def test_a_worker_that_dies_is_an_error_line_naming_its_file(tmp_path, monkeypat
     record the pool returns for it names the file under another key, and the line
     builder stopped the run with an internal error."""
     import os
-    import mocapfix.check as check_module
+    import mocapfix.batch.check as check_module
 
     for name in ("a.c3d", "b.c3d"):
         shutil.copy(SAMPLE_DATA / "walk_markers.c3d", tmp_path / name)

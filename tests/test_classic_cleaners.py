@@ -10,11 +10,12 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from mocapfix import corrupt, metrics
+from mocapfix.bench import corrupt
+from mocapfix.core import metrics
 from mocapfix.cleaners import build
-from mocapfix.errors import ConfigError, MocapfixError
-from mocapfix.gaps import runs
-from mocapfix.motion import Motion
+from mocapfix.core.errors import ConfigError, MocapfixError
+from mocapfix.core.gaps import runs
+from mocapfix.core.motion import Motion
 from mocapfix.solvers import segments
 from mocapfix.solvers.kalman import cv_rts_smoother
 from mocapfix.solvers.localfit import local_polyfit, moving_median

@@ -7,7 +7,7 @@ import pytest
 
 from mocapfix.cleaners import registry
 from mocapfix.cleaners.base import FittedCleaner
-from mocapfix.motion import Motion, Skeleton
+from mocapfix.core.motion import Motion, Skeleton
 
 CLEANERS = sorted(registry())
 # fitted cleaners need a model for a skeleton they know: tests/test_fitted_contract.py runs
@@ -83,7 +83,7 @@ def test_contract(name):
 @pytest.mark.parametrize("name", CLEANERS)
 def test_contract_all_missing_and_tiny_inputs(name):
     """Degenerate inputs give a result or a clear MocapfixError, never a crash."""
-    from mocapfix.errors import MocapfixError
+    from mocapfix.core.errors import MocapfixError
 
     cls = registry()[name]
     for pos in (np.full((50, 3, 3), np.nan), np.zeros((1, 2, 3)), np.zeros((3, 1, 3))):

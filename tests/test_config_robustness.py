@@ -8,9 +8,9 @@ import tracemalloc
 
 import pytest
 
-from mocapfix.errors import ConfigError
-from mocapfix.pipeline import load_config, loads_config
-from mocapfix.yamlsafe import load_yaml
+from mocapfix.core.errors import ConfigError
+from mocapfix.config import load_config, loads_config
+from mocapfix.core.yamlsafe import load_yaml
 from conftest import hang_guard
 
 GOOD_STEP = "pipeline:\n  - cleaner: butterworth\n"

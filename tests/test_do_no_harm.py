@@ -6,13 +6,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mocapfix import bench, bench_harm, formats
+from mocapfix import bench, formats
+from mocapfix.bench import harm as bench_harm
 from mocapfix.cleaners import build
-from mocapfix.kinematics import moved_by_rotation
-from mocapfix.measure import CleanResult
-from mocapfix.motion import Motion
-from mocapfix.pipeline import load_config
-from mocapfix.presets import resolve_config
+from mocapfix.core.kinematics import moved_by_rotation
+from mocapfix.quality.measure import CleanResult
+from mocapfix.core.motion import Motion
+from mocapfix.config import load_config
+from mocapfix.core.presets import resolve_config
 from mocapfix.solvers import glitches
 from mocapfix.solvers.noise import difference_noise, white_noise
 from conftest import EXPECTED_FILES, shared
@@ -113,7 +114,7 @@ def _line(T=60, fps=100.0):
 
 
 def _result(before: Motion, after: Motion, outliers=None) -> CleanResult:
-    from mocapfix.pipeline import StepRecord
+    from mocapfix.pipeline.steps import StepRecord
 
     shape = before.positions.shape[:2]
     rec = StepRecord("step 1 (x)", "x", 0.0, np.zeros(shape, bool), np.zeros(shape, bool),

@@ -1,6 +1,6 @@
 """Batches over executors (issue 13): a Dask cluster gives the same outputs as a local
 run, the pipeline is parsed once per worker, Dask is optional, and no BLAS call in a batch
-worker runs with more threads than the policy gives it (mocapfix.threads)."""
+worker runs with more threads than the policy gives it (mocapfix.core.threads)."""
 from __future__ import annotations
 
 import sys
@@ -14,13 +14,17 @@ from click.testing import CliRunner
 from threadpoolctl import threadpool_info, threadpool_limits
 
 from conftest import SAMPLE_DATA, output_tree
-from mocapfix import batch, threads
-from mocapfix.batch import CleanTask, discover_inputs, plan_outputs, run_batch, run_tasks
+from mocapfix.batch import clean as batch_clean
+from mocapfix.core import threads
+from mocapfix.batch.clean import CleanTask, run_batch
+from mocapfix.batch.discovery import discover_inputs
+from mocapfix.batch.plan import plan_outputs
+from mocapfix.batch.tasks import run_tasks
 from mocapfix.cli import main
-from mocapfix.errors import ConfigError
-from mocapfix.executors import ExecutorSpec
-from mocapfix.pipeline import load_config
-from mocapfix.presets import resolve_config
+from mocapfix.core.errors import ConfigError
+from mocapfix.batch.executors import ExecutorSpec
+from mocapfix.config import load_config
+from mocapfix.core.presets import resolve_config
 
 MOTION = (".c3d", ".bvh", ".amc", ".asf", ".csv")
 
@@ -84,12 +88,12 @@ def test_executor_options_conflict(tmp_path):
 
 
 def test_pipeline_parsed_once_per_process(monkeypatch, tmp_path):
-    import mocapfix.pipeline as pl
+    import mocapfix.config as pl
 
     calls = []
     real = pl.parse_config
     monkeypatch.setattr(pl, "parse_config", lambda *a, **k: calls.append(1) or real(*a, **k))
-    batch._PIPELINES.clear()
+    batch_clean._PIPELINES.clear()
     pipeline = load_config(resolve_config("default"))
     calls.clear()                               # the CLI's own parse of the config
     results = run_batch(_jobs(tmp_path / "o"), pipeline.config(), str(pipeline.source))
@@ -154,8 +158,8 @@ def test_thread_policy_numbers(monkeypatch):
 def test_check_on_dask_matches_local():
     import distributed
 
-    from mocapfix.check import CheckTask
-    from mocapfix.rules import load_rules, resolve_rules_path
+    from mocapfix.batch.check import CheckTask
+    from mocapfix.quality.rules import load_rules, resolve_rules_path
 
     task = CheckTask(load_rules(resolve_rules_path("default")))
     paths = [f.path for f in discover_inputs([SAMPLE_DATA]).files]

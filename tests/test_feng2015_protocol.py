@@ -5,9 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mocapfix import bench, corrupt, metrics
-from mocapfix.bench_oracle import OracleMethod, TUNED, tuned_method
-from mocapfix.motion import Motion, Skeleton
+from mocapfix import bench
+from mocapfix.bench import corrupt
+from mocapfix.core import metrics
+from mocapfix.bench.oracle import OracleMethod, TUNED, tuned_method
+from mocapfix.core.motion import Motion, Skeleton
 from mocapfix.solvers import segments
 
 from conftest import shared

@@ -11,7 +11,8 @@ import pytest
 from mocapfix import read
 from mocapfix.clean import clean_motion
 from mocapfix.cleaners import build
-from mocapfix.pipeline import default_config_path, load_config, load_yaml, parse_config
+from mocapfix.config import default_config_path, load_config, parse_config
+from mocapfix.core.yamlsafe import load_marked_yaml
 from mocapfix.solvers.segments import discontinuous_runs, largest_steps, steepest_step
 
 from conftest import shared
@@ -115,7 +116,7 @@ def test_default_clean_fills_no_run_that_jumps_three_times_the_markers_largest_s
 
     config = load_config(default_config_path())
     assert worst_ratio(config) <= 3.0
-    data = load_yaml(default_config_path().read_text())
+    data = load_marked_yaml(default_config_path().read_text())
     data["max_fill_error"] = None
     assert worst_ratio(parse_config(data)) <= 3.0
     for step in data["pipeline"]:
@@ -171,7 +172,7 @@ def test_the_report_says_which_step_refused_a_gaps_fill_and_why(tmp_path):
 
     volume = {"step": "step 3 (fill_ensemble)", "why": "its fill left the capture volume"}
     assert refusals(load_config(default_config_path()), "gated") == [volume]
-    data = load_yaml(default_config_path().read_text())
+    data = load_marked_yaml(default_config_path().read_text())
     data["max_fill_error"] = None
     assert refusals(parse_config(data), "ungated") == [volume, {
         "step": "step 4 (tsmc)",

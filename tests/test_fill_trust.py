@@ -15,10 +15,10 @@ import pytest
 
 from mocapfix import formats
 from mocapfix.clean import clean_file
-from mocapfix.corrupt import occlusion_gaps
-from mocapfix.errors import ConfigError
-from mocapfix.pipeline import (UNIT_WARNINGS, default_config_path, load_config, load_yaml,
-                               loads_config, parse_config)
+from mocapfix.bench.corrupt import occlusion_gaps
+from mocapfix.core.errors import ConfigError
+from mocapfix.config import UNIT_WARNINGS, default_config_path, load_config, loads_config, parse_config
+from mocapfix.core.yamlsafe import load_marked_yaml as load_yaml
 from mocapfix.solvers import fill_error
 from conftest import shared
 

@@ -11,12 +11,12 @@ import zipfile
 import numpy as np
 import pytest
 
-from mocapfix import models
+from mocapfix.core import models
 from mocapfix.cleaners import registry
 from mocapfix.cleaners.base import FittedCleaner
-from mocapfix.errors import ConfigError
-from mocapfix.motion import Motion, Skeleton
-from mocapfix.pipeline import loads_config
+from mocapfix.core.errors import ConfigError
+from mocapfix.core.motion import Motion, Skeleton
+from mocapfix.config import loads_config
 
 FITTED = sorted(n for n, c in registry().items() if issubclass(c, FittedCleaner))
 # small, fast training settings per fitted cleaner (the contract, not the accuracy)
@@ -134,7 +134,7 @@ def test_config_names_a_model_relative_to_the_config_file(tmp_path, training):
     _model(tmp_path, training)
     cfg = tmp_path / "cfg.yaml"
     cfg.write_text("version: 1\npipeline:\n  - cleaner: partlet_dictionary\n    model: models/body.npz\n")
-    from mocapfix.pipeline import load_config
+    from mocapfix.config import load_config
 
     pipe = load_config(cfg)
     step = pipe.steps[0].cleaner
@@ -176,7 +176,7 @@ def test_bad_models_are_config_errors_naming_the_line(tmp_path, training, damage
     cfg = tmp_path / "cfg.yaml"
     cfg.write_text("version: 1\npipeline:\n  - cleaner: fill\n  - cleaner: partlet_dictionary\n"
                    "    model: models/body.npz\n")
-    from mocapfix.pipeline import load_config
+    from mocapfix.config import load_config
 
     with pytest.raises(ConfigError) as err:
         load_config(cfg)

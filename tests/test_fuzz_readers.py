@@ -15,9 +15,9 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from malformed_corpus import c3d_bytes
-from mocapfix.errors import UnreadableFileError
+from mocapfix.core.errors import UnreadableFileError
 from mocapfix.formats import read
-from mocapfix.motion import Motion
+from mocapfix.core.motion import Motion
 from conftest import SAMPLE_DATA, hang_guard
 
 # MOCAPFIX_FUZZ_EXAMPLES=2000 for a longer hunt (random, not derandomised)

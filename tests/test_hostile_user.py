@@ -108,7 +108,7 @@ def test_reading_an_amc_at_a_non_finite_rate_is_refused():
     import pytest
 
     from mocapfix import formats
-    from mocapfix.errors import UnreadableFileError
+    from mocapfix.core.errors import UnreadableFileError
 
     for fps in (float("nan"), float("inf"), 0.0):
         with pytest.raises(UnreadableFileError, match="frame rate must be a positive number"):
@@ -195,7 +195,7 @@ def test_a_key_given_twice_in_a_config_or_rules_file_is_refused(tmp_path):
 
 
 def test_merge_keys_and_equal_keys_in_different_mappings_still_load():
-    from mocapfix.pipeline import loads_config
+    from mocapfix.config import loads_config
 
     text = ("version: 1\npipeline:\n  - &f {cleaner: fill, max_gap: 0.5 s}\n"
             "  - <<: *f\n    max_gap: 0.2 s\n  - cleaner: butterworth\n    cutoff: 6 Hz\n")
@@ -231,7 +231,7 @@ def test_a_long_but_legal_file_name_is_cleaned_and_its_stale_temporary_removed(t
     # its report keeps the stem only: "<name>.bvh.report.json" would pass the 255 bytes
     assert (out / f"{stem}.report.json").is_file()
     # the temporary a killed run leaves for that name is found and removed by the next run
-    from mocapfix.fileio import NAME_MAX
+    from mocapfix.core.fileio import NAME_MAX
 
     leftover = out / f".{(stem + '.bvh')[:NAME_MAX - 15]}.k3j_9x2a.part"
     leftover.write_bytes(b"half")
@@ -517,7 +517,7 @@ def test_an_asf_named_as_an_input_is_planned_like_the_copies_beside_amcs(tmp_pat
     assert _md5s(out) == kept
     # the writer alone (the Python API) refuses it too
     from mocapfix import formats
-    from mocapfix.errors import WriteError
+    from mocapfix.core.errors import WriteError
 
     with pytest.raises(WriteError, match="read with 05.asf"):
         formats.write(formats.read(other), out / "05_01.asf")
@@ -529,17 +529,17 @@ def test_an_unforeseen_failure_is_one_line_and_the_other_files_go_on(tmp_path, m
     # error) ended the run with a traceback and the files after it were never shown; any
     # command's unforeseen failure was a traceback. Simulated here, since every known
     # cause is fixed: the guard itself is what is tested
-    import mocapfix.info
-    import mocapfix.manifest
+    import mocapfix.quality.info
+    import mocapfix.batch.manifest
 
-    real = mocapfix.info.summarise
+    real = mocapfix.quality.info.summarise
 
     def flaky(motion):
         if str(motion.path).endswith(".bvh"):
             raise ValueError("simulated")
         return real(motion)
 
-    monkeypatch.setattr(mocapfix.info, "summarise", flaky)
+    monkeypatch.setattr(mocapfix.quality.info, "summarise", flaky)
     r = CliRunner().invoke(main, ["info", str(BVH), str(KIN), "--json"])
     no_traceback(r)
     assert r.exit_code == 3, r.output
@@ -549,7 +549,7 @@ def test_an_unforeseen_failure_is_one_line_and_the_other_files_go_on(tmp_path, m
     def broken_close(self, compact=True):
         raise OSError(28, "No space left on device")
 
-    monkeypatch.setattr(mocapfix.manifest.Manifest, "close", broken_close)
+    monkeypatch.setattr(mocapfix.batch.manifest.Manifest, "close", broken_close)
     args = ["clean", str(KIN), "-o", str(tmp_path / "out"), "-c", _cfg(tmp_path)]
     r = CliRunner().invoke(main, args)
     no_traceback(r)
@@ -568,7 +568,7 @@ def test_one_absurd_kinect_coordinate_does_not_move_its_joint(tmp_path):
     import numpy as np
 
     from mocapfix import formats
-    from mocapfix.pipeline import loads_config
+    from mocapfix.config import loads_config
 
     pipeline = loads_config("version: 1\npipeline:\n  - cleaner: kinect_skeleton\n")
     motion = formats.read(KIN)
@@ -698,14 +698,14 @@ def test_debug_shows_the_traceback_of_a_file_that_failed_unexpectedly(tmp_path, 
     # clean's or check's batch showed only "internal error TYPE: ..." even with --debug,
     # so the bug behind it could not be reported. Simulated failure (every known cause is
     # fixed); without --debug the output stays one line
-    import mocapfix.check
+    import mocapfix.batch.check
     import mocapfix.clean
 
     def broken(*args, **kwargs):
         raise ValueError("simulated")
 
     monkeypatch.setattr(mocapfix.clean, "build_report", broken)
-    monkeypatch.setattr(mocapfix.check, "check_motion", broken)
+    monkeypatch.setattr(mocapfix.batch.check, "check_motion", broken)
     runs = {"clean": ["clean", str(KIN), "-o", str(tmp_path / "out"), "-c", _cfg(tmp_path), "--overwrite"],
             "check": ["check", str(KIN)]}
     for name, args in runs.items():
@@ -761,7 +761,7 @@ def test_a_model_whose_array_header_lies_is_a_config_error(tmp_path):
 
     import numpy as np
 
-    from mocapfix import models
+    from mocapfix.core import models
 
     shipped = models.shipped()["mssa-cmu"]
     bomb = tmp_path / "bomb.npz"
@@ -946,9 +946,9 @@ def test_version_true_is_not_version_1():
     # YAML's true is Python's True, which equals 1: "version: true" passed as version 1
     import pytest
 
-    from mocapfix.errors import ConfigError
-    from mocapfix.pipeline import loads_config
-    from mocapfix.rules import loads_rules
+    from mocapfix.core.errors import ConfigError
+    from mocapfix.config import loads_config
+    from mocapfix.quality.rules import loads_rules
 
     with pytest.raises(ConfigError, match="unsupported config version True"):
         loads_config("version: true\npipeline: []\n", "c.yaml")

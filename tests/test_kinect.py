@@ -12,10 +12,10 @@ import pytest
 
 from conftest import hang_guard, need, shared, shared_files
 from mocapfix import formats
-from mocapfix.errors import UnreadableFileError
+from mocapfix.core.errors import UnreadableFileError
 from mocapfix.formats import kinect
-from mocapfix.formats import kinect_layouts as kl
-from mocapfix.motion import Motion
+from mocapfix.core import kinect_joints as kl
+from mocapfix.core.motion import Motion
 
 KINECT_FILES = shared_files("kinect")
 

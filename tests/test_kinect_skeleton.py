@@ -6,11 +6,11 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from mocapfix import bench_kinect as bk
+from mocapfix.bench import kinect as bk
 from mocapfix import formats
 from mocapfix.cleaners import build
-from mocapfix.cleaners.depth_skeleton import (leg_swap_frames, nearest_starts, validated_shares,
-                                              validation_starts)
+from mocapfix.solvers.depth_skeleton import (leg_swap_frames, nearest_starts, validated_shares,
+                                             validation_starts)
 from mocapfix.cli import main
 from mocapfix.formats import kinect as kf
 from mocapfix.solvers import run_offsets, svshrink, whittaker
@@ -302,7 +302,7 @@ def test_beats_the_best_kinect_baseline(scenario, bound):
     """Measured (05_02 + 60_10, seed 0): 0.74 / 0.76 / 0.49 of the best baseline (seeds
     1-2: 0.75-0.76 / 0.53-0.63 / 0.32-0.43; before the jump-read Inferred offsets, the
     linear fill and the local strengths: 0.77 / 0.80 / 0.52)."""
-    from mocapfix.pipeline import parse_config
+    from mocapfix.config import parse_config
 
     pipe = parse_config({"version": 1, "pipeline": [{"cleaner": "kinect_skeleton"}]})
     res = bk.run([shared("asfamc/05_02.amc"), shared("asfamc/60_10.amc")], seeds=[0],
@@ -484,9 +484,9 @@ def test_report_status_separates_good_kinect_recordings_from_bad(config):
     LabanotationSuite and MSR recordings OK, the glitchy UTKinect ones and KinectReader
     (32 % Inferred) WARN. With the optical markers' 50 mm every Kinect file warned."""
     from mocapfix.clean import clean_motion
-    from mocapfix.pipeline import load_config
-    from mocapfix.presets import resolve_config
-    from mocapfix.report import build_report
+    from mocapfix.config import load_config
+    from mocapfix.core.presets import resolve_config
+    from mocapfix.quality.report import build_report
     from tests.conftest import need
 
     pipe = load_config(resolve_config(config))

@@ -7,10 +7,11 @@ import numpy as np
 import pytest
 
 from conftest import REPO, shared
-from mocapfix import corrupt, metrics
+from mocapfix.bench import corrupt
+from mocapfix.core import metrics
 from mocapfix.cleaners import build
-from mocapfix.errors import ConfigError
-from mocapfix.motion import Motion, Skeleton
+from mocapfix.core.errors import ConfigError
+from mocapfix.core.motion import Motion, Skeleton
 from mocapfix.solvers import isometry, wavelet_ops
 
 
@@ -371,7 +372,7 @@ def test_kinect_settings_do_not_diverge_at_snr5(walk_snr5):
     ~75 cm squeezes bones to a few cm while their estimated lengths are ~1 m, and each
     Gauss–Newton step threw joints up to 7 m. Measured after: cleaner 59.8 cm, the
     kinect config (Kalman after it) 17.5 cm, from 74.8 cm of noise."""
-    from mocapfix.pipeline import load_config
+    from mocapfix.config import load_config
 
     motion, corrupted, inp = walk_snr5
     cm = 100 * motion.metres_per_unit
@@ -391,7 +392,7 @@ def test_divergent_alm_is_detected_and_falls_back(monkeypatch):
     isometry term (the same as asking for γ = 0), said in ``info``; if that diverges as
     well, the data is returned. Measured on these limbs with 5 mm noise (mean error
     8.0 mm): tuned settings 5.6 mm, with γ = 0 6.9 mm."""
-    from mocapfix.cleaners import lowrank_isometry
+    from mocapfix.solvers import lowrank_isometry
 
     clean, _ = _limbs_motion()
     rng = np.random.default_rng(3)

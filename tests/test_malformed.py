@@ -10,9 +10,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mocapfix.errors import UnreadableFileError
+from mocapfix.core.errors import UnreadableFileError
 from mocapfix.formats import read
-from mocapfix.motion import Motion
+from mocapfix.core.motion import Motion
 from conftest import SAMPLE_DATA, hang_guard
 
 SAMPLES = ["walk.bvh", "walker_01.amc", "walk_markers.c3d", "walk_kinect_v2.csv"]

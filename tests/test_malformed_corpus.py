@@ -13,10 +13,10 @@ import pytest
 
 from malformed_corpus import cases
 from mocapfix.clean import clean_file
-from mocapfix.errors import ConfigError, MocapfixError
+from mocapfix.core.errors import ConfigError, MocapfixError
 from mocapfix.formats import read
-from mocapfix.motion import Motion
-from mocapfix.pipeline import loads_config
+from mocapfix.core.motion import Motion
+from mocapfix.config import loads_config
 from conftest import hang_guard
 
 CASES = cases()

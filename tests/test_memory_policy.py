@@ -1,4 +1,4 @@
-"""The CLI's memory policy (mocapfix.memory): freed memory stays in the process while a
+"""The CLI's memory policy (mocapfix.core.memory): freed memory stays in the process while a
 file is cleaned and goes back after it. Measured on the process's resident set (Linux,
 glibc: the platform the policy acts on; elsewhere it does nothing)."""
 import subprocess
@@ -8,7 +8,7 @@ import pytest
 
 SCRIPT = """
 import numpy as np
-from mocapfix.memory import retain_freed_memory, release_freed_memory
+from mocapfix.core.memory import retain_freed_memory, release_freed_memory
 
 def rss_mb():
     with open("/proc/self/statm") as f:
@@ -42,11 +42,11 @@ def test_freed_memory_is_kept_until_released():
 
 
 def test_cli_and_pool_workers_keep_freed_memory(monkeypatch):
-    import mocapfix.memory as memory
+    import mocapfix.core.memory as memory
     from click.testing import CliRunner
 
     from mocapfix.cli import main
-    from mocapfix.threads import set_task_threads, task_threads, worker_init
+    from mocapfix.core.threads import set_task_threads, task_threads, worker_init
 
     calls = []
     monkeypatch.setattr(memory, "retain_freed_memory", lambda: calls.append(1) or True)
@@ -64,8 +64,8 @@ def test_cli_and_pool_workers_keep_freed_memory(monkeypatch):
 
 def test_freed_memory_is_returned_after_every_file(monkeypatch):
     """In the calling process (-j 1) and in a batch worker, each file ends with a trim."""
-    import mocapfix.memory as memory
-    from mocapfix.batch import InWorker, run_tasks
+    import mocapfix.core.memory as memory
+    from mocapfix.batch.tasks import InWorker, run_tasks
 
     calls = []
     monkeypatch.setattr(memory, "release_freed_memory", lambda: calls.append(1))

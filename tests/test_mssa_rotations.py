@@ -6,10 +6,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mocapfix import bench_rotations as br
-from mocapfix import formats, models
+from mocapfix.bench import rotations as br
+from mocapfix import formats
+from mocapfix.core import models
 from mocapfix.cleaners import build
-from mocapfix.errors import ConfigError
+from mocapfix.core.errors import ConfigError
 from mocapfix.solvers import glitches, rotchannels, ssa, sure
 from conftest import shared
 
@@ -442,8 +443,8 @@ def test_mssa_with_a_named_model_refuses_a_file_the_model_was_not_made_for():
     made for, the file is an error naming it (bases learned from the file instead left a
     line that said OK); with no model named, the file's own bases are the documented
     fallback (test above)."""
-    from mocapfix.errors import MocapfixError
-    from mocapfix.pipeline import loads_config
+    from mocapfix.core.errors import MocapfixError
+    from mocapfix.config import loads_config
     pipeline = loads_config("version: 1\npipeline:\n  - cleaner: mssa\n    model: mssa-cmu\n")
     cleaner = pipeline.steps[0].cleaner
     amc = formats.read(shared("asfamc/13_39.amc"))

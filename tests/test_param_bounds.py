@@ -11,9 +11,9 @@ import pytest
 from scipy import ndimage
 
 from mocapfix.cleaners import build, registry
-from mocapfix.errors import ConfigError
-from mocapfix.motion import Motion
-from mocapfix.pipeline import loads_config
+from mocapfix.core.errors import ConfigError
+from mocapfix.core.motion import Motion
+from mocapfix.config import loads_config
 from mocapfix.solvers import segments
 from mocapfix.solvers.localfit import local_polyfit, moving_median
 from conftest import hang_guard

@@ -11,13 +11,15 @@ import pytest
 from click.testing import CliRunner
 
 from conftest import shared
-from mocapfix import corrupt, formats, metrics, models
+from mocapfix import formats
+from mocapfix.bench import corrupt
+from mocapfix.core import metrics, models
 from mocapfix.bench import cleaner_input
 from mocapfix.cleaners import build
 from mocapfix.cli import main
-from mocapfix.errors import ConfigError
-from mocapfix.motion import Motion
-from mocapfix.pipeline import parse_config
+from mocapfix.core.errors import ConfigError
+from mocapfix.core.motion import Motion
+from mocapfix.config import parse_config
 
 SEEDS = (0, 1, 2)
 
@@ -350,8 +352,8 @@ def test_no_readable_training_file_names_it_once_with_its_line_and_writes_no_mod
 
 
 def test_kinect_v1_v2_azure_and_msr_names_map_to_the_kinect_model_joints():
-    from mocapfix import bodyparts
-    from mocapfix.formats import kinect_layouts as kl
+    from mocapfix.core import bodyparts
+    from mocapfix.core import kinect_joints as kl
 
     v2 = [n.lower() for n in bodyparts.KINECT_V2_NAMES]
     for layout in (names for names, _ in kl.JOINT_SETS.values()):

@@ -3,7 +3,7 @@ low-rank kernels of mocapfix.solvers.lowrank.
 
 Known answers on hand-made arrays and synthetic rigid motions; measured bounds on the
 real captures CMU 85_02 (breakdance, 810 frames) and an HDM05 slice, corrupted with
-mocapfix.corrupt.occlusion. Baselines for comparison are computed here with
+mocapfix.bench.corrupt.occlusion. Baselines for comparison are computed here with
 scipy.interpolate directly.
 """
 from __future__ import annotations
@@ -13,10 +13,10 @@ import pytest
 from scipy.interpolate import PchipInterpolator
 
 from mocapfix.cleaners import build
-from mocapfix.corrupt import occlusion
-from mocapfix.errors import ConfigError
-from mocapfix.metrics import rmse
-from mocapfix.motion import Motion
+from mocapfix.bench.corrupt import occlusion
+from mocapfix.core.errors import ConfigError
+from mocapfix.core.metrics import rmse
+from mocapfix.core.motion import Motion
 from mocapfix.solvers.lowrank import (conditional_mean_rows, impute_lowrank, lowrank_approx,
                                       missing_patterns, rank_for_variance, shrink, svt)
 from conftest import shared
@@ -332,7 +332,7 @@ def test_fill_pca_rejects_fills_outside_the_capture_volume():
 def test_swaps_nanmedian_equals_numpy():
     """The sort-based median of the rigid templates: known answers (odd and even counts,
     an all-NaN column) and numpy's nanmedian on random distances with NaN."""
-    from mocapfix.cleaners.swaps import _nanmedian_first_axis
+    from mocapfix.solvers.swaps import _nanmedian_first_axis
 
     x = np.array([[1.0, 4.0, np.nan], [np.nan, 2.0, np.nan], [3.0, 9.0, np.nan],
                   [7.0, 1.0, np.nan]])
@@ -346,7 +346,7 @@ def test_swaps_nanmedian_equals_numpy():
 
 
 def test_swaps_pair_distances_equal_the_direct_norms():
-    from mocapfix.cleaners.swaps import _pair_distances
+    from mocapfix.solvers.swaps import _pair_distances
 
     rng = np.random.default_rng(6)
     S = rng.normal(size=(50, 7, 3)) * 300

@@ -8,10 +8,10 @@ import pytest
 
 from mocapfix.cleaners import registry
 from mocapfix.cleaners.base import Cleaner, Param
-from mocapfix.errors import ConfigError
-from mocapfix.motion import Motion
-from mocapfix.pipeline import load_config, loads_config
-from mocapfix.quantity import parse_quantity
+from mocapfix.core.errors import ConfigError
+from mocapfix.core.motion import Motion
+from mocapfix.config import load_config, loads_config
+from mocapfix.core.quantity import parse_quantity
 
 CONFIGS = sorted((Path(__file__).resolve().parents[1] / "configs").glob("*.yaml"))
 

@@ -6,8 +6,8 @@ import pytest
 
 from mocapfix import read
 from mocapfix.cleaners import build
-from mocapfix.corrupt import occlusion
-from mocapfix.motion import Motion
+from mocapfix.bench.corrupt import occlusion
+from mocapfix.core.motion import Motion
 from mocapfix.solvers import pma as kernels
 
 from conftest import shared
@@ -78,7 +78,7 @@ def test_default_fills_the_start_gap_without_a_jump():
     """c3dorg_s01_Eb015pi: PV3 misses its first 47 frames. The default's fill must not
     plateau and then jump to meet the data: no frame-to-frame step in the gap or onto its
     border larger than the largest step of the marker's own data."""
-    from mocapfix.pipeline import default_config_path, load_config
+    from mocapfix.config import default_config_path, load_config
 
     m = read(shared("c3d/c3dorg_s01_Eb015pi.c3d"))
     j = m.index("PV3")

@@ -9,7 +9,7 @@ import pytest
 from click.testing import CliRunner
 
 from mocapfix.cli import main
-from mocapfix.errors import UnreadableFileError
+from mocapfix.core.errors import UnreadableFileError
 from mocapfix.formats import read, write
 
 from conftest import SAMPLE_DATA, hang_guard, no_traceback

@@ -10,9 +10,9 @@ from click.testing import CliRunner
 
 from mocapfix.clean import clean_motion
 from mocapfix.cli import main
-from mocapfix.motion import Motion, Skeleton
-from mocapfix.pipeline import loads_config
-from mocapfix.report import build_report, to_html, to_json, to_markdown
+from mocapfix.core.motion import Motion, Skeleton
+from mocapfix.config import loads_config
+from mocapfix.quality.report import build_report, to_html, to_json, to_markdown
 
 from conftest import no_traceback, shared
 
@@ -213,7 +213,7 @@ def test_plot_ticks_are_round_inside_the_range_and_at_least_two():
     5), and the browser test found a Kinect panel with one y tick."""
     from hypothesis import given, strategies as st
 
-    from mocapfix.render import _ticks
+    from mocapfix.quality.render import _ticks
 
     assert _ticks(0.5, 8.54) == [2.0, 4.0, 6.0, 8.0]
     assert _ticks(0.0, 100.0) == [0.0, 50.0, 100.0]
@@ -235,8 +235,8 @@ def test_markdown_says_what_each_step_found():
     pair ``kinect_skeleton`` found rigid and held, with its counts; per-joint tables of the
     step's info (noise, cut-offs) stay in the JSON only."""
     from mocapfix import read
-    from mocapfix.pipeline import load_config
-    from mocapfix.presets import resolve_config
+    from mocapfix.config import load_config
+    from mocapfix.core.presets import resolve_config
 
     motion = read(shared("kinect/kv2_laban_Ges01_wavehand.csv"))
     report = build_report(clean_motion(motion, load_config(resolve_config("kinect"))))
@@ -275,8 +275,8 @@ def test_empty_frames_around_the_take_change_nothing_a_step_does(rel, config):
     the padding, and every step's findings the same — gap counts that match the report's,
     and outliers rebuilt in place reported on the same frames of the file."""
     from mocapfix import read
-    from mocapfix.presets import resolve_config
-    from mocapfix.pipeline import load_config
+    from mocapfix.core.presets import resolve_config
+    from mocapfix.config import load_config
     motion = read(shared(rel))
     if motion.n_frames > 900:
         motion = motion.slice_frames(0, 900)

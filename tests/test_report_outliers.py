@@ -7,8 +7,8 @@ import numpy as np
 
 from mocapfix import formats
 from mocapfix.clean import clean_motion
-from mocapfix.pipeline import loads_config
-from mocapfix.report import build_report
+from mocapfix.config import loads_config
+from mocapfix.quality.report import build_report
 from conftest import shared
 
 
@@ -57,7 +57,7 @@ def test_a_kinect_glitch_replaced_in_place_is_counted_and_named():
 
 
 def test_replaced_frames_map_to_samples_by_name_and_skip_what_cannot_be_placed():
-    from mocapfix.pipeline import replaced_mask
+    from mocapfix.pipeline.steps import replaced_mask
 
     info = {"replaced_frames": {"A": [0, 5, 99, -1], "B": [1], "C": [2], "Z": [3]}}
     mask = replaced_mask(info, ["A", "B", "B", "C"], (10, 4))
@@ -71,8 +71,8 @@ def test_a_bvh_joint_re_made_where_its_parent_was_is_moved_by_the_parent():
     and its parent are both re-made at a frame, the parent is named as the cause of the
     joint's move (bvh-python's test file with a 35° glitch put by hand on LeftFoot and
     LeftToeBase at frames 40-41; the file as read has none the limb's path contradicts)."""
-    from mocapfix.pipeline import load_config
-    from mocapfix.presets import resolve_config
+    from mocapfix.config import load_config
+    from mocapfix.core.presets import resolve_config
 
     m = formats.read(shared("bvh/bvhpython_test_freebvh.bvh"))
     pipe = load_config(resolve_config("default"))

@@ -15,11 +15,11 @@ from pathlib import Path
 from click.testing import CliRunner
 
 from conftest import SAMPLE_DATA, no_traceback, output_tree, shared
-from mocapfix import models
+from mocapfix.core import models
 from mocapfix.cli import main
-from mocapfix.fileio import file_sha256
-from mocapfix.manifest import MANIFEST_NAME, run_key
-from mocapfix.pipeline import loads_config
+from mocapfix.core.fileio import file_sha256
+from mocapfix.batch.manifest import MANIFEST_NAME, run_key
+from mocapfix.config import loads_config
 
 CFG = "pipeline:\n  - cleaner: spikes\n  - cleaner: fill\n    max_gap: 0.5 s\n  - cleaner: gaussian\n"
 

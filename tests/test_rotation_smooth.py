@@ -7,8 +7,8 @@ import pytest
 
 from mocapfix.cleaners import build
 from mocapfix.cleaners.rotations import continuous_quaternions
-from mocapfix.kinematics import Rig
-from mocapfix.motion import Motion
+from mocapfix.core.kinematics import Rig
+from mocapfix.core.motion import Motion
 from conftest import shared
 
 

@@ -8,14 +8,14 @@ import re
 import numpy as np
 import pytest
 
-from mocapfix.measure import CleanResult
-from mocapfix.pipeline import StepRecord
-from mocapfix.errors import ConfigError
-from mocapfix.measure import measure_input
-from mocapfix.motion import Motion
-from mocapfix.pipeline import loads_config
-from mocapfix.report import build_report
-from mocapfix.rules import default_rules, load_rules, loads_rules, preset_names, RULES_DIR
+from mocapfix.quality.measure import CleanResult
+from mocapfix.pipeline.steps import StepRecord
+from mocapfix.core.errors import ConfigError
+from mocapfix.quality.measure import measure_input
+from mocapfix.core.motion import Motion
+from mocapfix.config import loads_config
+from mocapfix.quality.report import build_report
+from mocapfix.quality.rules import default_rules, load_rules, loads_rules, preset_names, RULES_DIR
 
 
 def _motion(fmt="c3d"):
@@ -171,7 +171,7 @@ def test_bones_a_file_animates_by_translation_are_not_judged(tmp_path):
     # "Hips: bone length varies by 45 %"; the spine, whose position channels hold still,
     # is a segment and is judged
     from mocapfix import formats
-    from mocapfix.measure import bone_variation, bones_of
+    from mocapfix.quality.measure import bone_variation, bones_of
 
     path = tmp_path / "root_motion.bvh"
     path.write_text(ROOT_MOTION_BVH)

@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from mocapfix import read
-from mocapfix.errors import ConfigError
-from mocapfix.motion import Motion
-from mocapfix.pipeline import loads_config
+from mocapfix.core.errors import ConfigError
+from mocapfix.core.motion import Motion
+from mocapfix.config import loads_config
 
 from conftest import shared
 
@@ -98,9 +98,9 @@ def test_bad_selection_is_a_config_error():
 
 def _clean_report(path, config=None):
     from mocapfix.clean import clean_motion
-    from mocapfix.pipeline import load_config
-    from mocapfix.presets import resolve_config
-    from mocapfix.report import build_report
+    from mocapfix.config import load_config
+    from mocapfix.core.presets import resolve_config
+    from mocapfix.quality.report import build_report
 
     pipe = loads_config(config) if config else load_config(resolve_config("default"))
     motion = read(path)
@@ -159,7 +159,7 @@ def test_pipeline_exclude_takes_markers_out_of_the_grading():
 
 
 def test_markdown_report_names_what_was_not_cleaned():
-    from mocapfix.report import to_markdown
+    from mocapfix.quality.report import to_markdown
 
     _, report = _clean_report(shared(PIG[0]))
     md = to_markdown(report)
@@ -172,8 +172,8 @@ def test_check_passes_over_model_outputs_whatever_their_names():
     """`check` judges markers: a rule without name patterns does not see the model outputs
     (the shipped optical-gait rules also exclude them by name, for files that do not list
     them in POINT:ANGLES/...)."""
-    from mocapfix.check import check_motion
-    from mocapfix.rules import loads_rules
+    from mocapfix.batch.check import check_motion
+    from mocapfix.quality.rules import loads_rules
 
     motion = read(shared(PIG[1]))
     rules = loads_rules("version: 1\nrules:\n  - {metric: missing, fail: 0 %}\n"
@@ -192,10 +192,10 @@ def test_check_passes_over_model_outputs_whatever_their_names():
 def test_a_result_built_without_the_pipeline_still_skips_model_outputs():
     """measure_cleaning works the model outputs out from the motion when the caller did
     not say what the pipeline left alone (library users, benchmark scripts)."""
-    from mocapfix.measure import CleanResult
-    from mocapfix.pipeline import load_config
-    from mocapfix.presets import resolve_config
-    from mocapfix.report import build_report
+    from mocapfix.quality.measure import CleanResult
+    from mocapfix.config import load_config
+    from mocapfix.core.presets import resolve_config
+    from mocapfix.quality.report import build_report
 
     motion = read(shared(PIG[1]))
     pipe = load_config(resolve_config("default"))

@@ -1,4 +1,4 @@
-"""Task threads (mocapfix.threads.parallel_map): the independent pieces of work inside one
+"""Task threads (mocapfix.core.threads.parallel_map): the independent pieces of work inside one
 file (fill_ensemble's gap models, trust's marker blocks, swaps' frame chunks) run on the
 cores available to a single-file clean, one thread in a batch worker, and the results do
 not depend on the number of threads."""
@@ -10,11 +10,12 @@ import numpy as np
 import pytest
 
 from conftest import shared
-from mocapfix import read, threads
-from mocapfix.batch import InWorker, run_tasks
-from mocapfix.corrupt import occlusion
-from mocapfix.pipeline import load_config
-from mocapfix.presets import resolve_config
+from mocapfix import read
+from mocapfix.core import threads
+from mocapfix.batch.tasks import InWorker, run_tasks
+from mocapfix.bench.corrupt import occlusion
+from mocapfix.config import load_config
+from mocapfix.core.presets import resolve_config
 
 
 @pytest.fixture

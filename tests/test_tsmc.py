@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 
 from mocapfix.cleaners import build
-from mocapfix.cleaners.tsmc import bridge_residual, tsmc_solve
-from mocapfix.motion import Motion
+from mocapfix.solvers.tsmc import bridge_residual, tsmc_solve
+from mocapfix.core.motion import Motion
 from mocapfix.solvers import dct
 from mocapfix.solvers.lowrank import svt
 from mocapfix.solvers.segments import linear_bridge
@@ -227,14 +227,14 @@ def amc_random_missing():
     """CMU 05_01 joint positions (598 frames × 31 joints) with 40 % of the samples missing
     at random (the TSMC paper's protocol), seeds 0 and 1."""
     import mocapfix
-    from mocapfix.corrupt import apply_protocol
+    from mocapfix.bench.corrupt import apply_protocol
 
     truth = mocapfix.read(shared("asfamc/05_01.amc"))
     return truth, [apply_protocol(truth, "feng2014", "random-missing", seed=s)[0] for s in (0, 1)]
 
 
 def _tsmc_mm(truth, bad, **params):
-    from mocapfix.metrics import rmse
+    from mocapfix.core.metrics import rmse
 
     out, _ = build("tsmc", prior="none", **params).apply(bad)
     return rmse(out.positions, truth.positions) * truth.metres_per_unit * 1000.0
@@ -257,7 +257,7 @@ def test_gap_edge_bridge_helps_on_isolated_missing_samples(amc_random_missing, m
     on isolated missing samples with ``prior: none`` it lowers the RMSE from 1.67 / 1.61 mm
     to 1.39 / 1.38 mm (measured). With the default ``prior: pca`` it changes the occlusion
     results by < 1 % (the PCA prediction already meets the gap's edges)."""
-    import mocapfix.cleaners.tsmc as tsmc_module
+    import mocapfix.solvers.tsmc as tsmc_module
 
     truth, cases = amc_random_missing
     bridged = [_tsmc_mm(truth, bad) for bad in cases]
@@ -414,7 +414,7 @@ def test_trust_one_absurd_sample_costs_only_itself():
     import numpy as np
 
     from mocapfix.formats import read
-    from mocapfix.pipeline import loads_config
+    from mocapfix.config import loads_config
 
     motion = read(SAMPLE_DATA / "walk_markers.c3d")
     trust = loads_config("version: 1\npipeline:\n  - cleaner: trust\n")
@@ -435,7 +435,7 @@ def test_trust_gross_screen_ignores_mislabelled_units():
     # the gross-error screen is relative to the capture's extent: millimetre data labelled
     # as metres is not one big gross error (an absolute 100 m screen took every sample)
     from mocapfix.formats import read
-    from mocapfix.pipeline import loads_config
+    from mocapfix.config import loads_config
 
     motion = read(SAMPLE_DATA / "walk_markers.c3d")
     wrong = motion.replace(metres_per_unit=1.0)
@@ -449,7 +449,7 @@ def test_trust_gross_screen_keeps_a_wand_moving_over_a_static_rig():
     import numpy as np
 
     from mocapfix.formats import read
-    from mocapfix.pipeline import loads_config
+    from mocapfix.config import loads_config
 
     base = read(SAMPLE_DATA / "walk_markers.c3d")
     T = base.n_frames
@@ -475,7 +475,7 @@ def test_trust_one_sample_metres_off_costs_only_itself():
     takes those samples alone; every other output sample is as without them. The real
     captures hold no such sample: 85_02, HDM05 and the 30 Hz PhaseSpace file lose none."""
     from mocapfix.formats import read
-    from mocapfix.pipeline import loads_config
+    from mocapfix.config import loads_config
 
     trust = loads_config("version: 1\npipeline:\n  - cleaner: trust\n")
     for name in ("cmu_85_02.c3d", "hdm05_HDM_mm_01-02_03_120.c3d", "c3dorg_s20_phasespace_sample.c3d"):

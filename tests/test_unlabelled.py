@@ -1,4 +1,4 @@
-"""Unlabelled trajectories are not markers to rebuild (mocapfix/unlabelled.py): a Vicon
+"""Unlabelled trajectories are not markers to rebuild (mocapfix/pipeline/unlabelled.py): a Vicon
 Plug-in Gait trial given five ``*N`` trajectories seen on one frame each, and ktk's racing
 capture, whose Sternum is seen on 3 % of the take, are cleaned with those trajectories
 passed through bit-identical (read back with py-c3d), not used as donors, not graded, and
@@ -14,16 +14,16 @@ import pytest
 from click.testing import CliRunner
 
 from mocapfix import formats, read
-from mocapfix.check import check_motion
+from mocapfix.batch.check import check_motion
 from mocapfix.clean import clean_file, clean_motion
 from mocapfix.cli import main
-from mocapfix.errors import ConfigError
-from mocapfix.motion import Motion
-from mocapfix.pipeline import default_config_path, load_config, loads_config
-from mocapfix.report import build_report, to_html, to_markdown
-from mocapfix.rules import default_rules, load_rules, loads_rules
-from mocapfix.selection import not_cleaned, take
-from mocapfix.unlabelled import name_convention
+from mocapfix.core.errors import ConfigError
+from mocapfix.core.motion import Motion
+from mocapfix.config import default_config_path, load_config, loads_config
+from mocapfix.quality.report import build_report, to_html, to_markdown
+from mocapfix.quality.rules import default_rules, load_rules, loads_rules
+from mocapfix.pipeline.selection import not_cleaned, take
+from mocapfix.pipeline.unlabelled import name_convention
 
 from conftest import shared
 
@@ -292,7 +292,7 @@ def test_benchmarks_leave_unlabelled_trajectories_out_of_the_truth():
     """HDM05's *0-*2 are no markers any pipeline cleans by default: the bench (and the
     accuracy cases) measure methods on its 41 named markers, and say so."""
     from mocapfix import bench
-    from mocapfix.selection import without_unlabelled
+    from mocapfix.pipeline.selection import without_unlabelled
 
     hdm = read(shared("c3d/hdm05_HDM_mm_01-02_03_120.c3d")).slice_frames(0, 240)
     named, dropped = without_unlabelled(hdm)

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mocapfix.kinematics import Rig, euler_to_matrix
-from mocapfix.writeback import decompose, solve_channels
+from mocapfix.core.kinematics import Rig, euler_to_matrix
+from mocapfix.core.writeback import decompose, solve_channels
 from conftest import shared, shared_files, need
 
 
@@ -130,7 +130,7 @@ def test_other_euler_solution_kept_when_nothing_changes(name, tmp_path):
 
 @pytest.mark.parametrize("axes", ["ZXY", "XYZ", "ZYX"])
 def test_nearest_euler_picks_the_equivalent_triplet_of_the_reference(axes):
-    from mocapfix.kinematics import matrix_to_euler, nearest_euler
+    from mocapfix.core.kinematics import matrix_to_euler, nearest_euler
 
     rng = np.random.default_rng(7)
     ref = rng.uniform(-170, 170, (200, 3))
@@ -146,9 +146,10 @@ def test_write_back_keeps_the_channels_of_rotation_cleaners_and_solves_moved_pos
     """The rotation cleaners return channels and their forward kinematics: nothing is
     left to solve, the channels are written as the cleaner made them (residual 0). A step
     that moves positions still gets its channels solved."""
-    from mocapfix import formats, writeback
+    from mocapfix import formats
+    from mocapfix.core import writeback
     from mocapfix.clean import clean_motion
-    from mocapfix.pipeline import loads_config
+    from mocapfix.config import loads_config
 
     m = formats.read(shared("bvh/cmu_cgspeed_131_01.bvh"))
     calls = []

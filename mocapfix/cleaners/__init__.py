@@ -1,59 +1,21 @@
 """Registry of cleaners by name.
 
-A cleaner module registers its classes with :func:`register`; :func:`build` makes one
-from a config step. ``_WHERE`` maps every cleaner name to its module, so :func:`build`
-imports only the modules a pipeline names (a clean with the default C3D steps does not
-load scipy.signal, scipy.interpolate or pywt unless a step needs them); :func:`registry`
-(listing every cleaner) imports them all. A module not in ``_WHERE`` can still register
-its cleaners when it is imported.
+A cleaner module registers its classes with :func:`register` — the one place a cleaner
+is listed: a new module in this package is found when the registry is first asked for a
+name (:func:`registry`, :func:`lookup`, :func:`build`), which imports every module here.
+None of them imports SciPy or PyWavelets at module level, so listing them all stays cheap
+(tests/test_cleaner_registry.py).
 """
 from __future__ import annotations
 
 import importlib
+import pkgutil
 
 from mocapfix.cleaners.base import Cleaner, Param
-from mocapfix.errors import ConfigError
+from mocapfix.core.errors import ConfigError
 
 _REGISTRY: dict[str, type[Cleaner]] = {}
-_MODULES = (
-    "mocapfix.cleaners.fill",
-    "mocapfix.cleaners.smooth",
-    "mocapfix.cleaners.spikes",
-    "mocapfix.cleaners.pca_fill",
-    "mocapfix.cleaners.swaps",
-    "mocapfix.cleaners.rotations",
-    "mocapfix.cleaners.lowrank_isometry",
-    "mocapfix.cleaners.tsmc",
-    "mocapfix.cleaners.partlet",
-    "mocapfix.cleaners.depth_skeleton",
-    "mocapfix.cleaners.pma",
-    "mocapfix.cleaners.mssa",
-)
 _loaded = False
-
-#: cleaner name → module that registers it (tests check the two agree)
-_WHERE = {
-    "fill": "mocapfix.cleaners.fill",
-    "gaussian": "mocapfix.cleaners.smooth",
-    "butterworth": "mocapfix.cleaners.smooth",
-    "wavelet": "mocapfix.cleaners.smooth",
-    "kalman": "mocapfix.cleaners.smooth",
-    "spikes": "mocapfix.cleaners.spikes",
-    "fill_pca": "mocapfix.cleaners.pca_fill",
-    "swaps": "mocapfix.cleaners.swaps",
-    "rotation_smooth": "mocapfix.cleaners.rotations",
-    "lowrank_isometry": "mocapfix.cleaners.lowrank_isometry",
-    "trust": "mocapfix.cleaners.tsmc",
-    "tsmc": "mocapfix.cleaners.tsmc",
-    "pma": "mocapfix.cleaners.pma",
-    "fill_ensemble": "mocapfix.cleaners.pma",
-    "partlet_dictionary": "mocapfix.cleaners.partlet",
-    "kinect_skeleton": "mocapfix.cleaners.depth_skeleton",
-    "mssa": "mocapfix.cleaners.mssa",
-    "euler_smooth": "mocapfix.cleaners.rotations",
-    "rotation_outliers": "mocapfix.cleaners.rotations",
-    "rotation_denoise": "mocapfix.cleaners.rotations",
-}
 
 
 def register(cls: type[Cleaner]) -> type[Cleaner]:
@@ -66,15 +28,13 @@ def register(cls: type[Cleaner]) -> type[Cleaner]:
 
 
 def _load() -> None:
+    """Import every module of this package: each registers its cleaners as it is
+    imported (the :func:`register` decorator is the one place a cleaner is listed)."""
     global _loaded
     if _loaded:
         return
-    for mod in _MODULES:
-        try:
-            importlib.import_module(mod)
-        except ModuleNotFoundError as exc:
-            if exc.name != mod:
-                raise
+    for module in pkgutil.iter_modules(__path__):
+        importlib.import_module(f"{__name__}.{module.name}")
     _loaded = True
 
 
@@ -84,9 +44,7 @@ def registry() -> dict[str, type[Cleaner]]:
 
 
 def lookup(name: str) -> type[Cleaner] | None:
-    """The cleaner class named ``name``, importing only its module when it is known."""
-    if name not in _REGISTRY and name in _WHERE:
-        importlib.import_module(_WHERE[name])
+    """The cleaner class named ``name`` (None: no such cleaner)."""
     return _REGISTRY.get(name) or registry().get(name)
 
 

@@ -5,7 +5,7 @@ Parameters are declared with :class:`Param`. Physical ones (``length``, ``time``
 ``frequency``) accept ``"20 mm"``, ``"0.5 s"``, ``"12 frames"``, ``"6 Hz"`` or a bare number in
 the declared default unit, and are converted to the motion's units and frame rate inside
 ``apply`` via :meth:`Cleaner.frames` and :meth:`Cleaner.length`. A bad value raises
-:class:`~mocapfix.errors.ConfigError` naming the step, the parameter and the allowed range.
+:class:`~mocapfix.core.errors.ConfigError` naming the step, the parameter and the allowed range.
 
 ``info`` is a JSON-serialisable dict of what the cleaner wants in the report (iterations,
 swaps found, ...). What was filled, flagged or moved is derived by the pipeline from the
@@ -21,9 +21,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, ClassVar
 
-from mocapfix.errors import ConfigError
-from mocapfix.motion import Motion
-from mocapfix.quantity import Quantity, parse_quantity
+from mocapfix.core.errors import ConfigError
+from mocapfix.core.motion import Motion
+from mocapfix.core.quantity import Quantity, parse_quantity
 
 _PHYSICAL = {"length", "time", "frequency"}
 
@@ -260,7 +260,7 @@ class FittedCleaner(Cleaner):
     Parameters stay exactly as given. ``fit(motions)`` sets the learned state in
     trailing-underscore attributes (listed in ``fitted_attributes``; lengths in metres)
     and never changes a parameter; ``apply`` never changes the cleaner. The state goes to
-    and comes from model files (:mod:`mocapfix.models`) through :meth:`state` and
+    and comes from model files (:mod:`mocapfix.core.models`) through :meth:`state` and
     :meth:`load_state`. A cleaner with a ``model`` parameter loads its state from that
     model when the config is loaded.
     """
@@ -303,8 +303,8 @@ class FittedCleaner(Cleaner):
         """The model files this step may read: the one its ``model`` parameter named, or
         when none is named the shipped models it chooses from per file (:attr:`auto_models`).
         Their content decides the outputs as much as the config does: a resumed batch
-        hashes them (:func:`mocapfix.manifest.run_key`)."""
-        from mocapfix import models
+        hashes them (:func:`mocapfix.batch.manifest.run_key`)."""
+        from mocapfix.core import models
 
         if self._model_file is not None:
             return [self._model_file]
@@ -318,7 +318,7 @@ class FittedCleaner(Cleaner):
         shipped models, read and check its header (a ConfigError naming the step if it is
         missing, corrupt or made for another cleaner) and load the state (cached per
         process, so a worker reads each model once)."""
-        from mocapfix import models
+        from mocapfix.core import models
 
         if self.model_param is None:
             return
@@ -334,6 +334,6 @@ class FittedCleaner(Cleaner):
         try:
             self.load_state(header, arrays)
         except (KeyError, ValueError, TypeError) as exc:
-            from mocapfix.errors import ConfigError
+            from mocapfix.core.errors import ConfigError
             raise ConfigError(f"{self.step}: model {path} is incompatible with {self.name!r}: "
                               f"{type(exc).__name__}: {exc}") from None

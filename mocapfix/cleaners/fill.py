@@ -7,8 +7,8 @@ import numpy as np
 
 from mocapfix.cleaners import register
 from mocapfix.cleaners.base import FILL_ERRORS, REJECTED_FILLS, Cleaner, FillGate, Param
-from mocapfix.gaps import gap_report, runs
-from mocapfix.motion import Motion
+from mocapfix.core.gaps import gap_report, runs
+from mocapfix.core.motion import Motion
 from mocapfix.solvers import fill_error
 from mocapfix.solvers.segments import INTERPOLATORS, fillable, interpolate_gaps
 

@@ -42,8 +42,8 @@ import numpy as np
 
 from mocapfix.cleaners import register
 from mocapfix.cleaners.base import FittedCleaner, Param
-from mocapfix.errors import MocapfixError
-from mocapfix.motion import Motion
+from mocapfix.core.errors import MocapfixError
+from mocapfix.core.motion import Motion
 from mocapfix.solvers import rotchannels, ssa
 from mocapfix.solvers.segments import linear_bridge
 
@@ -260,7 +260,7 @@ class MSSA(FittedCleaner):
                     "model: self")
             return None
         if self.values["model"] is None:   # "self": no model
-            from mocapfix import models
+            from mocapfix.core import models
 
             ships = models.shipped()
             for name in AUTO_MODELS:

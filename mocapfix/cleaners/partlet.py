@@ -111,7 +111,7 @@ penalty (no gain at the per-channel oracle), torso frame smoothing 0.1 / 0.2 s (
 5.01), the local strength for the torso frame fit too (2 seeds: 30 dB −0.4 %, 10 dB
 +1.1 %), 2 or 4 alternations (mixed), 10 FISTA iterations (30 dB 0.95).
 
-Outside this cleaner (``benchmarks/partlet_sure_pool.py``, 2 seeds): this cleaner's output,
+Outside this cleaner (``benchmarks/studies/partlet_sure_pool.py``, 2 seeds): this cleaner's output,
 the K-SVD ℓ2 one and ``tsmc``'s, each also smoothed at 8 strengths, weighted per file by
 SURE with Monte-Carlo divergences: 30 dB 0.845, 20 dB 1.95, 10 dB 4.77, at 3.7× the time;
 weighted with the truth, 10 dB no better than 4.67.
@@ -133,11 +133,11 @@ import warnings
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 
-from mocapfix import bodyparts
+from mocapfix.core import bodyparts
 from mocapfix.cleaners import register
 from mocapfix.cleaners.base import FittedCleaner, Param
-from mocapfix.errors import ConfigError, MocapfixError
-from mocapfix.motion import Motion
+from mocapfix.core.errors import ConfigError, MocapfixError
+from mocapfix.core.motion import Motion
 from mocapfix.solvers import sparse
 from mocapfix.solvers.bone_projection import project_lengths
 from mocapfix.solvers.dct import gcv_smooth
@@ -583,8 +583,8 @@ class PartletDictionary(FittedCleaner):
         skeleton (by its joint names, :data:`AUTO_MODELS`), chosen per file: a batch may
         mix CMU and Kinect skeletons, and ``apply`` never changes the configured cleaner
         (it used to keep the first file's model for the whole run). Model files are read
-        once per process (:func:`mocapfix.models.load`)."""
-        from mocapfix import models
+        once per process (:func:`mocapfix.core.models.load`)."""
+        from mocapfix.core import models
 
         canon = set(bodyparts.canonical_names(motion.names))
         for key, name in AUTO_MODELS:

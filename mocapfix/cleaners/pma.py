@@ -36,8 +36,8 @@ import numpy as np
 
 from mocapfix.cleaners import build, register
 from mocapfix.cleaners.base import FILL_ERRORS, REJECTED_FILLS, Cleaner, FillGate, Param
-from mocapfix.errors import ConfigError
-from mocapfix.motion import Motion, missing_samples
+from mocapfix.core.errors import ConfigError
+from mocapfix.core.motion import Motion, missing_samples
 from mocapfix.solvers import fill_error, pma
 from mocapfix.solvers.pca_gapfill import fill_gaps_pca
 from mocapfix.solvers.segments import largest_steps, steepest_step

@@ -1,7 +1,7 @@
 """Channel-space smoothing of the rotations a BVH or AMC file stores.
 
 Position-space cleaners work on forward-kinematics joint positions and are written back
-as rotations (:mod:`mocapfix.writeback`). This cleaner instead low-passes the channels
+as rotations (:mod:`mocapfix.core.writeback`). This cleaner instead low-passes the channels
 themselves, in a continuous representation (never raw, wrapped Euler angles): each joint with
 three rotation DOFs is turned into unit quaternions (scipy ``Rotation``, intrinsic order
 of the file), signs are made continuous (q and −q are the same rotation; a flip would be
@@ -22,15 +22,14 @@ import numpy as np
 
 from mocapfix.cleaners import register
 from mocapfix.cleaners.base import REPLACED_FRAMES, Cleaner, Param
-from mocapfix.errors import ConfigError
-from mocapfix.gaps import runs
-from mocapfix.kinematics import moved_by_rotation, nearest_branch, nearest_euler
-from mocapfix.motion import Motion
-from mocapfix.solvers import glitches, rotchannels, segments, sure
+from mocapfix.core.errors import ConfigError
+from mocapfix.core.kinematics import nearest_branch, nearest_euler
+from mocapfix.core.motion import Motion
+from mocapfix.solvers import glitches, rotation_glitches, rotchannels, segments, sure
 from mocapfix.solvers.noise import white_noise
 from mocapfix.solvers.rotchannels import continuous_quaternions
 from mocapfix.solvers.segments import linear_bridge
-from mocapfix.writeback import solve_channels
+from mocapfix.core.writeback import solve_channels
 
 
 def _channels_from_positions(motion: Motion) -> np.ndarray:
@@ -193,11 +192,12 @@ class RotationOutliers(Cleaner):
     30 Hz turn a joint that fast. A marked run is re-made only when the world-space path
     of the joints its rotation moves contradicts the input there — re-made, that path
     keeps at most ``evidence`` of its summed squared acceleration over the run and two
-    frames on each side (:func:`_contradicted_by_limbs`): a glitch throws the limb's end
+    frames on each side (:func:`mocapfix.solvers.rotation_glitches.contradicted_by_limbs`):
+    a glitch throws the limb's end
     out and back, a real turn moves it along a smooth path that re-making one joint
     breaks. On the shared takes as read this left the professionally cleaned Bandai
     takes untouched (86 mm before) and every remaining re-make one its limb's path
-    contradicts (benchmarks/HARM.md), while the ``rotations`` protocol's spikes fell from
+    contradicts (benchmarks/results/harm.md), while the ``rotations`` protocol's spikes fell from
     0.19× to 0.02× the better animator's filter (the re-makes of clean motion were most
     of the error left).
     """
@@ -227,28 +227,12 @@ class RotationOutliers(Cleaner):
         if rig is None or motion.channels is None or motion.n_frames < self["width"]:
             return motion.copy(), {"skipped": "no rotation channels (or too few frames)"}
         ch, F = _features_of(motion)
-        spikes = glitches.glitches(F, width=self["width"], k=self["threshold"], floor=self["min_angle"])
-        layout = rotchannels.layout(rig)
-        sizes = [e["size"] for e in layout]
-        edges = np.cumsum([0] + sizes)
-        joint_bad = np.stack([spikes[:, a:b].any(axis=1) for a, b in zip(edges[:-1], edges[1:])], axis=1)
-        if not joint_bad.any():
+        out, joint_bad, candidates = rotation_glitches.remake(
+            rig, ch, F, width=self["width"], k=self["threshold"], floor=self["min_angle"],
+            neutral=self.length("neutral", motion), ratio=self["evidence"])
+        if not candidates:
             return motion.replace(channels=ch, positions=rig.positions(ch)), {"spike_frames": 0}
-        G = F.copy()
-        for n, (a, b) in enumerate(zip(edges[:-1], edges[1:])):
-            G[joint_bad[:, n], a:b] = np.nan
-        G, _ = segments.interpolate_gaps(G, "pchip")
-        G = np.where(np.isnan(G), F, G)           # spikes at the very ends: hold the input
-        new = rotchannels.from_features(rig, G, ch)
-        joints = [j for j, axes in enumerate(rig.rot_axes) if axes]
-        candidates = int(joint_bad.sum())
-        joint_bad = _contradicted_by_limbs(rig, ch, new, joint_bad, joints,
-                                           self.length("neutral", motion), self["evidence"])
-        out = ch.copy()
-        for n, j in enumerate(joints):
-            rows = joint_bad[:, n]
-            if rows.any():
-                out[np.ix_(rows, rig.rot_columns[j])] = new[np.ix_(rows, rig.rot_columns[j])]
+        layout = rotchannels.layout(rig)
         hit = np.flatnonzero(joint_bad.any(axis=0))
         return motion.replace(channels=out, positions=rig.positions(out)), {
             "spike_frames": int(joint_bad.any(axis=1).sum()), "joint_frames_replaced": int(joint_bad.sum()),
@@ -256,58 +240,6 @@ class RotationOutliers(Cleaner):
             "joints": {layout[n]["joint"]: int(joint_bad[:, n].sum()) for n in hit},
             REPLACED_FRAMES: {layout[n]["joint"]: np.flatnonzero(joint_bad[:, n]).tolist()
                               for n in hit}}
-
-
-def _contradicted_by_limbs(rig, ch: np.ndarray, new: np.ndarray, bad: np.ndarray, joints: list[int],
-                           neutral: float, ratio: float) -> np.ndarray:
-    """``bad`` (T, joints with rotations) without the runs the world-space motion of the
-    limb does not contradict. A run of a joint's re-made channels is kept only when it
-    moves the joints its rotation moves (:func:`mocapfix.kinematics.moved_by_rotation`)
-    by more than ``neutral`` — with no lever there is nothing in the take to test the
-    channels against (the 30 Hz Bandai toes, whose end sites sit on the joint, bend at
-    every toe-off) — and makes their path smoother, by
-    :func:`mocapfix.solvers.glitches.limb_contradicts`: a glitch in the channels throws
-    the limb's end out and back, a real fast turn (a kick's knee at 30 Hz) moves it along
-    a smooth path that re-making the joint alone would break. Runs whose frames (with the
-    test's context) overlap and whose joints move some joint in common
-    (:func:`mocapfix.solvers.glitches.overlapping_runs`) are judged one after the other,
-    the most evident first, each against the take with the runs kept before it re-made:
-    a glitch on a foot and its toe at once leaves the toe's path rough while only one is
-    re-made, and a toe bent at a knee glitch gains no evidence from the knee's."""
-    T = len(ch)
-    moved = moved_by_rotation(rig)
-    context = glitches.EVIDENCE_CONTEXT
-    found = [(n, int(s), int(L)) for n in range(len(joints)) if len(moved[joints[n]])
-             for _, s, L in zip(*runs(bad[:, n][:, None]))]
-
-    def effect(run, state) -> float:
-        """The share of its limb's squared acceleration a run's re-making leaves in
-        ``state`` (inf without a lever)."""
-        n, s, L = run
-        j = joints[n]
-        a, b = max(s - context, 0), min(s + L + context, T)
-        trial = state[a:b].copy()
-        trial[s - a:s - a + L, rig.rot_columns[j]] = new[s:s + L, rig.rot_columns[j]]
-        before = rig.positions(state[a:b])[:, moved[j]]
-        after = rig.positions(trial)[:, moved[j]]
-        if np.nanmax(np.linalg.norm(after - before, axis=-1), initial=0.0) <= neutral:
-            return np.inf
-        return glitches.acceleration_share(before, after)
-
-    keep = np.zeros_like(bad)
-    for group in glitches.overlapping_runs(found, [set(moved[j].tolist()) for j in joints], context):
-        state = ch
-        while group:
-            shares = [effect(run, state) for run in group]
-            best = int(np.argmin(shares))
-            if not shares[best] <= ratio:
-                break
-            n, s, L = group.pop(best)
-            keep[s:s + L, n] = True
-            cols = rig.rot_columns[joints[n]]
-            state = state.copy()
-            state[s:s + L, cols] = new[s:s + L, cols]
-    return keep
 
 
 @register

@@ -12,9 +12,9 @@ import numpy as np
 
 from mocapfix.cleaners import register
 from mocapfix.cleaners.base import Cleaner, Param
-from mocapfix.gaps import gap_report
-from mocapfix.errors import ConfigError
-from mocapfix.motion import Motion
+from mocapfix.core.gaps import gap_report
+from mocapfix.core.errors import ConfigError
+from mocapfix.core.motion import Motion
 from mocapfix.solvers import segments
 from mocapfix.solvers.kalman import cv_rts_smoother
 

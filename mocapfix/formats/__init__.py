@@ -2,7 +2,7 @@
 
 Each format module defines ``NAME``, ``SUFFIXES``, ``sniff(head: bytes) -> bool``,
 ``read(path, **options) -> Motion`` and ``write(motion, path, **options) -> list[Path]``
-(writers use :mod:`mocapfix.fileio` so outputs appear atomically); one whose reader reads
+(writers use :mod:`mocapfix.core.fileio` so outputs appear atomically); one whose reader reads
 other files besides the one named also defines ``companion_files(path) -> list[Path]``.
 Modules are imported on first use so that ``mocapfix --help`` stays fast.
 """
@@ -11,8 +11,8 @@ from __future__ import annotations
 import importlib
 from pathlib import Path
 
-from mocapfix.errors import MocapfixError, UnreadableFileError, WriteError
-from mocapfix.motion import Motion
+from mocapfix.core.errors import MocapfixError, UnreadableFileError, WriteError
+from mocapfix.core.motion import Motion
 
 #: The one format table: name -> (module, suffixes). Each format module takes its ``NAME``
 #: and ``SUFFIXES`` from here; configs, rule files and folder discovery use it too.

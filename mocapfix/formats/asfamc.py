@@ -8,7 +8,7 @@ Reading
 
     Joints are ``root`` followed by one joint per bone — the bone's END point — in
     ``:bonedata`` order, re-ordered only where needed so that parents come first.
-    ``positions`` are the forward kinematics of a :class:`~mocapfix.kinematics.Rig`
+    ``positions`` are the forward kinematics of a :class:`~mocapfix.core.kinematics.Rig`
     built as that module's docstring describes (``pre_j = C_p⁻¹ C_j``, offset
     ``length · C_j⁻¹ · direction`` in the bone's own frame, root ``pre = C_root`` from
     ``orientation`` in the root ``axis`` order, root translation added to ``position``),
@@ -65,13 +65,13 @@ from pathlib import Path
 
 import numpy as np
 
-from mocapfix.errors import UnreadableFileError, UnsupportedFeatureError, WriteError
-from mocapfix.fileio import atomic_write_bytes, read_input_bytes
+from mocapfix.core.errors import UnreadableFileError, UnsupportedFeatureError, WriteError
+from mocapfix.core.fileio import atomic_write_bytes, read_input_bytes
 from mocapfix.formats import suffixes
 from mocapfix.formats.textenc import UTF8_BOM, refuse_wide_text
-from mocapfix.kinematics import Rig, euler_to_matrix
-from mocapfix.motion import Motion, Skeleton
-from mocapfix.units import asf_length_unit
+from mocapfix.core.kinematics import Rig, euler_to_matrix
+from mocapfix.core.motion import Motion, Skeleton
+from mocapfix.core.units import asf_length_unit
 
 NAME = "asfamc"
 SUFFIXES = suffixes(NAME)
@@ -829,7 +829,7 @@ def skeleton_conflict(amc: Path | None, asf: Path, asf_bytes: bytes, *, rewritin
       the AMC outputs the caller writes there, each beside its own copy: the outputs of
       an earlier run, cleaned again after their ASF was edited), it is replaced.
 
-    A batch checks every file before any runs (:func:`mocapfix.batch.skeleton_conflicts`):
+    A batch checks every file before any runs (:func:`mocapfix.batch.plan.skeleton_conflicts`):
     ``planned`` maps the names of the other copies it writes in that folder to the ASF
     each copies, ``present`` holds the names of the files there (:func:`file_names`),
     ``outsiders`` the AMCs there it does not write; the writer checks a file written

@@ -4,7 +4,7 @@ What is handled
 ---------------
 * Any rotation order per joint (CMU "cgspeed" conversions mix ZXY and ZYX in one file).
   Rotations are intrinsic in the listed order: ``CHANNELS 3 Zrotation Xrotation Yrotation``
-  gives ``Rig.rot_axes == "ZXY"``, i.e. ``Rz · Rx · Ry`` (see :mod:`mocapfix.kinematics`).
+  gives ``Rig.rot_axes == "ZXY"``, i.e. ``Rz · Rx · Ry`` (see :mod:`mocapfix.core.kinematics`).
 * Position channels on any joint (Bandai-Namco files give every joint 6 channels),
   ``CHANNELS 0``, joints without a ``CHANNELS`` line, several ``ROOT`` trees, joint names
   with spaces, CHANNELS before OFFSET, unknown channel types (carried through, ignored by FK).
@@ -72,13 +72,13 @@ from pathlib import Path
 
 import numpy as np
 
-from mocapfix.errors import UnreadableFileError, WriteError
-from mocapfix.fileio import atomic_write_bytes, read_input_bytes
+from mocapfix.core.errors import UnreadableFileError, WriteError
+from mocapfix.core.fileio import atomic_write_bytes, read_input_bytes
 from mocapfix.formats import suffixes
 from mocapfix.formats.textenc import refuse_wide_text
-from mocapfix.kinematics import Rig
-from mocapfix.motion import Motion, Skeleton
-from mocapfix.quantity import MAX_FRAME_RATE_HZ, MIN_FRAME_RATE_HZ
+from mocapfix.core.kinematics import Rig
+from mocapfix.core.motion import Motion, Skeleton
+from mocapfix.core.quantity import MAX_FRAME_RATE_HZ, MIN_FRAME_RATE_HZ
 
 NAME = "bvh"
 SUFFIXES = suffixes(NAME)

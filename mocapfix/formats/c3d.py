@@ -73,15 +73,15 @@ from pathlib import Path
 
 import numpy as np
 
-from mocapfix.errors import UnreadableFileError, WriteError
-from mocapfix.fileio import atomic_open, read_input_bytes
+from mocapfix.core.errors import UnreadableFileError, WriteError
+from mocapfix.core.fileio import atomic_open, read_input_bytes
 from mocapfix.formats import suffixes
 from mocapfix.formats.c3d_params import (MAX_DIM, group_record as _group_record, param_data_offset,
                                          param_record as _param_record, string_param as _string_param,
                                          string_value, with_group)
-from mocapfix.motion import Motion
-from mocapfix.quantity import MAX_FRAME_RATE_HZ, MIN_FRAME_RATE_HZ
-from mocapfix.units import METRES_PER_UNIT, normalise_unit_name
+from mocapfix.core.motion import Motion
+from mocapfix.core.quantity import MAX_FRAME_RATE_HZ, MIN_FRAME_RATE_HZ
+from mocapfix.core.units import METRES_PER_UNIT, normalise_unit_name
 
 NAME = "c3d"
 SUFFIXES = suffixes(NAME)
@@ -988,8 +988,8 @@ def _fill_params(motion: Motion, source: C3DSource, filled: np.ndarray,
     to fill (``left``, :func:`_left_runs`: residual -1 in the file) are listed as
     LEFT_POINTS, LEFT_FIRST / LEFT_LAST, LEFT_ERROR / LEFT_BOUND (what their fill's error
     was estimated to be), LEFT_EXTRAPOLATED and LEFT_COUNT."""
-    from mocapfix.gaps import runs
-    from mocapfix.measure import LONG_FILL_S
+    from mocapfix.core.gaps import runs
+    from mocapfix.core.gaps import LONG_FILL_S
     from mocapfix.solvers.fill_error import FillIndex
 
     col, start, length = runs(filled)

@@ -18,7 +18,7 @@ Layouts (detected from content, never from the name):
     rows ``x y z c``, 20 rows per frame, metres. Known: 20 rows per frame, c in [0, 1],
     nominal 15 fps (the dataset's stated rate; the file holds no timing). Assumed: the
     joint order, taken from the bone list of the dataset's ``drawskt.m`` viewer (see
-    :mod:`mocapfix.formats.kinect_layouts`) -- the bone-length tests on the real files
+    :mod:`mocapfix.core.kinect_joints`) -- the bone-length tests on the real files
     confirm it. The other variant (screen u, v, depth) is refused. ``c`` becomes the
     confidence directly. About a quarter of rows have ``c = 0``; on the shared files these
     are always plausible positions of joints the tracker inferred (shoulder centre, spine,
@@ -85,13 +85,13 @@ from pathlib import Path
 
 import numpy as np
 
-from mocapfix.errors import UnreadableFileError, UnsupportedFeatureError, WriteError
-from mocapfix.fileio import atomic_write_bytes, read_input_bytes
+from mocapfix.core.errors import UnreadableFileError, UnsupportedFeatureError, WriteError
+from mocapfix.core.fileio import atomic_write_bytes, read_input_bytes
 from mocapfix.formats import suffixes
-from mocapfix.quantity import MAX_FRAME_RATE_HZ, MIN_FRAME_RATE_HZ
-from mocapfix.formats import kinect_layouts as kl
-from mocapfix.motion import Motion, Skeleton
-from mocapfix.units import METRES_PER_UNIT, normalise_unit_name
+from mocapfix.core.quantity import MAX_FRAME_RATE_HZ, MIN_FRAME_RATE_HZ
+from mocapfix.core import kinect_joints as kl
+from mocapfix.core.motion import Motion, Skeleton
+from mocapfix.core.units import METRES_PER_UNIT, normalise_unit_name
 
 NAME = "kinect"
 SUFFIXES = suffixes(NAME)

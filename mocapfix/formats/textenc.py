@@ -9,7 +9,7 @@ saying how to convert the file.
 """
 from __future__ import annotations
 
-from mocapfix.errors import UnreadableFileError
+from mocapfix.core.errors import UnreadableFileError
 
 UTF8_BOM = b"\xef\xbb\xbf"
 _BOMS = (

@@ -64,7 +64,7 @@ import math
 
 import numpy as np
 
-from mocapfix.gaps import runs
+from mocapfix.core.gaps import runs
 
 #: the coverage of the bound
 LEVEL = 0.9

@@ -13,7 +13,7 @@ from functools import lru_cache
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 
-from mocapfix.gaps import runs
+from mocapfix.core.gaps import runs
 from mocapfix.solvers.segments import linear_bridge
 from mocapfix.solvers.sure import column_groups
 

@@ -34,7 +34,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from mocapfix.gaps import runs
+from mocapfix.core.gaps import runs
 from mocapfix.solvers.lowrank import (conditional_mean_rows, impute_lowrank, missing_patterns,
                                       ppca_from_moments)
 from mocapfix.solvers.rigid import body_frame, to_global

@@ -44,7 +44,7 @@ from __future__ import annotations
 import numpy as np
 
 from mocapfix.solvers.rigid import kabsch_to_shape
-from mocapfix.threads import parallel_map
+from mocapfix.core.threads import parallel_map
 
 #: the fillers computed here (the caller may add its own, e.g. weighted PCA)
 LOCAL_FILLERS = ("interp", "poly", "grnn", "linear", "pose")
@@ -380,7 +380,7 @@ def soft_distance_constraint(x: np.ndarray, others: np.ndarray, mu: np.ndarray, 
 def gap_list(observed: np.ndarray, max_gap: float | None = None, fill_ends: bool = True):
     """(marker, start, stop) of every gap to fill: runs of missing samples of markers seen
     at least once, at most ``max_gap`` frames, end gaps only with ``fill_ends``."""
-    from mocapfix.gaps import runs
+    from mocapfix.core.gaps import runs
 
     T = observed.shape[0]
     j, s, n = runs(~observed)
@@ -408,7 +408,7 @@ def member_fills(pos, observed, gaps, external, *, local=LOCAL_FILLERS, neighbou
     A member learns the same model for every gap of a marker with the same neighbours (the
     training frames are those where the marker is seen): it is fitted once per marker and
     neighbour set and predicts all those gaps (:func:`window_fills`). The fits are
-    independent: they run on the task's threads (:func:`mocapfix.threads.parallel_map`)."""
+    independent: they run on the task's threads (:func:`mocapfix.core.threads.parallel_map`)."""
     if mu is None:
         mu, sd = distance_stats(pos, observed)
     T = pos.shape[0]

@@ -1,5 +1,5 @@
 """Causal joint filters that Kinect applications run frame by frame, used as baselines by
-the ``kinect`` bench protocol (:mod:`mocapfix.bench_kinect`).
+the ``kinect`` bench protocol (:mod:`mocapfix.bench.kinect`).
 
 Both take positions (T, J, 3) without NaN (interpolate missing samples first) and sample
 times (T,) in seconds, and are vectorised over joints; the loop is over frames, as in the

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from mocapfix.kinematics import nearest_branch, nearest_euler
+from mocapfix.core.kinematics import nearest_branch, nearest_euler
 
 QUAT_SCALE = 360.0 / np.pi   # feature units per quaternion unit (≈ degrees for small angles)
 

@@ -32,7 +32,7 @@ from typing import Callable
 
 import numpy as np
 
-from mocapfix.gaps import runs
+from mocapfix.core.gaps import runs
 
 GAP_MODES = ("segments", "bridge")
 INTERPOLATORS = ("linear", "pchip", "spline")

@@ -24,7 +24,6 @@ from __future__ import annotations
 import warnings
 
 import numpy as np
-import pywt
 
 MODE = "periodization"
 
@@ -35,9 +34,11 @@ def padded_length(n: int, level: int) -> int:
     return max(step, -(-int(n) // step) * step)
 
 
-def check_wavelet(wavelet: str) -> pywt.Wavelet:
+def check_wavelet(wavelet: str):
     """The ``pywt.Wavelet`` named ``wavelet``; raises ValueError unless it is orthogonal
     (only orthogonal filter banks give ``WᵀW = I``)."""
+    import pywt  # imported here: listing the cleaners must not load PyWavelets
+
     if wavelet not in pywt.wavelist(kind="discrete"):
         raise ValueError(f"unknown wavelet {wavelet!r}")
     w = pywt.Wavelet(wavelet)
@@ -59,6 +60,8 @@ def forward(x: np.ndarray, wavelet: str = "db10", level: int = 2, axis: int = 0)
     -------
     Array of ``x``'s shape: the coefficients ``[cA_L, cD_L, …, cD_1]`` along ``axis``.
     """
+    import pywt
+
     x = np.asarray(x, dtype=np.float64)
     n = x.shape[axis]
     if n % (1 << level):
@@ -79,6 +82,8 @@ def _split_sizes(n: int, level: int) -> list[int]:
 
 def inverse(c: np.ndarray, wavelet: str = "db10", level: int = 2, axis: int = 0) -> np.ndarray:
     """``Wᵀ c`` (= ``W⁻¹ c``): the inverse of :func:`forward`, same layout."""
+    import pywt
+
     c = np.asarray(c, dtype=np.float64)
     n = c.shape[axis]
     if n % (1 << level):

@@ -1,0 +1,160 @@
+"""Find the input files of a batch (shared by clean, check, info and train-dictionary).
+
+Discovery in folders skips, with a note: hidden files, our own reports and temporary
+files, files whose suffix is no motion format, ``.csv``/``.txt``/``.tsv`` files whose content
+is not motion data (Nexus/QTM exports, notes), special files (FIFOs, devices, sockets),
+broken links and symlink loops, folders that cannot be listed and links to folders (named:
+their files are not processed), and names filtered out by ``include``/``exclude``
+patterns (case-insensitive). Files named explicitly are always taken (and fail with a
+clear error if they cannot be read). Input trees are never written to.
+"""
+from __future__ import annotations
+
+import errno
+import fnmatch
+import os
+import stat
+from dataclasses import dataclass
+from pathlib import Path
+
+from mocapfix.core.errors import ConfigError
+from mocapfix.formats import MOTION_SUFFIXES, suffixes
+
+
+_SKIP_SUFFIXES = (".report.json", ".report.md", ".report.html")
+TEXT_SUFFIXES = suffixes("kinect")
+
+
+@dataclass(frozen=True)
+class Found:
+    """An input file and the folder it was found in (None: named explicitly)."""
+
+    path: Path
+    root: Path | None = None
+
+    @property
+    def relative(self) -> Path:
+        return self.path.relative_to(self.root) if self.root is not None else Path(self.path.name)
+
+
+@dataclass
+class Discovery:
+    files: list
+    skipped: list          # (path, why) of files passed over in folders
+
+
+def _special_kind(mode: int) -> str | None:
+    for test, name in ((stat.S_ISFIFO, "a FIFO"), (stat.S_ISSOCK, "a socket"),
+                       (stat.S_ISCHR, "a character device"), (stat.S_ISBLK, "a block device")):
+        if test(mode):
+            return name
+    return None if stat.S_ISREG(mode) else "not a regular file"
+
+
+def regular_file_problem(path: Path) -> str | None:
+    """Why ``path`` is not a readable regular file (None if it is). Never opens it, so a
+    FIFO cannot block; a symlink loop or a dangling link is named."""
+    try:
+        st = os.stat(path)
+    except OSError as exc:
+        if exc.errno == errno.ELOOP:
+            return "symlink loop"
+        if path.is_symlink():
+            return "broken symlink"
+        return exc.strerror or str(exc)
+    if stat.S_ISDIR(st.st_mode):
+        return None
+    return _special_kind(st.st_mode)
+
+
+def looks_like_motion(path: Path) -> bool:
+    """Content sniff of a text file found in a folder: any format claims it."""
+    from mocapfix.formats import NAMES, module
+
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(4096)
+    except OSError:
+        return True          # let the reader report the problem
+    return any(module(name).sniff(head) for name in NAMES)
+
+
+def _matches(rel: str, patterns) -> bool:
+    """``rel`` (a path relative to its input folder, ``/``-separated) or its file name
+    matches one of the ``--include``/``--exclude`` globs, ignoring case on every OS: the
+    formats are told by suffix in any case, and ``*.c3d`` left out ``take.C3D``."""
+    rel = rel.lower()
+    name = rel.rsplit("/", 1)[-1]
+    return any(fnmatch.fnmatchcase(rel, p.lower()) or fnmatch.fnmatchcase(name, p.lower())
+               for p in patterns)
+
+
+def discover_inputs(inputs, include=(), exclude=(), sniff: bool = True,
+                    once_per_file: bool = False) -> Discovery:
+    """Files to process from files and folders (folders recursed in sorted order).
+    ``once_per_file``: a file found through two given paths is kept once even when its
+    output names would differ (``check``, ``info``: it was checked, listed and counted
+    twice, with two JUnit testcases)."""
+    files: list[Found] = []
+    skipped: list[tuple[str, str]] = []
+    for raw in inputs:
+        path = Path(raw)
+        if not path.exists() and not path.is_symlink():
+            raise ConfigError(f"{path}: no such file or folder")
+        problem = regular_file_problem(path)
+        if problem:
+            raise ConfigError(f"{path}: cannot read: {problem}")
+        if not path.is_dir():
+            files.append(Found(Path(os.path.abspath(path))))
+            continue
+        root = path.resolve()
+
+        def unlisted(exc: OSError):        # os.walk passes over a folder it cannot list
+            skipped.append((exc.filename or str(root), "cannot read this folder: "
+                            f"{exc.strerror or exc} (the files in it were not processed)"))
+
+        for dirpath, dirnames, filenames in os.walk(root, onerror=unlisted):
+            here = Path(dirpath)
+            dirnames[:] = sorted(d for d in dirnames if not d.startswith("."))
+            for d in [d for d in dirnames if (here / d).is_symlink()]:
+                # os.walk does not follow it (a link to "/" or a loop would never end): say
+                # so, or the takes behind it are silently left out
+                skipped.append((str(here / d), "a link to a folder, not followed (name the "
+                                               "folder itself to include it)"))
+            for name in sorted(filenames):
+                f = here / name
+                rel = f.relative_to(root).as_posix()
+                low = name.lower()
+                if (low.startswith(".") or low.endswith(_SKIP_SUFFIXES) or low.endswith(".part")
+                        or f.suffix.lower() not in MOTION_SUFFIXES):
+                    continue
+                if include and not _matches(rel, include):
+                    skipped.append((str(f), "not matched by --include"))
+                    continue
+                if exclude and _matches(rel, exclude):
+                    skipped.append((str(f), "matched by --exclude"))
+                    continue
+                problem = regular_file_problem(f)
+                if problem:
+                    skipped.append((str(f), problem))
+                    continue
+                if sniff and low.endswith(TEXT_SUFFIXES) and not looks_like_motion(f):
+                    skipped.append((str(f), "not motion data (no known layout)"))
+                    continue
+                files.append(Found(f, root))
+    return Discovery(*_once(files, skipped, once_per_file))
+
+
+def _once(files: list, skipped: list, by_file: bool = False) -> tuple[list, list]:
+    """Drop a file named a second time with the same output name (``clean in in/walk.bvh``,
+    or one file given twice): it is processed once, and the skip says why."""
+    seen: set = set()
+    kept = []
+    for f in files:
+        key = (os.path.realpath(f.path), None if by_file else f.relative)
+        if key in seen:
+            skipped.append((str(f.path), "given more than once (processed once)"))
+            continue
+        seen.add(key)
+        kept.append(f)
+    return kept, skipped

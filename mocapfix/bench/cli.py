@@ -1,0 +1,109 @@
+"""The ``mocapfix bench`` command (registered by :mod:`mocapfix.cli` with
+``main.add_command(bench)``). Thin: parses options and calls :func:`mocapfix.bench.run`."""
+from __future__ import annotations
+
+import os
+import sys
+
+import click
+
+from mocapfix.cli_options import GivenPath, executor_spec, executors
+from mocapfix.core.errors import MocapfixError
+
+EXIT_USAGE = 2
+
+
+def _split(value: str | None) -> list[str] | None:
+    if value is None:
+        return None
+    items = [v.strip() for v in value.split(",") if v.strip()]
+    if not items:
+        raise click.BadParameter("give at least one name")
+    return items
+
+
+def _debug(ctx) -> bool:
+    root = ctx.find_root()
+    return bool(isinstance(root.obj, dict) and root.obj.get("debug"))
+
+
+@click.command("bench")
+@click.argument("clean_files", nargs=-1, required=True, type=GivenPath(dir_okay=False))
+@click.option("--protocol", required=True,
+              type=click.Choice(["feng2015", "yang2019", "feng2014", "occlusion", "kinect", "rotations",
+                                 "harm"]),
+              help="Corruption protocol (see the README, 'Benchmarks').")
+@click.option("--methods", default=None,
+              help="Comma-separated registered cleaners and/or baselines (none, "
+                   "linear+gaussian, pca+butterworth), named pipelines, or the oracle-"
+                   "tuned gaussian(tuned), wavelet(tuned), kalman(tuned). Default: every "
+                   "registered cleaner, "
+                   "unless --configs is given. Baselines are always included.")
+@click.option("--configs", default=None,
+              help="Comma-separated YAML pipeline configs, each benchmarked as one method.")
+@click.option("--seeds", default=3, show_default=True, type=click.IntRange(1, 1000),
+              help="Number of seeds (0 … N−1); the same corruption is used for every method.")
+@click.option("--settings", default=None,
+              help="Comma-separated subset of the protocol's settings (default: all).")
+@click.option("--json", "json_out", type=GivenPath(dir_okay=False), default=None,
+              help="Write every run and the summary as JSON.")
+@click.option("--markdown", "md_out", type=GivenPath(dir_okay=False), default=None,
+              help="Write the Markdown tables to this file.")
+@click.option("--per-file", is_flag=True, help="Also tabulate each file separately.")
+@click.option("--quiet", "-q", is_flag=True, help="Do not print the tables or progress.")
+@click.option("-j", "--jobs", default=1, show_default=True, type=click.IntRange(1, 256),
+              help="Corrupted motions benchmarked in parallel (one task per seed, setting and "
+                   "file; not the kinect protocol).")
+@executors
+@click.pass_context
+def bench(ctx, clean_files, protocol, methods, configs, seeds, settings, json_out, md_out,
+          per_file, quiet, jobs, scheduler, dask_workers):
+    """Corrupt each CLEAN_FILE with a seeded PROTOCOL, clean it with each method and
+    print error tables against the clean data (mean ± std over seeds, seconds per file)."""
+    from mocapfix import bench as bench_lib
+    from mocapfix.batch.plan import check_output_file
+    from mocapfix.core.fileio import atomic_write_text, is_stream
+
+    try:                      # before the work: a long run must not end on an unwritable path
+        given = [c.strip() for c in (configs or "").split(",") if c.strip()]
+        for option, path in (("--json", json_out), ("--markdown", md_out)):
+            if path:
+                check_output_file(path, option, clean_files, configs=given)
+        if (json_out and md_out and os.path.realpath(json_out) == os.path.realpath(md_out)
+                and not is_stream(json_out)):
+            # the Markdown replaced the JSON without a word
+            raise MocapfixError(f"--json and --markdown both name {json_out}; give two files")
+    except MocapfixError as exc:
+        if _debug(ctx):
+            raise
+        click.echo(f"mocapfix: error: {exc}", err=True)
+        sys.exit(EXIT_USAGE)
+    if protocol == "kinect":  # CMU captures made into Kinect v2 CSVs: its own runner
+        from mocapfix.bench.kinect import main as kinect_main
+
+        if (jobs > 1 or scheduler or dask_workers) and not quiet:
+            click.echo("bench: note: the kinect protocol runs in this process (-j, "
+                       "--dask-workers and --scheduler are ignored)", err=True)
+        sys.exit(kinect_main(ctx, clean_files, configs, seeds, settings, json_out, md_out, quiet))
+    try:
+        spec = executor_spec(jobs, scheduler, dask_workers)
+        method_list, notes = bench_lib.resolve_methods(_split(methods), _split(configs))
+        progress = None if quiet else (lambda msg: click.echo(f"bench: {msg}", err=True))
+        for n in notes:
+            if not quiet:
+                click.echo(f"bench: note: {n}", err=True)
+        result = bench_lib.run(list(clean_files), protocol, method_list, seeds=seeds,
+                               settings=_split(settings), notes=notes, progress=progress,
+                               spec=spec)
+        markdown = result.to_markdown(per_file=per_file)
+        if json_out:
+            atomic_write_text(json_out, result.to_json(per_file=per_file) + "\n")
+        if md_out:
+            atomic_write_text(md_out, markdown)
+    except MocapfixError as exc:
+        if _debug(ctx):
+            raise
+        click.echo(f"mocapfix: error: {exc}", err=True)
+        sys.exit(EXIT_USAGE)
+    if not quiet:
+        click.echo(markdown)

@@ -1,0 +1,489 @@
+"""Rendering of judged measurements: the clean report as JSON, Markdown and a
+self-contained HTML page (inline SVG plots, no plotting library, no script), and
+``check`` results as text lines, JSON and JUnit XML.
+
+Nothing here measures or judges: see :mod:`mocapfix.quality.measure` and :mod:`mocapfix.quality.rules`.
+"""
+from __future__ import annotations
+
+import html
+import json
+import re
+import socket
+import time
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import numpy as np
+
+from mocapfix.core.errors import name_the_file, one_line
+from mocapfix.core.gaps import runs
+from mocapfix.core.gaps import LONG_FILL_S
+from mocapfix.quality.rules import METRICS, STATUS_ORDER
+from mocapfix.pipeline.unlabelled import is_unlabelled
+
+
+def to_json(report: dict) -> str:
+    return json.dumps(report, indent=1, allow_nan=False)
+
+
+def _pct(x) -> str:
+    return "–" if x is None else f"{100 * x:.1f} %"
+
+
+def _num(x, fmt="{:.1f}") -> str:
+    return "–" if x is None else fmt.format(x)
+
+
+def ranked(report: dict) -> list[dict]:
+    """Joints worst first: status, then missing before, then name."""
+    return sorted(report["joints"], key=lambda j: (-STATUS_ORDER[j["status"]],
+                                                   -(j["missing_before"] or 0), j["name"]))
+
+
+def changed_most(report: dict) -> list[dict]:
+    """Joints by how much cleaning changed them (samples filled or flagged, then the
+    largest move); joints never seen and still missing are left out (nothing to plot)."""
+    T = report["file"]["frames"] or 1
+
+    def amount(j):
+        filled = (j["missing_before"] or 0) - (j["missing_after"] or 0)
+        return (filled + j["outliers_flagged"] / T, j["correction_mm"]["max"] or 0.0)
+
+    shown = [j for j in report["joints"] if (j["missing_after"] or 0) < 1.0]
+    return sorted(shown, key=lambda j: tuple(-x for x in amount(j)) + (j["name"],))
+
+
+def _steps_run(report: dict):
+    run = [s for s in report["steps"] if s.get("skipped") != "not for this format"]
+    other = [s["step"] for s in report["steps"] if s.get("skipped") == "not for this format"]
+    return run, other
+
+
+def _long_fills(report: dict) -> list[str]:
+    """Markdown section listing every fill longer than LONG_FILL_S (none: no section)."""
+    rows = [(j["name"], g) for j in report["joints"] for g in j["gaps"]["filled"] if g.get("long")]
+    if not rows:
+        return []
+    out = ["", f"## Long fills (> {LONG_FILL_S:g} s: rebuilt from the model, not measured)", "",
+           "| joint | frames | s | confidence | estimated error (mm) | 90 % bound (mm) | filled by |",
+           "|---|---|---:|---:|---:|---:|---|"]
+    for name, g in sorted(rows, key=lambda r: -r[1]["length"]):
+        conf = "–" if g.get("confidence") is None else f"{g['confidence']:.2f}"
+        out.append(f"| {_cell(name)} | {g['start']}–{g['start'] + g['length'] - 1} "
+                   f"| {g['seconds']:.2f} | {conf} | {_num(g.get('error_mm'))} "
+                   f"| {_num(g.get('bound_mm'))}{' (extrapolated)' if g.get('extrapolated') else ''} "
+                   f"| {g['filled_by']} |")
+    return out
+
+
+def _fill_summary(f: dict) -> str:
+    """The file summary's line on the fills' error estimates and what was left."""
+    largest = f.get("fill_bound_max_mm")
+    return (f"- fills' 90 % error bound: largest {_num(largest)} mm"
+            + (f" ({f['fills_without_estimate']} fills without an estimate)"
+               if f.get("fills_without_estimate") else "")
+            + f"; samples left as too uncertain to fill: {f.get('samples_left_uncertain', 0)}")
+
+
+def _gaps_left(report: dict, shown: int = 12) -> list[str]:
+    """Markdown section listing the gaps no step filled completely, with the reasons the
+    steps gave for refusing their fills (``rejected_by``); gaps of one span and one reason
+    share a row (a whole-body dropout is one row, not one per marker). None: no section."""
+    fps, frames = report["file"].get("fps") or 0, report["file"]["frames"]
+    rows: dict[tuple, list[str]] = {}
+    for j in report["joints"]:
+        for g in j["gaps"]["unfilled"]:
+            why = "; ".join(f"{r['step']}: {r['why']}" for r in g.get("rejected_by", ()))
+            if not why and g["length"] == frames:
+                why = "never seen in the input"
+            rows.setdefault((g["start"], g["length"], g["filled_frames"], why), []).append(j["name"])
+    if not rows:
+        return []
+    out = ["", "## Gaps left unfilled", "",
+           "| frames | s | joints | why |", "|---|---:|---|---|"]
+    for (start, length, filled, why), names in sorted(rows.items(), key=lambda r: (-r[0][1], r[0][0])):
+        more = f", … (+{len(names) - shown})" if len(names) > shown else ""
+        part = f" ({filled} filled)" if filled else ""
+        secs = f"{length / fps:.2f}" if fps else "–"
+        out.append(f"| {start}–{start + length - 1}{part} | {secs} | {len(names)}: "
+                   f"{_cell(', '.join(names[:shown]))}{more} | {_cell(why or 'no step could fill it')} |")
+    return out
+
+
+def _unlabelled(report: dict, shown: int = 40) -> list[str]:
+    """Markdown section listing the unlabelled trajectories with the reason of each (none:
+    no section)."""
+    rows = [p for p in report.get("not_cleaned") or [] if is_unlabelled(p["why"])]
+    if not rows:
+        return []
+    out = ["", "## Unlabelled trajectories (not markers of the set: passed through unchanged, "
+           "not graded)", "", "| trajectory | why |", "|---|---|"]
+    out += [f"| {_cell(p['name'])} | {_cell(p['why'])} |" for p in rows[:shown]]
+    if len(rows) > shown:
+        out.append(f"| … (+{len(rows) - shown}; the JSON report lists all) | |")
+    return out
+
+
+def _not_cleaned(report: dict, shown: int = 12) -> list[str]:
+    """Markdown section naming the other points left alone by design (model outputs,
+    points the config excludes), grouped by reason."""
+    by_why: dict[str, list[str]] = {}
+    for p in report.get("not_cleaned") or []:
+        if not is_unlabelled(p["why"]):
+            by_why.setdefault(p["why"], []).append(p["name"])
+    if not by_why:
+        return []
+    rig = report.get("file", {}).get("format") in ("bvh", "asfamc")
+    out = ["", "## Not cleaned (" + ("their own channels as read, moving with their parents; "
+                                     if rig else "passed through unchanged, ") + "not graded)", ""]
+    for why, names in by_why.items():
+        more = f", … (+{len(names) - shown})" if len(names) > shown else ""
+        out.append(f"- {len(names)} × {why}: {', '.join(names[:shown])}{more}")
+    return out
+
+
+def _cell(text) -> str:
+    """A name in a Markdown table cell: its pipes escaped and line breaks made spaces (a
+    C3D label "a|b" split its row into one column too many, in the HTML report too)."""
+    return " ".join(str(text).splitlines()).replace("|", "\\|")
+
+
+#: a step's ``info`` lists up to this many items in the Markdown (longer ones: the JSON)
+_FINDINGS_ITEMS = 8
+
+
+def _step_findings(step: dict) -> str:
+    """A step's own figures from its ``info``, for people: numbers, words and short lists
+    (the rigid joint pairs ``kinect_skeleton`` holds, the gaps a filler filled); per-joint
+    tables and long lists stay in the JSON."""
+    def text(v) -> str:
+        return f"{v:.4g}" if isinstance(v, float) else str(v)
+
+    parts = []
+    for key, value in (step.get("info") or {}).items():
+        # the file summary counts the points no step cleans
+        if key == "points_not_cleaned" or value is None or isinstance(value, (bool, dict)):
+            continue
+        label = key.replace("_", " ")
+        if isinstance(value, (int, float, str)):
+            parts.append(f"{label} {_cell(text(value))}")
+        elif isinstance(value, list) and 0 < len(value) <= _FINDINGS_ITEMS and all(
+                isinstance(v, (int, float, str)) and not isinstance(v, bool) for v in value):
+            parts.append(f"{label} {_cell(', '.join(map(text, value)))}")
+    return "; ".join(parts)
+
+
+def to_markdown(report: dict) -> str:
+    f = report["file"]
+    name = Path(f["path"]).name if f.get("path") else "motion"
+    out = [f"# mocapfix report: {name}", "",
+           f"**Status: {f['status']}** — {f['frames']} frames at {f['fps']} fps, {f['joints']} "
+           f"joints/markers ({f['format']}, units {f['units']}).", "",
+           f"- file: {f['path']}",
+           f"- missing before: {_pct(f['missing_before'])}, after: {_pct(f['missing_after'])}",
+           f"- samples filled: {f['samples_filled']}, flagged as outliers: {f['samples_flagged']}",
+           f"- gaps before: {f['gaps_before']}, after: {f.get('gaps_after', '–')} (input gaps "
+           f"not wholly filled: {f['gaps_unfilled']}), "
+           f"long fills (> {LONG_FILL_S:g} s): {f.get('long_fills', 0)}",
+           _fill_summary(f),
+           f"- joints OK / WARN / FAIL: {f['joints_by_status']['OK']} / "
+           f"{f['joints_by_status']['WARN']} / {f['joints_by_status']['FAIL']}"
+           + (f" ({f['points_not_cleaned']} more points not cleaned"
+              + (f", {f['points_unlabelled']} of them unlabelled trajectories"
+                 if f.get("points_unlabelled") else "") + ": see below)"
+              if f.get("points_not_cleaned") else "")]
+    if "writeback_residual_mm" in f:
+        wb = f["writeback_residual_mm"]
+        out.append(f"- rotation write-back residual: mean {_num(wb['mean'], '{:.3f}')} mm, "
+                   f"max {_num(wb['max'], '{:.3f}')} mm")
+    for note in f["notes"]:
+        out.append(f"- note: {note}")
+    run, other = _steps_run(report)
+    out += ["", "## Steps", "", "| step | cleaner | filled | flagged | mean move (mm) | s |",
+            "|---|---|---:|---:|---:|---:|"]
+    for s in run:
+        label = s["step"] + (f" (skipped: {s['skipped']})" if s.get("skipped") else "")
+        out.append(f"| {label} | {s['cleaner']} | {s['filled']} | {s['flagged']} | "
+                   f"{_num(s['moved_mean_mm'], '{:.3f}')} | {_num(s['seconds'], '{:.3f}')} |")
+    found = [f"- {s['step']}: {summary}" for s in run if (summary := _step_findings(s))]
+    if found:
+        out += ["", "What the steps found:", ""] + found
+    if other:
+        out += ["", f"Not run for {f['format']} (the config limits them to other formats): "
+                + ", ".join(other) + "."]
+    out += ["", "## Joints", "",
+            "| joint | status | missing before → after | uncertain | gaps (longest) | outliers | "
+            "correction mean / max (mm) | jitter before → after (m/s²) | why |",
+            "|---|---|---|---|---|---:|---|---|---|"]
+    for j in ranked(report):
+        out.append(
+            f"| {_cell(j['name'])} | {j['status']} | {_pct(j['missing_before'])} → {_pct(j['missing_after'])} "
+            f"| {_pct(j.get('uncertain'))} "
+            f"| {j['gaps']['count']} ({j['gaps']['longest_frames']}) | {j['outliers_flagged']} "
+            f"| {_num(j['correction_mm']['mean'], '{:.2f}')} / {_num(j['correction_mm']['max'], '{:.1f}')} "
+            f"| {_num(j['jitter_before'], '{:.2f}')} → {_num(j['jitter_after'], '{:.2f}')} "
+            f"| {_cell('; '.join(j['reasons'])) or '–'} |")
+    out += _long_fills(report)
+    out += _gaps_left(report)
+    out += _unlabelled(report)
+    out += _not_cleaned(report)
+    rules = report.get("rules") or []
+    if rules:
+        out += ["", "Rules: " + "; ".join(
+            f"{r['name']} ({', '.join(f'{k} {r[k]}' for k in ('warn', 'fail') if k in r)})"
+            for r in rules), ""]
+    return "\n".join(out)
+
+
+# -- HTML ------------------------------------------------------------------------------------
+
+def _ticks(lo: float, hi: float, n: int = 4) -> list[float]:
+    """Round tick values inside [lo, hi] (1-2-5 steps, about ``n`` intervals), at least two
+    of them: rounding the step up (2 → 5) can leave a single multiple in the range."""
+    span = hi - lo
+    if not np.isfinite(span) or span <= 0:
+        return [lo]
+    raw = span / n
+    mag = 10 ** np.floor(np.log10(raw))
+    steps = [m * mag for m in (0.5, 1, 2, 5, 10)]
+    k = next(i for i, m in enumerate(steps) if m >= raw)
+    while True:
+        step = steps[k]
+        first = np.ceil(lo / step) * step
+        ticks = [float(v) for v in np.arange(first, hi + step * 1e-9, step)]
+        if len(ticks) >= 2 or k == 0:
+            return ticks
+        k -= 1
+
+
+def _fmt_tick(v: float) -> str:
+    return f"{v:.0f}" if abs(v) >= 10 or v == int(v) else f"{v:.2g}"
+
+
+def svg_trajectory(before: np.ndarray, after: np.ndarray, filled: np.ndarray,
+                   missing_before: np.ndarray, fps: float, title: str, unit_mm: float,
+                   labels: tuple[str, ...] = ("x (mm)", "y (mm)", "z (mm)", "change (mm)"),
+                   start_s: float = 0.0) -> str:
+    """Inline SVG: three coordinates over time before (grey) and after (colour), and the
+    distance between them (the change cleaning made); missing spans shaded red, filled
+    green. Every panel has labelled axes with ticks (time in s from ``start_s``; ``labels``
+    name the three coordinates and the change, in mm unless they say otherwise: the values
+    are multiplied by ``unit_mm``)."""
+    W, H, left, right, top_pad, bottom = 760, 150, 64, 12, 10, 26
+    T = len(after)
+    duration = (T - 1) / fps if fps and T > 1 else float(max(T - 1, 1))
+    diff = np.linalg.norm(after - before, axis=1) * unit_mm
+    panels = [(labels[a], before[:, a] * unit_mm, after[:, a] * unit_mm, c)
+              for a, c in enumerate(("#c0392b", "#27ae60", "#2c6fbb"))]
+    panels.append((labels[3], None, diff, "#8e44ad"))
+    height = H * len(panels)
+    parts = [f'<svg xmlns="http://www.w3.org/2000/svg" class="plot" width="{W}" height="{height}" '
+             f'viewBox="0 0 {W} {height}" role="img"><title>{html.escape(title)}</title>']
+
+    def X(i):
+        return left + (W - left - right) * i / max(T - 1, 1)
+
+    for p, (label, yb, ya, colour) in enumerate(panels):
+        top = p * H + top_pad
+        inner = H - top_pad - bottom
+        vals = [v[np.isfinite(v)] for v in (yb, ya) if v is not None]
+        both = np.concatenate(vals) if vals else np.zeros(0)
+        lo, hi = (float(both.min()), float(both.max())) if both.size else (0.0, 1.0)
+        if label.startswith("change"):
+            lo = 0.0
+        hi = hi if hi > lo else lo + 1.0
+
+        def Y(v, lo=lo, hi=hi, top=top, inner=inner):
+            return top + inner - inner * (v - lo) / (hi - lo)
+
+        parts.append(f'<g class="panel" data-axis="{html.escape(label)}">')
+        for mask, fill in ((missing_before, "#f6dada"), (filled, "#d6ecd6")):
+            _, s, n = runs(mask[:, None])
+            for a, m in zip(s, n):
+                parts.append(f'<rect x="{X(a):.1f}" y="{top:.1f}" width="{max(X(a + m) - X(a), 1):.1f}" '
+                             f'height="{inner:.1f}" fill="{fill}"/>')
+        # axes, ticks and labels
+        x0, x1, yb0 = left, W - right, top + inner
+        parts.append(f'<line class="axis x" x1="{x0}" y1="{yb0:.1f}" x2="{x1}" y2="{yb0:.1f}" stroke="#333"/>')
+        parts.append(f'<line class="axis y" x1="{x0}" y1="{top:.1f}" x2="{x0}" y2="{yb0:.1f}" stroke="#333"/>')
+        for v in _ticks(lo, hi):
+            y = Y(v)
+            parts.append(f'<line x1="{x0 - 4}" y1="{y:.1f}" x2="{x0}" y2="{y:.1f}" stroke="#333"/>'
+                         f'<text class="tick y" x="{x0 - 6}" y="{y + 4:.1f}" font-size="10" '
+                         f'text-anchor="end">{_fmt_tick(v)}</text>')
+        for v in _ticks(start_s, start_s + duration, 6):
+            x = X((v - start_s) * fps) if fps else X(v - start_s)
+            parts.append(f'<line x1="{x:.1f}" y1="{yb0:.1f}" x2="{x:.1f}" y2="{yb0 + 4:.1f}" stroke="#333"/>'
+                         f'<text class="tick x" x="{x:.1f}" y="{yb0 + 15:.1f}" font-size="10" '
+                         f'text-anchor="middle">{_fmt_tick(v)}</text>')
+        parts.append(f'<text class="label y" x="12" y="{top + inner / 2:.1f}" font-size="11" '
+                     f'transform="rotate(-90 12 {top + inner / 2:.1f})" text-anchor="middle">'
+                     f'{html.escape(label)}</text>')
+        parts.append(f'<text class="label x" x="{W - right}" y="{yb0 + 15:.1f}" font-size="10" '
+                     f'text-anchor="end">time (s)</text>')
+        lines = ([] if yb is None else [(yb, 'stroke="#999" stroke-width="1"')]) + \
+                [(ya, f'stroke="{colour}" stroke-width="1.3"')]
+        for y, style in lines:
+            ok = np.isfinite(y)
+            _, s, n = runs(ok[:, None])
+            for a, m in zip(s, n):
+                step = max(1, m // 1500)
+                idx = np.arange(a, a + m, step)
+                pts = " ".join(f"{X(i):.1f},{Y(y[i]):.1f}" for i in idx)
+                parts.append(f'<polyline fill="none" {style} points="{pts}"/>')
+        parts.append("</g>")
+    parts.append("</svg>")
+    return "".join(parts)
+
+
+def to_html(report: dict, result, n_plots: int = 6) -> str:
+    """The report as one page: summary, steps and joints tables, and trajectory plots of
+    the joints cleaning changed most."""
+    before, after = result.original, result.cleaned
+    filled = np.zeros(before.positions.shape[:2], bool)
+    for r in result.records:
+        filled |= r.filled
+    mm = before.metres_per_unit * 1000.0
+    plots = []
+    for j in changed_most(report)[:n_plots]:
+        k = before.names.index(j["name"])
+        plots.append(f"<h3>{html.escape(j['name'])} — {j['status']}</h3>" + svg_trajectory(
+            before.positions[:, k], after.positions[:, k], filled[:, k] & ~after.missing[:, k],
+            before.missing[:, k], before.fps, j["name"], mm))
+    name = Path(report["file"]["path"]).name if report["file"].get("path") else "motion"
+    body = markdown_to_html(to_markdown(report))
+    return ("<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'>"
+            f"<title>{html.escape(name)} — mocapfix report</title>"
+            "<style>body{font-family:sans-serif;max-width:1100px;margin:2em auto}"
+            "table{border-collapse:collapse;font-size:12px}td,th{border:1px solid #ccc;padding:2px 6px}"
+            "</style></head><body>" + body +
+            "<h2>Trajectories of the joints cleaning changed most</h2><p>grey: input; colour: "
+            "cleaned; the last panel is the distance between them; red shading: missing in the "
+            "input; green: filled by a cleaner.</p>"
+            + ("".join(plots) or "<p>No joint was changed.</p>") + "</body></html>")
+
+
+_INLINE = re.compile(r"`([^`]+)`|\*\*([^*]+)\*\*")
+_PIPE = re.compile(r"(?<!\\)\|")            # a cell border: a pipe not escaped as \|
+
+
+def _inline(text: str) -> str:
+    """Escape, then turn `code` and **bold** into tags."""
+    out, pos = [], 0
+    for m in _INLINE.finditer(text):
+        out.append(html.escape(text[pos:m.start()]))
+        out.append(f"<code>{html.escape(m.group(1))}</code>" if m.group(1) is not None
+                   else f"<strong>{html.escape(m.group(2))}</strong>")
+        pos = m.end()
+    out.append(html.escape(text[pos:]))
+    return "".join(out)
+
+
+def markdown_to_html(md: str) -> str:
+    """Just enough Markdown (headings, lists, pipe tables, bold, code) for our reports."""
+    out, in_table, in_list = [], False, False
+    for line in md.splitlines():
+        if line.startswith("|"):
+            cells = [c.strip().replace("\\|", "|") for c in _PIPE.split(line.strip().strip("|"))]
+            if set("".join(cells)) <= set("-:"):
+                continue
+            tag = "th" if not in_table else "td"
+            if not in_table:
+                out.append("<table>")
+                in_table = True
+            out.append("<tr>" + "".join(f"<{tag}>{_inline(c)}</{tag}>" for c in cells) + "</tr>")
+            continue
+        if in_table:
+            out.append("</table>")
+            in_table = False
+        if line.startswith("- "):
+            if not in_list:
+                out.append("<ul>")
+                in_list = True
+            out.append(f"<li>{_inline(line[2:])}</li>")
+            continue
+        if in_list:
+            out.append("</ul>")
+            in_list = False
+        if line.startswith("#"):
+            level = len(line) - len(line.lstrip("#"))
+            out.append(f"<h{level}>{_inline(line[level:].strip())}</h{level}>")
+        elif line.strip():
+            out.append("<p>" + _inline(line) + "</p>")
+    if in_table:
+        out.append("</table>")
+    if in_list:
+        out.append("</ul>")
+    return "\n".join(out)
+
+
+# -- check results ------------------------------------------------------------------------
+
+def check_line(result: dict, verbose: bool = False) -> str:
+    """One line per file (more with ``verbose``): status, path, the worst findings; a line
+    break in a file name or message is shown as ``\\n`` (it would split the file's line)."""
+    status, path = result["status"], one_line(result["path"])
+    if status == "ERROR":
+        return f"ERROR {one_line(name_the_file(result['path'], result['error']))}"
+    findings = result.get("findings", [])
+    worst = [f for f in findings if f["level"] == status] or findings
+    head = f"{status:<5} {path}"
+    if verbose:
+        lines = [head] + [f"      {f['level']}: {one_line(f['message'])}" for f in findings]
+        unlabelled = (result.get("file") or {}).get("unlabelled") or []
+        if unlabelled:
+            lines.append(f"      not judged: {len(unlabelled)} unlabelled trajectories ("
+                         + one_line(", ".join(u["name"] for u in unlabelled[:8]))
+                         + (", …" if len(unlabelled) > 8 else "") + ")")
+        wc = result.get("would_clean")
+        if wc and "error" not in wc:
+            lines.append(f"      would clean: fill {wc['samples_filled']} samples, flag "
+                         f"{wc['samples_flagged']}, leave {_pct(wc['missing_after'])} missing "
+                         f"({wc.get('samples_left_uncertain', 0)} samples as too uncertain to "
+                         f"fill; largest fill bound {_num(wc.get('fill_bound_max_mm'))} mm) and "
+                         + METRICS["uncertain"].phrase.format(v=_pct(wc["uncertain"])))
+        return "\n".join(lines)
+    if not worst:
+        return head
+    more = f"; +{len(findings) - 1} more" if len(findings) > 1 else ""
+    return f"{head}  ({one_line(worst[0]['message'])}{more})"
+
+
+def check_junit(results: list[dict], seconds: float, suite: str = "mocapfix check") -> str:
+    """JUnit XML: one testcase per file; a FAIL is a <failure> whose message names the rule
+    and the figure (all failing findings in its text), an unreadable file an <error>,
+    warnings go to <system-out>."""
+    failures = sum(r["status"] == "FAIL" for r in results)
+    errors = sum(r["status"] == "ERROR" for r in results)
+    attrs = {"name": suite, "tests": str(len(results)), "failures": str(failures),
+             "errors": str(errors), "skipped": "0", "time": f"{seconds:.3f}"}
+    root = ET.Element("testsuites", attrs)
+    ts = ET.SubElement(root, "testsuite", {**attrs, "timestamp": time.strftime("%Y-%m-%dT%H:%M:%S"),
+                                           "hostname": socket.gethostname()})
+    for r in results:
+        tc = ET.SubElement(ts, "testcase", {"classname": f"mocapfix.check.{r.get('format') or 'unknown'}",
+                                            "name": r["path"], "file": r["path"],
+                                            "time": f"{r.get('seconds', 0.0):.3f}"})
+        findings = r.get("findings", [])
+        if r["status"] == "ERROR":
+            el = ET.SubElement(tc, "error", {"type": "unreadable", "message": r["error"]})
+            el.text = r["error"]
+        elif r["status"] == "FAIL":
+            fails = [f for f in findings if f["level"] == "FAIL"]
+            first = fails[0]
+            el = ET.SubElement(tc, "failure", {"type": first["rule"], "message": first["message"]})
+            el.text = "\n".join(f"{f['rule']}: {f['message']}" for f in fails)
+        warns = [f for f in findings if f["level"] == "WARN"]
+        if warns:
+            ET.SubElement(tc, "system-out").text = "\n".join(f"WARN {f['rule']}: {f['message']}"
+                                                             for f in warns)
+    ET.indent(root)
+    text = ET.tostring(root, encoding="unicode")
+    # control characters (a file named "a\x01b.bvh", a reader quoting raw bytes) are not
+    # allowed in XML 1.0 even as references: written as \xNN text, or CI cannot parse it
+    text = _XML_INVALID.sub(lambda m: f"\\x{ord(m.group()):02x}", text)
+    return '<?xml version="1.0" encoding="UTF-8"?>\n' + text + "\n"
+
+
+_XML_INVALID = re.compile("[\x00-\x08\x0b\x0c\x0e-\x1f\ufffe\uffff]")
