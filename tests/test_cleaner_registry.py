@@ -99,3 +99,45 @@ def test_listing_every_cleaner_loads_no_scipy():
         "names = sorted(cleaners.registry())\n"
         "assert 'partlet_dictionary' in names and 'lowrank_isometry' in names\n")
     assert _scipy_modules(loaded) == []
+
+
+def test_a_new_format_module_is_found_by_the_format_table_alone(tmp_path, monkeypatch):
+    """Adding a format is writing one module: its NAME and SUFFIXES declarations put it in
+    the format table, and files of it are read, cleaned and written with nothing else
+    edited (the module here: one point per line, "x y z" in mm at 100 Hz)."""
+    import numpy as np
+
+    from mocapfix import formats
+    from mocapfix.clean import clean_motion
+    from mocapfix.config import load_config
+    from mocapfix.core.presets import resolve_config
+
+    (tmp_path / "xyz_demo.py").write_text(
+        '"""A demo format: a line of x y z (mm) per frame of one point, 100 Hz."""\n'
+        "from pathlib import Path\n\n"
+        "import numpy as np\n\n"
+        "from mocapfix.core.motion import Motion\n\n"
+        'NAME = "xyz_demo"\n'
+        'SUFFIXES = (".xyz",)\n\n\n'
+        "def sniff(head):\n"
+        "    return head.split(b'\\n', 1)[0].count(b' ') == 2\n\n\n"
+        "def read(path, **options):\n"
+        "    pos = np.loadtxt(path, ndmin=2)[:, None, :]\n"
+        "    return Motion(pos, ['P'], 100.0)\n\n\n"
+        "def write(motion, path, **options):\n"
+        "    np.savetxt(path, motion.positions[:, 0, :])\n"
+        "    return [Path(path)]\n")
+    paths = [*formats.__path__, str(tmp_path)]
+    table = formats._declared_formats(paths)
+    assert list(table)[-1] == "xyz_demo" and table["xyz_demo"][1] == (".xyz",)
+    monkeypatch.setattr(formats, "__path__", paths)
+    monkeypatch.setattr(formats, "FORMATS", table)
+    monkeypatch.setattr(formats, "_SUFFIXES", {s: n for n, (_, ss) in table.items() for s in ss})
+    t = np.arange(50) / 100.0
+    path = tmp_path / "take.xyz"
+    np.savetxt(path, np.stack([100 * np.sin(t), 50 * t, np.zeros_like(t)], axis=1))
+    motion = formats.read(path)
+    assert motion.format == "xyz_demo" and motion.n_frames == 50
+    cleaned = clean_motion(motion, load_config(resolve_config("default"))).cleaned
+    written = formats.write(cleaned, tmp_path / "out.xyz")
+    assert np.allclose(formats.read(written[0]).positions, motion.positions)
