@@ -159,7 +159,7 @@ def test_suspect_samples_find_spikes_and_leave_fast_clean_motion_alone():
     """Known answer: on the clean dance takes almost no sample stands 40 mm off its running
     median (measured: 3 of 34,813 samples of 05_02, at a foot strike; none in 05_10); 30
     spikes of 30 cm are all found, and nothing else but those few."""
-    from mocapfix.cleaners.partlet import suspect_samples
+    from mocapfix.solvers.partlet import suspect_samples
 
     for name in ("05_02.amc", "05_10.amc"):
         truth = _clean(name, 100_000)
@@ -179,7 +179,7 @@ def test_suspect_samples_find_spikes_and_leave_fast_clean_motion_alone():
 def test_rigid_bone_test_tells_a_bone_from_a_pair_that_moves_apart():
     """Known answer: a 30 cm bone under 2 cm noise is rigid, two joints whose distance
     swings by ±10 cm are not, under the same noise; clean data: exact."""
-    from mocapfix.cleaners.partlet import rigid_bones
+    from mocapfix.solvers.partlet import rigid_bones
 
     def rigid_bone(a, b, sigma):
         return bool(rigid_bones(a[:, None], b[:, None], sigma)[0])
