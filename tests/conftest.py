@@ -31,7 +31,7 @@ def _missing(what: str):
 #: Every file of the shared data, by folder, as listed in ../shared/data/SOURCES.md. The
 #: per-file tests are parametrised from this table, not from what happens to be on disk,
 #: so a missing file fails its own test under MOCAPFIX_REQUIRE_DATA=1, and
-#: tests/test_shared_data.py checks that the disk holds exactly these files.
+#: tests/formats/test_shared_data.py checks that the disk holds exactly these files.
 EXPECTED_FILES = {
     "c3d": (
         "btk_ADemo1_pc_integer.c3d", "btk_Gait.c3d", "btk_PiG_Motion-FlatFoot-Hole.c3d",

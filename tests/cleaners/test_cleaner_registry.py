@@ -3,11 +3,10 @@ new module in the package is found without being named anywhere else, and buildi
 default pipeline does not load the heavy scipy/pywt modules it does not use."""
 import subprocess
 import sys
-from pathlib import Path
 
 from mocapfix import cleaners
 
-REPO = Path(__file__).resolve().parents[1]
+from conftest import REPO
 
 
 def _modules_loaded_by(code: str) -> set[str]:

@@ -17,7 +17,7 @@ from mocapfix.solvers import run_offsets, svshrink, whittaker
 from mocapfix.solvers.bone_projection import (median_lengths, project_lengths, steady_pairs,
                                                two_bone_pairs)
 
-from tests.conftest import SAMPLE_DATA, no_traceback, shared, shared_files
+from conftest import SAMPLE_DATA, no_traceback, shared, shared_files
 
 KIN = SAMPLE_DATA / "walk_kinect_v2.csv"
 
@@ -385,7 +385,7 @@ def _bone_var(motion):
 
 @pytest.mark.parametrize("path", shared_files("kinect", "kv1_msr3d_*"))
 def test_msr_constant_bones_stay_constant_and_bones_do_not_get_worse(path):
-    from tests.conftest import need
+    from conftest import need
 
     m = formats.read(need(path))
     out, info = build("kinect_skeleton").apply(m)
@@ -402,7 +402,7 @@ def test_real_files_bones_steadier_and_tracked_samples_rarely_moved_far(path):
     """Measured share of Tracked samples moved by > 5 cm: 0-1.2 % on the Kinect v2 and MSR
     files (3.7 % on KinectReader_joints, 32 % of its samples Inferred)
     and 7-13 % on UTKinect (rows 0.07-0.4 s apart; Kinect v1 bones varying by 14 %)."""
-    from tests.conftest import need
+    from conftest import need
 
     m = formats.read(need(path))
     out, _ = build("kinect_skeleton").apply(m)
@@ -431,7 +431,7 @@ def test_spikes_fire_on_30_fps_skeletons():
 def test_fast_kinect_csv_writer_writes_what_the_general_one_writes(path):
     """The per-frame writer of the headerless Kinect CSVs gives the same text as the
     per-sample one, for moved, filled and removed samples."""
-    from tests.conftest import need
+    from conftest import need
 
     m = formats.read(need(path))
     out, _ = build("kinect_skeleton").apply(m)
@@ -487,7 +487,7 @@ def test_report_status_separates_good_kinect_recordings_from_bad(config):
     from mocapfix.config import load_config
     from mocapfix.core.presets import resolve_config
     from mocapfix.quality.report import build_report
-    from tests.conftest import need
+    from conftest import need
 
     pipe = load_config(resolve_config(config))
     status = {}

@@ -5,7 +5,6 @@ from __future__ import annotations
 import json
 import shutil
 import time
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -21,7 +20,7 @@ from mocapfix.core.motion import Motion, Skeleton
 
 from conftest import SAMPLE_DATA, cut_amc, no_traceback
 
-SAMPLE = Path(__file__).resolve().parent.parent / "sample_data"
+SAMPLE = SAMPLE_DATA
 
 
 def make_motion(T=600, J=31, units="mm", mpu=1e-3, seed=7):

@@ -117,7 +117,7 @@ def test_uncertain_rule_grades_a_marker_rebuilt_from_little_data():
     step = loads_config("pipeline:\n  - cleaner: fill\n").steps[0]
     rebuilt = motion.replace(positions=truth.copy())
     # every point cleaned, as with `unlabelled: {clean: true}` (by default a marker seen on
-    # 3 % of the take is an unlabelled trajectory, left alone: tests/test_unlabelled.py)
+    # 3 % of the take is an unlabelled trajectory, left alone: tests/pipeline/test_unlabelled.py)
     result = CleanResult(motion, rebuilt, [StepRecord.compare(step, motion, rebuilt, {}, 0.0)],
                          not_cleaned=[None] * 3)
     assert not result.cleaned.missing[:, 1].any()         # looks complete after cleaning…

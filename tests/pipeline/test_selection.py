@@ -152,7 +152,7 @@ def test_pipeline_exclude_takes_markers_out_of_the_grading():
                                 "  - {cleaner: fill, method: linear, max_gap: 0.5 s}\n")
     why = {p["name"]: p["why"] for p in excluded["not_cleaned"]}
     assert {n: why[n] for n in probes} == dict.fromkeys(probes, "excluded by the config")
-    # the file's other point left alone: Sternum, seen on 3 % of the take (tests/test_unlabelled.py)
+    # the file's other point left alone: Sternum, seen on 3 % of the take (tests/pipeline/test_unlabelled.py)
     assert set(why) - set(probes) == {"Sternum"}
     assert not set(why) & {j["name"] for j in excluded["joints"]}
     assert excluded["file"]["joints"] == motion.n_joints - 7

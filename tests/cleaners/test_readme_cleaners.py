@@ -2,11 +2,11 @@
 its parameters with their defaults (the table is written by hand; this keeps it true)."""
 from __future__ import annotations
 
-from pathlib import Path
-
 from mocapfix.cleaners import registry
 
-README = Path(__file__).resolve().parents[1] / "README.md"
+from conftest import REPO
+
+README = REPO / "README.md"
 
 
 def test_every_cleaner_row_matches_the_registry():

@@ -22,7 +22,9 @@ from __future__ import annotations
 import ast
 from pathlib import Path
 
-PACKAGE = Path(__file__).resolve().parents[1] / "mocapfix"
+from conftest import REPO
+
+PACKAGE = REPO / "mocapfix"
 
 LAYERS = [
     ("mocapfix.core",),

@@ -10,7 +10,7 @@ from mocapfix.cleaners.base import FittedCleaner
 from mocapfix.core.motion import Motion, Skeleton
 
 CLEANERS = sorted(registry())
-# fitted cleaners need a model for a skeleton they know: tests/test_fitted_contract.py runs
+# fitted cleaners need a model for a skeleton they know: tests/cleaners/test_fitted_contract.py runs
 # this same contract (shapes, no mutation, determinism, units) on them after fitting
 UNFITTED = sorted(n for n, c in registry().items() if not issubclass(c, FittedCleaner))
 

@@ -1,8 +1,6 @@
 """Config parsing and validation, physical quantities, and the shipped configs."""
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 
@@ -13,7 +11,9 @@ from mocapfix.core.motion import Motion
 from mocapfix.config import load_config, loads_config
 from mocapfix.core.quantity import parse_quantity
 
-CONFIGS = sorted((Path(__file__).resolve().parents[1] / "configs").glob("*.yaml"))
+from conftest import REPO
+
+CONFIGS = sorted((REPO / "configs").glob("*.yaml"))
 
 
 def test_quantities_convert_to_si_and_frames():

@@ -14,7 +14,7 @@ from mocapfix.cli import main
 from mocapfix.formats import kinect as kf
 from mocapfix.solvers.realtime import holt_joint_filter, one_euro
 
-from tests.conftest import cut_amc, no_traceback, shared
+from conftest import cut_amc, no_traceback, shared
 
 
 def _truth(seed=0):
