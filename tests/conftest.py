@@ -136,6 +136,26 @@ def output_tree(folder) -> dict:
     return out
 
 
+#: A quick config for command-line tests that need one: one fill step.
+FILL_CONFIG = "version: 1\npipeline:\n  - cleaner: fill\n    max_gap: 0.5 s\n"
+
+
+def config_file(tmp_path, text: str = FILL_CONFIG, name: str = "cfg.yaml") -> str:
+    """``text`` written to ``tmp_path / name``; its path, as ``-c`` takes it."""
+    p = tmp_path / name
+    p.write_text(text)
+    return str(p)
+
+
+def md5_tree(folder) -> dict:
+    """Every file under ``folder`` -> its MD5: compare two of them to show that a run changed
+    nothing there."""
+    import hashlib
+
+    return {p: hashlib.md5(p.read_bytes()).hexdigest() for p in sorted(Path(folder).rglob("*"))
+            if p.is_file()}
+
+
 def no_traceback(result) -> None:
     """A CliRunner result printed no traceback and raised nothing but its exit."""
     assert "Traceback" not in result.output

@@ -17,6 +17,8 @@ from mocapfix.formats import MOTION_SUFFIXES, write
 from mocapfix.core.motion import Motion
 from conftest import DATA, SAMPLE_DATA, need, shared
 
+BVH = SAMPLE_DATA / "walk.bvh"
+
 
 def _tree(folder):
     return {p.relative_to(folder): (hashlib.sha256(p.read_bytes()).hexdigest(), p.stat().st_mtime_ns)
@@ -211,3 +213,13 @@ def test_a_worker_that_dies_is_an_error_line_naming_its_file(tmp_path, monkeypat
     lines = [ln for ln in res.stderr.splitlines() if ln.startswith("ERROR")]
     assert lines and all(str(tmp_path) in ln and "worker failed" in ln for ln in lines)
     assert "internal error" not in res.output + res.stderr
+
+
+def test_check_names_an_unreadable_file_once(tmp_path):
+    # "ERROR /x/bad.bvh: /x/bad.bvh:1: expected 'HIERARCHY'...": the path came twice
+    bad = tmp_path / "bad.bvh"
+    bad.write_text("not a bvh\n")
+    r = CliRunner().invoke(main, ["check", str(bad), str(BVH)])
+    assert r.exit_code == 3
+    line = next(x for x in r.output.splitlines() if x.startswith("ERROR"))
+    assert line.count(str(bad)) == 1 and line.startswith(f"ERROR {bad}:1: "), line

@@ -1,6 +1,7 @@
 """Batches over executors (issue 13): a Dask cluster gives the same outputs as a local
 run, the pipeline is parsed once per worker, Dask is optional, and no BLAS call in a batch
-worker runs with more threads than the policy gives it (mocapfix.core.threads)."""
+worker runs with more threads than the policy gives it (mocapfix.core.threads). A
+malformed or unreachable scheduler address is refused before the output folder changes."""
 from __future__ import annotations
 
 import sys
@@ -13,7 +14,7 @@ import scipy.linalg
 from click.testing import CliRunner
 from threadpoolctl import threadpool_info, threadpool_limits
 
-from conftest import SAMPLE_DATA, output_tree
+from conftest import SAMPLE_DATA, config_file, md5_tree, no_traceback, output_tree
 from mocapfix.batch import clean as batch_clean
 from mocapfix.core import threads
 from mocapfix.batch.clean import CleanTask, run_batch
@@ -27,6 +28,7 @@ from mocapfix.config import load_config
 from mocapfix.core.presets import resolve_config
 
 MOTION = (".c3d", ".bvh", ".amc", ".asf", ".csv")
+BVH = SAMPLE_DATA / "walk.bvh"
 
 
 def _jobs(outdir):
@@ -173,3 +175,40 @@ def test_check_on_dask_matches_local():
         dask = strip(run_tasks(task, paths, executor=client.get_executor(pure=False)))
     assert len(local) == 4 and local == dask
     assert {r["status"] for r in local.values()} <= {"OK", "WARN", "FAIL"}
+
+
+def test_a_malformed_scheduler_address_is_refused_before_anything_is_written(tmp_path):
+    # "--scheduler foo" raised ValueError (a traceback) when the batch started, after the
+    # output folder and its manifest had been made; dask is in the dev extra
+    out = tmp_path / "out"
+    for address in ("foo", "tcp://host-without-port", "tcp://127.0.0.1:x"):
+        for args in (["clean", str(BVH), "-o", str(out), "-c", config_file(tmp_path)], ["check", str(BVH)]):
+            r = CliRunner().invoke(main, [*args, "--scheduler", address])
+            no_traceback(r)
+            assert r.exit_code == 2, r.output
+            assert f"--scheduler {address!r} is not a Dask scheduler address" in r.output
+    assert not out.exists()
+
+
+def test_an_unreachable_scheduler_leaves_the_output_folder_as_it_was(tmp_path, monkeypatch):
+    # a well-formed address nobody answers: the run used to leave the folders it made and
+    # a manifest of "started" records behind (or append them to an existing manifest)
+    import distributed                                     # the dev extra has it
+
+    def refuse(*args, **kwargs):
+        raise OSError("Timed out trying to connect to tcp://10.0.0.1:8786 after 10 s")
+    monkeypatch.setattr(distributed, "Client", refuse)
+    fresh = tmp_path / "new" / "out"
+    r = CliRunner().invoke(main, ["clean", str(BVH), "-o", str(fresh), "-c", config_file(tmp_path),
+                                  "--scheduler", "tcp://10.0.0.1:8786"])
+    no_traceback(r)
+    assert r.exit_code == 2 and "cannot reach the Dask scheduler" in r.output, r.output
+    assert not (tmp_path / "new").exists()
+    used = tmp_path / "used"
+    r = CliRunner().invoke(main, ["clean", str(BVH), "-o", str(used), "-c", config_file(tmp_path)])
+    assert r.exit_code == 0, r.output
+    before = md5_tree(used)
+    r = CliRunner().invoke(main, ["clean", str(SAMPLE_DATA), "-o", str(used), "-c", config_file(tmp_path),
+                                  "--overwrite", "--scheduler", "tcp://10.0.0.1:8786"])
+    assert r.exit_code == 2, r.output
+    assert md5_tree(used) == before                           # the manifest as it was

@@ -1,6 +1,8 @@
 """Resumable batches (issue 13): the manifest in the output folder lets a re-run skip the
 files an earlier run finished — also after that run was killed — and redo only the rest,
-with the same outputs as one uninterrupted run."""
+with the same outputs as one uninterrupted run. A damaged manifest or config record is
+refused or distrusted, an input that changed while it was cleaned is not recorded as
+finished, and a file found through two given paths resumes."""
 from __future__ import annotations
 
 import json
@@ -14,13 +16,15 @@ from pathlib import Path
 
 from click.testing import CliRunner
 
-from conftest import SAMPLE_DATA, no_traceback, output_tree, shared
+from conftest import SAMPLE_DATA, config_file, no_traceback, output_tree, shared
 from mocapfix.core import models
 from mocapfix.cli import main
 from mocapfix.core.fileio import file_sha256
 from mocapfix.batch.manifest import MANIFEST_NAME, run_key
 from mocapfix.config import loads_config
 
+BVH = SAMPLE_DATA / "walk.bvh"
+KIN = SAMPLE_DATA / "walk_kinect_v2.csv"
 CFG = "pipeline:\n  - cleaner: spikes\n  - cleaner: fill\n    max_gap: 0.5 s\n  - cleaner: gaussian\n"
 
 
@@ -300,3 +304,81 @@ def test_the_run_key_hashes_every_model_a_step_may_read():
         pipeline = loads_config(f"version: 1\npipeline:\n  - {step}\n")
         key = run_key(pipeline.dump(), ["json"], None, pipeline.model_files())
         assert key["models_sha256"] == {str(ships[n]): file_sha256(ships[n]) for n in names}, step
+
+
+def test_a_damaged_manifest_or_config_record_in_the_output_folder(tmp_path):
+    # the journal is a text file anyone can edit; a record whose "files" is not a list of
+    # names crashed every re-run with a TypeError traceback, a folder in place of the
+    # manifest or of the config record with IsADirectoryError (the latter after cleaning)
+    import json
+
+    out = tmp_path / "out"
+    cfg = config_file(tmp_path)
+    assert CliRunner().invoke(main, ["clean", str(BVH), "-o", str(out), "-c", cfg]).exit_code == 0
+    manifest = out / "mocapfix-manifest.jsonl"
+    record = json.loads(manifest.read_text().splitlines()[0])
+    for damaged in (5, [None], {"a": 1}, "walk.bvh"):
+        manifest.write_text(json.dumps({**record, "files": damaged}) + "\n")
+        for policy in ([], ["--skip-existing"]):
+            r = CliRunner().invoke(main, ["clean", str(BVH), "-o", str(out), "-c", cfg, *policy])
+            no_traceback(r)
+            if policy:             # the existing output is kept, as the option says
+                assert r.exit_code == 0 and "output exists" in r.output, r.output
+            else:                  # no trustworthy record: an existing output, refused
+                assert r.exit_code == 2 and "exist already" in r.output, r.output
+    for name in ("mocapfix-manifest.jsonl", "mocapfix-config.yaml"):
+        bad = tmp_path / f"bad_{name}"
+        (bad / name).mkdir(parents=True)
+        r = CliRunner().invoke(main, ["clean", str(BVH), "-o", str(bad), "-c", cfg])
+        no_traceback(r)
+        assert r.exit_code == 2 and name in r.output, r.output
+        assert not (bad / "walk.bvh").exists()
+
+
+def test_an_input_that_changes_while_it_is_cleaned_is_not_recorded_as_finished(tmp_path, monkeypatch):
+    # the manifest took the input's sha256 after the clean: a file still being written
+    # was recorded with its new content against an output of the old one, and the next
+    # run skipped it as "finished earlier", keeping the stale output
+    import mocapfix.clean as clean_module
+
+    src = tmp_path / "in"
+    src.mkdir()
+    take = src / "walk.csv"
+    take.write_bytes(KIN.read_bytes())
+    real = clean_module.clean_motion
+
+    def clean_while_the_file_grows(motion, pipeline):
+        with open(take, "ab") as fh:            # the recorder appends a frame meanwhile
+            fh.write(KIN.read_bytes().splitlines(keepends=True)[-1])
+        return real(motion, pipeline)
+
+    monkeypatch.setattr(clean_module, "clean_motion", clean_while_the_file_grows)
+    out = tmp_path / "out"
+    args = ["clean", str(src), "-o", str(out), "-c", config_file(tmp_path)]
+    r = CliRunner().invoke(main, args)
+    no_traceback(r)
+    assert r.exit_code == 1, r.output
+    assert f"ERROR {take}: the file changed while it was being cleaned" in r.output
+    assert not (out / "walk.csv").exists()
+    monkeypatch.setattr(clean_module, "clean_motion", real)
+    r = CliRunner().invoke(main, args)
+    assert r.exit_code == 0 and "finished earlier" not in r.output, r.output
+    assert (out / "walk.csv").is_file()
+
+
+def test_one_file_found_through_two_given_paths_resumes(tmp_path):
+    # `clean in in/sub/x.csv -o out` writes out/sub/x.csv and out/x.csv; the manifest kept
+    # one record per input, so the same command run again stopped with exit 2, "1 output(s)
+    # exist already … made with another config, report kinds, --fps, version or input"
+    src = tmp_path / "in"
+    (src / "sub").mkdir(parents=True)
+    (src / "sub" / "x.csv").write_bytes(KIN.read_bytes())
+    out = tmp_path / "out"
+    args = ["clean", str(src), str(src / "sub" / "x.csv"), "-o", str(out), "-c", config_file(tmp_path)]
+    r = CliRunner().invoke(main, args)
+    assert r.exit_code == 0, r.output
+    assert (out / "sub" / "x.csv").is_file() and (out / "x.csv").is_file()
+    r = CliRunner().invoke(main, args)
+    no_traceback(r)
+    assert r.exit_code == 0, r.output
+    assert r.output.count("finished earlier") >= 2 and "exist already" not in r.output, r.output

@@ -10,6 +10,7 @@ import zipfile
 
 import numpy as np
 import pytest
+from click.testing import CliRunner
 
 from mocapfix.core import models
 from mocapfix.cleaners import registry
@@ -17,6 +18,9 @@ from mocapfix.cleaners.base import FittedCleaner
 from mocapfix.core.errors import ConfigError
 from mocapfix.core.motion import Motion, Skeleton
 from mocapfix.config import loads_config
+from mocapfix.cli import main
+
+from conftest import SAMPLE_DATA, config_file, no_traceback
 
 FITTED = sorted(n for n, c in registry().items() if issubclass(c, FittedCleaner))
 # small, fast training settings per fitted cleaner (the contract, not the accuracy)
@@ -194,3 +198,48 @@ def test_models_are_written_atomically_and_load_once(tmp_path, training, monkeyp
     for _ in range(3):
         models.load(path, cleaner="partlet_dictionary")
     assert len(calls) == 1
+
+
+def test_a_model_whose_array_header_lies_is_a_config_error(tmp_path):
+    # a model member whose .npy header declares 10^11 floats (a few bytes in the file):
+    # np.load first allocates what is declared -> MemoryError (745 GiB), a traceback;
+    # now a config error naming the model and the array, before any file is read
+    import io
+    import zipfile
+
+    import numpy as np
+
+    from mocapfix.core import models
+
+    shipped = models.shipped()["mssa-cmu"]
+    bomb = tmp_path / "bomb.npz"
+    with zipfile.ZipFile(shipped) as zin, zipfile.ZipFile(bomb, "w") as zout:
+        for name in zin.namelist():
+            data = zin.read(name)
+            if name == "bases.npy":
+                buf = io.BytesIO()
+                np.lib.format.write_array_header_1_0(
+                    buf, {"descr": "<f8", "fortran_order": False, "shape": (10 ** 11,)})
+                data = buf.getvalue() + bytes(64)
+            zout.writestr(name, data)
+    cfg = config_file(tmp_path, "version: 1\npipeline:\n  - cleaner: mssa\n    model: bomb.npz\n")
+    r = CliRunner().invoke(main, ["clean", str(SAMPLE_DATA / "walker_01.amc"), "-o",
+                                  str(tmp_path / "out"), "-c", cfg])
+    no_traceback(r)
+    assert r.exit_code == 2, r.output
+    assert "bomb.npz: corrupt model file" in r.output and "'bases' declares" in r.output
+    assert not (tmp_path / "out").exists()
+    models.load(shipped, "mssa")                        # a sound model still loads
+
+
+def test_a_model_header_nested_too_deep_is_a_config_error(tmp_path):
+    # the JSON header "[[[[...]]]]" 100,000 deep: RecursionError, an internal error
+    import numpy as np
+
+    deep = ("[" * 100_000 + "]" * 100_000).encode()
+    np.savez(tmp_path / "deep.npz", __header__=np.frombuffer(deep, dtype=np.uint8))
+    cfg = config_file(tmp_path, "version: 1\npipeline:\n  - cleaner: mssa\n    model: deep.npz\n")
+    r = CliRunner().invoke(main, ["clean", str(SAMPLE_DATA / "walker_01.amc"), "-o",
+                                  str(tmp_path / "out"), "-c", cfg])
+    no_traceback(r)
+    assert r.exit_code == 2 and "deep.npz: not a mocapfix model file (RecursionError" in r.output, r.output

@@ -524,3 +524,31 @@ def test_kinect_stamps_a_tick_apart_are_a_readable_error(tmp_path):
     assert "internal error" not in error[0] and "kinect_skeleton" in error[0]
     assert "shortest time step 1e-07 s" in error[0]
     assert (out / "walk.csv").is_file() and not (out / "ticks.csv").exists()
+
+
+def test_one_absurd_kinect_coordinate_does_not_move_its_joint(tmp_path):
+    # one corrupt field (1e9-1e300 m: a flipped exponent bit) steered the first GCV
+    # smooth of kinect_skeleton: the whole joint came out 0.3 m (1e9) to 2.6 m (1e12) off
+    # in every frame, with no warning. Corrupt a clean take, clean it, bound the error
+    # against the clean of the uncorrupted take
+    import numpy as np
+
+    from mocapfix import formats
+    from mocapfix.config import loads_config
+
+    pipeline = loads_config("version: 1\npipeline:\n  - cleaner: kinect_skeleton\n")
+    motion = formats.read(KIN)
+    reference, _ = pipeline.run(motion)
+    j = motion.names.index("SpineBase")
+    for axis, value in ((0, 1e9), (0, 1e12), (0, -1e15), (0, 1e300), (2, -1e20)):
+        positions = motion.positions.copy()
+        positions[20, j, axis] = value
+        cleaned, records = pipeline.run(motion.replace(positions=positions))
+        error = np.linalg.norm(cleaned.positions - reference.positions, axis=-1)
+        assert np.nanmax(error) < 0.02, (value, float(np.nanmax(error)))
+        assert 20 in records[0].info["replaced_frames"]["SpineBase"]
+        # known answer: the same as that sample missing (a -1e20 m depth turned the depth
+        # model off for the whole file)
+        positions[20, j] = np.nan
+        as_missing, _ = pipeline.run(motion.replace(positions=positions))
+        np.testing.assert_array_equal(cleaned.positions, as_missing.positions)

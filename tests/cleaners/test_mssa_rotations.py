@@ -5,14 +5,18 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from click.testing import CliRunner
 
 from mocapfix.bench import rotations as br
 from mocapfix import formats
 from mocapfix.core import models
 from mocapfix.cleaners import build
 from mocapfix.core.errors import ConfigError
+from mocapfix.cli import main
 from mocapfix.solvers import glitches, rotchannels, ssa, sure
-from conftest import shared
+from conftest import SAMPLE_DATA, no_traceback, shared
+
+BVH, C3D = SAMPLE_DATA / "walk.bvh", SAMPLE_DATA / "walk_markers.c3d"
 
 
 # -- solvers: known answers ---------------------------------------------------------------
@@ -452,3 +456,14 @@ def test_mssa_with_a_named_model_refuses_a_file_the_model_was_not_made_for():
     bvh = formats.read(shared("bvh/cmu_cgspeed_131_01.bvh"))
     with pytest.raises(MocapfixError, match=r"cmu_cgspeed_131_01\.bvh.*train a model for it"):
         cleaner.apply(bvh)
+
+
+def test_training_mssa_on_a_bvh_and_a_c3d_says_one_model_per_skeleton(tmp_path):
+    # the first file (BVH) made the model learn rotations; the C3D has none:
+    # "internal error AttributeError: 'NoneType' object has no attribute 'rot_axes'"
+    out = tmp_path / "m.npz"
+    r = CliRunner().invoke(main, ["train-dictionary", str(BVH), str(C3D), "--method", "mssa", "-o", str(out)])
+    no_traceback(r)
+    assert r.exit_code == 2, r.output
+    assert f"{C3D}: has no rotation channels" in r.output and "one model per skeleton" in r.output
+    assert not out.exists()

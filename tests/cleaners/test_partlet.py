@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from conftest import shared
+from conftest import SAMPLE_DATA, no_traceback, shared
 from mocapfix import formats
 from mocapfix.bench import corrupt
 from mocapfix.core import metrics, models
@@ -22,6 +22,7 @@ from mocapfix.core.motion import Motion
 from mocapfix.config import parse_config
 
 SEEDS = (0, 1, 2)
+KIN = SAMPLE_DATA / "walk_kinect_v2.csv"
 
 
 def _clean(name: str, frames: int = 480) -> Motion:
@@ -377,3 +378,17 @@ def test_train_dictionary_passes_over_notes_in_a_training_folder(tmp_path):
     assert res.exit_code == 0, res.output
     assert "skipped" in res.output and "notes.txt" in res.output
     assert "trained on 2 files" in res.output
+
+
+def test_partlet_training_on_unusable_takes_is_one_clear_error(tmp_path):
+    # a Kinect take then an AMC (other joint names: no body frame) failed with "internal
+    # error ValueError: no frame has enough torso points"; takes shorter than one window
+    # (an ASF alone is a one-frame rest pose) with "need at least one array to concatenate"
+    asf, amc = SAMPLE_DATA / "walker.asf", SAMPLE_DATA / "walker_01.amc"
+    for files, message in (([KIN, amc], f"{amc}: lacks body-frame joints of {KIN}"),
+                           ([asf], "no training motion has a complete window of 16 samples")):
+        r = CliRunner().invoke(main, ["train-dictionary", *map(str, files), "--atoms", "4",
+                                      "--iterations", "1", "-o", str(tmp_path / "m.npz")])
+        no_traceback(r)
+        assert r.exit_code == 2 and message in r.output, r.output
+    assert not (tmp_path / "m.npz").exists()

@@ -1,18 +1,25 @@
 """Hostile configs: wrong types where a list is expected, YAML alias bombs, deep nesting,
 bytes that are not UTF-8. Each must be one ConfigError naming the file, quickly and in
-little memory — never a TypeError, RecursionError or UnicodeDecodeError traceback."""
+little memory — never a TypeError, RecursionError or UnicodeDecodeError traceback. A key
+given twice is refused (merge keys still load); a config or rules path that is a folder
+says so, and one that is a pipe is read."""
 from __future__ import annotations
 
+import os
+import threading
 import time
 import tracemalloc
 
 import pytest
+from click.testing import CliRunner
 
+from mocapfix.cli import main
 from mocapfix.core.errors import ConfigError
 from mocapfix.config import load_config, loads_config
 from mocapfix.core.yamlsafe import load_yaml
-from conftest import hang_guard
+from conftest import FILL_CONFIG, SAMPLE_DATA, config_file, hang_guard, no_traceback
 
+BVH, KIN = SAMPLE_DATA / "walk.bvh", SAMPLE_DATA / "walk_kinect_v2.csv"
 GOOD_STEP = "pipeline:\n  - cleaner: butterworth\n"
 
 
@@ -153,3 +160,72 @@ def test_cli_reports_a_bad_config_in_one_line_with_exit_2(tmp_path, name, data):
     assert result.exit_code == 2, result.output
     assert "Traceback" not in result.output and str(config) in result.output
     assert not (tmp_path / "out").exists() or not any((tmp_path / "out").rglob("*.bvh"))
+
+
+def test_a_key_given_twice_in_a_config_or_rules_file_is_refused(tmp_path):
+    # YAML keeps the last of two equal keys without a word: "max_gap: 5 s" after
+    # "max_gap: 0.5 s" ran with five seconds, a second "pipeline:" replaced the first
+    twice = FILL_CONFIG + "    max_gap: 5 s\n"
+    r = CliRunner().invoke(main, ["clean", str(BVH), "-o", str(tmp_path / "out"),
+                                  "-c", config_file(tmp_path, twice, "twice.yaml")])
+    no_traceback(r)
+    assert r.exit_code == 2, r.output
+    assert "twice.yaml (line 5): key 'max_gap' appears twice" in r.output and "line 4" in r.output
+    assert not (tmp_path / "out").exists()
+    two_pipelines = "version: 1\npipeline: []\npipeline:\n  - cleaner: fill\n"
+    r = CliRunner().invoke(main, ["check", str(BVH), "--would-clean",
+                                  config_file(tmp_path, two_pipelines, "two.yaml")])
+    assert r.exit_code == 2 and "key 'pipeline' appears twice" in r.output, r.output
+    rules = "version: 1\nrules:\n  - metric: missing\n    warn: 5 %\n    warn: 50 %\n"
+    r = CliRunner().invoke(main, ["check", str(BVH), "-r", config_file(tmp_path, rules, "rules.yaml")])
+    assert r.exit_code == 2 and "rules.yaml (line 5): key 'warn' appears twice" in r.output, r.output
+
+
+def test_merge_keys_and_equal_keys_in_different_mappings_still_load():
+    from mocapfix.config import loads_config
+
+    text = ("version: 1\npipeline:\n  - &f {cleaner: fill, max_gap: 0.5 s}\n"
+            "  - <<: *f\n    max_gap: 0.2 s\n  - cleaner: butterworth\n    cutoff: 6 Hz\n")
+    pipeline = loads_config(text)
+    steps = pipeline.config()["pipeline"]
+    assert [s["cleaner"] for s in steps] == ["fill", "fill", "butterworth"]
+    assert [s.get("max_gap") for s in steps[:2]] == ["0.5 s", "0.2 s"]
+
+
+def test_config_or_rules_path_that_is_a_folder_says_so(tmp_path):
+    # a folder given to -c / -r / --would-clean was "no such config file or preset"
+    folder = tmp_path / "my.yaml"
+    folder.mkdir()
+    for args, what in ((["clean", str(KIN), "-o", str(tmp_path / "out"), "-c", str(folder)], "config"),
+                       (["check", str(KIN), "--would-clean", str(folder)], "config"),
+                       (["check", str(KIN), "-r", str(folder)], "rules")):
+        r = CliRunner().invoke(main, args)
+        no_traceback(r)
+        assert r.exit_code == 2, (args, r.output)
+        assert f"{folder}: is a folder, not a {what} file" in r.output, (args, r.output)
+    assert not (tmp_path / "out").exists()
+
+
+def _release_writer(fifo):
+    """Let a thread blocked opening ``fifo`` to write go on and drain what it writes,
+    never blocking here (with no writer left the read ends at once, on EOF)."""
+    fd = os.open(fifo, os.O_RDONLY | os.O_NONBLOCK)
+    os.set_blocking(fd, True)
+    with os.fdopen(fd, "rb") as fh:
+        fh.read()
+
+
+def test_config_from_a_pipe_is_read(tmp_path):
+    # `-c <(…)` (a pipe, not a regular file) was "no such config file or preset"
+    fifo = tmp_path / "cfg.pipe"
+    os.mkfifo(fifo)
+    text = b"version: 1\npipeline:\n  - cleaner: fill\n    max_gap: 0.5 s\n"
+    writer = threading.Thread(target=lambda: fifo.write_bytes(text), daemon=True)
+    writer.start()
+    r = CliRunner().invoke(main, ["clean", str(KIN), "-o", str(tmp_path / "out"), "-c", str(fifo)])
+    if writer.is_alive():           # without the fix nobody opens the pipe to read
+        _release_writer(fifo)
+    writer.join(10)
+    no_traceback(r)
+    assert r.exit_code == 0, r.output
+    assert "max_gap: 0.5 s" in (tmp_path / "out" / "mocapfix-config.yaml").read_text()

@@ -99,3 +99,18 @@ def test_pipeline_records_filled_flagged_and_skips_other_formats(monkeypatch):
     assert records[0].moved[0, 0] == pytest.approx(np.sqrt(3))
     assert records[1].skipped and not records[1].filled.any()
     assert np.allclose(m.positions[0], 1.0)  # input untouched
+
+
+def test_version_true_is_not_version_1():
+    # YAML's true is Python's True, which equals 1: "version: true" passed as version 1
+    import pytest
+
+    from mocapfix.core.errors import ConfigError
+    from mocapfix.config import loads_config
+    from mocapfix.quality.rules import loads_rules
+
+    with pytest.raises(ConfigError, match="unsupported config version True"):
+        loads_config("version: true\npipeline: []\n", "c.yaml")
+    with pytest.raises(ConfigError, match="unsupported rules version True"):
+        loads_rules("version: true\nrules: []\n", "r.yaml")
+    assert loads_config("version: 1\npipeline: []\n").steps == []

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from conftest import hang_guard, need, shared, shared_files
+from conftest import SAMPLE_DATA, hang_guard, need, shared, shared_files
 from mocapfix import formats
 from mocapfix.core.errors import UnreadableFileError, UnsupportedFeatureError, WriteError
 from mocapfix.formats import asfamc
@@ -595,3 +595,14 @@ def test_asf_mass_that_is_not_positive_is_noted_not_refused(tmp_path):
     asf.write_text(text.replace("\n  length 1.0\n", "\n  length 0\n"))
     with pytest.raises(UnreadableFileError, match=r"units length must be positive, got 0"):
         asfamc.read(amc)
+
+
+def test_reading_an_amc_at_a_non_finite_rate_is_refused():
+    import pytest
+
+    from mocapfix import formats
+    from mocapfix.core.errors import UnreadableFileError
+
+    for fps in (float("nan"), float("inf"), 0.0):
+        with pytest.raises(UnreadableFileError, match="frame rate must be a positive number"):
+            formats.read(SAMPLE_DATA / "walker_01.amc", fps=fps)

@@ -9,8 +9,10 @@ import re
 
 import numpy as np
 import pytest
+from click.testing import CliRunner
 
-from conftest import hang_guard, need, shared, shared_files
+from conftest import hang_guard, need, no_traceback, shared, shared_files
+from mocapfix.cli import main
 from mocapfix import formats
 from mocapfix.core.errors import UnreadableFileError
 from mocapfix.formats import kinect
@@ -756,3 +758,32 @@ def test_a_lone_corrupt_time_stamp_is_read_between_its_neighbours(tmp_path, row,
     assert not any("backward" in n for n in hit.notes)
     formats.write(hit, tmp_path / "out.csv")
     assert (tmp_path / "out.csv").read_bytes() == path.read_bytes()
+
+
+def test_a_kinect_time_column_of_absurd_steps_is_refused_by_the_reader(tmp_path):
+    # a headed CSV whose time stamps are 1e300 apart read as "90 frames at 0 fps" and
+    # cleaning died in the smoother: "internal error OverflowError"
+    import math
+
+    joints = ["Head", "Neck", "SpineShoulder", "SpineMid", "SpineBase", "ShoulderLeft",
+              "ElbowLeft", "WristLeft", "ShoulderRight", "ElbowRight", "WristRight", "HipLeft",
+              "KneeLeft", "AnkleLeft", "HipRight", "KneeRight", "AnkleRight"]
+    header = "time," + ",".join(f"{j}_X,{j}_Y,{j}_Z" for j in joints)
+
+    def take(step):
+        rows = [",".join([f"{step * (t + 1):.6g}"] + [f"{v:.4f}" for k in range(len(joints))
+                 for v in (0.1 * k + 0.01 * math.sin(t / 5), 1.0 - 0.05 * k, 2.5 + 0.01 * math.cos(t / 7))])
+                for t in range(90)]
+        return header + "\n" + "\n".join(rows) + "\n"
+
+    src = tmp_path / "in"
+    src.mkdir()
+    (src / "absurd.csv").write_text(take(1e300))
+    (src / "fine.csv").write_text(take(1 / 30))
+    r = CliRunner().invoke(main, ["clean", str(src), "-o", str(tmp_path / "out"), "-c", "kinect"])
+    no_traceback(r)
+    assert r.exit_code == 1, r.output
+    error = [line for line in r.output.splitlines() if line.startswith("ERROR")]
+    assert len(error) == 1 and error[0].startswith(f"ERROR {src / 'absurd.csv'}: the time column gives ")
+    assert error[0].endswith("frames per second, outside 0.001-100000 Hz (a corrupt time column?)")
+    assert (tmp_path / "out" / "fine.csv").is_file() and not list((tmp_path / "out").glob("absurd*"))

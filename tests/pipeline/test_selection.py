@@ -6,14 +6,17 @@ import sys
 
 import numpy as np
 import pytest
+from click.testing import CliRunner
 
 from mocapfix import read
 from mocapfix.core.errors import ConfigError
 from mocapfix.core.motion import Motion
 from mocapfix.config import loads_config
+from mocapfix.cli import main
 
-from conftest import shared
+from conftest import SAMPLE_DATA, config_file, shared
 
+C3D = SAMPLE_DATA / "walk_markers.c3d"
 PIG = ["c3d/c3dorg_s09_PlugInC3D.c3d", "c3d/btk_PiG_Motion-FlatFoot-Hole.c3d"]
 
 
@@ -296,3 +299,14 @@ def test_flag_then_fill_still_repairs_a_rig_when_joints_are_left_out(where):
     assert np.array_equal(result.cleaned.channels[:, left], ch[:, left])
     if where in ("pipeline", "step"):
         assert np.nanmax(result.writeback_residual) == pytest.approx(np.nanmax(plain.writeback_residual))
+
+
+def test_a_selection_that_matches_nothing_says_why_it_warns(tmp_path):
+    # markers: ["NoSuch*"] leaves nothing to clean: the file WARNs (report note), but the
+    # line gave no reason, even with -v
+    cfg = config_file(tmp_path, "version: 1\nmarkers: [\"NoSuch*\"]\npipeline:\n  - cleaner: fill\n")
+    r = CliRunner().invoke(main, ["clean", str(C3D), "-o", str(tmp_path / "out"), "-c", cfg, "-v"])
+    assert r.exit_code == 0, r.output
+    lines = r.output.splitlines()
+    assert lines[0].startswith("WARN")
+    assert "leave none of this file's markers to clean" in lines[1], r.output

@@ -14,7 +14,9 @@ from mocapfix.core.motion import Motion, Skeleton
 from mocapfix.config import loads_config
 from mocapfix.quality.report import build_report, to_html, to_json, to_markdown
 
-from conftest import no_traceback, shared
+from conftest import SAMPLE_DATA, config_file, no_traceback, shared
+
+BVH = SAMPLE_DATA / "walk.bvh"
 
 
 def _motion():
@@ -300,3 +302,86 @@ def test_empty_frames_around_the_take_change_nothing_a_step_does(rel, config):
     assert rep_padded["file"]["frames_outside_take"] == [[0, 23], [23 + T, 17]]
     for key in ("gaps_before", "gaps_unfilled", "samples_filled", "samples_flagged"):
         assert rep_padded["file"][key] == rep_plain["file"][key], key
+
+
+def test_a_file_name_that_is_not_utf8_is_cleaned_and_reported(tmp_path):
+    # Linux names are bytes; b"take\xff.bvh" reaches Python as "take\udcff.bvh". The
+    # Markdown/HTML reports and the JUnit XML could not be encoded: the file failed with
+    # "internal error UnicodeEncodeError" and check --junit ended in a traceback
+    import os
+    import xml.etree.ElementTree as ET
+
+    import pytest
+
+    src = tmp_path / "in"
+    src.mkdir()
+    try:
+        raw = os.path.join(os.fsencode(src), b"take\xff.bvh")
+        with open(raw, "wb") as fh:
+            fh.write(BVH.read_bytes())
+    except (OSError, UnicodeError):
+        pytest.skip("this file system refuses names that are not UTF-8")
+    out = tmp_path / "out"
+    r = CliRunner().invoke(main, ["clean", str(src), "-o", str(out), "-c", config_file(tmp_path),
+                                  "--report", "json,md,html"])
+    no_traceback(r)
+    assert r.exit_code == 0, r.output
+    names = sorted(os.listdir(os.fsencode(out)))
+    for name in (b"take\xff.bvh", b"take\xff.bvh.report.json", b"take\xff.bvh.report.md",
+                 b"take\xff.bvh.report.html"):
+        assert name in names, names
+    md = (out / os.fsdecode(b"take\xff.bvh.report.md")).read_bytes()
+    md.decode("utf-8")                                   # the reports stay UTF-8 text
+    junit = tmp_path / "check.xml"
+    r = CliRunner().invoke(main, ["check", str(src), "--junit", str(junit), "--exit-zero"])
+    no_traceback(r)
+    assert r.exit_code == 0, r.output
+    case = ET.parse(junit).getroot().find(".//testcase")
+    assert case is not None and "take" in case.get("name")
+
+
+def _six_channel_bvh(glitch: float | None) -> str:
+    """A 3-joint BVH whose every joint has 6 channels (as Bandai-Namco's files do),
+    120 frames of smooth motion; ``glitch`` goes into Chest.Xposition at frame 60."""
+    import numpy as np
+
+    hier = ("HIERARCHY\nROOT Hips\n{\n OFFSET 0 0 0\n CHANNELS 6 Xposition Yposition Zposition "
+            "Zrotation Xrotation Yrotation\n JOINT Chest\n {\n  OFFSET 0 20 0\n  CHANNELS 6 "
+            "Xposition Yposition Zposition Zrotation Xrotation Yrotation\n  JOINT Head\n  {\n"
+            "   OFFSET 0 20 0\n   CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation "
+            "Yrotation\n   End Site\n   {\n    OFFSET 0 10 0\n   }\n  }\n }\n}\n"
+            "MOTION\nFrames: 120\nFrame Time: 0.0083333\n")
+    rows = []
+    for f in range(120):
+        t = f / 120
+        vals = [10 * np.sin(3 * t), 90, 5 * t, 5 * np.sin(5 * t), 3 * np.cos(4 * t), 2 * t,
+                0, 20, 0, 4 * np.sin(6 * t), 2 * np.cos(5 * t), 1,
+                0, 20, 0, 3 * np.sin(7 * t), np.cos(3 * t), 0]
+        if f == 60 and glitch is not None:
+            vals[6] = glitch
+        rows.append(" ".join(f"{v:.6g}" for v in vals))
+    return hier + "\n".join(rows) + "\n"
+
+
+def test_a_joint_moved_beyond_the_float_range_is_reported_not_an_internal_error(tmp_path):
+    # 1e300 in a non-root joint's position channel: the report's largest correction
+    # overflowed to inf (written as null) and the comparison "max > 0" raised TypeError,
+    # so the file failed with "internal error TypeError" and no output. The rotations are
+    # smoothed by a fixed filter (the default leaves this noiseless take as it is), so the
+    # joints below the glitch move by 1e300 × a rounding error
+    import json
+
+    src = tmp_path / "in"
+    src.mkdir()
+    (src / "glitch.bvh").write_text(_six_channel_bvh(1e300))
+    (src / "clean.bvh").write_text(_six_channel_bvh(None))
+    config = tmp_path / "smooth.yaml"
+    config.write_text("pipeline:\n  - cleaner: rotation_smooth\n    translations: false\n")
+    out = tmp_path / "out"
+    r = CliRunner().invoke(main, ["clean", str(src), "-o", str(out), "--report", "json,md,html",
+                                  "-c", str(config)])
+    no_traceback(r)
+    assert r.exit_code == 0 and "internal error" not in r.output, r.output
+    report = json.loads((out / "glitch.bvh.report.json").read_text())
+    assert any(j["correction_mm"]["max"] is None for j in report["joints"])
+    assert (out / "glitch.bvh").read_text().startswith("HIERARCHY")
