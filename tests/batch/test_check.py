@@ -34,6 +34,7 @@ def archive_run(tmp_path_factory):
     return data, before, junit, result
 
 
+@pytest.mark.slow
 def test_archive_junit_is_valid_one_testcase_per_file(archive_run):
     data, before, junit, result = archive_run
     assert result.exit_code == 1, result.output          # some rules fail, every file readable
@@ -56,6 +57,7 @@ def test_archive_junit_is_valid_one_testcase_per_file(archive_run):
     assert "cmu_85_02.c3d" not in failed and "hdm05_HDM_mm_01-02_03_120.c3d" not in failed
 
 
+@pytest.mark.slow
 def test_archive_check_writes_nothing_into_the_input(archive_run):
     data, before, _, _ = archive_run
     assert _tree(data) == before

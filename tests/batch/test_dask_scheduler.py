@@ -11,10 +11,14 @@ import sys
 import time
 from pathlib import Path
 
+import pytest
 from click.testing import CliRunner
 
 from conftest import SAMPLE_DATA, output_tree
 from mocapfix.cli import main
+
+# slow: starts a Dask scheduler and worker as processes (~3 s)
+pytestmark = pytest.mark.slow
 
 
 def _dask_command() -> list[str]:

@@ -40,6 +40,7 @@ def _tree(folder: Path) -> dict:
     return output_tree(folder)
 
 
+@pytest.mark.slow
 def test_dask_local_cluster_gives_byte_identical_outputs(tmp_path):
     import distributed          # a dev dependency: missing it fails, never skips
 
@@ -61,6 +62,7 @@ def test_dask_local_cluster_gives_byte_identical_outputs(tmp_path):
     assert a["walk_markers.c3d.report.json"]["file"]["frames"] > 100
 
 
+@pytest.mark.slow
 def test_cli_dask_workers_match_local(tmp_path):
     cfg = tmp_path / "cfg.yaml"
     cfg.write_text("pipeline:\n  - cleaner: fill\n    max_gap: 0.5 s\n  - cleaner: gaussian\n")
@@ -89,6 +91,7 @@ def test_executor_options_conflict(tmp_path):
     assert r.exit_code == 2 and "-j/--jobs" in r.output
 
 
+@pytest.mark.slow
 def test_pipeline_parsed_once_per_process(monkeypatch, tmp_path):
     import mocapfix.config as pl
 
@@ -134,6 +137,7 @@ class ProbeTask(CleanTask):
         return {**result, "blas_calls": len(seen), "blas_max": max(seen, default=0)}
 
 
+@pytest.mark.slow
 def test_batch_workers_never_run_blas_with_more_than_one_thread(tmp_path):
     pipeline = load_config(resolve_config("default"))
     jobs = _jobs(tmp_path / "o")
@@ -157,6 +161,7 @@ def test_thread_policy_numbers(monkeypatch):
     assert threads.blas_threads(1) == threads.SINGLE_FILE_THREADS
 
 
+@pytest.mark.slow
 def test_check_on_dask_matches_local():
     import distributed
 

@@ -14,6 +14,7 @@ import sys
 import time
 from pathlib import Path
 
+import pytest
 from click.testing import CliRunner
 
 from conftest import SAMPLE_DATA, config_file, no_traceback, output_tree, shared
@@ -66,6 +67,7 @@ def _run(*args):
     return CliRunner().invoke(main, ["clean", *map(str, args)])
 
 
+@pytest.mark.slow
 def test_killed_batch_resumes_and_skips_finished_files(tmp_path):
     src, cfg = _inputs(tmp_path), _cfg(tmp_path)
     out = tmp_path / "out"
@@ -105,6 +107,7 @@ def test_killed_batch_resumes_and_skips_finished_files(tmp_path):
         assert a[rel] == b[rel], rel
 
 
+@pytest.mark.slow
 def test_what_a_rerun_redoes(tmp_path):
     src, cfg = _inputs(tmp_path, copies=1), _cfg(tmp_path)
     out = tmp_path / "out"
@@ -139,6 +142,7 @@ def test_what_a_rerun_redoes(tmp_path):
     assert r.exit_code == 0 and "cleaned 1 of 1 files (3 skipped: finished earlier)" in r.output
 
 
+@pytest.mark.slow
 def test_interrupted_output_and_torn_record(tmp_path):
     """A file whose output was written but whose record was not (killed in between) is
     redone without --overwrite; a torn last line of the journal is ignored."""
@@ -158,6 +162,7 @@ def test_interrupted_output_and_torn_record(tmp_path):
     assert _records(out)[victim["input"]]["status"] == "done"
 
 
+@pytest.mark.slow
 def test_failed_file_is_retried(tmp_path):
     src, cfg = _inputs(tmp_path, copies=1), _cfg(tmp_path)
     bad = src / "take0" / "broken.bvh"
@@ -205,6 +210,7 @@ def _train_mssa(src: Path, model: Path, *options) -> None:
     assert r.exit_code == 0, r.output
 
 
+@pytest.mark.slow
 def test_a_model_retrained_at_the_same_path_is_not_finished(tmp_path):
     # the run key hashed the config text alone, which names the model by path: after
     # retraining the model there a re-run said "SKIP … finished earlier" and kept the
@@ -269,6 +275,7 @@ def test_a_skeleton_edited_while_its_take_is_cleaned_is_not_recorded_as_finished
     assert _records(out)[str(src / "13_39.amc")]["status"] == "failed"
 
 
+@pytest.mark.slow
 def test_a_manifest_without_model_and_skeleton_hashes_finishes_nothing(tmp_path):
     # a manifest written before the run key held the models' and the input's companions'
     # hashes cannot tell whether they changed: its files are redone, nothing crashes

@@ -68,6 +68,7 @@ def test_two_amcs_never_share_an_output_skeleton_they_do_not_have_in_common(tmp_
     assert md5_tree(y.parent) == {k: v for k, v in before.items() if k.parent == y.parent}
 
 
+@pytest.mark.slow
 def test_an_edited_asf_is_written_over_its_old_copy_that_only_this_amc_uses(tmp_path):
     # x_01 cleaned, then its ASF edited (longer bones) and x_01 cleaned again with
     # --overwrite: the run stopped on "out/walker.asf holds another ASF, which other AMC
@@ -121,6 +122,7 @@ def test_an_edited_asf_is_written_over_its_old_copy_that_only_this_amc_uses(tmp_
     assert md5_tree(out) == kept
 
 
+@pytest.mark.slow
 def test_skip_existing_redoes_an_output_whose_replacement_was_interrupted(tmp_path):
     # x_01 and x_02 cleaned; their ASF edited; a --overwrite run of both killed after x_01
     # (its output and the new ASF copy written, x_02's old output still there, recorded as
@@ -190,6 +192,7 @@ def test_an_asf_named_in_other_letter_case_is_not_read_with_the_wrong_amc(tmp_pa
     assert not (tmp_path / "o3").exists()
 
 
+@pytest.mark.slow
 def test_an_amc_output_left_without_its_skeleton_copy_is_written_again(tmp_path):
     # a run killed after writing out/05_01.amc but before its copy out/05.asf: 05_01.amc
     # then read the only .asf there, 13.asf, and every later run (resume, --overwrite,
@@ -213,6 +216,7 @@ def test_an_amc_output_left_without_its_skeleton_copy_is_written_again(tmp_path)
         assert got.n_joints == want.n_joints and abs(got.positions - want.positions).max() < 1e-6
 
 
+@pytest.mark.slow
 def test_one_asf_in_two_letter_cases_with_the_same_content_is_not_refused(tmp_path):
     # a/05.ASF and b/05.asf hold the same skeleton: the plan let them share one copy, and
     # then refused 05_10 because out/05.ASF, a copy not written yet, could not be read

@@ -9,6 +9,7 @@ import os
 import pickle
 import time
 
+import pytest
 from click.testing import CliRunner
 
 from conftest import SAMPLE_DATA
@@ -70,6 +71,7 @@ class Busy(bench.Method):
         return motion.copy(), None
 
 
+@pytest.mark.slow
 def test_jobs_2_gives_the_sequential_runs_in_the_same_order():
     methods = [cleaner("gaussian"), cleaner("fill", max_gap=None)]
     kw = dict(seeds=2, settings=["noise", "mixed"])
@@ -91,6 +93,7 @@ def test_jobs_2_gives_the_sequential_runs_in_the_same_order():
             == [line.rsplit("|", 3)[0] for line in two.detail_table().splitlines()])
 
 
+@pytest.mark.slow
 def test_cli_jobs_and_dask_scheduler_match_sequential(tmp_path):
     """The CLI options: -j 2 (local worker processes) and --scheduler (a Dask cluster;
     in-process here, as in test_executors, so the test stays fast) give the JSON of -j 1
@@ -145,6 +148,7 @@ def test_a_killed_worker_gives_error_rows_and_the_bench_ends():
     assert "ERR" in res.headline_table()
 
 
+@pytest.mark.slow
 def test_budget_is_checked_per_seed_and_setting_block_with_jobs():
     """Busy uses 0.3 s of CPU per run against a 0.25 s budget: it runs the first block (both
     files, in parallel) and no other; none (a copy) runs all four blocks. As in one process.

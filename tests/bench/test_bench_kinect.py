@@ -97,6 +97,7 @@ def test_holt_filter_follows_a_ramp_and_passes_big_jumps():
     assert np.abs(z[:29]).max() == 0.0
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("scenario", bk.SCENARIOS)
 def test_protocol_runs_and_baselines_beat_raw(scenario):
     res = bk.run([shared("asfamc/05_02.amc")], seeds=[0], scenarios=[scenario])

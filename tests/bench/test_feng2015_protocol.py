@@ -109,6 +109,7 @@ def test_oracle_picks_the_best_grid_value():
         oracle.run(noisy)
 
 
+@pytest.mark.slow
 def test_tuned_baselines_in_bench_beat_their_defaults():
     truth, _ = _smooth_case()
     truth = truth.replace(positions=truth.positions + np.sin(np.arange(1200) / 120.0)[:, None, None])
@@ -133,6 +134,7 @@ def test_linear_wavelet_threshold_is_a_low_pass():
         segments.wavelet_denoise(slow, threshold="hard")
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name,paper_cm", [("gaussian(tuned)", 6.65), ("wavelet(tuned)", 8.60),
                                            ("kalman(tuned)", 7.24)])
 def test_tuned_baselines_on_cmu_dance_match_the_paper_at_10_db(name, paper_cm):

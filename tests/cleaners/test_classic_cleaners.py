@@ -320,6 +320,7 @@ def cmu():
     return mocapfix.read(shared("c3d/cmu_85_02.c3d"))
 
 
+@pytest.mark.slow
 def test_spikes_recall_and_false_positives_on_real_data(cmu):
     # measured (seeds 0, 1): recall 0.9985–0.9995, false-positive rate 0.00003 on the
     # clean capture and < 0.0001 on the non-spike samples of the noisy one
@@ -355,6 +356,7 @@ def test_spikes_leave_fast_clean_movement_alone():
     assert info["flagged"] <= 0.005 * (~motion.missing).sum()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("scenario", ["noise", "mixed"])
 @pytest.mark.parametrize("capture, cutoff", [("hdm05", "6 Hz"), ("cmu", "12 Hz")])
 def test_spikes_fill_butterworth_beats_raw_and_linear_gaussian(capture, cutoff, scenario, request):

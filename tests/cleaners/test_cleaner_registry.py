@@ -4,6 +4,8 @@ default pipeline does not load the heavy scipy/pywt modules it does not use."""
 import subprocess
 import sys
 
+import pytest
+
 from mocapfix import cleaners
 
 from conftest import REPO
@@ -74,6 +76,7 @@ def test_unknown_cleaner_names_the_known_ones():
         cleaners.build("no_such_cleaner")
 
 
+@pytest.mark.slow
 def test_default_c3d_clean_loads_no_scipy():
     """The default C3D chain (swaps, trust, fill_ensemble, tsmc) on a capture with gaps,
     jitter and spikes runs on numpy alone (its DCT uses numpy's FFT): importing scipy.fft

@@ -86,6 +86,7 @@ def test_fill_ensemble_drops_the_jumping_members_only_when_the_average_jumps():
                                   (smooth + small) / 2) is None
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["c3dorg_s04_sub_labels.c3d", "c3dorg_s09_PlugInC3D.c3d"])
 def test_default_clean_fills_no_run_that_jumps_three_times_the_markers_largest_step(name):
     """On these captures a group of markers leaves the volume at once and the PCA prior of
@@ -126,6 +127,7 @@ def test_default_clean_fills_no_run_that_jumps_three_times_the_markers_largest_s
         assert worst_ratio(parse_config(data)) > 3.0
 
 
+@pytest.mark.slow
 def test_fill_ensemble_refills_without_the_member_that_jumped_on_a_real_capture():
     """numediart_03_rolling, LR_HME (elbow) loses 218 frames while the arm rolls: a GRNN
     member, far from the poses it was trained on, follows its nearest training pose and
@@ -145,6 +147,7 @@ def test_fill_ensemble_refills_without_the_member_that_jumped_on_a_real_capture(
     assert ratio(build("fill_ensemble", max_step=0.0)) > 5.0
 
 
+@pytest.mark.slow
 def test_the_report_says_which_step_refused_a_gaps_fill_and_why(tmp_path):
     """c3d.org s09: the points of the model's left tibia and foot segments (LTIO, LTIL,
     LTOO, LTOP) are lost at frame 188, 82 frames before the take ends; the ensemble's

@@ -217,6 +217,7 @@ def test_a_joint_seen_too_rarely_to_smooth_keeps_its_samples_and_is_filled_from_
         assert np.ptp(reach) < 0.01                       # on its bone from the wrist
 
 
+@pytest.mark.slow
 def test_validated_fills_lower_the_error_of_lost_limbs(tmp_path):
     """Acrobatics (CMU 90_31) with Inferred and NotTracked limb ends: weighing the
     parent-based estimate of each lost run against the joint's own smooth by their
@@ -296,6 +297,7 @@ def test_leg_swaps_are_found_exactly(tmp_path):
 
 
 # -- the kinect protocol: better than the best Kinect filter -------------------------------
+@pytest.mark.slow
 @pytest.mark.parametrize("scenario, bound", [("jitter", 0.8), ("inferred+occlusion", 0.85),
                                              ("mixed", 0.55)])
 def test_beats_the_best_kinect_baseline(scenario, bound):
@@ -314,6 +316,7 @@ def test_beats_the_best_kinect_baseline(scenario, bound):
     assert 0.7 < rows["ks"]["acc_ratio"][0] < 1.3
 
 
+@pytest.mark.slow
 def test_rigid_pairs_found_in_the_data_lower_the_error(tmp_path):
     """The protocol's skeleton (CMU through forward kinematics) keeps the two hips, the
     shoulders and the forearm-hand at constant distances that are not Kinect bones: the
@@ -334,6 +337,7 @@ def test_rigid_pairs_found_in_the_data_lower_the_error(tmp_path):
     assert spread(truth) < 1e-6
 
 
+@pytest.mark.slow
 def test_rigid_pairs_do_not_spread_a_tracked_spike_to_the_neighbours(tmp_path):
     """40 one-frame jumps of 15-40 cm on Tracked joints (a tracker glitch the state does not
     flag): the projection onto the bones and rigid pairs before the smoothing must not
@@ -358,6 +362,7 @@ def test_rigid_pairs_do_not_spread_a_tracked_spike_to_the_neighbours(tmp_path):
     assert err(with_pairs) < 0.97 * err(without), (err(with_pairs), err(without))
 
 
+@pytest.mark.slow
 def test_dropped_frames_cleaned_on_the_true_time_axis(tmp_path):
     """A file with dropped frames: written back with the same rows and timestamps, and the
     smoother sees the real interval (smoothing on frame indices makes the error larger)."""
@@ -383,6 +388,7 @@ def _bone_var(motion):
     return np.nanstd(L, 0) / np.nanmean(L, 0)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("path", shared_files("kinect", "kv1_msr3d_*"))
 def test_msr_constant_bones_stay_constant_and_bones_do_not_get_worse(path):
     from conftest import need
@@ -397,6 +403,7 @@ def test_msr_constant_bones_stay_constant_and_bones_do_not_get_worse(path):
     assert np.all(after <= before + 0.005), (before, after)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("path", shared_files("kinect"))
 def test_real_files_bones_steadier_and_tracked_samples_rarely_moved_far(path):
     """Measured share of Tracked samples moved by > 5 cm: 0-1.2 % on the Kinect v2 and MSR
@@ -427,6 +434,7 @@ def test_spikes_fire_on_30_fps_skeletons():
     assert sorted(map(tuple, np.argwhere(out.missing & ~m.missing).tolist())) == [(50, 7), (90, 15)]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("path", shared_files("kinect", "kv2_*"))
 def test_fast_kinect_csv_writer_writes_what_the_general_one_writes(path):
     """The per-frame writer of the headerless Kinect CSVs gives the same text as the
@@ -478,6 +486,7 @@ def test_fast_kinect_csv_writer_keeps_each_numbers_decimals(tmp_path):
     assert fast == kf._patched_text(m.source, out)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("config", ["default", "kinect"])
 def test_report_status_separates_good_kinect_recordings_from_bad(config):
     """Both shipped configs run the same Kinect step and grade it alike: the clean
@@ -526,6 +535,7 @@ def test_kinect_stamps_a_tick_apart_are_a_readable_error(tmp_path):
     assert (out / "walk.csv").is_file() and not (out / "ticks.csv").exists()
 
 
+@pytest.mark.slow
 def test_one_absurd_kinect_coordinate_does_not_move_its_joint(tmp_path):
     # one corrupt field (1e9-1e300 m: a flipped exponent bit) steered the first GCV
     # smooth of kinect_skeleton: the whole joint came out 0.3 m (1e9) to 2.6 m (1e12) off

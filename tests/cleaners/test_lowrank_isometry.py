@@ -243,6 +243,7 @@ def cmu():
 TUNED = dict(eta=1.1, mu=0.03, approx_penalty=False)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("setting, aje_max, abe_max, aje_tuned, abe_tuned",
                          [("10%", 0.008, 0.0016, 0.0027, 0.0008),
                           ("20%", 0.019, 0.0036, 0.0053, 0.0013)])
@@ -261,6 +262,7 @@ def test_yang2019_protocol_on_cmu(cmu, setting, aje_max, abe_max, aje_tuned, abe
         assert info["iterations"] < 100 and info["iso_energy_after"] < info["iso_energy_before"]
 
 
+@pytest.mark.slow
 def test_keep_inliers_replaces_only_outliers(cmu):
     """Measured (seeds 0, 1): AJE 0.0002 m at 5 % and 0.0019 m at 20 % (tuned, without
     keep_inliers: 0.0017 / 0.0038); all but a few clean samples keep their measurement."""
@@ -304,6 +306,7 @@ KINECT = dict(gamma=1000.0, eta=1.1, mu=0.03, approx_penalty=False)
 
 # measured before → after (KINECT settings, whole files): utkinect s01 0.155 → 0.014,
 # laban Ges01 0.080 → 0.018, msr a10 0.022 → 0.016, msr a06 0.017 → 0.005
+@pytest.mark.slow
 @pytest.mark.parametrize("name, ratio", [("kv1_utkinect_joints_s01_e01.txt", 0.3),
                                          ("kv2_laban_Ges01_wavehand.csv", 0.4),
                                          ("kv1_msr3d_a10_s06_e02_skeleton3D.txt", 0.9),
@@ -366,6 +369,7 @@ def walk_snr5():
     return motion, corrupted, cleaner_input(motion, corrupted)
 
 
+@pytest.mark.slow
 def test_kinect_settings_do_not_diverge_at_snr5(walk_snr5):
     """Before the bounded step the ALM diverged here (measured RMSE 3.0e11 cm for the
     cleaner, 7.2e10 cm for config:kinect, |A| 4e11 m after 100 iterations): noise of

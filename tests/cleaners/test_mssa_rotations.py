@@ -153,6 +153,7 @@ def test_euler_smooth_wants_an_odd_median():
         build("euler_smooth", median=4)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["asfamc/90_31.amc", "bvh/cmu_cgspeed_131_01.bvh"])
 def test_rotation_outliers_remove_spikes_and_keep_fast_real_motion(name):
     m = formats.read(shared(name))
@@ -229,6 +230,7 @@ def test_bandai_walk_toe_offs_are_kept_by_rotation_outliers():
     assert br.evaluate(m, cleaned)["pos_err_pct"] < 0.05 * br.evaluate(m, spiked)["pos_err_pct"]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["asfamc/13_39.amc", "bvh/cmu_cgspeed_131_01.bvh",
                                   "bvh/bandai_dataset-1_walk_normal_001.bvh"])
 def test_rotation_denoise_beats_the_gaussian_on_euler_curves(name):
@@ -240,6 +242,7 @@ def test_rotation_denoise_beats_the_gaussian_on_euler_curves(name):
     assert ours < 0.95 * euler and ours < 0.5 * none
 
 
+@pytest.mark.slow
 def test_mssa_uses_the_shipped_model_on_cmu_skeletons_and_learns_otherwise():
     assert "mssa-cmu" in models.shipped()
     m = formats.read(shared("asfamc/13_39.amc"))          # not in the training corpus
@@ -381,6 +384,7 @@ def test_sure_piecewise_gives_each_piece_its_own_smoother(span):
         assert (widths[cols] == np.median(np.concatenate(chosen))).all()
 
 
+@pytest.mark.slow
 def test_sure_piecewise_with_more_pieces_of_one_length_than_one_call_takes():
     """333 pieces of 3 frames (two calls side by side): each still as if smoothed alone;
     and a one-frame channel goes through the quadratic fits (it raised once)."""
@@ -411,6 +415,7 @@ def test_group_sums_add_a_group_alike_wherever_it_stands():
     assert sums(R2, [0, 1, 0, 1, 0])[0].tolist() == [sums(R[:, :3], [0, 0, 0])[0, 0], 12.0]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["asfamc/60_10.amc", "asfamc/05_10.amc"])
 def test_rotation_denoise_does_not_smooth_across_steps_of_the_motion(name):
     """CMU 60_10 and 05_10 hold frame-to-frame jumps of 15–100° in their own data (a femur,

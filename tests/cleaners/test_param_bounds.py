@@ -117,6 +117,7 @@ def test_moving_median_and_local_fit_are_unchanged_by_the_cut():
         assert np.allclose(u, v, equal_nan=True)
 
 
+@pytest.mark.slow
 def test_moving_median_memory_is_bounded_for_wide_windows(monkeypatch):
     from mocapfix.solvers import localfit
 

@@ -21,6 +21,9 @@ from mocapfix.core.errors import ConfigError
 from mocapfix.core.motion import Motion
 from mocapfix.config import parse_config
 
+# slow: the shipped models on real captures against ground truth (~20 s)
+pytestmark = pytest.mark.slow
+
 SEEDS = (0, 1, 2)
 KIN = SAMPLE_DATA / "walk_kinect_v2.csv"
 

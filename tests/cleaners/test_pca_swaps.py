@@ -219,6 +219,7 @@ def _interp(P, kind):
 # measured gap RMSE (mm), default parameters: 85_02 seeds 0/1: 94 / 81 (linear 494 / 395,
 # pchip 481 / 347); HDM05 frames 0-1500 seeds 0/1: 8.8 / 11.6 (linear 170 / 107, pchip
 # 170 / 92).
+@pytest.mark.slow
 @pytest.mark.parametrize("rel, frames, seed, bound", [
     (CMU, None, 0, 125.0),
     (CMU, None, 1, 110.0),
@@ -283,6 +284,7 @@ def test_swaps_unit_invariant():
     assert build("swaps").apply(mm)[1] == build("swaps").apply(m)[1]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("rel", [CMU, HDM])
 def test_swaps_none_on_clean_captures(rel):
     clean = _read(rel)
@@ -294,6 +296,7 @@ def test_swaps_none_on_clean_captures(rel):
 
 # measured over seeds 0-19: 85_02 20/20 found, HDM05 19/19 (seed 12 swaps a label with
 # its exact duplicate, which changes nothing); after repair RMSE 0 in every found case.
+@pytest.mark.slow
 @pytest.mark.parametrize("rel", [CMU, HDM])
 def test_swaps_real_recall_and_error(rel):
     clean = _read(rel)
@@ -314,6 +317,7 @@ def test_swaps_real_recall_and_error(rel):
     assert tried >= 5 and found / tried >= 0.8
 
 
+@pytest.mark.slow
 def test_fill_pca_rejects_fills_outside_the_capture_volume():
     """c3d.org sample04 holds several subjects whose markers do not move as one body: PCA
     predictions for some gaps land metres outside the lab. Those runs must be left missing

@@ -57,6 +57,7 @@ def test_meet_borders_ramp():
     assert np.allclose(out[:, 0], [1, 1.5, 2, 2.5, 3])
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("seed", [0, 1])
 def test_beats_members_and_spline_on_cmu_85_02(seed):
     truth = read(shared("c3d/cmu_85_02.c3d"))
@@ -74,6 +75,7 @@ def test_beats_members_and_spline_on_cmu_85_02(seed):
     assert full < gap_rmse("pma", members=["linear"])
 
 
+@pytest.mark.slow
 def test_default_fills_the_start_gap_without_a_jump():
     """c3dorg_s01_Eb015pi: PV3 misses its first 47 frames. The default's fill must not
     plateau and then jump to meet the data: no frame-to-frame step in the gap or onto its
@@ -136,6 +138,7 @@ def test_pose_member_recovers_a_marker_that_follows_its_neighbours_pose():
     assert err["interp"] > 20 * err["pose6"], err
 
 
+@pytest.mark.slow
 def test_refill_uses_a_missing_neighbour_once_it_is_filled():
     """PhoeniX dance (40 markers, no gaps): a 1-s gap in a marker overlaps a 1.1-s gap in
     its most rigid neighbour, for every third marker. Without ``refill`` each gap is filled
@@ -184,6 +187,7 @@ def test_refill_leaves_gaps_whose_neighbours_are_seen_as_they_were():
     assert np.array_equal(one.positions, two.positions)
 
 
+@pytest.mark.slow
 def test_refill_skips_edge_and_short_gaps():
     """Edge gaps are neither refilled nor lent (an extrapolated neighbour is no
     measurement), and gaps shorter than REFILL_MIN_S are left as the first pass made
@@ -233,6 +237,7 @@ def test_grnn_is_the_gaussian_weighted_mean_of_the_training_targets():
                                rtol=1e-9, atol=1e-9)
 
 
+@pytest.mark.slow
 def test_gaps_no_other_marker_is_seen_through_get_no_members_and_a_reason(monkeypatch):
     """PhoeniX dance with interior gaps in six markers and its last 60 frames empty (every
     marker gone, as OptiTrack exports end): the empty frames are left missing, each with the

@@ -46,6 +46,7 @@ def _noisy_copy(motion, deg, seed):
     return motion.replace(channels=ch, positions=rig.positions(ch))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("rel", ["bvh/cmu_cgspeed_131_03.bvh", "asfamc/05_01.amc"])
 def test_noisy_rotation_channels_are_denoised(rel):
     clean = __import__("mocapfix").read(shared(rel))

@@ -240,6 +240,7 @@ def _tsmc_mm(truth, bad, **params):
     return rmse(out.positions, truth.positions) * truth.metres_per_unit * 1000.0
 
 
+@pytest.mark.slow
 def test_temporal_term_fills_isolated_missing_samples(amc_random_missing):
     """With the paper's model (``prior: none``) on isolated missing samples the smoothness
     term β/2 ||M O||² does the filling: measured 1.39 / 1.38 mm with β = 3 against
@@ -252,6 +253,7 @@ def test_temporal_term_fills_isolated_missing_samples(amc_random_missing):
         assert with_beta < 0.2 * without, (with_beta, without)
 
 
+@pytest.mark.slow
 def test_gap_edge_bridge_helps_on_isolated_missing_samples(amc_random_missing, monkeypatch):
     """The bridge carries the model's offset from the samples at a gap's edges into the gap:
     on isolated missing samples with ``prior: none`` it lowers the RMSE from 1.67 / 1.61 mm
@@ -303,6 +305,7 @@ RATIO_BOUNDS = {  # (capture, scenario): {baseline: (mean, worst seed)}
 }
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("capture,scenario", list(RATIO_BOUNDS))
 def test_against_classical_on_occlusion(capture, scenario):
     import accuracy_cases as A
@@ -323,6 +326,7 @@ def test_against_classical_on_occlusion(capture, scenario):
 TSMC_GAP_BOUNDS = {"85_02": (22.5, 24.5), "hdm05": (2.06, 2.16)}  # (mean, worst seed)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("capture", list(TSMC_GAP_BOUNDS))
 def test_pca_prior_fills_occlusion_gaps(capture):
     import accuracy_cases as A
@@ -468,6 +472,7 @@ def test_trust_gross_screen_keeps_a_wand_moving_over_a_static_rig():
     assert records[0].info["untrusted_gross"] == 1
 
 
+@pytest.mark.slow
 def test_trust_one_sample_metres_off_costs_only_itself():
     """CMU 85_02 (breakdance): a single sample 5-50 m off (and a run of three 10 m off)
     made trust untrust 28-252 of its marker's samples around it (the screen at 100 m did

@@ -15,6 +15,9 @@ from conftest import DATA, need
 from mocapfix.cli import main
 from mocapfix.formats import MOTION_SUFFIXES, read
 
+# slow: `mocapfix clean` over every shared capture (~20 s)
+pytestmark = pytest.mark.slow
+
 
 def _digests(folder):
     return {p: hashlib.sha256(p.read_bytes()).hexdigest() for p in sorted(folder.rglob("*")) if p.is_file()}

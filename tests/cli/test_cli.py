@@ -66,6 +66,7 @@ def test_info_names_the_frames_where_no_marker_is_seen():
     assert "empty       229 frames with no marker seen: 1151–1379 (2.29 s)" in text
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("path", ALL_SHARED)
 def test_info_reads_every_shared_file(path):
     result = CliRunner().invoke(main, ["info", "--json", str(need(path))])
@@ -74,6 +75,7 @@ def test_info_reads_every_shared_file(path):
     assert row["frames"] > 0 and row["joints"] > 0 and 0.0 <= row["missing_fraction"] <= 1.0
 
 
+@pytest.mark.slow
 def test_clean_sample_folder_end_to_end(tmp_path):
     src = tmp_path / "in"
     shutil.copytree(SAMPLE_DATA, src)

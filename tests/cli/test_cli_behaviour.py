@@ -39,6 +39,7 @@ def _folder(tmp_path, *files):
     return src
 
 
+@pytest.mark.slow
 def test_lines_stream_as_files_finish_off_a_terminal(tmp_path):
     src = tmp_path / "in"
     src.mkdir()
@@ -390,6 +391,7 @@ def test_nan_report_threshold_is_refused_before_anything_is_written(tmp_path):
     assert not (tmp_path / "o").exists()
 
 
+@pytest.mark.slow
 def test_the_summary_counts_the_files_by_status(tmp_path):
     """The last line adds up the per-file lines: as many OK, WARN and FAIL as were printed
     (the sample data plus the shared c3d.org MAC sample, which FAILs on its 8 markers
@@ -523,6 +525,7 @@ def test_a_line_break_in_a_file_name_does_not_split_its_line(tmp_path):
     assert (tmp_path / "out" / "a\nb.bvh").is_file()
 
 
+@pytest.mark.slow
 def test_a_closed_pipe_on_stdout_ends_the_run_quietly(tmp_path):
     # `mocapfix info DIR | head -1`: every later file was reported as "internal error
     # BrokenPipeError" (and before the last guard a traceback); now the run stops
@@ -544,6 +547,7 @@ def test_a_closed_pipe_on_stdout_ends_the_run_quietly(tmp_path):
         assert "Traceback" not in err and "internal error" not in err and "BrokenPipe" not in err, err
 
 
+@pytest.mark.slow
 def test_values_near_1e300_print_no_numpy_warnings(tmp_path):
     """A Kinect file with one coordinate at 1e300 m: info, check and clean (one process and
     a pool of two) printed a dozen 'RuntimeWarning: overflow encountered in multiply' lines

@@ -14,6 +14,9 @@ import pytest
 
 import accuracy_cases as A
 
+# slow: the shipped default on real captures over three seeds (~25 s)
+pytestmark = pytest.mark.slow
+
 # Measured (benchmarks/accuracy_bounds.py, seeds 0, 1, 2; default = swaps → trust →
 # fill_ensemble → tsmc, issue 16; fill_ensemble with its pose members and the ±3 sd
 # distance constraint), RMSE mm:

@@ -34,6 +34,7 @@ def _harm(path, config="default"):
 
 # -- the shared takes as read --------------------------------------------------------------
 
+@pytest.mark.slow
 @pytest.mark.parametrize("config", ["default", "animation-bvh"])
 @pytest.mark.parametrize("path", BANDAI)
 def test_professionally_cleaned_takes_come_back_unchanged(path, config):
@@ -46,6 +47,7 @@ def test_professionally_cleaned_takes_come_back_unchanged(path, config):
     assert cases == []
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("path", RIG_TAKES)
 def test_every_change_over_10_mm_on_a_shared_rig_take_is_supported(path):
     """Every joint-frame the default moves by more than 10 mm lies in a case the take

@@ -31,6 +31,7 @@ def _run(retain: bool):
     return out[0] == "True", float(out[1]), float(out[2])
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="glibc's mallopt, /proc")
 def test_freed_memory_is_kept_until_released():
     retained, kept, after = _run(True)

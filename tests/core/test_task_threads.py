@@ -96,6 +96,7 @@ def test_budget_single_file_worker_and_environment(budget, monkeypatch):
     assert InWorker(lambda _: threads.task_threads())(None) == 1
 
 
+@pytest.mark.slow
 def test_default_clean_is_identical_with_one_and_two_threads(budget):
     """The default pipeline on a real capture with gaps, jitter and spikes (every threaded
     step has work): the same output, bit for bit, with one and with two task threads."""
@@ -118,6 +119,7 @@ def test_default_clean_is_identical_with_one_and_two_threads(budget):
     assert (np.isnan(corrupted.positions) & ~np.isnan(a.positions)).any()
 
 
+@pytest.mark.slow
 def test_gap_fills_do_not_depend_on_which_job_runs_first(budget, monkeypatch):
     """Two gaps of one marker whose rigid neighbours are never seen in its training frames
     (each job then takes its frame's reference shape from its own gap): the fills are the

@@ -61,6 +61,7 @@ def test_decompose_restricted_axes(axes):
     np.testing.assert_allclose(decompose(axes, euler_to_matrix(axes, ang)), ang, atol=1e-12)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("path", shared_files("bvh", "*.bvh"))
 def test_real_bvh_perturbed_positions_write_back(path):
     from mocapfix.formats import read
@@ -83,6 +84,7 @@ def test_real_bvh_perturbed_positions_write_back(path):
     assert err.max() < 1e-9 * size
 
 
+@pytest.mark.slow
 def test_real_amc_perturbed_positions_write_back():
     from mocapfix.formats import read
 
@@ -98,6 +100,7 @@ def test_real_amc_perturbed_positions_write_back():
     assert np.sqrt(np.mean(res ** 2)) < 0.05
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["05_10.amc", "60_10.amc", "61_10.amc"])
 def test_other_euler_solution_kept_when_nothing_changes(name, tmp_path):
     """CMU 05_10 (rfemur), 60_10 and 61_10 (root) store some frames on the second
@@ -142,6 +145,7 @@ def test_nearest_euler_picks_the_equivalent_triplet_of_the_reference(axes):
                                nearest_euler(np.deg2rad(principal), np.deg2rad(ref), degrees=False), atol=1e-12)
 
 
+@pytest.mark.slow
 def test_write_back_keeps_the_channels_of_rotation_cleaners_and_solves_moved_positions(monkeypatch):
     """The rotation cleaners return channels and their forward kinematics: nothing is
     left to solve, the channels are written as the cleaner made them (residual 0). A step

@@ -128,6 +128,7 @@ def test_fk_matches_independent_textbook_computation(amc_name, asf_name):
 
 
 # ----------------------------------------------------------------- real files
+@pytest.mark.slow
 @pytest.mark.parametrize("amc", AMC_FILES)
 def test_every_cmu_file_reads_with_its_asf(amc):
     amc = need(amc)
@@ -153,6 +154,7 @@ def test_every_cmu_file_reads_with_its_asf(amc):
     np.testing.assert_allclose(motion.positions[0, 0], motion.channels[0, :3], atol=1e-12)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("amc", AMC_FILES)
 def test_unchanged_motion_writes_byte_identical_files(amc, tmp_path):
     amc = need(amc)

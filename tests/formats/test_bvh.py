@@ -110,6 +110,7 @@ def _bvhio_world_positions(path, frames):
     return out
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("path", BVH_FILES)
 def test_forward_kinematics_matches_bvhio(path):
     path = need(path)

@@ -94,6 +94,7 @@ def test_every_shared_file_reads_and_matches_sources(path):
     np.testing.assert_array_equal(motion.confidence, (~motion.missing).astype(float))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("path", ALL_FILES)
 def test_missing_and_positions_match_py_c3d(path):
     path = need(path)
@@ -197,6 +198,7 @@ def _params_equal(a, b):
                    (q.bytes_per_element, q.dims, q.data, q.desc), f"{name}:{key}"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("path", ALL_FILES)
 def test_round_trip_keeps_everything(path, tmp_path):
     path = need(path)

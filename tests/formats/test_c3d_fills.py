@@ -8,6 +8,7 @@ import warnings
 
 import c3d
 import numpy as np
+import pytest
 
 from mocapfix import formats
 from mocapfix.formats import c3d_params as P
@@ -48,6 +49,7 @@ def _group(path):
         }
 
 
+@pytest.mark.slow
 def test_cleaned_c3d_lists_every_filled_run(tmp_path):
     """c3d.org s01 (Eb015pi): 12 gaps, two of them 0.94 s (PV2/PV3, one at the start);
     the parameter section must grow by a block to hold the list."""
@@ -154,6 +156,7 @@ def test_with_group_replaces_one_group_and_keeps_the_others_bytes():
     assert P.with_group(bytes(broken), "MOCAPFIX", []) is None
 
 
+@pytest.mark.slow
 def test_the_report_describes_the_fills_an_int16_file_could_not_hold(tmp_path):
     """c3d.org s09 stores int16 coordinates (POINT:SCALE 0.0966: ±3.2 m). The default's fills
     of markers leaving the volume reach beyond that; the writer leaves them as gaps, and the

@@ -20,6 +20,9 @@ from mocapfix.formats import read
 from mocapfix.core.motion import Motion
 from conftest import SAMPLE_DATA, hang_guard
 
+# slow: hypothesis fuzzing of the four readers (~6 s)
+pytestmark = pytest.mark.slow
+
 # MOCAPFIX_FUZZ_EXAMPLES=2000 for a longer hunt (random, not derandomised)
 _LONG = int(os.environ.get("MOCAPFIX_FUZZ_EXAMPLES", "0"))
 FUZZ = settings(max_examples=_LONG or 60, deadline=None, derandomize=not _LONG, database=None,

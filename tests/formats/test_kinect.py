@@ -211,6 +211,7 @@ def test_real_file_unchanged_round_trip_is_byte_identical(path, tmp_path):
     assert out.read_bytes() == path.read_bytes()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("path", KINECT_FILES)
 def test_real_file_changed_values_round_trip(path, tmp_path):
     path = need(path)
@@ -660,6 +661,7 @@ def _odd_v2_csv(rng, frames=80, trailing=False) -> str:
     return "".join(out)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("seed", range(6))
 def test_bulk_csv_writer_gives_the_bytes_of_the_sample_by_sample_writer(seed, tmp_path):
     rng = np.random.default_rng(seed)

@@ -37,6 +37,7 @@ def _refused(path):
     assert str(path) in str(info.value) and len(str(info.value).splitlines()) == 1
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", SAMPLES)
 def test_truncated_at_random_offsets(name, tmp_path):
     data = (SAMPLE_DATA / name).read_bytes()

@@ -19,6 +19,9 @@ from mocapfix.core.motion import Motion
 from mocapfix.config import loads_config
 from conftest import hang_guard
 
+# slow: ~1,400 malformed inputs read, cleaned and written (~6 s)
+pytestmark = pytest.mark.slow
+
 CASES = cases()
 PER_CASE_SECONDS = 10
 # cheap, and exercising the three kernels that size arrays from parameters

@@ -67,6 +67,7 @@ def _group(path, prefix):
     return list(zip(names, first, last, error, bound))
 
 
+@pytest.mark.slow
 def test_a_long_uncertain_fill_is_left_reported_and_written_when_the_threshold_allows(tmp_path):
     path, j, truth = _with_gap(tmp_path)
     # as shipped: the hand through 1.5 s of breakdance cannot be trusted to 20 mm
@@ -113,6 +114,7 @@ def test_a_long_uncertain_fill_is_left_reported_and_written_when_the_threshold_a
     assert true > 1.0
 
 
+@pytest.mark.slow
 def test_the_bound_covers_the_true_error_of_nine_fills_in_ten_on_a_real_capture():
     """Calibration on real captures (CMU 85_02 and HDM05, the first 1,200 frames), the
     ``occlusion`` gaps of 0.1–1.5 s, seeds 0–5, every fill written (gate off, so the

@@ -20,6 +20,7 @@ C3D = SAMPLE_DATA / "walk_markers.c3d"
 PIG = ["c3d/c3dorg_s09_PlugInC3D.c3d", "c3d/btk_PiG_Motion-FlatFoot-Hole.c3d"]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("rel", PIG)
 def test_model_outputs_are_bit_identical_after_clean(rel, tmp_path):
     path = shared(rel)
@@ -110,6 +111,7 @@ def _clean_report(path, config=None):
     return motion, build_report(clean_motion(motion, pipe), pipe.report)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("rel", PIG)
 def test_report_lists_model_outputs_as_not_cleaned_and_grades_markers_only(rel):
     motion, report = _clean_report(shared(rel))
@@ -132,6 +134,7 @@ def test_report_lists_model_outputs_as_not_cleaned_and_grades_markers_only(rel):
     assert not any(n in reasons for n in model)
 
 
+@pytest.mark.slow
 def test_pig_walk_with_complete_markers_is_ok():
     """btk's PiG walk: every marker complete, forces/moments/powers missing outside the
     force-plate contacts. It used to FAIL on 'LAnkleForce 24.1 % still missing'."""
@@ -142,6 +145,7 @@ def test_pig_walk_with_complete_markers_is_ok():
     assert report["file"]["joints_by_status"] == {"OK": int(is_marker.sum()), "WARN": 0, "FAIL": 0}
 
 
+@pytest.mark.slow
 def test_pipeline_exclude_takes_markers_out_of_the_grading():
     """ktk's racing capture has six calibration probes never seen in the trial: excluded
     for the whole pipeline they are listed as such, not rebuilt, and do not fail the file."""
@@ -161,6 +165,7 @@ def test_pipeline_exclude_takes_markers_out_of_the_grading():
     assert excluded["file"]["joints"] == motion.n_joints - 7
 
 
+@pytest.mark.slow
 def test_markdown_report_names_what_was_not_cleaned():
     from mocapfix.quality.report import to_markdown
 
@@ -171,6 +176,7 @@ def test_markdown_report_names_what_was_not_cleaned():
     assert "(32 more points not cleaned: see below)" in md
 
 
+@pytest.mark.slow
 def test_check_passes_over_model_outputs_whatever_their_names():
     """`check` judges markers: a rule without name patterns does not see the model outputs
     (the shipped optical-gait rules also exclude them by name, for files that do not list
@@ -192,6 +198,7 @@ def test_check_passes_over_model_outputs_whatever_their_names():
     assert check_motion(motion.replace(positions=gappy), rules)["status"] == "FAIL"
 
 
+@pytest.mark.slow
 def test_a_result_built_without_the_pipeline_still_skips_model_outputs():
     """measure_cleaning works the model outputs out from the motion when the caller did
     not say what the pipeline left alone (library users, benchmark scripts)."""
@@ -264,6 +271,7 @@ def test_a_position_step_on_a_rig_keeps_the_left_out_joints_channels():
     assert np.abs(result.cleaned.channels[:, arm] - ch[:, arm]).max() > 1.0   # smoothed
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("where", ["pipeline", "step", "above", "markers", "child", "child-step"])
 def test_flag_then_fill_still_repairs_a_rig_when_joints_are_left_out(where):
     # the first version wrote the flagging step's positions back at once: its flagged

@@ -101,6 +101,7 @@ def test_cli_clean_passes_the_trajectories_through_bit_identical(pig, tmp_path):
         (out / f"{path.name}.report.html").read_text()
 
 
+@pytest.mark.slow
 def test_named_markers_are_cleaned_as_without_the_trajectories(pig, tmp_path):
     """The Python path: the named markers come out of clean_file exactly as a clean of the
     original trial gives them, and the status is the original's."""
@@ -119,6 +120,7 @@ def test_named_markers_are_cleaned_as_without_the_trajectories(pig, tmp_path):
     assert not any(name in reasons for name in EXTRAS)
 
 
+@pytest.mark.slow
 def test_unlabelled_trajectories_are_no_donors():
     """fill_pca rebuilds gaps from every marker it is given: the named markers of c3d.org's
     pc_real (7 % missing) come out the same whether the trajectories sit near the body or
@@ -137,6 +139,7 @@ def test_unlabelled_trajectories_are_no_donors():
     assert np.array_equal(out_far.positions[:, -5:], far.positions[:, -5:], equal_nan=True)
 
 
+@pytest.mark.slow
 def test_check_and_info_pass_over_them(pig):
     original, path = pig
     r = CliRunner().invoke(main, ["check", str(path), "-v"])
@@ -153,6 +156,7 @@ def test_check_and_info_pass_over_them(pig):
     assert "unlabelled  not cleaned or judged by default: *3 (Vicon *N name)" in info.output
 
 
+@pytest.mark.slow
 def test_a_config_can_clean_them_and_rules_can_judge_them(pig, tmp_path):
     _, path = pig
     cfg = tmp_path / "clean_unlabelled.yaml"
@@ -173,6 +177,7 @@ def test_a_config_can_clean_them_and_rules_can_judge_them(pig, tmp_path):
     assert r.exit_code == 1 and "*3: 99.7 % missing" in r.output, r.output
 
 
+@pytest.mark.slow
 def test_rarely_seen_marker_is_left_alone_and_listed():
     """ktk's racing capture: Sternum is seen on 21 of its 700 frames; the default used to
     rebuild it over runs of 4.1 s. It is passed through as read and listed with its share;

@@ -19,6 +19,9 @@ from click.testing import CliRunner
 from mocapfix.cli import main
 from conftest import SAMPLE_DATA
 
+# slow: headless Chromium renders each report (~3 s a page)
+pytestmark = pytest.mark.slow
+
 FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
          "--disable-background-networking", "--disable-component-update", "--disable-sync",
          "--disable-dev-shm-usage", "--hide-scrollbars"]

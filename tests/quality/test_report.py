@@ -268,6 +268,7 @@ def _padded(motion: Motion, before: int, after: int) -> Motion:
     return motion.replace(positions=pos, confidence=conf, times=times, source=None)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("rel, config", [("c3d/hdm05_HDM_mm_01-02_03_120.c3d", "default"),
                                          ("kinect/kv2_laban_Ges02_balancinghands.csv", "kinect")])
 def test_empty_frames_around_the_take_change_nothing_a_step_does(rel, config):

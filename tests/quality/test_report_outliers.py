@@ -4,6 +4,7 @@ cause is explained: on real files with one glitch put in by hand."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from mocapfix import formats
 from mocapfix.clean import clean_motion
@@ -16,6 +17,7 @@ def _joint(report, name):
     return next(j for j in report["joints"] if j["name"] == name)
 
 
+@pytest.mark.slow
 def test_a_rotation_spike_is_an_outlier_of_its_joint_and_explains_the_move_below_it():
     m = formats.read(shared("bvh/cmu_cgspeed_131_01.bvh"))
     elbow = m.names.index("LeftElbow")
@@ -39,6 +41,7 @@ def test_a_rotation_spike_is_an_outlier_of_its_joint_and_explains_the_move_below
     assert "where LeftElbow was judged an outlier and rebuilt" in " ".join(wrist["reasons"])
 
 
+@pytest.mark.slow
 def test_a_kinect_glitch_replaced_in_place_is_counted_and_named():
     m = formats.read(shared("kinect/kv2_laban_Ges03_drawlines.csv"))
     pipe = loads_config("pipeline:\n  - cleaner: kinect_skeleton\n")
@@ -66,6 +69,7 @@ def test_replaced_frames_map_to_samples_by_name_and_skip_what_cannot_be_placed()
     assert not replaced_mask({}, ["A"], (3, 1)).any()
 
 
+@pytest.mark.slow
 def test_a_bvh_joint_re_made_where_its_parent_was_is_moved_by_the_parent():
     """In BVH a joint's own rotation turns the joints below it, not itself: when a joint
     and its parent are both re-made at a frame, the parent is named as the cause of the
