@@ -41,7 +41,7 @@ def _override(name: str, value):
 
 
 def _config_text(edit):
-    from mocapfix import pipeline
+    from mocapfix import config as pipeline
 
     original = pipeline.load_config
 
@@ -81,7 +81,9 @@ def apply(mutant: str) -> None:
     elif mutant == "no_pca_prior":
         _override("prior", "none")
     elif mutant == "no_lowrank":
-        tsmc.tsmc_solve = lambda x, omega, *a, **k: (
+        from mocapfix.solvers import tsmc as tsmc_kernels
+
+        tsmc_kernels.tsmc_solve = lambda x, omega, *a, **k: (
             np.zeros_like(x), np.zeros_like(x),
             {"iterations": 0, "residual": 0.0, "converged": True, "rank": 0})
     elif mutant == "one_iteration":

@@ -340,13 +340,7 @@ def clean(inputs, outdir, config_path, reports, jobs, as_json, fps, allow_inside
     --overwrite or --skip-existing is given. Exit code 0 when every file was cleaned, 1
     when some failed (the others are still written), 2 for a usage or config error.
     """
-    from pathlib import Path
-
-    from mocapfix.batch.plan import check_output_folder, plan_outputs, skeleton_conflicts
-    from mocapfix.batch.clean import run_batch
-    from mocapfix.clean import output_files, remove_outputs
-    from mocapfix.core.fileio import atomic_write_text, remove_stale_temporaries
-    from mocapfix.batch.manifest import Manifest, run_key
+    from mocapfix.batch.clean import plan_clean, run_clean, would_do
     from mocapfix.config import load_config
     from mocapfix.core.presets import resolve_config
 
@@ -356,140 +350,57 @@ def clean(inputs, outdir, config_path, reports, jobs, as_json, fps, allow_inside
     try:
         if overwrite and skip_existing:   # (the last one given used to win silently)
             raise click.BadParameter("--overwrite and --skip-existing exclude each other; give one")
-        policy = "overwrite" if overwrite else "skip" if skip_existing else None
         kinds = _parse_reports(reports)
         spec = _executor_spec(jobs, scheduler, dask_workers)
         pipeline = load_config(resolve_config(config_path or "default"))
         _print_warnings(out)
         found = _discover(inputs, include, exclude, out)
-        jobs_list = plan_outputs(found.files, outdir, allow_inside_input, inputs)
-        if not jobs_list:
-            raise MocapfixError("no motion files found in " + ", ".join(inputs))
-        config_file = Path(outdir) / "mocapfix-config.yaml"
-        config_text = f"# effective config of this run (from {pipeline.source})\n" + pipeline.dump()
-        manifest = Manifest(outdir, run_key(config_text, kinds, {"fps": fps} if fps else None,
-                                            pipeline.model_files()))
-        finished = set() if policy == "overwrite" else {j for j in jobs_list if manifest.finished(j)}
-        # a folder where an output would go is not an earlier output: that file fails
-        # ("cannot write: Is a directory"); --skip-existing skipped it as "output exists"
-        existing = [j for j in jobs_list if _output_there(j) and j not in finished
-                    and not manifest.interrupted(j)]
-        if existing and policy is None:
-            shown = ", ".join(str(j.output) for j in existing[:3]) + (" …" if len(existing) > 3 else "")
-            other = any(manifest.knows(j.source) for j in existing)
-            raise MocapfixError(f"{len(existing)} output(s) exist already ({shown}); pass --overwrite "
-                                "to replace them or --skip-existing to keep them"
-                                + ("; the folder's manifest records them made with another config, "
-                                   "model, report kinds, --fps, version, input or skeleton"
-                                   if other else ""))
-        if policy == "skip" and existing and config_file.exists() and \
-                _config_body(config_file.read_text(encoding="utf-8")) != _config_body(config_text):
-            raise MocapfixError(f"{config_file}: the outputs there were made with another config; "
-                                "--skip-existing would mix two configs in one folder (use --overwrite "
-                                "or another output folder)")
-        if policy == "skip" and any(manifest.made_with_other_models(j) for j in existing):
-            raise MocapfixError(f"{outdir}: the outputs there were made with other contents of the "
-                                "model file(s) this config reads; --skip-existing would mix two "
-                                "models in one folder (use --overwrite or another output folder)")
-        # the folders this run makes (taken back if nothing runs)
-        made = [p for p in (Path(outdir), *Path(outdir).parents) if not os.path.lexists(p)]
-        check_output_folder(outdir, create=not dry_run)
-        if config_file.is_dir():
-            raise MocapfixError(f"{config_file}: is a folder; the run's config record "
-                                "cannot be written there (move it away)")
-    except click.BadParameter as exc:
+        plan = plan_clean(found.files, outdir, pipeline, inputs=inputs, reports=kinds,
+                          policy="overwrite" if overwrite else "skip" if skip_existing else None,
+                          fps=fps, allow_inside_input=allow_inside_input, dry_run=dry_run)
+    except (click.BadParameter, MocapfixError) as exc:
         _fail(str(exc), debug, exc)
-    except MocapfixError as exc:
-        _fail(str(exc), debug, exc)
-    # --skip-existing keeps what an earlier run finished: an output whose replacement a
-    # run started and never finished (killed) is redone, as without the option -- kept,
-    # an AMC there could sit beside the new copy of an ASF its batch-mates had replaced
-    todo = [j for j in jobs_list if j not in finished
-            and not (policy == "skip" and _output_there(j) and not manifest.interrupted(j))]
-    skipped = [j for j in jobs_list if j not in todo]
-    conflicts = skeleton_conflicts(todo)
-    if conflicts:
-        for folder in made:             # the folders this run made, empty: taken back
-            with contextlib.suppress(OSError):
-                folder.rmdir()
-        more = f" (and {len(conflicts) - 1} more)" if len(conflicts) > 1 else ""
-        _fail(conflicts[0] + more + "; nothing was cleaned", debug, None)
-    if not dry_run:
-        # a killed run leaves its half-written temporaries; the files this run writes
-        # anew take theirs away (never anything else)
-        remove_stale_temporaries(f for j in todo for f in output_files(j.output))
-    for j in skipped:
-        why = "finished earlier" if j in finished else "output exists"
+    for j, why in plan.skipped:
         out.line(f"SKIP  {one_line(j.source)}: {why} ({one_line(j.output)})")
     if dry_run:
-        for j in todo:
-            note = (" (its output path is a folder: the file would fail)" if j.output.is_dir()
-                    else " (replaces the existing output)" if _output_there(j) else "")
-            out.line(f"WOULD {one_line(j.source)} -> {one_line(j.output)}{note}", level=-1)
+        todo = would_do(plan)
+        for f in todo:
+            note = (" (its output path is a folder: the file would fail)" if f.get("output_is_folder")
+                    else " (replaces the existing output)" if f["replaces"] else "")
+            out.line(f"WOULD {one_line(f['input'])} -> {one_line(f['output'])}{note}", level=-1)
         out.line(f"dry run: {len(todo)} file(s) would be cleaned with {pipeline.source}, "
-                 f"{len(skipped)} skipped; nothing written", level=-1, err=True)
+                 f"{len(plan.skipped)} skipped; nothing written", level=-1, err=True)
         if as_json:                     # (stdout stayed empty: `--json --dry-run | jq` failed)
-            click.echo(json.dumps({"dry_run": True, "config": str(pipeline.source),
-                                   "files": [{"input": str(j.source), "output": str(j.output),
-                                              "replaces": _output_there(j),
-                                              **({"output_is_folder": True}
-                                                 if j.output.is_dir() else {})}
-                                             for j in todo],
-                                   "skipped": [str(j.source) for j in skipped]}, indent=1))
+            click.echo(json.dumps({"dry_run": True, "config": str(pipeline.source), "files": todo,
+                                   "skipped": [str(j.source) for j, _ in plan.skipped]}, indent=1))
         sys.exit(EXIT_OK)
 
-    finished_here: list[str] = []
-
     def stream(r):
-        finished_here.append(r["input"])
         out.line(_clean_line(r, obj["verbosity"] > 0), level=0 if r["status"] != "ERROR" else -1,
                  err=True if r["status"] == "ERROR" else None)
         if debug and r.get("traceback"):
             out.error(r["traceback"].rstrip())
-        if r["status"] == "ERROR":
-            # a failed file leaves nothing behind, not even an output of an earlier run
-            remove_outputs(output_files(Path(r["output"])))
-        manifest.record(r)               # resumable: one record per finished file
 
-    manifest.start(todo)
     try:
-        results = run_batch(todo, pipeline.config(), str(pipeline.source), kinds, jobs,
-                            {"default_fps": fps} if fps else None, on_result=stream, spec=spec)
+        results = run_clean(plan, workers=jobs, spec=spec, on_result=stream)
     except MocapfixError as exc:        # e.g. the Dask scheduler cannot be reached
-        if not finished_here:           # nothing ran: leave the folder as it was
-            manifest.abandon()
-            for folder in made:
-                with contextlib.suppress(OSError):
-                    folder.rmdir()      # only if empty, innermost first
         _fail(str(exc), debug, exc)
-    manifest.close()
     failed = [r for r in results if r["status"] == "ERROR"]
-    if len(failed) < len(results) or finished:
-        # provenance: written only when this config produced (or kept) at least one output
-        atomic_write_text(config_file, config_text)
+    skipped = [str(j.source) for j, _ in plan.skipped]
     if as_json:
         click.echo(json.dumps({"files": results, "cleaned": len(results) - len(failed),
-                               "failed": len(failed), "skipped": [str(j.source) for j in skipped],
+                               "failed": len(failed), "skipped": skipped,
                                "config": str(pipeline.source)}, indent=1))
     else:
         graded = [r["status"] for r in results if r["status"] != "ERROR"]
         out.line(f"cleaned {len(results) - len(failed)} of {len(results)} files"
-                 + (f" ({len(skipped)} skipped: {'finished earlier' if finished else 'output exists'})"
+                 + (f" ({len(skipped)} skipped: {'finished earlier' if plan.resumed else 'output exists'})"
                     if skipped else "")
                  + (": " + ", ".join(f"{graded.count(s)} {s}" for s in ("OK", "WARN", "FAIL")
                                       if s in graded) if graded else "")
                  + (f"; {len(failed)} failed (ERROR): " + ", ".join(one_line(r["input"]) for r in failed)
                     if failed else ""), level=-1, err=bool(failed))
     sys.exit(EXIT_SOME_FAILED if failed else EXIT_OK)
-
-
-def _output_there(job) -> bool:
-    """An earlier output (or anything but a folder) is at ``job.output``."""
-    return job.output.exists() and not job.output.is_dir()
-
-
-def _config_body(text: str) -> str:
-    return "\n".join(line for line in text.splitlines() if not line.startswith("#"))
 
 
 # -- check ---------------------------------------------------------------------------------

@@ -1,17 +1,40 @@
-"""The clean batch: one :class:`CleanTask` per planned job (read, clean, write the output
-and its reports: :func:`mocapfix.clean.clean_file`), each worker parsing the config once.
+"""The clean batch: the policy of ``mocapfix clean`` as library functions, and one
+:class:`CleanTask` per planned job (read, clean, write the output and its reports:
+:func:`mocapfix.clean.clean_file`), each worker parsing the config once.
+
+:func:`plan_clean` decides what a run does before anything is written: the jobs, which are
+skipped (finished earlier by the same config, models, report kinds and inputs — recorded in
+the output folder's manifest, :mod:`mocapfix.batch.manifest` — or kept by
+``policy="skip"``), and refuses with one :class:`~mocapfix.core.errors.MocapfixError` what
+the run must not do (outputs of another run in the way without a policy, two configs or
+models mixed in one folder by ``"skip"``, an AMC whose ASF copy would pair it with the
+wrong skeleton, an output folder that cannot be written). :func:`run_clean` runs the plan:
+it records each finished file in the manifest (a killed run resumes), leaves nothing of a
+file that failed, takes back the folders it made when nothing ran, and writes the run's
+effective config beside the outputs. :func:`clean_batch` is both in one call, for a
+notebook or a script; the CLI prints around the same two steps.
 """
 from __future__ import annotations
 
+import contextlib
 import os
 import threading
 from concurrent.futures import Executor
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Callable
 
-from mocapfix.core.errors import MocapfixError, name_the_file
-from mocapfix.batch.plan import Job
+from mocapfix.batch.discovery import discover_inputs
+from mocapfix.batch.manifest import Manifest, run_key
+from mocapfix.batch.plan import Job, check_output_folder, plan_outputs, skeleton_conflicts
 from mocapfix.batch.tasks import error_result, internal_error, run_tasks
+from mocapfix.clean import output_files, remove_outputs
+from mocapfix.core.errors import MocapfixError, name_the_file
+from mocapfix.core.fileio import atomic_write_text, remove_stale_temporaries
+from mocapfix.pipeline.steps import Pipeline
+
+#: what a run may do with outputs of an earlier run in its way (None: refuse)
+POLICIES = (None, "overwrite", "skip")
 
 
 @dataclass
@@ -104,3 +127,171 @@ def run_batch(jobs: list[Job], config: dict, source: str, reports=("json",), wor
         if on_result is not None:
             on_result(result)
     return results  # type: ignore[return-value]
+
+
+# -- the policy of a clean run ----------------------------------------------------------------
+
+@dataclass
+class CleanPlan:
+    """What a clean run will do (:func:`plan_clean`)."""
+
+    pipeline: Pipeline
+    outdir: Path
+    reports: tuple
+    read_options: dict | None
+    manifest: Manifest
+    #: the run's effective config, and where it is written
+    config_text: str
+    config_file: Path
+    todo: list
+    #: (job, why) of the jobs left alone: "finished earlier" or "output exists"
+    skipped: list
+    #: the folders this run makes (taken back, empty, when nothing runs)
+    made: list = field(default_factory=list)
+
+    @property
+    def resumed(self) -> bool:
+        """Some outputs were finished by an earlier run of the same config."""
+        return any(why == "finished earlier" for _, why in self.skipped)
+
+
+def _output_there(job: Job) -> bool:
+    """An earlier output (or anything but a folder) is at ``job.output``."""
+    return job.output.exists() and not job.output.is_dir()
+
+
+def _config_body(text: str) -> str:
+    return "\n".join(line for line in text.splitlines() if not line.startswith("#"))
+
+
+def plan_clean(files, outdir, pipeline: Pipeline, *, inputs=(), reports=("json",),
+               policy: str | None = None, fps: float | None = None,
+               allow_inside_input: bool = False, dry_run: bool = False) -> CleanPlan:
+    """Plan cleaning ``files`` (found by :func:`~mocapfix.batch.discovery.discover_inputs`
+    in ``inputs``) into ``outdir`` with ``pipeline``; see the module docstring. Raises
+    :class:`~mocapfix.core.errors.MocapfixError` for what the run must not do; a dry run
+    makes no folder and writes nothing, and refuses what the real run would."""
+    if policy not in POLICIES:
+        raise ValueError(f"policy must be one of {POLICIES}, got {policy!r}")
+    outdir = Path(outdir)
+    jobs = plan_outputs(files, outdir, allow_inside_input, inputs)
+    if not jobs:
+        raise MocapfixError("no motion files found in " + ", ".join(map(str, inputs or files)))
+    config_file = outdir / "mocapfix-config.yaml"
+    config_text = f"# effective config of this run (from {pipeline.source})\n" + pipeline.dump()
+    manifest = Manifest(outdir, run_key(config_text, reports, {"fps": fps} if fps else None,
+                                        pipeline.model_files()))
+    finished = set() if policy == "overwrite" else {j for j in jobs if manifest.finished(j)}
+    # a folder where an output would go is not an earlier output: that file fails
+    # ("cannot write: Is a directory"); --skip-existing skipped it as "output exists"
+    existing = [j for j in jobs if _output_there(j) and j not in finished
+                and not manifest.interrupted(j)]
+    if existing and policy is None:
+        shown = ", ".join(str(j.output) for j in existing[:3]) + (" …" if len(existing) > 3 else "")
+        other = any(manifest.knows(j.source) for j in existing)
+        raise MocapfixError(f"{len(existing)} output(s) exist already ({shown}); pass --overwrite "
+                            "to replace them or --skip-existing to keep them"
+                            + ("; the folder's manifest records them made with another config, "
+                               "model, report kinds, --fps, version, input or skeleton"
+                               if other else ""))
+    if policy == "skip" and existing and config_file.exists() and \
+            _config_body(config_file.read_text(encoding="utf-8")) != _config_body(config_text):
+        raise MocapfixError(f"{config_file}: the outputs there were made with another config; "
+                            "--skip-existing would mix two configs in one folder (use --overwrite "
+                            "or another output folder)")
+    if policy == "skip" and any(manifest.made_with_other_models(j) for j in existing):
+        raise MocapfixError(f"{outdir}: the outputs there were made with other contents of the "
+                            "model file(s) this config reads; --skip-existing would mix two "
+                            "models in one folder (use --overwrite or another output folder)")
+    made = [p for p in (outdir, *outdir.parents) if not os.path.lexists(p)]
+    check_output_folder(outdir, create=not dry_run)
+    if config_file.is_dir():
+        raise MocapfixError(f"{config_file}: is a folder; the run's config record "
+                            "cannot be written there (move it away)")
+    # "skip" keeps what an earlier run finished: an output whose replacement a run started
+    # and never finished (killed) is redone, as without the option -- kept, an AMC there
+    # could sit beside the new copy of an ASF its batch-mates had replaced
+    todo = [j for j in jobs if j not in finished
+            and not (policy == "skip" and _output_there(j) and not manifest.interrupted(j))]
+    skipped = [(j, "finished earlier" if j in finished else "output exists")
+               for j in jobs if j not in todo]
+    conflicts = skeleton_conflicts(todo)
+    if conflicts:
+        _take_back(made)
+        more = f" (and {len(conflicts) - 1} more)" if len(conflicts) > 1 else ""
+        raise MocapfixError(conflicts[0] + more + "; nothing was cleaned")
+    return CleanPlan(pipeline, outdir, tuple(reports), {"default_fps": fps} if fps else None,
+                     manifest, config_text, config_file, todo, skipped, made)
+
+
+def _take_back(folders) -> None:
+    """Remove the ``folders`` a run made, where they are empty, innermost first."""
+    for folder in folders:
+        with contextlib.suppress(OSError):
+            folder.rmdir()
+
+
+def would_do(plan: CleanPlan) -> list[dict]:
+    """A dry run's account of the plan: per file to clean, its output and whether it
+    replaces one (or would fail: its output path is a folder)."""
+    return [{"input": str(j.source), "output": str(j.output), "replaces": _output_there(j),
+             **({"output_is_folder": True} if j.output.is_dir() else {})} for j in plan.todo]
+
+
+def run_clean(plan: CleanPlan, *, workers: int = 1, spec=None,
+              on_result: Callable | None = None) -> list[dict]:
+    """Run a :func:`plan_clean` plan; results in job order, ``on_result(result)`` as each
+    file finishes. A file that failed leaves nothing behind, not even an output of an
+    earlier run; each finished file is recorded in the manifest; the effective config is
+    written when this config produced (or kept) at least one output. When the batch cannot
+    start (e.g. a Dask scheduler that cannot be reached) before any file finished, the
+    manifest and the folders the run made are taken back and the error raised."""
+    # a killed run leaves its half-written temporaries; the files this run writes anew
+    # take theirs away (never anything else)
+    remove_stale_temporaries(f for j in plan.todo for f in output_files(j.output))
+    finished_here: list[str] = []
+
+    def record(result):
+        finished_here.append(result["input"])
+        if result["status"] == "ERROR":
+            remove_outputs(output_files(Path(result["output"])))
+        plan.manifest.record(result)            # resumable: one record per finished file
+        if on_result is not None:
+            on_result(result)
+
+    plan.manifest.start(plan.todo)
+    try:
+        results = run_batch(plan.todo, plan.pipeline.config(), str(plan.pipeline.source),
+                            plan.reports, workers, plan.read_options, on_result=record, spec=spec)
+    except MocapfixError:
+        if not finished_here:               # nothing ran: leave the folder as it was
+            plan.manifest.abandon()
+            _take_back(plan.made)
+        raise
+    plan.manifest.close()
+    failed = sum(r["status"] == "ERROR" for r in results)
+    if failed < len(results) or plan.resumed:
+        atomic_write_text(plan.config_file, plan.config_text)
+    return results
+
+
+def clean_batch(inputs, outdir, config="default", *, reports=("json",), policy: str | None = None,
+                fps: float | None = None, workers: int = 1, include=(), exclude=(),
+                allow_inside_input: bool = False, on_result: Callable | None = None) -> dict:
+    """Clean files and folders into ``outdir`` as ``mocapfix clean`` does: ``config`` is a
+    preset name, a YAML path or a :class:`~mocapfix.pipeline.steps.Pipeline`; ``policy``
+    None, ``"overwrite"`` or ``"skip"`` (the CLI's ``--overwrite`` and
+    ``--skip-existing``). Returns ``{"files": [result per file cleaned], "skipped":
+    [(input, why), ...], "ignored": [(path, why) of files discovery passed over]}``;
+    raises :class:`~mocapfix.core.errors.MocapfixError` for what the run refuses."""
+    from mocapfix.config import load_config
+    from mocapfix.core.presets import resolve_config
+
+    pipeline = config if isinstance(config, Pipeline) else load_config(resolve_config(config))
+    found = discover_inputs([str(i) for i in inputs], include, exclude)
+    plan = plan_clean(found.files, outdir, pipeline, inputs=[str(i) for i in inputs],
+                      reports=reports, policy=policy, fps=fps,
+                      allow_inside_input=allow_inside_input)
+    results = run_clean(plan, workers=workers, on_result=on_result)
+    return {"files": results, "skipped": [(str(j.source), why) for j, why in plan.skipped],
+            "ignored": [(str(p), why) for p, why in found.skipped]}

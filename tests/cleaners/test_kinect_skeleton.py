@@ -9,8 +9,8 @@ from click.testing import CliRunner
 from mocapfix.bench import kinect as bk
 from mocapfix import formats
 from mocapfix.cleaners import build
-from mocapfix.cleaners.depth_skeleton import (leg_swap_frames, nearest_starts, validated_shares,
-                                              validation_starts)
+from mocapfix.solvers.depth_skeleton import (leg_swap_frames, nearest_starts, validated_shares,
+                                             validation_starts)
 from mocapfix.cli import main
 from mocapfix.formats import kinect as kf
 from mocapfix.solvers import run_offsets, svshrink, whittaker

@@ -396,7 +396,7 @@ def test_divergent_alm_is_detected_and_falls_back(monkeypatch):
     isometry term (the same as asking for γ = 0), said in ``info``; if that diverges as
     well, the data is returned. Measured on these limbs with 5 mm noise (mean error
     8.0 mm): tuned settings 5.6 mm, with γ = 0 6.9 mm."""
-    from mocapfix.cleaners import lowrank_isometry
+    from mocapfix.solvers import lowrank_isometry
 
     clean, _ = _limbs_motion()
     rng = np.random.default_rng(3)

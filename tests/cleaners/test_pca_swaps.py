@@ -336,7 +336,7 @@ def test_fill_pca_rejects_fills_outside_the_capture_volume():
 def test_swaps_nanmedian_equals_numpy():
     """The sort-based median of the rigid templates: known answers (odd and even counts,
     an all-NaN column) and numpy's nanmedian on random distances with NaN."""
-    from mocapfix.cleaners.swaps import _nanmedian_first_axis
+    from mocapfix.solvers.swaps import _nanmedian_first_axis
 
     x = np.array([[1.0, 4.0, np.nan], [np.nan, 2.0, np.nan], [3.0, 9.0, np.nan],
                   [7.0, 1.0, np.nan]])
@@ -350,7 +350,7 @@ def test_swaps_nanmedian_equals_numpy():
 
 
 def test_swaps_pair_distances_equal_the_direct_norms():
-    from mocapfix.cleaners.swaps import _pair_distances
+    from mocapfix.solvers.swaps import _pair_distances
 
     rng = np.random.default_rng(6)
     S = rng.normal(size=(50, 7, 3)) * 300

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from mocapfix.cleaners import build
-from mocapfix.cleaners.tsmc import bridge_residual, tsmc_solve
+from mocapfix.solvers.tsmc import bridge_residual, tsmc_solve
 from mocapfix.core.motion import Motion
 from mocapfix.solvers import dct
 from mocapfix.solvers.lowrank import svt
@@ -259,7 +259,7 @@ def test_gap_edge_bridge_helps_on_isolated_missing_samples(amc_random_missing, m
     on isolated missing samples with ``prior: none`` it lowers the RMSE from 1.67 / 1.61 mm
     to 1.39 / 1.38 mm (measured). With the default ``prior: pca`` it changes the occlusion
     results by < 1 % (the PCA prediction already meets the gap's edges)."""
-    import mocapfix.cleaners.tsmc as tsmc_module
+    import mocapfix.solvers.tsmc as tsmc_module
 
     truth, cases = amc_random_missing
     bridged = [_tsmc_mm(truth, bad) for bad in cases]
