@@ -1,8 +1,9 @@
 #!/usr/bin/env python3
 """Measured RMSE (mm) of the shipped default per accuracy case, over the seeds of
 tests/accuracy_cases.py (mean and worst seed), and its ratio to each baseline — the
-numbers the bounds of tests/test_default_accuracy.py and tests/test_tsmc.py are set from.
-Re-run after any change to the default config or its cleaners and re-set the bounds.
+numbers the bounds of tests/config/test_default_accuracy.py and tests/cleaners/test_tsmc.py
+are set from. Re-run after any change to the default config or its cleaners and re-set the
+bounds.
 
     MOCAPFIX_REQUIRE_DATA=1 python benchmarks/accuracy_bounds.py [--seeds 0,1,2]
 """

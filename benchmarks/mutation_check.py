@@ -21,7 +21,7 @@ from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 REPO = HERE.parent
-TESTS = ["tests/test_default_accuracy.py", "tests/test_tsmc.py"]
+TESTS = ["tests/config/test_default_accuracy.py", "tests/cleaners/test_tsmc.py"]
 
 sys.path.insert(0, str(HERE))
 from mutants import MUTANTS  # noqa: E402

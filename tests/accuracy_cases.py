@@ -1,6 +1,6 @@
-"""Multi-seed accuracy cases shared by tests/test_default_accuracy.py, tests/test_tsmc.py,
-benchmarks/accuracy_bounds.py (prints the measured mean / worst seed per case, to re-set
-the bounds) and benchmarks/mutation_check.py.
+"""Multi-seed accuracy cases shared by tests/config/test_default_accuracy.py,
+tests/cleaners/test_tsmc.py, benchmarks/accuracy_bounds.py (prints the measured mean / worst
+seed per case, to re-set the bounds) and benchmarks/mutation_check.py.
 
 A case is a gap-free real capture (a slice small enough for CI; its markers, without
 HDM05's unlabelled ``*0``-``*2``, which no pipeline cleans by default), one ``occlusion``

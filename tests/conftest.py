@@ -31,7 +31,7 @@ def _missing(what: str):
 #: Every file of the shared data, by folder, as listed in ../shared/data/SOURCES.md. The
 #: per-file tests are parametrised from this table, not from what happens to be on disk,
 #: so a missing file fails its own test under MOCAPFIX_REQUIRE_DATA=1, and
-#: tests/test_shared_data.py checks that the disk holds exactly these files.
+#: tests/formats/test_shared_data.py checks that the disk holds exactly these files.
 EXPECTED_FILES = {
     "c3d": (
         "btk_ADemo1_pc_integer.c3d", "btk_Gait.c3d", "btk_PiG_Motion-FlatFoot-Hole.c3d",
@@ -134,6 +134,26 @@ def output_tree(folder) -> dict:
             out[rel] = drop_seconds(json.loads(p.read_text())) if p.name.endswith(".report.json") \
                 else p.read_bytes()
     return out
+
+
+#: A quick config for command-line tests that need one: one fill step.
+FILL_CONFIG = "version: 1\npipeline:\n  - cleaner: fill\n    max_gap: 0.5 s\n"
+
+
+def config_file(tmp_path, text: str = FILL_CONFIG, name: str = "cfg.yaml") -> str:
+    """``text`` written to ``tmp_path / name``; its path, as ``-c`` takes it."""
+    p = tmp_path / name
+    p.write_text(text)
+    return str(p)
+
+
+def md5_tree(folder) -> dict:
+    """Every file under ``folder`` -> its MD5: compare two of them to show that a run changed
+    nothing there."""
+    import hashlib
+
+    return {p: hashlib.md5(p.read_bytes()).hexdigest() for p in sorted(Path(folder).rglob("*"))
+            if p.is_file()}
 
 
 def no_traceback(result) -> None:

@@ -63,7 +63,7 @@ from mocapfix import formats  # noqa: E402
 from mocapfix.bench import corrupt
 from mocapfix.core import metrics
 from mocapfix.bench import cleaner_input  # noqa: E402
-from mocapfix.cleaners.partlet import noise_level, suspect_samples  # noqa: E402
+from mocapfix.solvers.partlet import noise_level, suspect_samples  # noqa: E402
 from mocapfix.config import parse_config  # noqa: E402
 from mocapfix.solvers.dct import dct, eigenvalues, idct  # noqa: E402
 

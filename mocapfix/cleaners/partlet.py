@@ -61,7 +61,7 @@ the paper tunes λ1, λ2, λ3 per noise setting from a grid, we ship one setting
   presmoothing; 5 dB −6 %, 10 dB + 20 % outliers −6 %); blending both scales' outputs
   was no better than switching. Not for OMP codes (K-SVD model, 10 dB: ℓ2 6.23 → 6.49, ℓ1
   5.18 → 6.04).
-- Suspect samples (:func:`suspect_samples`): a joint sample farther than ``despike`` (5)
+- Suspect samples (:func:`mocapfix.solvers.partlet.suspect_samples`): a joint sample farther than ``despike`` (5)
   noise σ and ``min_outlier`` from the running median of 7 frames is kept out of the
   presmoothing and of the torso-frame fit; it stays in the data term, where the ℓ2,p term
   decides on it. GCV presmoothing had smeared ±50 cm outliers into their neighbours
@@ -73,7 +73,7 @@ the paper tunes λ1, λ2, λ3 per noise setting from a grid, we ship one setting
   (k = 4: 6.54 → 5.99 cm) but hurt clean input (a filled 60-frame gap 5.0 → 7.5 cm).
 - The cleaned bones are projected to their median length (``bones``), for every skeleton
   bone whose input is consistent with a rigid bone under the file's noise
-  (:func:`rigid_bones`; a marker pair or sensor joints that move apart are left alone):
+  (:func:`mocapfix.solvers.partlet.rigid_bones`; a marker pair or sensor joints that move apart are left alone):
   10 dB 5.81 → 5.33, 30 dB 1.07 → 0.93, 20 dB + 10 % 2.41 → 2.20, that filled gap
   5.0 → 3.7 cm (from the two steps above with a fixed 0.15 s frame smoothing to the
   shipped defaults). Not in the paper (its Fig. 7 only shows bone lengths as a symptom).
@@ -131,113 +131,20 @@ import time
 import warnings
 
 import numpy as np
-from numpy.lib.stride_tricks import sliding_window_view
 
 from mocapfix.core import bodyparts
 from mocapfix.cleaners import register
 from mocapfix.cleaners.base import FittedCleaner, Param
 from mocapfix.core.errors import ConfigError, MocapfixError
 from mocapfix.core.motion import Motion
-from mocapfix.solvers import sparse
-from mocapfix.solvers.bone_projection import project_lengths
+from mocapfix.solvers import partlet as pk
 from mocapfix.solvers.dct import gcv_smooth
-from mocapfix.solvers.local_sure import local_sure_smooth
 from mocapfix.solvers.lowrank import blas_single_thread
 from mocapfix.solvers.rigid import from_frame, kabsch, to_frame, torso_frames
 from mocapfix.solvers.segments import linear_bridge
-from mocapfix.solvers.ssa import channel_noise
 
 #: a model for a file when no ``model`` is given: shipped name by skeleton convention
 AUTO_MODELS = (("lfemur", "partlet-cmu"), ("kneeleft", "partlet-kinect"))
-
-
-def _windows(X: np.ndarray, m: int, dilation: int, starts: np.ndarray) -> np.ndarray:
-    """(d, n) matrix of windows: column j = vec of X[starts[j] + dilation·k], k < m,
-    X (T, c) → d = m·c (frame-major)."""
-    span = dilation * (m - 1) + 1
-    view = sliding_window_view(X, span, axis=0)[:, :, ::dilation]   # (T-span+1, c, m)
-    return np.ascontiguousarray(np.swapaxes(view[starts], 1, 2)).reshape(len(starts), -1).T
-
-
-def _overlap_average(W: np.ndarray, T: int, c: int, m: int, dilation: int, starts: np.ndarray):
-    """Inverse of :func:`_windows`: average of every window's copy of each frame."""
-    rec = W.T.reshape(len(starts), m, c)
-    out = np.zeros((T, c))
-    count = np.zeros(T)
-    for k in range(m):
-        out[starts + dilation * k] += rec[:, k]
-        count[starts + dilation * k] += 1
-    return out / np.maximum(count, 1)[:, None], count
-
-
-def _starts(T: int, m: int, dilation: int, stride: int) -> np.ndarray:
-    """Window starts: for each phase r < dilation, every ``stride`` window samples
-    (``stride · dilation`` frames) and the last possible one, so that every frame lies in
-    about ``m / stride`` windows."""
-    last = T - (dilation * (m - 1) + 1)
-    if last < 0:
-        return np.zeros(0, dtype=np.intp)
-    parts = []
-    for r in range(min(dilation, last + 1)):
-        s = np.arange(r, last + 1, stride * dilation)
-        tail = last - ((last - r) % dilation)
-        parts.append(np.append(s, tail))
-    return np.unique(np.concatenate(parts))
-
-
-def suspect_samples(P: np.ndarray, k: float, floor: float = 0.0, width: int = 7) -> np.ndarray:
-    """(T, J) mask of joint samples of P (T, J, 3) that stand off a running median of
-    ``width`` frames by more than ``k`` noise σ (the 3-D distance; σ the MAD of the
-    per-coordinate residuals, robust to a minority of outliers): the samples the
-    presmoothing and the frame fit must not see, before the ℓ2,p term decides on them."""
-    T = P.shape[0]
-    flat = P.reshape(T, -1)
-    ok = ~np.isnan(flat).all(axis=0)
-    if T < width or not ok.any():
-        return np.zeros(P.shape[:2], dtype=bool)
-    filled = np.ascontiguousarray(linear_bridge(flat[:, ok]).T)      # channels contiguous: faster
-    if width % 2:   # the same as ndimage.median_filter(mode="nearest"), in half the time
-        h = width // 2
-        view = sliding_window_view(np.pad(filled, ((0, 0), (h, h)), mode="edge"), width, axis=1)
-        med = np.partition(view, h, axis=-1)[..., h]
-    else:
-        from scipy import ndimage   # imported here: listing the cleaners need not load it
-
-        med = ndimage.median_filter(filled, size=(1, width), mode="nearest")
-    r = np.full(flat.shape, np.nan)
-    r[:, ok] = (filled - med).T
-    r[np.isnan(flat)] = np.nan
-    seen = np.abs(r[~np.isnan(r)])
-    scale = 1.4826 * float(np.median(seen)) if seen.size else 0.0
-    dist = np.sqrt(np.nansum(r.reshape(P.shape) ** 2, axis=2))
-    return (dist > max(k * scale, floor)) & ~np.isnan(P).any(axis=2)
-
-
-def rigid_bones(a: np.ndarray, b: np.ndarray, sigma: float, *, factor: float = 2.0) -> np.ndarray:
-    """Per bone, whether the input is consistent with a bone of constant length between
-    joint tracks ``a`` and ``b`` (T, B, 3) carrying white noise of σ per coordinate: the
-    robust spread (1.4826 MAD) of the squared length ℓ² is at most ``factor`` × what the
-    noise alone gives (Var ℓ² = 8L²σ² + 24σ⁴ for ℓ² = |d + n|², n ~ N(0, 2σ²I)), plus 1 %
-    of L² for rounding. Clean data from a rigid skeleton: ℓ² constant; a marker pair or a
-    sensor's joints that move apart: spread far above the noise's. NaN samples are
-    ignored; a bone with fewer than 3 samples is not taken as rigid."""
-    l2 = np.sum((a - b) ** 2, axis=2)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)
-        med = np.nanmedian(l2, axis=0)
-        spread = 1.4826 * np.nanmedian(np.abs(l2 - med), axis=0)
-    L2 = np.maximum(med - 6.0 * sigma ** 2, 0.0)
-    expected = np.sqrt(8.0 * L2 * sigma ** 2 + 24.0 * sigma ** 4)
-    enough = np.isfinite(l2).sum(axis=0) >= 3
-    return enough & (spread <= factor * expected + 0.01 * L2)
-
-
-def noise_level(X: np.ndarray) -> float:
-    """σ̂ of white noise on the channels of X (T, c), NaN-aware: the median absolute second
-    difference / 0.6745 / √6 (Var of a second difference of white noise is 6σ²)."""
-    d2 = X[2:] - 2 * X[1:-1] + X[:-2]
-    d2 = np.abs(d2[np.isfinite(d2)])
-    return float(np.median(d2) / 0.6745 / np.sqrt(6.0)) if d2.size else 0.0
 
 
 @register
@@ -356,7 +263,7 @@ class PartletDictionary(FittedCleaner):
         ref = self.values["frame_noise"].si
         fac = 1.0
         if ref > 0:
-            fac = float(np.clip(noise_level(P[:, self.frame_].reshape(len(P), -1)) / ref, 1.0, 6.0))
+            fac = float(np.clip(pk.noise_level(P[:, self.frame_].reshape(len(P), -1)) / ref, 1.0, 6.0))
         R, c, valid = torso_frames(frame_pts, self.template_,
                                    smoothing=self.values["frame_smoothing"].si * fps * fac)
         local = to_frame(P, R, c)
@@ -430,12 +337,12 @@ class PartletDictionary(FittedCleaner):
                 dil = self._dilation(mo.fps, r)
                 # fine scale: a window every half window sample; coarse: every ``dil`` samples
                 # (a quarter as many windows as the fine scale at 30 of 120 Hz)
-                starts = _starts(len(P), m, dil, max(1, dil // 2) if k == 0 else dil)
+                starts = pk.starts(len(P), m, dil, max(1, dil // 2) if k == 0 else dil)
                 if not len(starts):
                     continue
                 for p in bodyparts.PARTLETS:
                     Xp = X[:, self.partlets_[p]].reshape(len(P), -1)
-                    W = _windows(Xp, m, dil, starts)
+                    W = pk.windows(Xp, m, dil, starts)
                     W = W[:, ~np.isnan(W).any(axis=0)]
                     data[k][p].append(W)
         if not all(data[0].values()):
@@ -470,10 +377,13 @@ class PartletDictionary(FittedCleaner):
                 B = B[:, rng.choice(B.shape[1], self.values["max_windows"], replace=False)]
             B = B.astype(np.float32)   # training in single precision: half the time, same atoms
             if self.values["method"] == "ksvd":
-                D, W, iters = self._train_ksvd(B, K, rng)
+                D, W, iters = pk.train_ksvd(B, K, rng, sparsity=self.values["sparsity"],
+                                            iterations=self.values["train_iterations"])
                 E = 0.0
             else:
-                D, W, E, iters = self._train_robust(B, K, rng)
+                D, W, E, iters = pk.train_robust(B, K, rng, beta=self.values["beta"],
+                                                 lam=self.values["train_lambda"].si,
+                                                 iterations=self.values["train_iterations"])
             D = D.astype(np.float64)
             R = B - D @ W - E
             unexplained[p] = float(np.vdot(R, R) / max(np.vdot(B, B), 1e-300))
@@ -491,39 +401,6 @@ class PartletDictionary(FittedCleaner):
         ok = idx >= 0
         P[:, ok] = motion.positions[:, idx[ok]] * motion.metres_per_unit
         return P
-
-    def _init_dictionary(self, B, K, rng):
-        D = B[:, rng.choice(B.shape[1], size=min(K, B.shape[1]), replace=False)].copy()
-        if D.shape[1] < K:
-            D = np.concatenate([D, rng.normal(size=(B.shape[0], K - D.shape[1])).astype(B.dtype)], axis=1)
-        return D / np.maximum(np.linalg.norm(D, axis=0), 1e-12)
-
-    def _train_robust(self, B, K, rng):
-        """Robust dictionary learning, Feng 2015 eq. 5, by coordinate descent (§III-C-2):
-        (W, E)-step = lasso on D (FISTA) and soft-threshold of the residual; D-step = eq. 6."""
-        D = self._init_dictionary(B, K, rng)
-        beta = self.values["beta"] * float(np.median(np.linalg.norm(B, axis=0)))
-        lam = self.values["train_lambda"].si
-        W = np.zeros((K, B.shape[1]), dtype=B.dtype)
-        E = np.zeros_like(B)
-        it = 0
-        for it in range(1, self.values["train_iterations"] + 1):
-            G = D.T @ D
-            W, _ = sparse.fista(G, D.T @ (B - E), beta, x0=W, n_iter=10, tol=1e-3)
-            E = sparse.soft(B - D @ W, lam / 2.0) if lam > 0 else np.zeros_like(B)
-            D = sparse.dictionary_step(D, W @ W.T, (B - E) @ W.T, rng=rng, data=B)
-        return D, W, E, it
-
-    def _train_ksvd(self, B, K, rng):
-        """K-SVD (Xiao 2015 §3, after Aharon et al. 2006): OMP codes with ``sparsity`` atoms,
-        then the atom-by-atom rank-1 update."""
-        D = self._init_dictionary(B, K, rng)
-        it = 0
-        W = None
-        for it in range(1, self.values["train_iterations"] + 1):
-            W = sparse.omp(D.T @ D, D.T @ B, self.values["sparsity"])
-            D, W = sparse.ksvd_step(B, D, W, rng=rng)
-        return D, W, it
 
     # -- model files -----------------------------------------------------------------------
     def state(self) -> tuple[dict, dict]:
@@ -611,7 +488,7 @@ class PartletDictionary(FittedCleaner):
             "ksvd" if self.method_ == "ksvd" else "robust")
         dil = self._dilation(motion.fps, self.sample_rate_)
         m = self.window_
-        starts = _starts(T, m, dil, self.values["stride"])
+        starts = pk.starts(T, m, dil, self.values["stride"])
         info = {"model_joints": int((idx >= 0).sum()), "coding": coding, "dilation": dil}
         rate = motion.fps / dil
         if not 0.75 <= rate / self.sample_rate_ <= 1.34:
@@ -625,7 +502,7 @@ class PartletDictionary(FittedCleaner):
         P[:, ok] = motion.positions[:, idx[ok]] * motion.metres_per_unit
         suspect = np.zeros(P.shape[:2], dtype=bool)
         if self.values["despike"] > 0:
-            suspect = suspect_samples(P, self.values["despike"], self.values["min_outlier"].si)
+            suspect = pk.suspect_samples(P, self.values["despike"], self.values["min_outlier"].si)
         try:
             local, R, c, centre, valid = self._normalise(np.where(suspect[..., None], np.nan, P), motion.fps)
         except ValueError as exc:
@@ -636,8 +513,8 @@ class PartletDictionary(FittedCleaner):
             local = to_frame(P, R, c)
         X = local - centre
         info["suspect"] = int(suspect.sum())
-        raw_sigma = noise_level(np.where(suspect[..., None], np.nan, P).reshape(T, -1))
-        sigma = noise_level(X[:, self.frame_].reshape(T, -1))
+        raw_sigma = pk.noise_level(np.where(suspect[..., None], np.nan, P).reshape(T, -1))
+        sigma = pk.noise_level(X[:, self.frame_].reshape(T, -1))
         dictionary = self.dictionary_
         limit = self.values["coarse_noise"].si
         if self.coarse_ is not None and limit > 0 and sigma > limit and coding == "robust":
@@ -646,20 +523,27 @@ class PartletDictionary(FittedCleaner):
             # Not for OMP codes: 6 atoms per 0.5 s window are too few (K-SVD model, 10 dB,
             # 2 seeds: ℓ2 6.23 → 6.49, ℓ1 5.18 → 6.04 cm)
             cdil = self._dilation(motion.fps, self.coarse_["sample_rate"])
-            cstarts = _starts(T, self.coarse_["window"], cdil, self.values["stride"])
+            cstarts = pk.starts(T, self.coarse_["window"], cdil, self.values["stride"])
             if len(cstarts):
                 dictionary, m, dil, starts = self.coarse_["dictionary"], self.coarse_["window"], cdil, cstarts
                 info.update({"scale": "coarse", "dilation": dil})
         total = np.zeros_like(X)
         count = np.zeros(X.shape[:2])
         unexplained, iters = {}, 0
+        v = self.values
+        coding_settings = pk.Coding(
+            presmooth=v["presmooth"], local_smoothing=v["local_smoothing"].si, lambda1=v["lambda1"],
+            lambda2=v["lambda2"], lambda3=v["lambda3"], p=v["p"], min_outlier=v["min_outlier"].si,
+            ridge=v["ridge"], iterations=v["iterations"], fill_iterations=v["fill_iterations"],
+            fista_iterations=v["fista_iterations"], neighbours=v["neighbours"], loss=v["loss"],
+            sparsity=v["sparsity"], detail=v["detail"])
         for p in bodyparts.PARTLETS:
             joints = self.partlets_[p]
             Xp = X[:, joints]
             if np.isnan(Xp).all():
                 continue
-            rec, frac, it = self._code_partlet(Xp, dictionary[p], starts, m, dil, sigma, coding, motion.fps,
-                                               suspect[:, joints])
+            rec, frac, it = pk.code_partlet(Xp, dictionary[p], starts, m, dil, sigma, coding, motion.fps,
+                                               suspect[:, joints], coding_settings)
             total[:, joints] += rec
             count[:, joints] += 1
             unexplained[p] = round(frac, 5)
@@ -675,8 +559,8 @@ class PartletDictionary(FittedCleaner):
             bones = np.array([(a, b) for a, b in motion.skeleton.bone_array.tolist()
                               if a in to_model and b in to_model], dtype=np.intp).reshape(-1, 2)
             ends = np.vectorize(to_model.get, otypes=[np.intp])(bones) if len(bones) else bones
-            rigid = rigid_bones(seen[:, ends[:, 0]], seen[:, ends[:, 1]], raw_sigma)
-            pos, info["bones"] = self._project_bones(pos, bones[rigid])
+            rigid = pk.rigid_bones(seen[:, ends[:, 0]], seen[:, ends[:, 1]], raw_sigma)
+            pos, info["bones"] = pk.project_bones(pos, bones[rigid])
         info["unmodelled_joints"] = [n for i, n in enumerate(motion.names) if i not in set(file_j)]
         info.update({"noise_mm": round(sigma * 1e3, 3), "iterations": iters,
                      "unexplained": unexplained,
@@ -689,122 +573,3 @@ class PartletDictionary(FittedCleaner):
                                + ", ".join(high) + ": the dictionary explains little of it")
         return motion.replace(positions=pos), info
 
-    def _code_partlet(self, Xp, D, starts, m, dil, sigma, coding, fps, suspect=None):
-        """Robust structured sparse coding of one partlet (eq. 11), or OMP (Xiao 2015),
-        with windows of ``m`` samples ``dil`` frames apart.
-        Returns (reconstruction (T, n, 3), unexplained energy fraction, iterations)."""
-        T, n, _ = Xp.shape
-        flat = Xp.reshape(T, -1)
-        missing = np.isnan(Xp).any(axis=2)
-        if suspect is not None and suspect.any():
-            flat = np.where(np.repeat(suspect, 3, axis=1), np.nan, flat)
-        Z = linear_bridge(flat)
-        Z[np.isnan(Z)] = 0.0
-        pad = min(T // 2, int(round(0.1 * fps)))
-        presmooth = self.values["presmooth"]
-        width = self.values["local_smoothing"].si * fps
-
-        def presmoothed(Z, noisy):
-            """Z smoothed per sample by SURE with the channel noise of ``noisy`` (or by one
-            GCV strength per channel when ``local_smoothing`` is 0)."""
-            if width > 0:
-                return local_sure_smooth(Z, channel_noise(noisy) ** 2, width=width, n_pad=pad,
-                                         group=3)[0]
-            return gcv_smooth(Z, n_pad=pad)[0]
-
-        if presmooth:
-            Z = presmoothed(Z, flat)
-            sigma = noise_level(Z)
-        Y = _windows(Z, m, dil, starts)
-        G = D.T @ D
-        Lnorm = float(np.linalg.eigvalsh(G)[-1])
-        lam3 = self.values["lambda3"] * sigma * np.sqrt(2.0 * np.log(D.shape[1])) * np.sqrt(m)
-        thr = max(self.values["lambda1"] * sigma * np.sqrt(3.0), self.values["min_outlier"].si)
-        lap = None
-        lam2 = 0.0
-        if coding == "robust" and self.values["neighbours"] > 0 and self.values["lambda2"] > 0:
-            lap = sparse.knn_laplacian(Y.T, k=self.values["neighbours"])
-            lam2 = self.values["lambda2"] * Lnorm
-        step = 1.0 / sparse.lipschitz(G, lap, lam2)
-        ridge = np.linalg.inv(G + (self.values["ridge"] * Lnorm + lam2) * np.eye(len(G)))
-        E = np.zeros((T, n, 3))
-        Psi = None
-        it = 0
-        rec = None
-        p = self.values["p"] if coding == "robust" else 1.0
-        robust = coding == "robust" or self.values["loss"] == "l1"
-        n_outer = self.values["iterations"] if robust else 1
-        if missing.any():
-            n_outer = max(n_outer, self.values["fill_iterations"])
-        # the Ψ-step in single precision (as training): half the time, codes alike
-        # (held-out dance, 2 seeds: every cell within 0.01 cm)
-        D1, G1, ridge1 = (D.astype(np.float32), G.astype(np.float32), ridge.astype(np.float32)) \
-            if coding == "robust" else (D, G, ridge)
-        for it in range(1, n_outer + 1):
-            C = D1.T @ Y.astype(D1.dtype)
-            if coding == "robust":
-                if Psi is None:   # start from the ridge solution: FISTA from zero is slow
-                    Psi = ridge1 @ C
-                Psi, _ = sparse.fista(G1, C, lam3, laplacian=lap, lam_graph=lam2, x0=Psi,
-                                      n_iter=self.values["fista_iterations"], tol=1e-4, step=step)
-            else:
-                Psi = sparse.omp(G, C, self.values["sparsity"])
-            rec, _ = _overlap_average((D1 @ Psi).astype(np.float64), T, flat.shape[1], m, dil, starts)
-            rec3 = rec.reshape(T, n, 3)
-            Q = np.where(missing[..., None], 0.0, Xp - rec3)
-            if robust:
-                E = E if it > 1 else Q
-                for _ in range(1 if p == 1.0 else 3):   # p = 1: closed form, one step
-                    E = sparse.group_shrink_lp(Q, E, 2.0 * thr, p)
-            if it == n_outer:   # nothing codes it: the next signal is not needed
-                break
-            Z = np.where(missing[..., None], rec3, Xp - E).reshape(T, -1)
-            if presmooth:
-                # the noise level of this signal, not the input's: E takes part of the noise
-                Z = presmoothed(Z, Z)
-            Y = _windows(Z, m, dil, starts)
-        obs = ~missing
-        resid = np.where(obs[..., None], Xp - E - rec.reshape(T, n, 3), 0.0)
-        # out of sample: the energy of the coded (smoothed, outlier-free) signal the
-        # dictionary leaves, as a fraction of that signal's energy
-        coded = np.where(obs[..., None], Z.reshape(T, n, 3), 0.0)
-        left = np.where(obs[..., None], Z.reshape(T, n, 3) - rec.reshape(T, n, 3), 0.0)
-        frac = float(np.vdot(left, left) / max(np.vdot(coded, coded), 1e-300))
-        rec3 = rec.reshape(T, n, 3)
-        if self.values["detail"]:
-            # samples the noise term took as outliers get no detail back
-            clean = obs & (np.linalg.norm(E, axis=2) == 0.0)
-            rec3 = rec3 + self._residual_detail(resid, clean, fps)
-        return rec3, frac, it
-
-    @staticmethod
-    def _project_bones(pos: np.ndarray, bones: np.ndarray):
-        """``bones`` projected to their median length over the cleaned frames
-        (:func:`mocapfix.solvers.bone_projection.project_lengths`, equal weights, 4 sweeps: 8
-        gain ≤ 0.05 cm at 10 dB for twice the time): the
-        skeleton is rigid, the dictionary's reconstruction only nearly so. Bones of zero
-        length (joints a conversion put at one place) are left alone."""
-        bones = np.asarray(bones, dtype=np.intp).reshape(-1, 2)
-        if not len(bones):
-            return pos, 0
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", RuntimeWarning)
-            lengths = np.nanmedian(np.linalg.norm(pos[:, bones[:, 0]] - pos[:, bones[:, 1]], axis=2), axis=0)
-        scale = np.nanmedian(lengths) if np.isfinite(lengths).any() else 0.0
-        ok = np.isfinite(lengths) & (lengths > 1e-3 * max(scale, 1e-300))
-        if not ok.any():
-            return pos, 0
-        w = np.ones(pos.shape[:2])
-        return project_lengths(pos, bones[ok], lengths[ok], w, sweeps=4), int(ok.sum())
-
-    @staticmethod
-    def _residual_detail(resid: np.ndarray, keep: np.ndarray, fps: float) -> np.ndarray:
-        """The part of the residual the dictionary leaves that is motion, not noise: the
-        residual of every channel smoothed with its own GCV-chosen strength (the DCT
-        smoother of :mod:`mocapfix.solvers.dct`). Clean input (GCV: no smoothing) keeps all
-        its detail; white noise is smoothed away. Samples not in ``keep`` (missing, or taken
-        as outliers) contribute no detail."""
-        T = resid.shape[0]
-        r = np.where(keep[..., None], resid, 0.0).reshape(T, -1)
-        smooth, _ = gcv_smooth(r, n_pad=min(T // 2, int(round(0.1 * fps))))
-        return smooth.reshape(resid.shape)

@@ -1,27 +1,50 @@
 """Format registry: picks a reader by suffix and content, a writer by suffix.
 
-Each format module defines ``NAME``, ``SUFFIXES``, ``sniff(head: bytes) -> bool``,
-``read(path, **options) -> Motion`` and ``write(motion, path, **options) -> list[Path]``
-(writers use :mod:`mocapfix.core.fileio` so outputs appear atomically); one whose reader reads
-other files besides the one named also defines ``companion_files(path) -> list[Path]``.
-Modules are imported on first use so that ``mocapfix --help`` stays fast.
+A format is one module of this package that declares, at its top level and as literals,
+``NAME = "..."``, ``SUFFIXES = (".ext", ...)`` and optionally ``SNIFF_ORDER = n`` (where
+its sniffer runs when a file's suffix does not settle the format; lower first), and defines
+``sniff(head: bytes) -> bool``, ``read(path, **options) -> Motion`` and
+``write(motion, path, **options) -> list[Path]`` (writers use
+:mod:`mocapfix.core.fileio` so outputs appear atomically); one whose reader reads other
+files besides the one named also defines ``companion_files(path) -> list[Path]``, one whose
+files cannot hold every value ``storable(motion) -> Motion``. The table :data:`FORMATS` is
+read off those declarations (the module's text, not its import), so a new module is found
+with nothing else edited, and modules are imported on first use so that ``mocapfix
+--help`` stays fast.
 """
 from __future__ import annotations
 
+import ast
 import importlib
+import pkgutil
+import re
 from pathlib import Path
 
 from mocapfix.core.errors import MocapfixError, UnreadableFileError, WriteError
 from mocapfix.core.motion import Motion
 
-#: The one format table: name -> (module, suffixes). Each format module takes its ``NAME``
-#: and ``SUFFIXES`` from here; configs, rule files and folder discovery use it too.
-FORMATS = {
-    "c3d": ("mocapfix.formats.c3d", (".c3d",)),
-    "bvh": ("mocapfix.formats.bvh", (".bvh",)),
-    "asfamc": ("mocapfix.formats.asfamc", (".amc", ".asf")),
-    "kinect": ("mocapfix.formats.kinect", (".csv", ".txt", ".tsv")),
-}
+#: a module-level declaration of a format module (module docstring)
+_DECLARATION = re.compile(r"^(NAME|SUFFIXES|SNIFF_ORDER) = (.+)$", re.MULTILINE)
+
+
+def _declared_formats(paths) -> dict:
+    """name -> (module, suffixes) of the format modules found in ``paths`` (a package's
+    ``__path__``), in sniffing order, from the literals they declare."""
+    found = []
+    for info in pkgutil.iter_modules(paths):
+        source = Path(info.module_finder.path) / f"{info.name}.py"
+        if info.ispkg or not source.is_file():
+            continue
+        decl = {k: ast.literal_eval(v) for k, v in _DECLARATION.findall(source.read_text(encoding="utf-8"))}
+        if "NAME" in decl and "SUFFIXES" in decl:
+            found.append((decl.get("SNIFF_ORDER", 10), decl["NAME"], f"{__name__}.{info.name}",
+                          tuple(s.lower() for s in decl["SUFFIXES"])))
+    return {name: (mod, suffixes) for _, name, mod, suffixes in sorted(found)}
+
+
+#: The one format table: name -> (module, suffixes), sniffing order. Configs, rule files and
+#: folder discovery use it too.
+FORMATS = _declared_formats(__path__)
 #: format names, as configs and rule files spell them in ``formats:``
 NAMES = tuple(FORMATS)
 _SUFFIXES = {suffix: name for name, (_, suffixes) in FORMATS.items() for suffix in suffixes}

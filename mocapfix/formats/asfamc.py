@@ -67,14 +67,15 @@ import numpy as np
 
 from mocapfix.core.errors import UnreadableFileError, UnsupportedFeatureError, WriteError
 from mocapfix.core.fileio import atomic_write_bytes, read_input_bytes
-from mocapfix.formats import suffixes
 from mocapfix.formats.textenc import UTF8_BOM, refuse_wide_text
 from mocapfix.core.kinematics import Rig, euler_to_matrix
 from mocapfix.core.motion import Motion, Skeleton
 from mocapfix.core.units import asf_length_unit
 
 NAME = "asfamc"
-SUFFIXES = suffixes(NAME)
+SUFFIXES = (".amc", ".asf")
+#: where its sniffer runs when the suffix does not tell (lower first: the stricter tests)
+SNIFF_ORDER = 2
 DEFAULT_FPS = 120.0
 
 _AXES = "XYZ"

@@ -74,14 +74,15 @@ import numpy as np
 
 from mocapfix.core.errors import UnreadableFileError, WriteError
 from mocapfix.core.fileio import atomic_write_bytes, read_input_bytes
-from mocapfix.formats import suffixes
 from mocapfix.formats.textenc import refuse_wide_text
 from mocapfix.core.kinematics import Rig
 from mocapfix.core.motion import Motion, Skeleton
 from mocapfix.core.quantity import MAX_FRAME_RATE_HZ, MIN_FRAME_RATE_HZ
 
 NAME = "bvh"
-SUFFIXES = suffixes(NAME)
+SUFFIXES = (".bvh",)
+#: where its sniffer runs when the suffix does not tell (lower first: the stricter tests)
+SNIFF_ORDER = 1
 
 _BOM = b"\xef\xbb\xbf"
 _TOKEN = re.compile(rb"\S+")

@@ -75,7 +75,6 @@ import numpy as np
 
 from mocapfix.core.errors import UnreadableFileError, WriteError
 from mocapfix.core.fileio import atomic_open, read_input_bytes
-from mocapfix.formats import suffixes
 from mocapfix.formats.c3d_params import (MAX_DIM, group_record as _group_record, param_data_offset,
                                          param_record as _param_record, string_param as _string_param,
                                          string_value, with_group)
@@ -84,7 +83,9 @@ from mocapfix.core.quantity import MAX_FRAME_RATE_HZ, MIN_FRAME_RATE_HZ
 from mocapfix.core.units import METRES_PER_UNIT, normalise_unit_name
 
 NAME = "c3d"
-SUFFIXES = suffixes(NAME)
+SUFFIXES = (".c3d",)
+#: where its sniffer runs when the suffix does not tell (lower first: the stricter tests)
+SNIFF_ORDER = 0
 
 PROCESSOR_INTEL, PROCESSOR_DEC, PROCESSOR_MIPS = 84, 85, 86
 PROCESSOR_NAMES = {PROCESSOR_INTEL: "Intel", PROCESSOR_DEC: "DEC", PROCESSOR_MIPS: "SGI/MIPS"}

@@ -87,14 +87,15 @@ import numpy as np
 
 from mocapfix.core.errors import UnreadableFileError, UnsupportedFeatureError, WriteError
 from mocapfix.core.fileio import atomic_write_bytes, read_input_bytes
-from mocapfix.formats import suffixes
 from mocapfix.core.quantity import MAX_FRAME_RATE_HZ, MIN_FRAME_RATE_HZ
 from mocapfix.core import kinect_joints as kl
 from mocapfix.core.motion import Motion, Skeleton
 from mocapfix.core.units import METRES_PER_UNIT, normalise_unit_name
 
 NAME = "kinect"
-SUFFIXES = suffixes(NAME)
+SUFFIXES = (".csv", ".txt", ".tsv")
+#: where its sniffer runs when the suffix does not tell (lower first: the stricter tests)
+SNIFF_ORDER = 3
 
 STATE_CONFIDENCE = {0: 0.0, 1: 0.5, 2: 1.0}
 UTKINECT_FPS = 30.0
