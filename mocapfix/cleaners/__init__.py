@@ -4,7 +4,7 @@ A cleaner module registers its classes with :func:`register` — the one place a
 is listed: a new module in this package is found when the registry is first asked for a
 name (:func:`registry`, :func:`lookup`, :func:`build`), which imports every module here.
 None of them imports SciPy or PyWavelets at module level, so listing them all stays cheap
-(tests/test_cleaner_registry.py).
+(tests/cleaners/test_cleaner_registry.py).
 """
 from __future__ import annotations
 
