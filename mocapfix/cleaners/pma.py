@@ -40,7 +40,7 @@ from mocapfix.core.errors import ConfigError
 from mocapfix.core.motion import Motion, missing_samples
 from mocapfix.solvers import fill_error, pma
 from mocapfix.solvers.pca_gapfill import fill_gaps_pca
-from mocapfix.solvers.segments import largest_steps, steepest_step
+from mocapfix.solvers.segments import largest_steps
 
 _EXTERNAL = ("pca", "tsmc")
 #: shortest gap (s) the refill rounds fill again: shorter ones changed by at most 0.04 mm
@@ -178,17 +178,17 @@ class PMA(Cleaner):
         lo, hi = seen_points.min(axis=0), seen_points.max(axis=0)
         box = (lo - 0.1 * (hi - lo), hi + 0.1 * (hi - lo))
         floor = self.length("sd_floor", motion)
-        top = largest_steps(pos, observed)
-        combined = [self._combine(pos, gap, cand, fills, verr, mu, sd, floor, box, top)
+        ctx = pma.Combination(mu, sd, floor, box, largest_steps(pos, observed),
+                              self["weights"], self["constraint_neighbours"], self["width"],
+                              self["max_step"])
+        combined = [pma.combine(pos, gap, cand, fills, verr, ctx)
                     for gap, (cand, fills), verr in zip(gaps, members, validated)]
         if validate:
-            cross, fitted = self._window_errors(pos, gaps, windows, len(plan.windows), mu, sd,
-                                                floor, box, top)
+            cross, fitted = self._window_errors(pos, gaps, windows, len(plan.windows), ctx)
             trust.estimate(gaps, plan, cross, "the members", fitted=fitted)
         if self["refill"] > 0 and self["weights"] != "plausibility":
-            combined = self._refill(work, observed, gaps, local, mu, sd, floor, box,
-                                    members, validated, combined, info, references, top,
-                                    trust)
+            combined = self._refill(work, observed, gaps, local, ctx, members, validated,
+                                    combined, info, references, trust)
         info["rejected_samples"] = 0
         info[REJECTED_FILLS] = trust.rejected
         for (j, s, e), result, (cand, _), tested in zip(gaps, combined, members, windows):
@@ -235,8 +235,8 @@ class PMA(Cleaner):
             info["gaps_too_uncertain"] = trust.count
         return motion.replace(positions=out, confidence=conf), info
 
-    def _window_errors(self, pos, gaps, windows, copies, mu, sd, floor, box, top):
-        """Two (G, copies) errors of the combined fill (:meth:`_combine`: the weighted
+    def _window_errors(self, pos, gaps, windows, copies, ctx):
+        """Two (G, copies) errors of the combined fill (:func:`mocapfix.solvers.pma.combine`: the weighted
         average, the soft constraint, the jump screen) on each gap's validation windows:
         its members weighted by their errors on the gap's *other* windows (cross-fitted:
         the weights are not chosen on the window they are judged on — a window's test
@@ -263,8 +263,8 @@ class PMA(Cleaner):
                     cut_positions[c] = self._cut_positions(pos, gaps, windows, c)
                 others = [w[5] for w in ws if w[0] != c] or [w[5] for w in ws if w[0] == c]
                 for out, chosen in ((cross, others), (fitted, [w[5] for w in ws])):
-                    result = self._combine(cut_positions[c], (j, u, v), cand, fills,
-                                           mean_errors(fills, chosen), mu, sd, floor, box, top)
+                    result = pma.combine(cut_positions[c], (j, u, v), cand, fills,
+                                         mean_errors(fills, chosen), ctx)
                     if result is not None and result[0] is not None:
                         out[g, c] = fill_error.rms_error(result[0], pos[u:v, j])
         return cross, fitted
@@ -279,93 +279,8 @@ class PMA(Cleaner):
                     out[u:v, j] = np.nan
         return out
 
-    def _combine(self, pos, gap, cand, fills, verr, mu, sd, floor, box, top):
-        """One gap's fill from its members' fills: their average weighted by validation
-        error (or by plausibility where a member was not validated), pulled inside the
-        distance intervals of the marker's most rigid neighbours; averaged again without
-        the members that jump when that fill jumps (:meth:`_without_jumps`). Returns None
-        when no member filled the gap, else ``(avg, spread, names, weights)`` with ``avg``
-        None when the fill leaves the capture volume ``box``."""
-        if not fills:
-            return None
-        result = self._weighted(pos, gap, cand, fills, verr, mu, sd, floor)
-        smooth = self._without_jumps(pos, gap, fills, top, result[0])
-        if smooth is not None:
-            result = self._weighted(pos, gap, cand, smooth, verr, mu, sd, floor)
-        avg = result[0]
-        if ((avg < box[0]) | (avg > box[1])).any():
-            return (None, *result[1:])
-        return result
-
-    def _weighted(self, pos, gap, cand, fills, verr, mu, sd, floor):
-        """:meth:`_combine`'s weighted average of ``fills`` and soft constraint →
-        ``(avg, spread, names, weights)``."""
-        j, s, e = gap
-        frames = np.arange(s, e)
-        names = list(fills)
-        stack = np.stack([fills[k] for k in names])              # (M, n, 3)
-        rig = cand[:5]
-        if all(k in verr for k in names):
-            w = self._validation_weights([verr[k] for k in names])
-        elif len(rig):
-            others = pos[np.ix_(frames, rig)]
-            score = np.array([pma.plausibility(f, others, mu[j, rig], sd[j, rig], floor)
-                              for f in stack])
-            w = 1.0 / (score + 1e-3)
-        else:
-            w = np.ones(len(names))
-        w /= w.sum()
-        avg = np.tensordot(w, stack, axes=1)
-        spread = np.sqrt(np.tensordot(w, ((stack - avg) ** 2).sum(axis=2), axes=1))
-        k = self["constraint_neighbours"]
-        if k and len(cand):
-            rig = cand[:k]
-            avg = pma.soft_distance_constraint(
-                avg, pos[np.ix_(frames, rig)], mu[j, rig], np.maximum(sd[j, rig], floor),
-                self["width"])
-        return avg, spread, names, w
-
-    def _validation_weights(self, mse):
-        """Member weights from their validation errors: inverse squared error, or all on
-        the best (``weights: best``)."""
-        mse = np.asarray(mse, dtype=float)
-        return (mse == mse.min()).astype(float) if self["weights"] == "best" \
-            else 1.0 / (mse + 1e-12 + 1e-6 * mse.min())
-
-    def _without_jumps(self, pos, gap, fills, top, fill):
-        """When ``fill`` (a gap's average), joined to the data at the gap's borders, moves
-        further from one frame to the next than ``max_step`` × the marker's largest
-        observed step ``top[j]``: the members of ``fills`` that do not, if there are some
-        and not all; else None (keep the average: ``max_step`` 0, a marker never seen
-        twice in a row, a fill that does not jump, or no member that does better)."""
-        j, s, e = gap
-        limit = self["max_step"] * top[j]
-        if limit <= 0:
-            return None
-        T = pos.shape[0]
-        before = pos[s - 1, j] if s > 0 else None
-        after = pos[e, j] if e < T else None
-        if steepest_step(fill, before, after) <= limit:
-            return None
-        smooth = {k: f for k, f in fills.items() if steepest_step(f, before, after) <= limit}
-        return smooth if 0 < len(smooth) < len(fills) else None
-
-    def _average(self, pos, gap, fills, verr, top):
-        """The validation-weighted average of a gap's validated member fills (all of them
-        when none was validated), without the members that jump when it jumps
-        (:meth:`_without_jumps`)."""
-        avg = self._plain_average(fills, verr)
-        smooth = self._without_jumps(pos, gap, fills, top, avg)
-        return avg if smooth is None else self._plain_average(smooth, verr)
-
-    def _plain_average(self, fills, verr):
-        names = [k for k in fills if k in verr] or list(fills)
-        w = self._validation_weights([verr[k] for k in names]) if names[0] in verr \
-            else np.ones(len(names))
-        return np.tensordot(w / w.sum(), np.stack([fills[k] for k in names]), axes=1)
-
-    def _refill(self, motion, observed, gaps, local, mu, sd, floor, box, members, validated,
-                combined, info, references, top, trust):
+    def _refill(self, motion, observed, gaps, local, ctx, members, validated, combined, info,
+                references, trust):
         """The refill rounds (``refill``): an interior gap of at least
         :data:`REFILL_MIN_S` during which one of its marker's most rigid neighbours (as
         many as the largest ``neighbours`` count) is missing too, and that neighbour's
@@ -386,7 +301,8 @@ class PMA(Cleaner):
         lies by a gap refilled in the round before (their fills would move by a fraction
         of a millimetre: at most 0.23 mm on the PhoeniX dance). ``refilled_gaps`` in the
         info counts the gaps chosen for the rounds. Returns the gaps' combined fills
-        (:meth:`_combine`)."""
+        (:func:`mocapfix.solvers.pma.combine`)."""
+        mu, sd = ctx.mu, ctx.sd
         pos = motion.positions
         T = pos.shape[0]
         K = max(self["neighbours"])
@@ -399,7 +315,7 @@ class PMA(Cleaner):
             for (j, s, e), (_, fills), verr, done in zip(gaps, members, validated, combined):
                 if (0 < s and e < T and done is not None and done[0] is not None
                         and trust.trusted((j, s, e))):
-                    filled[s:e, j] = self._average(pos, (j, s, e), fills, verr, top)
+                    filled[s:e, j] = pma.average(pos, (j, s, e), fills, verr, ctx)
             return filled
 
         filled = current_fills()
@@ -455,8 +371,7 @@ class PMA(Cleaner):
             changed = set(todo)
         for g in (g for group in redo.values() for g in group):
             cand, fills = members[g]
-            combined[g] = self._combine(pos, gaps[g], cand, fills, validated[g], mu, sd, floor, box,
-                                        top)
+            combined[g] = pma.combine(pos, gaps[g], cand, fills, validated[g], ctx)
         return combined
 
     def _fill_short(self, out, conf, gaps, short, horizon, trust):
@@ -575,7 +490,7 @@ class FillEnsemble(PMA):
     PhoeniX dance 0.81 → 0.73 and 0.85 → 0.70 (Vicon 1.5 s 0.55 → 0.63). A gap whose
     fill jumps from one frame to the next by more than 3× its marker's largest observed
     step is averaged again without the members that jump so (``max_step: 3``,
-    :meth:`PMA._without_jumps`): a GRNN member far from its training poses turns into a
+    :func:`mocapfix.solvers.pma.without_jumps`): a GRNN member far from its training poses turns into a
     nearest-neighbour lookup and jumps when the nearest pose changes (numediart_03_rolling
     LR_HME: 140 mm in one frame where the marker's data moves at most 11.7 mm, now 11.7;
     filled runs stepping more than 3× their marker's largest step: 11 of 209 → 5 of 207,

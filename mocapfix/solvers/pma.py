@@ -41,10 +41,13 @@ that serve them, on the task's threads).
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
-from mocapfix.solvers.rigid import kabsch_to_shape
 from mocapfix.core.threads import parallel_map
+from mocapfix.solvers.rigid import kabsch_to_shape
+from mocapfix.solvers.segments import steepest_step
 
 #: the fillers computed here (the caller may add its own, e.g. weighted PCA)
 LOCAL_FILLERS = ("interp", "poly", "grnn", "linear", "pose")
@@ -569,3 +572,120 @@ def hermite_short_gaps(pos: np.ndarray, observed: np.ndarray, gaps) -> list:
     pos[s[gi] + k - 1, j[gi]] = (h00 * p0[gi] + h10 * L * m0[gi] + h01 * p1[gi]
                                  + h11 * L * m1[gi])
     return done
+
+
+# -- one gap's fill from its members' fills (the combination of fill_ensemble and pma) ----
+
+@dataclass(frozen=True)
+class Combination:
+    """What combining one gap's member fills needs, shared by every gap of a capture:
+    the distance statistics of the marker pairs (``mu``, ``sd``: :func:`distance_stats`),
+    the smallest distance deviation in the plausibility weights (``floor``), the capture
+    volume (``box``: the observed samples' box grown by 10 % a side), each marker's
+    largest observed step (``top``: :func:`mocapfix.solvers.segments.largest_steps`), and
+    the cleaner's settings: how members are weighted (``weights``: plausibility,
+    validation or best), the soft constraint (``constraint_neighbours``, ``width``) and
+    the jump screen (``max_step``)."""
+
+    mu: np.ndarray
+    sd: np.ndarray
+    floor: float
+    box: tuple
+    top: np.ndarray
+    weights: str = "plausibility"
+    constraint_neighbours: int = 3
+    width: float = 2.0
+    max_step: float = 0.0
+
+
+def combine(pos, gap, cand, fills, verr, ctx: Combination):
+    """One gap's fill from its members' fills: their average weighted by validation
+    error (or by plausibility where a member was not validated), pulled inside the
+    distance intervals of the marker's most rigid neighbours; averaged again without
+    the members that jump when that fill jumps (:func:`without_jumps`). Returns None
+    when no member filled the gap, else ``(avg, spread, names, weights)`` with ``avg``
+    None when the fill leaves the capture volume ``ctx.box``."""
+    if not fills:
+        return None
+    result = weighted(pos, gap, cand, fills, verr, ctx)
+    smooth = without_jumps(pos, gap, fills, result[0], ctx)
+    if smooth is not None:
+        result = weighted(pos, gap, cand, smooth, verr, ctx)
+    avg = result[0]
+    if ((avg < ctx.box[0]) | (avg > ctx.box[1])).any():
+        return (None, *result[1:])
+    return result
+
+
+def weighted(pos, gap, cand, fills, verr, ctx: Combination):
+    """:func:`combine`'s weighted average of ``fills`` and soft constraint →
+    ``(avg, spread, names, weights)``."""
+    j, s, e = gap
+    frames = np.arange(s, e)
+    names = list(fills)
+    stack = np.stack([fills[k] for k in names])              # (M, n, 3)
+    rig = cand[:5]
+    if all(k in verr for k in names):
+        w = validation_weights([verr[k] for k in names], ctx.weights)
+    elif len(rig):
+        others = pos[np.ix_(frames, rig)]
+        score = np.array([plausibility(f, others, ctx.mu[j, rig], ctx.sd[j, rig], ctx.floor)
+                          for f in stack])
+        w = 1.0 / (score + 1e-3)
+    else:
+        w = np.ones(len(names))
+    w /= w.sum()
+    avg = np.tensordot(w, stack, axes=1)
+    spread = np.sqrt(np.tensordot(w, ((stack - avg) ** 2).sum(axis=2), axes=1))
+    k = ctx.constraint_neighbours
+    if k and len(cand):
+        rig = cand[:k]
+        avg = soft_distance_constraint(
+            avg, pos[np.ix_(frames, rig)], ctx.mu[j, rig], np.maximum(ctx.sd[j, rig], ctx.floor),
+            ctx.width)
+    return avg, spread, names, w
+
+
+def validation_weights(mse, how: str = "validation"):
+    """Member weights from their validation errors: inverse squared error, or all on
+    the best (``how == "best"``)."""
+    mse = np.asarray(mse, dtype=float)
+    return (mse == mse.min()).astype(float) if how == "best" \
+        else 1.0 / (mse + 1e-12 + 1e-6 * mse.min())
+
+
+def without_jumps(pos, gap, fills, fill, ctx: Combination):
+    """When ``fill`` (a gap's average), joined to the data at the gap's borders, moves
+    further from one frame to the next than ``ctx.max_step`` × the marker's largest
+    observed step ``ctx.top[j]``: the members of ``fills`` that do not, if there are some
+    and not all; else None (keep the average: ``max_step`` 0, a marker never seen
+    twice in a row, a fill that does not jump, or no member that does better)."""
+    j, s, e = gap
+    limit = ctx.max_step * ctx.top[j]
+    if limit <= 0:
+        return None
+    T = pos.shape[0]
+    before = pos[s - 1, j] if s > 0 else None
+    after = pos[e, j] if e < T else None
+    if steepest_step(fill, before, after) <= limit:
+        return None
+    smooth = {k: f for k, f in fills.items() if steepest_step(f, before, after) <= limit}
+    return smooth if 0 < len(smooth) < len(fills) else None
+
+
+def average(pos, gap, fills, verr, ctx: Combination):
+    """The validation-weighted average of a gap's validated member fills (all of them
+    when none was validated), without the members that jump when it jumps
+    (:func:`without_jumps`)."""
+    avg = plain_average(fills, verr, ctx.weights)
+    smooth = without_jumps(pos, gap, fills, avg, ctx)
+    return avg if smooth is None else plain_average(smooth, verr, ctx.weights)
+
+
+def plain_average(fills, verr, how: str = "validation"):
+    """The average of ``fills`` weighted by their validation errors ``verr`` (equal
+    weights when none was validated)."""
+    names = [k for k in fills if k in verr] or list(fills)
+    w = validation_weights([verr[k] for k in names], how) if names[0] in verr \
+        else np.ones(len(names))
+    return np.tensordot(w / w.sum(), np.stack([fills[k] for k in names]), axes=1)

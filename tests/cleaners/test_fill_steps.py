@@ -13,6 +13,7 @@ from mocapfix.clean import clean_motion
 from mocapfix.cleaners import build
 from mocapfix.config import default_config_path, load_config, parse_config
 from mocapfix.core.yamlsafe import load_marked_yaml
+from mocapfix.solvers import pma
 from mocapfix.solvers.segments import discontinuous_runs, largest_steps, steepest_step
 
 from conftest import shared
@@ -65,25 +66,28 @@ def test_discontinuous_runs_rejects_the_run_that_jumps_and_only_it():
 
 
 def test_fill_ensemble_drops_the_jumping_members_only_when_the_average_jumps():
-    cleaner = build("fill_ensemble", max_step=3.0)
     P = _line(T=12, J=1)
     gap = (0, 4, 7)                                 # frames 4..6, data at 3 and 7
     smooth = P[4:7, 0].copy()
     jumpy = smooth.copy()
     jumpy[1, 2] += 20.0
-    top = np.array([1.0])
+
+    def ctx(max_step=3.0, top=1.0):
+        return pma.Combination(None, None, 0.0, None, np.array([top]), "validation",
+                               max_step=max_step)
+
     fills = {"smooth": smooth, "jumpy": jumpy}
     average = (smooth + jumpy) / 2                  # jumps 10 units: more than 3 x 1
-    assert list(cleaner._without_jumps(P, gap, fills, top, average)) == ["smooth"]
-    assert cleaner._without_jumps(P, gap, fills, top, smooth) is None
-    assert cleaner._without_jumps(P, gap, {"a": jumpy, "b": jumpy + 1}, top, jumpy) is None
-    assert build("fill_ensemble", max_step=0.0)._without_jumps(P, gap, fills, top, average) is None
-    assert cleaner._without_jumps(P, gap, fills, np.array([0.0]), average) is None
-    assert np.allclose(cleaner._average(P, gap, fills, {"smooth": 1.0, "jumpy": 1.0}, top), smooth)
+    assert list(pma.without_jumps(P, gap, fills, average, ctx())) == ["smooth"]
+    assert pma.without_jumps(P, gap, fills, smooth, ctx()) is None
+    assert pma.without_jumps(P, gap, {"a": jumpy, "b": jumpy + 1}, jumpy, ctx()) is None
+    assert pma.without_jumps(P, gap, fills, average, ctx(max_step=0.0)) is None
+    assert pma.without_jumps(P, gap, fills, average, ctx(top=0.0)) is None
+    assert np.allclose(pma.average(P, gap, fills, {"smooth": 1.0, "jumpy": 1.0}, ctx()), smooth)
     small = smooth.copy()
     small[1, 2] += 2.0                              # a member stepping 2.2 units: allowed
-    assert cleaner._without_jumps(P, gap, {"smooth": smooth, "small": small}, top,
-                                  (smooth + small) / 2) is None
+    assert pma.without_jumps(P, gap, {"smooth": smooth, "small": small}, (smooth + small) / 2,
+                             ctx()) is None
 
 
 @pytest.mark.slow
