@@ -17,7 +17,10 @@ The **error of a fill** is the RMS, over the samples of the filled run, of the 3
 distance between the written fill and the true position (mm). A fill is *covered* when
 that error is at most its bound. Per capture: fills, the share covered (target 85–95 %),
 the median estimate and true error, the bound factors the capture's own windows gave,
-and with the gate: the fills written, covered, and the gap samples left unfilled. A
+with the gate: the fills written, covered, and the gap samples left unfilled; and the
+window scores each run calibrated on, with the chance that the cell would lie in 85–95 %
+if every bound were exactly calibrated (:func:`chance_in_range`: the ceiling of that
+target with this many windows and fills). A
 second table shows what other thresholds would write (from the ungated run's bounds):
 the share of the gap samples and the RMS error of those fills.
 
@@ -28,6 +31,7 @@ Run time: about 100 s with 5 seeds on the shared 2-core machine (one process).
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 import time
 from pathlib import Path
@@ -115,6 +119,51 @@ class Pooled:
                 f"pooled growth exponent {slope:.2f} ({len(span)} probed gaps)")
 
 
+class ScoreCounts:
+    """How many window scores each run's calibration rests on (the ordinary scores of
+    every step of the run, summed), by wrapping :func:`mocapfix.solvers.fill_error.scores`."""
+
+    def __init__(self):
+        self.count = 0
+        original = fill_error.scores
+
+        def scores(*a, **k):
+            out = original(*a, **k)
+            self.count += len(out)
+            return out
+
+        fill_error.scores = scores
+
+    def take(self) -> int:
+        count, self.count = self.count, 0
+        return count
+
+
+def chance_in_range(runs, draws: int = 20000, seed: int = 0) -> float:
+    """The probability that a cell of these runs lands in 85–95 % coverage if every bound
+    were exactly what split conformal promises: the real gaps exchangeable with the
+    windows. ``runs``: (scores m, fills n) per run. A run's coverage is then
+    Beta(k, m + 1 − k), k = ⌈(m + 1) 0.9⌉ (the coverage of split conformal given its
+    calibration set; Vovk 2012, "Conditional validity of inductive conformal predictors"), 0.9 where the run used
+    the prior (m < 9), and its fills are covered independently at that rate. The ceiling
+    of what any per-capture calibration resting on these windows can show per cell."""
+    rng = np.random.default_rng(seed)
+    covered = np.zeros(draws)
+    total = 0
+    for m, n in runs:
+        if n == 0:
+            continue
+        if m >= fill_error.MIN_SCORES:
+            k = math.ceil((m + 1) * fill_error.LEVEL)
+            rate = rng.beta(k, m + 1 - k, draws) if k <= m else np.ones(draws)
+        else:
+            rate = np.full(draws, fill_error.LEVEL)
+        covered += rng.binomial(n, rate)
+        total += n
+    share = covered / max(total, 1)
+    return float(np.mean((share >= 0.85) & (share <= 0.95)))
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--seeds", type=int, default=5)
@@ -124,6 +173,7 @@ def main():
                     "(score quantiles and growth exponent over every capture's calibration)")
     args = ap.parse_args()
     pooled = Pooled() if args.priors else None
+    counts = ScoreCounts()
     gated = load_config(REPO / "configs" / "default.yaml")
     ungated = load_config(REPO / "configs" / "default.yaml")
     ungated.max_fill_error = None
@@ -131,12 +181,15 @@ def main():
     rows = []
     for name, label, clean in captures(args.max_frames, only=args.only):
         for regime, max_s in REGIMES.items():
-            every, written, facs, far, grow = [], [], [], [], []
+            every, written, facs, far, grow, runs = [], [], [], [], [], []
             left = samples = 0
             for seed in range(args.seeds):
                 corrupted, mask = occlusion_gaps(clean, np.random.default_rng(seed), max_s=max_s)
+                counts.take()
                 out, records = ungated.run(corrupted)
-                every += fill_outcomes(out, clean, mask)
+                outcomes = fill_outcomes(out, clean, mask)
+                runs.append((counts.take(), len(outcomes)))
+                every += outcomes
                 facs += factors(records)
                 far += factors(records, extrapolated=True)
                 grow += slopes(records)
@@ -145,27 +198,29 @@ def main():
                 left += int(out.missing[mask].sum())
                 samples += int(mask.sum())
             rows.append((label, regime, every, written, (facs, far, grow),
-                         100.0 * left / max(samples, 1), samples))
+                         100.0 * left / max(samples, 1), samples, runs))
             print(f"{label} {regime}: {coverage(every)} all, {coverage(written)} written",
                   flush=True)
     print(f"\n### Fill error bounds — coverage of the 90 % bound ({args.seeds} seeds, "
           f"occlusion gaps, configs/default.yaml)\n")
     print("| capture | gaps | fills | covered | median estimate mm | median true mm | "
           "bound factors | extrapolated fills | covered | factors | exponents | "
-          "written (20 mm gate) | covered | samples left unfilled |")
-    print("|---|---|---:|---:|---:|---:|---|---:|---:|---|---|---:|---:|---:|")
-    for label, regime, every, written, (facs, far, grow), left, _ in rows:
+          "written (20 mm gate) | covered | samples left unfilled | scores per run | "
+          "chance in 85–95 % if exchangeable |")
+    print("|---|---|---:|---:|---:|---:|---|---:|---:|---|---|---:|---:|---:|---|---:|")
+    for label, regime, every, written, (facs, far, grow), left, _, runs in rows:
         est = np.median([o[0] for o in every]) if every else float("nan")
         true = np.median([o[2] for o in every]) if every else float("nan")
         extra = [o for o in every if o[4]]
         print(f"| {label} | {regime} | {len(every)} | {coverage(every)} | {est:.2f} | "
               f"{true:.2f} | {spread(facs)} | {len(extra)} | {coverage(extra)} | {spread(far)} | "
-              f"{spread(grow, 2)} | {len(written)} | {coverage(written)} | {left:.1f} % |")
+              f"{spread(grow, 2)} | {len(written)} | {coverage(written)} | {left:.1f} % | "
+              f"{spread([m for m, _ in runs], 0)} | {100 * chance_in_range(runs):.0f} % |")
     print(f"\n### What a threshold would write (every fill's bound, {args.seeds} seeds): share of "
           "the gap samples written / RMSE of the fills written, mm\n")
     print("| capture | gaps | " + " | ".join(f"≤ {t:g} mm" for t in THRESHOLDS) + " | every fill |")
     print("|---|---|" + "---:|" * (len(THRESHOLDS) + 1))
-    for label, regime, every, _, _, _, samples in rows:
+    for label, regime, every, _, _, _, samples, _ in rows:
         cells = [written_at(every, t, samples) for t in (*THRESHOLDS, np.inf)]
         print(f"| {label} | {regime} | " + " | ".join(cells) + " |")
     allf = [f for r in rows for f in r[2]]
@@ -174,6 +229,10 @@ def main():
     print(f"\nall captures: {coverage(allf)} of {len(allf)} fills covered ({coverage(alle)} of "
           f"the {len(alle)} extrapolated); written {coverage(allw)} of {len(allw)}; "
           f"{time.perf_counter() - started:.0f} s")
+    chances = [chance_in_range(r[7]) for r in rows]
+    print(f"cells in 85–95 %: {sum(85 <= 100 * np.mean([t <= b for _, b, t, *_ in r[2]]) <= 95 for r in rows if r[2])} "
+          f"of {len(rows)}; expected if every bound were exactly calibrated (exchangeable gaps): "
+          f"{sum(chances):.1f} of {len(rows)}")
     if pooled:
         print(pooled.report())
 
