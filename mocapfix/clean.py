@@ -22,11 +22,13 @@ from mocapfix.core.writeback import write_back
 REPORT_KINDS = ("json", "md", "html")
 
 
-def clean_motion(motion: Motion, pipeline: Pipeline) -> CleanResult:
+def clean_motion(motion: Motion, pipeline: Pipeline, to: str | None = None) -> CleanResult:
     """Run ``pipeline`` on ``motion``. For BVH/AMC the cleaned positions are turned back
     into the file's channels and the written positions are their forward kinematics; a
     value the output file cannot hold is dropped as its writer will drop it
-    (:func:`mocapfix.formats.storable`)."""
+    (:func:`mocapfix.formats.storable`). ``to``: the format it will be written in (None:
+    its own); what that format cannot carry is added to the cleaned motion's notes
+    (:func:`mocapfix.formats.losses`), so the report says it."""
     started = time.perf_counter()
     cleaned, records = pipeline.run(motion)
     residual = None
@@ -41,7 +43,9 @@ def clean_motion(motion: Motion, pipeline: Pipeline) -> CleanResult:
             positions = cleaned.rig.positions(channels)
             residual = np.linalg.norm(positions - cleaned.positions, axis=-1)
         cleaned = cleaned.replace(channels=channels, positions=positions)
-    cleaned = formats.storable(cleaned)
+    if to is not None and to != motion.format:
+        cleaned = cleaned.replace(notes=[*cleaned.notes, *formats.losses(cleaned, to)])
+    cleaned = formats.storable(cleaned, to)
     return CleanResult(motion, cleaned, records, residual, time.perf_counter() - started, why)
 
 
@@ -80,8 +84,10 @@ def remove_outputs(paths) -> None:
 
 
 def clean_file(source: Path, output: Path, pipeline: Pipeline, reports=("json",),
-               read_options: dict | None = None, skeleton_checked: bool = False) -> dict:
-    """Read, clean, write. Returns a JSON-able summary; raises MocapfixError on failure.
+               read_options: dict | None = None, skeleton_checked: bool = False,
+               to: str | None = None) -> dict:
+    """Read, clean, write (in format ``to``; None: the format read). Returns a JSON-able
+    summary; raises MocapfixError on failure.
 
     ``skeleton_checked``: an AMC's ASF copy was checked with its batch's
     (:func:`mocapfix.batch.plan.skeleton_conflicts`), so its writer does not check it alone.
@@ -92,7 +98,7 @@ def clean_file(source: Path, output: Path, pipeline: Pipeline, reports=("json",)
     motion = formats.read(source, **(read_options or {}))
     if motion.n_frames == 0:
         raise UnreadableFileError(source, "holds no frames; nothing to clean")
-    result = clean_motion(motion, pipeline)
+    result = clean_motion(motion, pipeline, to)
     report = build_report(result, pipeline.report)
     paths = report_paths(output, reports)
     writers = {"json": lambda: to_json(report), "md": lambda: to_markdown(report),
@@ -102,7 +108,7 @@ def clean_file(source: Path, output: Path, pipeline: Pipeline, reports=("json",)
     try:
         # in the format that was read, which the content decided, not the name: a BVH
         # saved as .c3d stays a BVH (the output mirrors the input's name)
-        written = list(formats.write(result.cleaned, output, format=motion.format,
+        written = list(formats.write(result.cleaned, output, format=to or motion.format,
                                      **({"skeleton_checked": True} if skeleton_checked
                                         and motion.format == "asfamc" else {})))
         for kind, path in paths.items():
@@ -122,4 +128,6 @@ def clean_file(source: Path, output: Path, pipeline: Pipeline, reports=("json",)
         "samples_flagged": f["samples_flagged"], "seconds": round(result.seconds, 4),
         "reasons": sorted({r for j in report["joints"] for r in j["reasons"] if r.startswith(f["status"])})[:3]
         or f.get("reasons", []),
+        **({"format": to, "not_carried": [n for n in result.cleaned.notes if n not in motion.notes]}
+           if to and to != motion.format else {}),
     }

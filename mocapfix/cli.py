@@ -141,11 +141,17 @@ def _print_warnings(out: Out):
     UNIT_WARNINGS.clear()
 
 
-def _discover(inputs, include, exclude, out: Out, once_per_file: bool = False):
+def _discover(inputs, include, exclude, out: Out, once_per_file: bool = False,
+              checked_unknown: bool = False):
+    """Find the inputs and print what was passed over; ``checked_unknown``: the text files
+    of no known layout are checked (``check --strict``), not passed over."""
     from mocapfix.batch.discovery import discover_inputs
 
     found = discover_inputs(inputs, include, exclude, once_per_file=once_per_file)
+    unknown = {str(f.path) for f, _ in found.unknown} if checked_unknown else set()
     for path, why in found.skipped:
+        if path in unknown:
+            continue
         out.line(f"SKIP  {one_line(path)}: {one_line(why)}", level=0 if "not motion" not in why else 1,
                  err=True)
     if found.skipped and out.verbosity == 0:
@@ -248,6 +254,15 @@ def list_cleaners(markdown):
         click.echo(f"{name:<18} {summary}\n{'':<18} {params}")
 
 
+@main.command("formats")
+def list_formats():
+    """The file formats mocapfix reads and writes: name (for --to), suffixes."""
+    from mocapfix import formats
+
+    for name in formats.NAMES:
+        click.echo(f"{name:<12} {' '.join(formats.suffixes(name))}")
+
+
 @main.command("configs")
 @click.argument("name", required=False)
 @click.option("--rules", "rules", is_flag=True, help="Rule sets of `check` instead of pipeline configs.")
@@ -302,7 +317,38 @@ def _clean_line(r: dict, verbose: bool) -> str:
         return f"SKIP  {one_line(r['input'])}: {r['skipped']}"
     if verbose and r.get("reasons"):
         text += "\n      " + "\n      ".join(map(one_line, r["reasons"]))
+    for note in r.get("not_carried", []):       # a conversion never drops data silently
+        text += f"\n      not carried into {r['format']}: {one_line(note)}"
     return text
+
+
+def _batch_options(verb: str, reports: str):
+    """The options ``clean`` and ``convert`` share (``verb``: "cleaned", "converted";
+    ``reports``: the default report kinds)."""
+    options = [
+        click.option("--report", "reports", default=reports, show_default=True,
+                     help="Reports to write beside each output: json, md, html (comma-separated) or none."),
+        click.option("-j", "--jobs", default=1, show_default=True, type=click.IntRange(1, 256),
+                     help=f"Files {verb} in parallel (process pool)."),
+        click.option("--json", "as_json", is_flag=True,
+                     help="Print a JSON summary on stdout (per-file lines go to stderr)."),
+        click.option("--fps", type=FPS, default=None, help="Frame rate for files that store none (AMC)."),
+        click.option("--allow-inside-input", is_flag=True,
+                     help="Allow the output folder to lie inside an input folder."),
+        click.option("--dry-run", is_flag=True,
+                     help=f"Say what would be {verb} and written; write nothing. Refuses (exit 2) "
+                          "what the real run would refuse."),
+        click.option("--overwrite", is_flag=True,
+                     help="Replace outputs (and their reports) left by an earlier run."),
+        click.option("--skip-existing", is_flag=True,
+                     help="Leave files whose output exists alone (same config and models only)."),
+    ]
+
+    def decorate(fn):
+        for opt in reversed(options):
+            fn = opt(fn)
+        return fn
+    return decorate
 
 
 @main.command()
@@ -312,26 +358,15 @@ def _clean_line(r: dict, verbose: bool) -> str:
 @click.option("-c", "--config", "config_path", callback=not_empty,
               help="Pipeline config: a YAML file or a shipped preset name (`mocapfix configs`). "
                    "Default: default.")
-@click.option("--report", "reports", default="json", show_default=True,
-              help="Reports to write beside each output: json, md, html (comma-separated) or none.")
-@click.option("-j", "--jobs", default=1, show_default=True, type=click.IntRange(1, 256),
-              help="Files cleaned in parallel (process pool).")
-@click.option("--json", "as_json", is_flag=True, help="Print a JSON summary on stdout (per-file lines go to stderr).")
-@click.option("--fps", type=FPS, default=None, help="Frame rate for files that store none (AMC).")
-@click.option("--allow-inside-input", is_flag=True,
-              help="Allow the output folder to lie inside an input folder.")
-@click.option("--dry-run", is_flag=True,
-              help="Say what would be cleaned and written; write nothing. Refuses (exit 2) "
-                   "what the real run would refuse.")
-@click.option("--overwrite", is_flag=True,
-              help="Replace outputs (and their reports) left by an earlier run.")
-@click.option("--skip-existing", is_flag=True,
-              help="Leave files whose output exists alone (same config and models only).")
+@_batch_options("cleaned", "json")
+@click.option("--to", "to", metavar="FORMAT", callback=not_empty,
+              help="Write every output in this format (c3d, trc, kinect, ... : `mocapfix "
+                   "formats`); default: each input's own. What it cannot carry is named.")
 @patterns
 @executors
 @common
 def clean(inputs, outdir, config_path, reports, jobs, as_json, fps, allow_inside_input, dry_run,
-          overwrite, skip_existing, include, exclude, scheduler, dask_workers):
+          overwrite, skip_existing, to, include, exclude, scheduler, dask_workers):
     """Clean INPUT files or folders with a pipeline of cleaners.
 
     Files an earlier run of the same config and models finished (recorded in the output
@@ -340,9 +375,46 @@ def clean(inputs, outdir, config_path, reports, jobs, as_json, fps, allow_inside
     --overwrite or --skip-existing is given. Exit code 0 when every file was cleaned, 1
     when some failed (the others are still written), 2 for a usage or config error.
     """
-    from mocapfix.batch.clean import plan_clean, run_clean, would_do
     from mocapfix.config import load_config
     from mocapfix.core.presets import resolve_config
+
+    _run_clean(inputs, outdir, lambda: load_config(resolve_config(config_path or "default")),
+               reports, jobs, as_json, fps, allow_inside_input, dry_run, overwrite,
+               skip_existing, to, include, exclude, scheduler, dask_workers, "cleaned")
+
+
+@main.command()
+@click.argument("inputs", nargs=-1, required=True, type=GivenPath())
+@click.option("-o", "--output", "outdir", required=True, type=GivenPath(file_okay=False),
+              help="Output folder; the input tree is mirrored inside it, suffixes changed.")
+@click.option("--to", "to", required=True, metavar="FORMAT", callback=not_empty,
+              help="Output format: c3d, trc, kinect, ... (`mocapfix formats`).")
+@_batch_options("converted", "none")
+@patterns
+@executors
+@common
+def convert(inputs, outdir, to, reports, jobs, as_json, fps, allow_inside_input, dry_run,
+            overwrite, skip_existing, include, exclude, scheduler, dask_workers):
+    """Convert INPUT files or folders to another format, cleaning nothing.
+
+    Samples are written as read (a missing sample stays missing: never filled); units are
+    the input's, stated in the output where the format has a place for them; what the
+    output format cannot carry (rotations into a marker format, analog channels into TRC,
+    Kinect tracking states ...) is named per file. Resumes and refuses like `clean`.
+    """
+    from mocapfix.batch.clean import convert_pipeline
+
+    _run_clean(inputs, outdir, convert_pipeline, reports, jobs, as_json, fps,
+               allow_inside_input, dry_run, overwrite, skip_existing, to, include, exclude,
+               scheduler, dask_workers, "converted")
+
+
+def _run_clean(inputs, outdir, make_pipeline, reports, jobs, as_json, fps, allow_inside_input,
+               dry_run, overwrite, skip_existing, to, include, exclude, scheduler, dask_workers,
+               verb: str):
+    """The body of ``clean`` and ``convert`` (``verb``: "cleaned", "converted"): plan,
+    run, print, exit."""
+    from mocapfix.batch.clean import plan_clean, run_clean, would_do
 
     obj = _ctx()
     debug = obj["debug"]
@@ -352,12 +424,12 @@ def clean(inputs, outdir, config_path, reports, jobs, as_json, fps, allow_inside
             raise click.BadParameter("--overwrite and --skip-existing exclude each other; give one")
         kinds = _parse_reports(reports)
         spec = _executor_spec(jobs, scheduler, dask_workers)
-        pipeline = load_config(resolve_config(config_path or "default"))
+        pipeline = make_pipeline()
         _print_warnings(out)
         found = _discover(inputs, include, exclude, out)
         plan = plan_clean(found.files, outdir, pipeline, inputs=inputs, reports=kinds,
                           policy="overwrite" if overwrite else "skip" if skip_existing else None,
-                          fps=fps, allow_inside_input=allow_inside_input, dry_run=dry_run)
+                          fps=fps, allow_inside_input=allow_inside_input, dry_run=dry_run, to=to)
     except (click.BadParameter, MocapfixError) as exc:
         _fail(str(exc), debug, exc)
     for j, why in plan.skipped:
@@ -368,7 +440,7 @@ def clean(inputs, outdir, config_path, reports, jobs, as_json, fps, allow_inside
             note = (" (its output path is a folder: the file would fail)" if f.get("output_is_folder")
                     else " (replaces the existing output)" if f["replaces"] else "")
             out.line(f"WOULD {one_line(f['input'])} -> {one_line(f['output'])}{note}", level=-1)
-        out.line(f"dry run: {len(todo)} file(s) would be cleaned with {pipeline.source}, "
+        out.line(f"dry run: {len(todo)} file(s) would be {verb} with {pipeline.source}, "
                  f"{len(plan.skipped)} skipped; nothing written", level=-1, err=True)
         if as_json:                     # (stdout stayed empty: `--json --dry-run | jq` failed)
             click.echo(json.dumps({"dry_run": True, "config": str(pipeline.source), "files": todo,
@@ -393,7 +465,7 @@ def clean(inputs, outdir, config_path, reports, jobs, as_json, fps, allow_inside
                                "config": str(pipeline.source)}, indent=1))
     else:
         graded = [r["status"] for r in results if r["status"] != "ERROR"]
-        out.line(f"cleaned {len(results) - len(failed)} of {len(results)} files"
+        out.line(f"{verb} {len(results) - len(failed)} of {len(results)} files"
                  + (f" ({len(skipped)} skipped: {'finished earlier' if plan.resumed else 'output exists'})"
                     if skipped else "")
                  + (": " + ", ".join(f"{graded.count(s)} {s}" for s in ("OK", "WARN", "FAIL")
@@ -421,16 +493,21 @@ def clean(inputs, outdir, config_path, reports, jobs, as_json, fps, allow_inside
 @click.option("-j", "--jobs", default=1, show_default=True, type=click.IntRange(1, 256),
               help="Files checked in parallel.")
 @click.option("--fps", type=FPS, default=None, help="Frame rate for files that store none (AMC).")
+@click.option("--strict", is_flag=True,
+              help="Check text files in folders that hold a table of numbers in no known layout "
+                   "too (they fail as unreadable) instead of listing them as skipped.")
 @patterns
 @executors
 @common(quiet_help="Only FAIL and ERROR lines and the summary.")
 def check(inputs, rules_path, junit_path, as_json, fail_on, exit_zero, would_clean, jobs, fps,
-          include, exclude, scheduler, dask_workers):
+          strict, include, exclude, scheduler, dask_workers):
     """Check INPUT files or folders against quality rules without changing anything.
 
     One line per file as it finishes: OK, WARN (passes), FAIL (a rule failed) or ERROR
-    (unreadable). Exit 0 all passed, 1 a rule failed, 2 usage or config error, 3 an input
-    could not be read.
+    (unreadable). A text file in a folder that holds a table of numbers in no known layout
+    is SKIP (a skipped testcase in the JUnit XML; --strict checks it, and it is ERROR).
+    Exit 0 all passed, 1 a rule failed, 2 usage or config error, 3 an input could not be
+    read.
     """
     import time
 
@@ -457,13 +534,20 @@ def check(inputs, rules_path, junit_path, as_json, fail_on, exit_zero, would_cle
             pipeline = load_config(resolve_config(would_clean))
             _print_warnings(out)
             config, source = pipeline.config(), str(pipeline.source)
-        found = _discover(inputs, include, exclude, out, once_per_file=True)
-        if not found.files:
+        found = _discover(inputs, include, exclude, out, once_per_file=True, checked_unknown=strict)
+        if strict:                      # checked like the others: each one an ERROR
+            found.files = sorted([*found.files, *(f for f, _ in found.unknown)],
+                                 key=lambda f: (str(f.root), str(f.relative)))
+        if not found.files and not found.unknown:
             raise MocapfixError("no motion files found in " + ", ".join(inputs))
     except MocapfixError as exc:
         _fail(str(exc), debug, exc)
     task = CheckTask(rules, config, source, {"default_fps": fps} if fps else None)
-    names = [str(f.relative if f.root is None else f.root.name / f.relative) for f in found.files]
+
+    def name(f) -> str:
+        return str(f.relative if f.root is None else f.root.name / f.relative)
+
+    names = [name(f) for f in found.files]
     results: list = [None] * len(found.files)
     try:
         for n, r in run_tasks(task, [f.path for f in found.files], jobs, spec=spec):
@@ -478,6 +562,9 @@ def check(inputs, rules_path, junit_path, as_json, fail_on, exit_zero, would_cle
                 out.error(r["traceback"].rstrip())
     except MocapfixError as exc:        # e.g. the Dask scheduler cannot be reached
         _fail(str(exc), debug, exc)
+    if not strict:
+        results += [{"path": str(f.path), "name": name(f), "status": "SKIP", "skipped": why,
+                     "findings": []} for f, why in found.unknown]
     seconds = time.perf_counter() - started
     if junit_path:
         try:
@@ -489,7 +576,8 @@ def check(inputs, rules_path, junit_path, as_json, fail_on, exit_zero, would_cle
     if as_json:
         click.echo(json.dumps({"summary": s, "rules": rules.describe(), "files": results}, indent=1))
     out.line(f"checked {s['files']} files: {s['OK']} OK, {s['WARN']} WARN, {s['FAIL']} FAIL, "
-             f"{s['ERROR']} ERROR", level=-1, err=True)
+             f"{s['ERROR']} ERROR" + (f"; {s['SKIP']} SKIP (not a known layout; --strict fails "
+                                      "them)" if s["SKIP"] else ""), level=-1, err=True)
     sys.exit(EXIT_OK if exit_zero else exit_code(results))
 
 

@@ -110,5 +110,7 @@ def exit_code(results: list[dict]) -> int:
 
 
 def summary(results: list[dict]) -> dict:
-    counts = {k: sum(r["status"] == k for r in results) for k in ("OK", "WARN", "FAIL", "ERROR")}
-    return {"files": len(results), **counts, "exit_code": exit_code(results)}
+    """Counts by status; ``files`` counts the captures checked (not the SKIPped files of
+    no known layout, which pass)."""
+    counts = {k: sum(r["status"] == k for r in results) for k in ("OK", "WARN", "FAIL", "ERROR", "SKIP")}
+    return {"files": len(results) - counts["SKIP"], **counts, "exit_code": exit_code(results)}

@@ -45,6 +45,8 @@ class CleanTask:
     source: str
     reports: tuple = ("json",)
     read_options: dict | None = None
+    #: the output format (None: the input's)
+    to: str | None = None
 
     def __call__(self, job: Job) -> dict:
         from mocapfix.clean import clean_file
@@ -59,7 +61,7 @@ class CleanTask:
                 before = None           # unreadable: clean_file names the cause
             # an AMC's skeleton copy was checked with the whole batch's (skeleton_conflicts)
             result = clean_file(job.source, job.output, pipeline, self.reports, self.read_options,
-                                skeleton_checked=True)
+                                skeleton_checked=True, to=self.to)
             # for the manifest: the hashes of what was cleaned. Taken after the clean alone, a
             # file still being written (copied, synced) was recorded with its new content
             # against an output of the old one, and the next run skipped it as finished
@@ -117,10 +119,10 @@ def _stamps(paths) -> tuple:
 
 def run_batch(jobs: list[Job], config: dict, source: str, reports=("json",), workers: int = 1,
               read_options: dict | None = None, on_result: Callable | None = None,
-              executor: Executor | None = None, spec=None) -> list[dict]:
-    """Clean every job; results in job order. ``on_result(result)`` is called as each file
-    finishes (for streaming output)."""
-    task = CleanTask(config, source, tuple(reports), read_options)
+              executor: Executor | None = None, spec=None, to: str | None = None) -> list[dict]:
+    """Clean every job (written in format ``to``, None: the input's); results in job order.
+    ``on_result(result)`` is called as each file finishes (for streaming output)."""
+    task = CleanTask(config, source, tuple(reports), read_options, to)
     results: list[dict | None] = [None] * len(jobs)
     for n, result in run_tasks(task, jobs, workers, executor, spec):
         results[n] = result
@@ -148,6 +150,8 @@ class CleanPlan:
     skipped: list
     #: the folders this run makes (taken back, empty, when nothing runs)
     made: list = field(default_factory=list)
+    #: the output format (None: each input's own)
+    to: str | None = None
 
     @property
     def resumed(self) -> bool:
@@ -166,21 +170,28 @@ def _config_body(text: str) -> str:
 
 def plan_clean(files, outdir, pipeline: Pipeline, *, inputs=(), reports=("json",),
                policy: str | None = None, fps: float | None = None,
-               allow_inside_input: bool = False, dry_run: bool = False) -> CleanPlan:
+               allow_inside_input: bool = False, dry_run: bool = False,
+               to: str | None = None) -> CleanPlan:
     """Plan cleaning ``files`` (found by :func:`~mocapfix.batch.discovery.discover_inputs`
-    in ``inputs``) into ``outdir`` with ``pipeline``; see the module docstring. Raises
-    :class:`~mocapfix.core.errors.MocapfixError` for what the run must not do; a dry run
-    makes no folder and writes nothing, and refuses what the real run would."""
+    in ``inputs``) into ``outdir`` with ``pipeline``, writing format ``to`` (a name of
+    :data:`mocapfix.formats.NAMES`; None: each input's own); see the module docstring.
+    Raises :class:`~mocapfix.core.errors.MocapfixError` for what the run must not do; a
+    dry run makes no folder and writes nothing, and refuses what the real run would."""
+    from mocapfix import formats
+
     if policy not in POLICIES:
         raise ValueError(f"policy must be one of {POLICIES}, got {policy!r}")
+    if to is not None and to not in formats.NAMES:
+        raise MocapfixError(f"unknown output format {to!r}; known: {', '.join(formats.NAMES)}")
     outdir = Path(outdir)
-    jobs = plan_outputs(files, outdir, allow_inside_input, inputs)
+    jobs = plan_outputs(files, outdir, allow_inside_input, inputs,
+                        suffix=formats.suffixes(to)[0] if to else None)
     if not jobs:
         raise MocapfixError("no motion files found in " + ", ".join(map(str, inputs or files)))
     config_file = outdir / "mocapfix-config.yaml"
     config_text = f"# effective config of this run (from {pipeline.source})\n" + pipeline.dump()
     manifest = Manifest(outdir, run_key(config_text, reports, {"fps": fps} if fps else None,
-                                        pipeline.model_files()))
+                                        pipeline.model_files(), to))
     finished = set() if policy == "overwrite" else {j for j in jobs if manifest.finished(j)}
     # a folder where an output would go is not an earlier output: that file fails
     # ("cannot write: Is a directory"); --skip-existing skipped it as "output exists"
@@ -221,7 +232,14 @@ def plan_clean(files, outdir, pipeline: Pipeline, *, inputs=(), reports=("json",
         more = f" (and {len(conflicts) - 1} more)" if len(conflicts) > 1 else ""
         raise MocapfixError(conflicts[0] + more + "; nothing was cleaned")
     return CleanPlan(pipeline, outdir, tuple(reports), {"default_fps": fps} if fps else None,
-                     manifest, config_text, config_file, todo, skipped, made)
+                     manifest, config_text, config_file, todo, skipped, made, to)
+
+
+def convert_pipeline() -> Pipeline:
+    """The pipeline of ``mocapfix convert``: no step (read, write in another format)."""
+    from mocapfix.config import parse_config
+
+    return parse_config({"version": 1, "pipeline": []}, "convert (no cleaning)")
 
 
 def _take_back(folders) -> None:
@@ -262,7 +280,8 @@ def run_clean(plan: CleanPlan, *, workers: int = 1, spec=None,
     plan.manifest.start(plan.todo)
     try:
         results = run_batch(plan.todo, plan.pipeline.config(), str(plan.pipeline.source),
-                            plan.reports, workers, plan.read_options, on_result=record, spec=spec)
+                            plan.reports, workers, plan.read_options, on_result=record, spec=spec,
+                            to=plan.to)
     except MocapfixError:
         if not finished_here:               # nothing ran: leave the folder as it was
             plan.manifest.abandon()
@@ -277,21 +296,24 @@ def run_clean(plan: CleanPlan, *, workers: int = 1, spec=None,
 
 def clean_batch(inputs, outdir, config="default", *, reports=("json",), policy: str | None = None,
                 fps: float | None = None, workers: int = 1, include=(), exclude=(),
-                allow_inside_input: bool = False, on_result: Callable | None = None) -> dict:
+                allow_inside_input: bool = False, on_result: Callable | None = None,
+                to: str | None = None) -> dict:
     """Clean files and folders into ``outdir`` as ``mocapfix clean`` does: ``config`` is a
-    preset name, a YAML path or a :class:`~mocapfix.pipeline.steps.Pipeline`; ``policy``
-    None, ``"overwrite"`` or ``"skip"`` (the CLI's ``--overwrite`` and
-    ``--skip-existing``). Returns ``{"files": [result per file cleaned], "skipped":
+    preset name, a YAML path or a :class:`~mocapfix.pipeline.steps.Pipeline` (``"convert"``:
+    no cleaning, as ``mocapfix convert``); ``policy`` None, ``"overwrite"`` or ``"skip"``
+    (the CLI's ``--overwrite`` and ``--skip-existing``); ``to`` the output format (None:
+    each input's own). Returns ``{"files": [result per file cleaned], "skipped":
     [(input, why), ...], "ignored": [(path, why) of files discovery passed over]}``;
     raises :class:`~mocapfix.core.errors.MocapfixError` for what the run refuses."""
     from mocapfix.config import load_config
     from mocapfix.core.presets import resolve_config
 
-    pipeline = config if isinstance(config, Pipeline) else load_config(resolve_config(config))
+    pipeline = (config if isinstance(config, Pipeline) else convert_pipeline()
+                if config == "convert" else load_config(resolve_config(config)))
     found = discover_inputs([str(i) for i in inputs], include, exclude)
     plan = plan_clean(found.files, outdir, pipeline, inputs=[str(i) for i in inputs],
                       reports=reports, policy=policy, fps=fps,
-                      allow_inside_input=allow_inside_input)
+                      allow_inside_input=allow_inside_input, to=to)
     results = run_clean(plan, workers=workers, on_result=on_result)
     return {"files": results, "skipped": [(str(j.source), why) for j, why in plan.skipped],
             "ignored": [(str(p), why) for p, why in found.skipped]}

@@ -2,7 +2,9 @@
 
 Discovery in folders skips, with a note: hidden files, our own reports and temporary
 files, files whose suffix is no motion format, ``.csv``/``.txt``/``.tsv`` files whose content
-is not motion data (Nexus/QTM exports, notes), special files (FIFOs, devices, sockets),
+matches no known layout (two kinds: a table of numbers is data in a layout we do not
+read — reported plainly, listed by ``check`` as a skipped testcase and failed by ``check
+--strict`` — anything else is a note, passed over quietly), special files (FIFOs, devices, sockets),
 broken links and symlink loops, folders that cannot be listed and links to folders (named:
 their files are not processed), and names filtered out by ``include``/``exclude``
 patterns (case-insensitive). Files named explicitly are always taken (and fail with a
@@ -10,9 +12,11 @@ clear error if they cannot be read). Input trees are never written to.
 """
 from __future__ import annotations
 
+import dataclasses
 import errno
 import fnmatch
 import os
+import re
 import stat
 from dataclasses import dataclass
 from pathlib import Path
@@ -41,6 +45,14 @@ class Found:
 class Discovery:
     files: list
     skipped: list          # (path, why) of files passed over in folders
+    #: the text files among ``skipped`` that hold a table of numbers in no layout we read
+    #: (``Found``, why): data, not notes
+    unknown: list = dataclasses.field(default_factory=list)
+
+
+#: fields of a row of numbers: separated by commas, semicolons, tabs or spaces
+_FIELDS = re.compile(r"[,;\t ]+")
+_NUMBER = re.compile(r"[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?")
 
 
 def _special_kind(mode: int) -> str | None:
@@ -67,16 +79,39 @@ def regular_file_problem(path: Path) -> str | None:
     return _special_kind(st.st_mode)
 
 
+def _head(path: Path) -> bytes | None:
+    try:
+        with open(path, "rb") as fh:
+            return fh.read(4096)
+    except OSError:
+        return None
+
+
 def looks_like_motion(path: Path) -> bool:
     """Content sniff of a text file found in a folder: any format claims it."""
     from mocapfix.formats import NAMES, module
 
-    try:
-        with open(path, "rb") as fh:
-            head = fh.read(4096)
-    except OSError:
+    head = _head(path)
+    if head is None:
         return True          # let the reader report the problem
     return any(module(name).sniff(head) for name in NAMES)
+
+
+def unknown_layout(path: Path) -> str | None:
+    """Why a text file no format claims is data all the same: at least three of the
+    complete lines of its first 4 KB are rows of three or more numbers (a vendor export we
+    do not read, a layout of our formats gone wrong). None for a note (prose, a list)."""
+    head = _head(path)
+    if head is None:
+        return None
+    lines = head.decode("utf-8", errors="replace").lstrip("\ufeff").splitlines()[:-1] or []
+    rows = sum(sum(bool(_NUMBER.fullmatch(f)) for f in _FIELDS.split(line.strip())) >= 3
+               for line in lines)
+    if rows < 3:
+        return None
+    first = next((line.strip() for line in lines if line.strip()), "")
+    shown = first[:60] + ("…" if len(first) > 60 else "")
+    return f"not a known layout (first line: {shown!r})"
 
 
 def _matches(rel: str, patterns) -> bool:
@@ -97,6 +132,7 @@ def discover_inputs(inputs, include=(), exclude=(), sniff: bool = True,
     twice, with two JUnit testcases)."""
     files: list[Found] = []
     skipped: list[tuple[str, str]] = []
+    unknown: list[tuple[Found, str]] = []
     for raw in inputs:
         path = Path(raw)
         if not path.exists() and not path.is_symlink():
@@ -139,10 +175,15 @@ def discover_inputs(inputs, include=(), exclude=(), sniff: bool = True,
                     skipped.append((str(f), problem))
                     continue
                 if sniff and low.endswith(TEXT_SUFFIXES) and not looks_like_motion(f):
-                    skipped.append((str(f), "not motion data (no known layout)"))
+                    why = unknown_layout(f)
+                    if why is None:
+                        skipped.append((str(f), "not motion data (a note: no table of numbers)"))
+                    else:
+                        skipped.append((str(f), why))
+                        unknown.append((Found(f, root), why))
                     continue
                 files.append(Found(f, root))
-    return Discovery(*_once(files, skipped, once_per_file))
+    return Discovery(*_once(files, skipped, once_per_file), unknown)
 
 
 def _once(files: list, skipped: list, by_file: bool = False) -> tuple[list, list]:

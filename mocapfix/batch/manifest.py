@@ -39,11 +39,12 @@ _KEY_FIELDS = ("config_sha256", "models_sha256", "reports", "read_options", "ver
 _INPUT_FIELDS = ("input_sha256", "companions_sha256")
 
 
-def run_key(config_text: str, reports, read_options: dict | None, model_files=()) -> dict:
+def run_key(config_text: str, reports, read_options: dict | None, model_files=(),
+            to: str | None = None) -> dict:
     """What determines a run's outputs besides the input: config, the content of the model
     files it reads (``model_files``, hashed here once per run: a model retrained at the
-    same path leaves the config text as it was), report kinds, read options, mocapfix
-    version."""
+    same path leaves the config text as it was), report kinds, read options, the output
+    format asked for (``to``), mocapfix version."""
     body = "\n".join(line for line in config_text.splitlines() if not line.startswith("#"))
     try:
         models = {str(p): file_sha256(p) for p in model_files}
@@ -53,7 +54,8 @@ def run_key(config_text: str, reports, read_options: dict | None, model_files=()
         raise ConfigError(f"{exc.filename}: cannot read the model file: {exc.strerror or exc}") from None
     return {"config_sha256": hashlib.sha256(body.encode("utf-8")).hexdigest(),
             "models_sha256": models, "reports": sorted(reports),
-            "read_options": dict(sorted((read_options or {}).items())), "version": __version__}
+            "read_options": dict(sorted((read_options or {}).items())), "version": __version__,
+            **({"to": to} if to else {})}
 
 
 def input_identity(source) -> dict:

@@ -124,8 +124,10 @@ def _under(path: Path, folder: Path) -> bool:
     return path == folder or folder in path.parents
 
 
-def plan_outputs(found: list, outdir, allow_inside_input: bool = False, inputs=()) -> list[Job]:
-    """Output path of each input: ``OUTDIR/<path relative to its input folder>``."""
+def plan_outputs(found: list, outdir, allow_inside_input: bool = False, inputs=(),
+                 suffix: str | None = None) -> list[Job]:
+    """Output path of each input: ``OUTDIR/<path relative to its input folder>``, its
+    suffix made ``suffix`` when one is given (a conversion)."""
     outdir = Path(os.path.abspath(outdir))
     real_out = outdir.resolve() if outdir.exists() else outdir
     for raw in inputs:
@@ -136,7 +138,7 @@ def plan_outputs(found: list, outdir, allow_inside_input: bool = False, inputs=(
                 raise ConfigError(
                     f"output folder {outdir} is inside input folder {root}; choose another "
                     "output folder or pass --allow-inside-input")
-    jobs = [Job(f.path, outdir / f.relative) for f in found
+    jobs = [Job(f.path, _with_suffix(outdir / f.relative, suffix)) for f in found
             if not _under(f.path, real_out) or f.root is None]
     if found and not jobs:          # (it said "no motion files found in IN")
         raise ConfigError(f"every motion file found in {', '.join(map(str, inputs))} is inside the "
@@ -152,6 +154,11 @@ def plan_outputs(found: list, outdir, allow_inside_input: bool = False, inputs=(
         seen[job.output] = job.source
     _check_shared_skeletons(jobs)
     return jobs
+
+
+def _with_suffix(path: Path, suffix: str | None) -> Path:
+    """``take.c3d`` → ``take.trc``; a name with no suffix gets one."""
+    return path if suffix is None else path.with_name(path.stem + suffix if path.suffix else path.name + suffix)
 
 
 def _check_shared_skeletons(jobs: list[Job]) -> None:

@@ -146,14 +146,33 @@ def _read_as(path: Path, name: str, options: dict) -> Motion:
     return motion
 
 
-def storable(motion: Motion) -> Motion:
-    """``motion`` as the writer of its format will store it (a format module's
-    ``storable``, where a file cannot hold every value: an int16 C3D), so that what is
-    measured and reported is what is written."""
-    if motion.format not in FORMATS:
+def storable(motion: Motion, name: str | None = None) -> Motion:
+    """``motion`` as the writer of format ``name`` (None: its own) will store it (a format
+    module's ``storable``, where a file cannot hold every value: an int16 C3D), so that
+    what is measured and reported is what is written."""
+    name = name or motion.format
+    if name not in FORMATS:
         return motion
-    fix = getattr(module(motion.format), "storable", None)
+    fix = getattr(module(name), "storable", None)
     return motion if fix is None else fix(motion)
+
+
+def losses(motion: Motion, name: str) -> list[str]:
+    """What a file of format ``name`` cannot carry from ``motion`` (read in another
+    format), one note each: what only the motion's own format keeps (its module's
+    ``kept_only_here(motion)``: a C3D's analog channels and events, a Kinect file's tracking
+    states) and what the target cannot hold (its module's ``losses(motion)``), and the
+    rotations of a rig written as joint positions."""
+    if name == motion.format:
+        return []
+    notes = []
+    if motion.format in FORMATS:
+        notes += getattr(module(motion.format), "kept_only_here", lambda m: [])(motion)
+    notes += [n for n in getattr(module(name), "losses", lambda m: [])(motion) if n not in notes]
+    if motion.channels is not None and name not in ("bvh", "asfamc"):
+        notes.append(f"the joint rotations ({motion.channels.shape[1]} channels) are not "
+                     f"carried: {name} stores the joint positions (forward kinematics)")
+    return notes
 
 
 def write(motion: Motion, path, format: str | None = None, **options) -> list[Path]:

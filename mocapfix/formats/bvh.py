@@ -692,11 +692,11 @@ def write(motion: Motion, path, **options) -> list[Path]:
     """Write ``motion.channels`` with the hierarchy of the file it was read from."""
     path = Path(path)
     source = motion.source
-    if motion.channels is None:
-        raise WriteError(path, "the motion has no BVH channels to write")
     if not isinstance(source, BvhSource):
         raise WriteError(path, "BVH output needs a motion read from a BVH file "
                                "(its hierarchy is written back unchanged)")
+    if motion.channels is None:
+        raise WriteError(path, "the motion has no BVH channels to write")
     channels = np.asarray(motion.channels, dtype=np.float64)
     if channels.ndim != 2 or channels.shape[1] != source.n_channels:
         raise WriteError(path, f"channels have shape {channels.shape}, the hierarchy needs "

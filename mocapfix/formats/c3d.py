@@ -850,6 +850,31 @@ def _beyond_int16(new: np.ndarray, source: C3DSource) -> np.ndarray:
     return source.missing & np.isfinite(new).all(axis=2) & out.any(axis=2)
 
 
+def kept_only_here(motion: Motion) -> list[str]:
+    """What of a motion read from a C3D no other format carries: analog channels,
+    events, the points that are model outputs (angles, forces ...), the residuals and
+    camera masks. For :func:`mocapfix.formats.losses`."""
+    source = motion.source
+    if not isinstance(source, C3DSource):
+        return []
+    notes = []
+    channels = source.analog.shape[1] // max(source.analog_per_frame, 1) if source.analog.size else 0
+    if channels:
+        notes.append(f"{channels} analog channel(s) (force plates, EMG ...) are not carried")
+    events = len(source.events) + len(source.parameter_events)
+    if events:
+        notes.append(f"{events} event(s) are not carried")
+    if motion.kinds is not None:
+        others = [n for n, k in zip(motion.names, motion.kinds) if k != "marker"]
+        if others:
+            notes.append(f"{len(others)} point(s) that are model outputs, not markers "
+                         f"({', '.join(others[:3])}{' ...' if len(others) > 3 else ''}), are "
+                         "written as positions by formats that keep every point, left out by "
+                         "marker formats")
+    notes.append("the residuals and camera masks of the samples are not carried")
+    return notes
+
+
 def storable(motion: Motion) -> Motion:
     """``motion`` as :func:`write` will store it in its source file: a fill an int16 file
     cannot hold (far outside where the markers ever were) is made a gap again, with a

@@ -930,6 +930,16 @@ _READERS = {
 # ---------------------------------------------------------------------------------------
 # writing
 # ---------------------------------------------------------------------------------------
+def kept_only_here(motion: Motion) -> list[str]:
+    """What of a motion read from a Kinect file no other format carries: the tracking
+    state (or confidence) of each sample. For :func:`mocapfix.formats.losses`."""
+    source = motion.source
+    if isinstance(source, KinectSource) and source.state_kind is not None:
+        return [f"the {source.state_kind} {'state' if source.state_kind == 'tracking' else 'value'}"
+                " of each sample is not carried (inferred samples are written as positions)"]
+    return []
+
+
 def write(motion: Motion, path, **options) -> list[Path]:
     """Write ``motion`` in the layout it was read from (see the module docstring)."""
     path = Path(path)

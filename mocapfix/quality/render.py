@@ -452,12 +452,13 @@ def check_line(result: dict, verbose: bool = False) -> str:
 
 def check_junit(results: list[dict], seconds: float, suite: str = "mocapfix check") -> str:
     """JUnit XML: one testcase per file; a FAIL is a <failure> whose message names the rule
-    and the figure (all failing findings in its text), an unreadable file an <error>,
-    warnings go to <system-out>."""
+    and the figure (all failing findings in its text), an unreadable file an <error>, a
+    file of no known layout a <skipped>, warnings go to <system-out>."""
     failures = sum(r["status"] == "FAIL" for r in results)
     errors = sum(r["status"] == "ERROR" for r in results)
+    skipped = sum(r["status"] == "SKIP" for r in results)
     attrs = {"name": suite, "tests": str(len(results)), "failures": str(failures),
-             "errors": str(errors), "skipped": "0", "time": f"{seconds:.3f}"}
+             "errors": str(errors), "skipped": str(skipped), "time": f"{seconds:.3f}"}
     root = ET.Element("testsuites", attrs)
     ts = ET.SubElement(root, "testsuite", {**attrs, "timestamp": time.strftime("%Y-%m-%dT%H:%M:%S"),
                                            "hostname": socket.gethostname()})
@@ -469,6 +470,8 @@ def check_junit(results: list[dict], seconds: float, suite: str = "mocapfix chec
         if r["status"] == "ERROR":
             el = ET.SubElement(tc, "error", {"type": "unreadable", "message": r["error"]})
             el.text = r["error"]
+        elif r["status"] == "SKIP":
+            ET.SubElement(tc, "skipped", {"message": r["skipped"]})
         elif r["status"] == "FAIL":
             fails = [f for f in findings if f["level"] == "FAIL"]
             first = fails[0]

@@ -89,13 +89,16 @@ def test_outputs_honour_the_umask(tmp_path, mask, mode):
 def test_non_motion_text_is_skipped_and_patterns_filter(tmp_path):
     src = _folder(tmp_path, C3D, KIN)
     (src / "notes.txt").write_text("subject 3, second session\nmarkers re-taped after trial 2\n")
-    (src / "Trial01.csv").write_text("Trajectories\n100\n,,Subject:LASI,,\nFrame,Sub Frame,X,Y,Z\n"
-                                     "1,0,1.0,2.0,3.0\n")   # a Nexus export header
+    (src / "forces.csv").write_text("t;fx;fy;fz\n0.00;1.5;2.5;3.5\n0.01;1.6;2.6;3.6\n"
+                                    "0.02;1.7;2.7;3.7\n0.03;1.8;2.8;3.8\n")   # data, no layout we read
     r = CliRunner().invoke(main, ["clean", str(src), "-o", str(tmp_path / "o"), "-c", _cfg(tmp_path), "-v"])
     assert r.exit_code == 0, r.output
-    assert "notes.txt: not motion data" in r.output and "Trial01.csv: not motion data" in r.output
+    assert "notes.txt: not motion data" in r.output
+    assert "SKIP  " + str(src / "forces.csv") + ": not a known layout (first line: 't;fx;fy;fz')" in r.output
     r = CliRunner().invoke(main, ["clean", str(src), "-o", str(tmp_path / "o2"), "-c", _cfg(tmp_path)])
-    assert r.exit_code == 0 and "2 text file(s) are not motion data" in r.output
+    # without -v the note is counted, the data file of no known layout named
+    assert r.exit_code == 0 and "1 text file(s) are not motion data" in r.output
+    assert "forces.csv: not a known layout" in r.output
     r = CliRunner().invoke(main, ["clean", str(src), "-o", str(tmp_path / "p"), "-c", _cfg(tmp_path),
                                   "--include", "*.c3d"])
     assert r.exit_code == 0 and sorted(p.name for p in (tmp_path / "p").glob("walk*")) == [

@@ -1,0 +1,81 @@
+"""`mocapfix convert` and `clean --to`: the samples written are the samples read (a
+missing one stays missing), what the output format cannot carry is named per file and in
+the report, a conversion that cannot be made fails that file alone with a clear error,
+and runs resume like `clean`."""
+from __future__ import annotations
+
+import hashlib
+import json
+
+import numpy as np
+from click.testing import CliRunner
+
+from mocapfix import formats
+from mocapfix.cli import main
+from conftest import SAMPLE_DATA, no_traceback
+
+C3D, BVH, KIN = SAMPLE_DATA / "walk_markers.c3d", SAMPLE_DATA / "walk.bvh", SAMPLE_DATA / "walk_kinect_v2.csv"
+
+
+def _digest(path):
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def test_convert_writes_the_samples_read_and_leaves_gaps_as_gaps(tmp_path):
+    before = _digest(C3D)
+    r = CliRunner().invoke(main, ["convert", str(C3D), "-o", str(tmp_path / "o"), "--to", "kinect"])
+    assert r.exit_code == 0, r.output
+    assert "converted 1 of 1 files" in r.output
+    assert _digest(C3D) == before
+    out = tmp_path / "o" / "walk_markers.csv"
+    assert sorted(p.name for p in (tmp_path / "o").iterdir()) == [
+        "mocapfix-config.yaml", "mocapfix-manifest.jsonl", "walk_markers.csv"]   # no report by default
+    src, got = formats.read(C3D), formats.read(out)
+    assert got.names == src.names and got.units == src.units
+    assert abs(got.fps - src.fps) < 1e-6 * src.fps        # times printed to 1e-9 s
+    assert np.array_equal(got.missing, src.missing) and src.missing.any()   # gaps kept, not filled
+    seen = ~src.missing
+    assert np.abs(got.positions[seen] - src.positions[seen]).max() < 1e-5
+
+
+def test_what_the_output_cannot_carry_is_named_on_the_line_and_in_the_report(tmp_path):
+    r = CliRunner().invoke(main, ["convert", str(BVH), str(KIN), "-o", str(tmp_path / "o"), "--to", "c3d",
+                                  "--report", "json"])
+    assert r.exit_code == 0, r.output
+    assert "not carried into c3d: the joint rotations" in r.output
+    assert "not carried into c3d: the tracking state of each sample" in r.output
+    report = json.loads((tmp_path / "o" / "walk.c3d.report.json").read_text())
+    assert any("joint rotations" in n for n in report["file"]["notes"])
+    src, got = formats.read(BVH), formats.read(tmp_path / "o" / "walk.c3d")
+    assert got.names == src.names
+    assert np.abs(got.positions - src.positions).max() < 1e-3 * np.abs(src.positions).max()
+
+
+def test_a_conversion_that_cannot_be_made_fails_that_file_alone(tmp_path):
+    r = CliRunner().invoke(main, ["convert", str(C3D), str(BVH), "-o", str(tmp_path / "o"), "--to", "bvh"])
+    no_traceback(r)
+    assert r.exit_code == 1, r.output
+    assert "ERROR" in r.output and "BVH output needs a motion read from a BVH file" in r.output
+    assert not (tmp_path / "o" / "walk_markers.bvh").exists()      # nothing left of it
+    assert (tmp_path / "o" / "walk.bvh").exists()                   # the other file written
+    r = CliRunner().invoke(main, ["convert", str(C3D), "-o", str(tmp_path / "p"), "--to", "xyz"])
+    assert r.exit_code == 2 and "unknown output format 'xyz'" in r.output
+    assert not (tmp_path / "p").exists()
+
+
+def test_clean_to_another_format_cleans_then_writes_it(tmp_path):
+    r = CliRunner().invoke(main, ["clean", str(KIN), "-o", str(tmp_path / "o"), "--to", "c3d"])
+    assert r.exit_code == 0, r.output
+    cleaned = formats.read(tmp_path / "o" / "walk_kinect_v2.c3d")
+    src = formats.read(KIN)
+    assert cleaned.n_frames == src.n_frames and cleaned.names == src.names
+    assert not np.allclose(cleaned.positions, src.positions, equal_nan=True)   # it was cleaned
+
+
+def test_convert_resumes_and_a_new_format_is_a_new_run(tmp_path):
+    args = ["convert", str(C3D), "-o", str(tmp_path / "o"), "--to", "kinect"]
+    assert CliRunner().invoke(main, args).exit_code == 0
+    r = CliRunner().invoke(main, args)
+    assert r.exit_code == 0 and "finished earlier" in r.output
+    r = CliRunner().invoke(main, ["convert", str(C3D), "-o", str(tmp_path / "o"), "--to", "c3d"])
+    assert r.exit_code == 0 and (tmp_path / "o" / "walk_markers.c3d").exists(), r.output
