@@ -32,8 +32,13 @@ points out and back — the output's path is much smoother (``accel_ratio`` ≤
 :data:`SUPPORTED_RATIO`); a real fast movement (a kick's peak at 30 Hz) is a smooth path
 that a wrong repair makes rougher. A case is also explained when its largest change is
 within :data:`NOISE_SPAN` times the white noise measured on that point's path in the input
-(``noise_mm``: smoothing a noisy capture moves samples by about its noise). A case neither
-explains is *unsupported*. The Markdown lists every case; ``benchmarks/harm.py`` also
+(``noise_mm``: smoothing a noisy capture moves samples by about its noise). On a skeleton
+of points (Kinect: joints with bones, no rig) a case is also explained by its bones: a bone
+with an end among the points it moves is off its median length there by more than
+:data:`NOISE_SPAN` times the combined noise of its two ends (no sensor noise makes a
+forearm 5 cm longer), the output brings that error at least halfway back, and the case
+moves nothing further than the error plus that noise (``bone_error_in_mm`` →
+``bone_error_out_mm``). A case none of these explains is *unsupported*. The Markdown lists every case; ``benchmarks/harm.py`` also
 draws each one.
 """
 from __future__ import annotations
@@ -101,9 +106,33 @@ def point_noise(positions: np.ndarray) -> np.ndarray:
     return np.median(difference_noise(positions.reshape(T, 3 * J), 4).reshape(J, 3), axis=1)
 
 
+def bone_errors(positions: np.ndarray, bones: np.ndarray) -> np.ndarray:
+    """(T, B) how far each bone's length is from its median over the take (the
+    positions' unit; NaN where an end is missing)."""
+    if not len(bones):
+        return np.zeros((len(positions), 0))
+    L = np.linalg.norm(positions[:, bones[:, 0]] - positions[:, bones[:, 1]], axis=-1)
+    with np.errstate(all="ignore"):
+        return np.abs(L - np.nanmedian(L, axis=0))
+
+
+def _bone_evidence(bones: np.ndarray, errors: tuple, noise: np.ndarray, points: np.ndarray,
+                   a: int, b: int) -> tuple[float, float, float]:
+    """Of the bones with an end among ``points``, over frames ``a:b``: the largest error
+    of a bone's length in the input and in the output, and what the noise of its two ends
+    explains of it (:data:`NOISE_SPAN` × their combined σ); zeros without bones."""
+    touch = np.flatnonzero(np.isin(bones, points).any(axis=1)) if len(bones) else np.zeros(0, int)
+    if not len(touch):
+        return 0.0, 0.0, 0.0
+    e_in, e_out = (np.nan_to_num(e[a:b, touch]).max(axis=0) for e in errors)
+    worst = int(np.argmax(e_in))
+    span = NOISE_SPAN * float(np.hypot(*noise[bones[touch[worst]]]))
+    return float(e_in[worst]), float(e_out[worst]), span
+
+
 def _case(before: np.ndarray, after: np.ndarray, moved: np.ndarray, noise: np.ndarray, names,
           start: int, length: int, points: np.ndarray, fps: float, mm: float, steps: list[str],
-          judged: str | None) -> dict:
+          judged: str | None, bones: np.ndarray, errors: tuple) -> dict:
     T = len(before)
     a, b = max(start - CONTEXT, 0), min(start + length + CONTEXT, T)
     acc_in = _acceleration(before[a:b, points])
@@ -115,6 +144,11 @@ def _case(before: np.ndarray, after: np.ndarray, moved: np.ndarray, noise: np.nd
     to_ms2 = fps * fps * mm / 1000.0
     most = points[worst[1]]
     sigma = float(noise[most]) * mm
+    bone_in, bone_out, bone_span = _bone_evidence(bones, errors, noise, points, a, b)
+    # the input's skeleton contradicts it there: a bone off its length by more than its
+    # ends' noise explains, brought at least halfway back, by a move no larger than the error
+    by_bones = (bone_in > bone_span and bone_out <= 0.5 * bone_in
+                and inside[worst] <= (bone_in + bone_span) * mm)
     return {"point": judged, "frame": int(start), "frames": int(length),
             "seconds": round(length / fps, 4) if fps else None, "steps": steps,
             "moved_max_mm": round(float(inside[worst]), 2),
@@ -124,7 +158,9 @@ def _case(before: np.ndarray, after: np.ndarray, moved: np.ndarray, noise: np.nd
             "accel_out_ms2": round(np.sqrt(acc_out) * to_ms2, 3),
             "accel_ratio": round(ratio, 4) if np.isfinite(ratio) else None,
             "noise_mm": round(sigma, 3),
-            "supported": bool(ratio <= SUPPORTED_RATIO or inside[worst] <= NOISE_SPAN * sigma)}
+            "bone_error_in_mm": round(bone_in * mm, 2), "bone_error_out_mm": round(bone_out * mm, 2),
+            "supported": bool(ratio <= SUPPORTED_RATIO or inside[worst] <= NOISE_SPAN * sigma
+                              or by_bones)}
 
 
 def cases(result) -> list[dict]:
@@ -142,6 +178,10 @@ def cases(result) -> list[dict]:
         return []
     moves = _moved_by(before)
     noise = point_noise(before.positions)
+    # a rig's bones are constant by construction: only a skeleton of points is evidence
+    bones = (before.skeleton.bone_array if before.skeleton is not None and before.rig is None
+             else np.zeros((0, 2), np.intp))
+    errors = (bone_errors(before.positions, bones), bone_errors(after.positions, bones))
     judged = np.zeros((T, J), bool)
     for rec in result.records:
         judged |= rec.outliers
@@ -159,11 +199,11 @@ def cases(result) -> list[dict]:
                  if any(r.outliers[s:s + n, k].any() for k, s, n in group)]
         judged_names = ", ".join(dict.fromkeys(before.names[k] for k, _, _ in group))
         out.append(_case(before.positions, after.positions, moved, noise, before.names, start,
-                         stop - start, points, before.fps, mm, steps, judged_names))
+                         stop - start, points, before.fps, mm, steps, judged_names, bones, errors))
     for k, s, n in zip(*runs(big & ~covered)):
         steps = [r.step for r in result.records if (r.moved[s:s + n, k] > 0).any()]
         out.append(_case(before.positions, after.positions, moved, noise, before.names, int(s),
-                         int(n), np.array([k]), before.fps, mm, steps, None))
+                         int(n), np.array([k]), before.fps, mm, steps, None, bones, errors))
     return sorted(out, key=lambda c: -c["moved_max_mm"])
 
 
@@ -219,6 +259,12 @@ def _jitter_ratio(before: Motion, after: Motion) -> float:
 LISTED = 20
 
 
+def _bone_cell(case: dict) -> str:
+    if not case["bone_error_in_mm"] and not case["bone_error_out_mm"]:
+        return "–"
+    return f"{case['bone_error_in_mm']:.1f} → {case['bone_error_out_mm']:.1f}"
+
+
 def to_markdown(result, listed: int = LISTED) -> str:
     """Per method, one row per file, a worst-over-files row, and the ``listed`` largest
     cases of each file (with a count of the rest)."""
@@ -229,7 +275,10 @@ def to_markdown(result, listed: int = LISTED) -> str:
              "of the samples seen in both, mm; `moved > 10 mm` counts samples (joint-frames); "
              "a case is a run judged wrong (or smoothed) that moved something more than 10 mm, "
              f"*supported* when the output's acceleration around it is ≤ {SUPPORTED_RATIO:g}× "
-             "the input's.", ""]
+             f"the input's, when its largest move is within {NOISE_SPAN:g}× the point's noise, "
+             "or (skeletons of points: Kinect) when a bone of the points it moves is off its "
+             f"length by more than {NOISE_SPAN:g}× its ends' noise there and the output brings "
+             "it at least halfway back, by a move no larger than that error.", ""]
     if result.notes:
         parts += [f"- note: {n}" for n in result.notes] + [""]
     heads = [h for _, h, _ in METRICS]
@@ -260,14 +309,15 @@ def to_markdown(result, listed: int = LISTED) -> str:
             parts += [f"Cases of {method} (every sample moved > 10 mm is in one; at most "
                       f"{listed} per file here):", "",
                       "| file | judged wrong | frames | steps | moved max mm (point, frame) | "
-                      "> 10 mm | accel in → out m/s² | noise mm | supported |", "|---" * 9 + "|"]
+                      "> 10 mm | accel in → out m/s² | noise mm | bone error in → out mm | "
+                      "supported |", "|---" * 10 + "|"]
             for name, c in shown:
                 where = c["point"] or "(smoothing)"
                 parts.append(
                     f"| {name} | {where} | {c['frame']}+{c['frames']} | {', '.join(c['steps'])} | "
                     f"{c['moved_max_mm']:.1f} ({c['moved_most']}, {c['moved_most_frame']}) | "
                     f"{c['samples_moved_10mm']} | {c['accel_in_ms2']:.1f} → {c['accel_out_ms2']:.1f} | "
-                    f"{c['noise_mm']:.2f} | {'yes' if c['supported'] else '**no**'} |")
+                    f"{c['noise_mm']:.2f} | {_bone_cell(c)} | {'yes' if c['supported'] else '**no**'} |")
             parts.append("")
             parts += [f"- {name}: {len(rest)} more cases, {sum(not c['supported'] for c in rest)} "
                       "of them unsupported" for name, rest in more]

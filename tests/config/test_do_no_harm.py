@@ -155,6 +155,38 @@ def test_a_spike_put_back_on_its_path_is_a_supported_case():
     assert cases[0]["point"] == "M" and cases[0]["accel_out_ms2"] == 0.0
 
 
+def _arm(T=120, fps=30.0):
+    """An elbow on a slow sway and a hand swinging round it on a 300 mm forearm (mm): a
+    skeleton of points, as a Kinect file gives."""
+    from mocapfix.core.motion import Skeleton
+
+    t = np.arange(T) / fps
+    elbow = np.stack([200 * np.sin(t), 50 * np.cos(t), 1000 + 0 * t], axis=1)
+    a = 2 * np.pi * 0.8 * t
+    hand = elbow + 300 * np.stack([np.cos(a), np.sin(a), 0 * t], axis=1)
+    return Motion(np.stack([elbow, hand], axis=1), ["ElbowLeft", "HandLeft"], fps,
+                  skeleton=Skeleton(np.array([-1, 0])))
+
+
+def test_a_move_that_restores_a_bone_the_input_stretched_is_supported_by_the_bones():
+    truth = _arm()
+    stretched = truth.positions.copy()
+    bone = stretched[:, 1] - stretched[:, 0]
+    bump = 60 * np.hanning(21)                                  # a 60 mm stretch over 0.7 s
+    stretched[50:71, 1] += bump[:, None] * bone[50:71] / 300.0
+    before = truth.replace(positions=stretched)
+    metrics, cases = bench_harm.evaluate(_result(before, truth.copy()))
+    assert metrics["moved10"] > 0 and metrics["unsupported"] == 0
+    case = cases[0]
+    assert case["accel_ratio"] > bench_harm.SUPPORTED_RATIO         # not by the path alone
+    assert case["bone_error_in_mm"] == pytest.approx(60.0, abs=1.0) and case["bone_error_out_mm"] < 1.0
+    # a move as large made across the bone leaves its length wrong: unsupported
+    across = stretched.copy()
+    across[50:71, 1, 2] += bump
+    _, cases = bench_harm.evaluate(_result(before, truth.replace(positions=across)))
+    assert cases and cases[0]["bone_error_out_mm"] > 50 and not cases[0]["supported"]
+
+
 def test_samples_written_are_counted_by_run_length():
     m = _line(T=300)
     pos = m.positions.copy()
