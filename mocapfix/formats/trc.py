@@ -1,0 +1,488 @@
+"""TRC marker files (Motion Analysis "Track Row Column", as OpenSim reads and writes them).
+
+Layout (OpenSim 4 documentation, "Marker (.trc) Files", simtk-confluence.stanford.edu
+/display/OpenSim/Marker+(.trc)+Files; the same as Motion Analysis Corp.'s exporters and
+BTK's ``btkTRCFileIO``), tab separated::
+
+    PathFileType  4  (X/Y/Z)  <file name>
+    DataRate  CameraRate  NumFrames  NumMarkers  Units  OrigDataRate  OrigDataStartFrame  OrigNumFrames
+    <the values of line 2, in the same order>
+    Frame#  Time  <marker 1>  <tab> <tab>  <marker 2> ...
+            <tab> X1  Y1  Z1  X2  Y2  Z2 ...
+    [blank line]
+    1  0.000  x  y  z  x  y  z ...
+
+Reading (decisions):
+
+* Header keys are matched by name, in any order; extra keys are kept, absent ones default
+  (no ``Units``: mm, with a note, as BTK does); trailing tabs are ignored. The rate is
+  ``DataRate`` (else ``CameraRate``); a rate that is not a positive finite number is an
+  error naming line 3. ``Units`` ``mm``/``cm``/``m`` (any case, also ``millimeters`` ...)
+  set ``units`` and ``metres_per_unit``; an unknown unit is refused.
+* Markers are the non-empty labels of line 4 after ``Frame#`` and ``Time``, surrounding
+  spaces stripped (BTK's rule; ``btk_Knee.trc`` has `` genou1_NewMarker3 ``); marker ``k``
+  is in columns ``2 + 3k .. 4 + 3k``. ``NumMarkers`` differing from the labels is noted
+  (the labels win, as in BTK). A file with ``NumMarkers 0`` and no labels reads as a motion
+  with no markers.
+* Missing samples are empty (or blank) fields, ``NaN``/``nan`` too; a row shorter than
+  the labelled columns (writers that trim trailing empty fields) is missing there. A
+  sample with any of X, Y, Z missing is missing. Values in columns beyond the labelled
+  markers (unlabelled trajectories some exporters append, e.g. ``btk_Gait.trc``) are not
+  read: a note counts them; they are kept in ``source`` and written back untouched.
+* ``times`` is the Time column; ``NumFrames`` differing from the rows is noted (the rows
+  win). A last line without a line break that is shorter than the row before it is a
+  truncation: dropped with a note (and not written back), as the Kinect reader does.
+* Any other malformation (a header line missing, a non-numeric value, no data rows) is
+  one :class:`UnreadableFileError` naming the line and what was expected.
+
+Parsing is vectorised: each line is split once, and all the value fields of the file go
+through one ``numpy`` float conversion.
+
+Writing:
+
+(a) A motion read from a TRC file, with the same markers and frame count, is written back
+    as the original text with only the changed samples re-formatted: a moved or filled
+    sample gets the decimals of the token it replaces (a filled sample, whose fields were
+    empty, the decimals most common in the file); a sample made missing gets empty fields.
+    An unchanged motion writes back byte-identical (line endings, trailing tabs, spaces).
+(b) Any other motion (markers of a C3D, joint positions of a BVH/AMC/Kinect file) is
+    written as a fresh OpenSim 4 TRC: the header above with ``DataRate = CameraRate =
+    OrigDataRate = fps``, ``OrigDataStartFrame 1``, the motion's units, ``Frame#`` from 1,
+    ``Time`` = ``times - times[0]`` (else ``i / fps``) printed ``%.6f``, positions printed
+    ``%.5f`` (a precision of 5e-6 units: 5 nm in mm files), missing samples as empty
+    fields -- never carried forward. Points whose ``kinds`` entry is not ``"marker"`` (C3D
+    angles, forces, moments) are not written; :func:`losses` lists them and everything
+    else a TRC cannot hold, so that a converter can say so. Tabs and line breaks in names
+    are replaced by spaces (also listed by :func:`losses`).
+
+Why hand-written: TRC is a small tab-separated text layout. The PyPI packages that read it
+(``trc-data-reader``; OpenSim's 200 MB C++ bindings; the wider ``pyomeca`` and
+``kineticstoolkit``) either do not keep the text needed for a byte-identical write-back,
+or are far too heavy for a runtime dependency; OpenSim is used by the tests as the
+independent reader of what we write.
+"""
+from __future__ import annotations
+
+import re
+from collections import Counter
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from mocapfix.core.errors import UnreadableFileError, UnsupportedFeatureError, WriteError
+from mocapfix.core.fileio import atomic_write_bytes, read_input_bytes
+from mocapfix.core.motion import Motion, missing_samples
+from mocapfix.core.quantity import MAX_FRAME_RATE_HZ, MIN_FRAME_RATE_HZ
+from mocapfix.core.units import METRES_PER_UNIT, normalise_unit_name
+from mocapfix.formats.textenc import refuse_wide_text
+
+NAME = "trc"
+SUFFIXES = (".trc",)
+#: where its sniffer runs when the suffix does not tell (a fixed first word: strict)
+SNIFF_ORDER = 1
+
+#: decimals of the values of a fresh file
+DECIMALS = 5
+_HEADER_KEYS = ("DataRate", "CameraRate", "NumFrames", "NumMarkers", "Units",
+                "OrigDataRate", "OrigDataStartFrame", "OrigNumFrames")
+#: a field that is empty or blanks only (a missing coordinate), between tabs
+_EMPTY_FIELD = re.compile(r"(?<![^\t])[ ]*(?![^\t])")
+
+
+@dataclass
+class TRCSource:
+    """What the writer needs to reproduce the file."""
+
+    bom: str
+    lines: list[str]             # every line, without its line ending
+    endings: list[str]           # the ending of each line ("\n", "\r\n", "\r" or "")
+    data_lines: np.ndarray       # (T,) index in ``lines`` of each frame's row
+    names: list[str]
+    header: dict                 # key -> value text of lines 2-3
+    original: np.ndarray         # (T, J, 3) values as read (NaN where missing)
+    missing: np.ndarray          # (T, J) missing when read
+    decimals: int                # the most common decimals of the file's values
+    skip_lines: list[int] = field(default_factory=list)   # a truncated last fragment
+    unlabelled_values: int = 0   # values beyond the labelled columns (kept, not read)
+
+
+# ---------------------------------------------------------------------------------------
+# reading
+# ---------------------------------------------------------------------------------------
+def sniff(head: bytes) -> bool:
+    return head.lstrip(b"\xef\xbb\xbf").startswith(b"PathFileType")
+
+
+def _split_lines(text: str) -> tuple[list[str], list[str]]:
+    """Lines and their endings, so that joining them gives ``text`` back."""
+    parts = re.split(r"(\r\n|\n|\r)", text)
+    lines, endings = parts[0::2], parts[1::2] + [""]
+    if lines and lines[-1] == "" and len(lines) > 1:
+        lines.pop()
+        endings.pop()
+    return lines, endings
+
+
+def _fields(line: str) -> list[str]:
+    """Tab-separated fields of a header line, trailing empty ones dropped."""
+    fields = line.split("\t")
+    while fields and not fields[-1].strip():
+        fields.pop()
+    return fields
+
+
+def _number(text: str, path, line: int, what: str) -> float:
+    try:
+        return float(text)
+    except ValueError:
+        raise UnreadableFileError(path, f"{what} {text.strip()!r} is not a number", line=line) from None
+
+
+def _header(lines: list[str], path, notes: list[str]) -> dict:
+    if not lines[0].startswith("PathFileType"):
+        raise UnreadableFileError(path, "not a TRC file: line 1 does not start with "
+                                        "'PathFileType'", line=1)
+    needed = ("the header keys (DataRate, CameraRate, NumFrames, ...)", "the header values",
+              "the marker labels (Frame#, Time, ...)", "the coordinate labels (X1, Y1, Z1, ...)")
+    for k, what in enumerate(needed):
+        if len(lines) < k + 2:
+            raise UnreadableFileError(path, f"file ends after line {k + 1}; expected {what} "
+                                            f"on line {k + 2}")
+    keys = [k.strip() for k in _fields(lines[1])]
+    values = [v.strip() for v in _fields(lines[2])]
+    if "DataRate" not in keys and "CameraRate" not in keys:
+        raise UnreadableFileError(path, "no DataRate or CameraRate key on line 2", line=2)
+    if len(values) < len(keys):
+        notes.append(f"line 3 has {len(values)} header values for {len(keys)} keys; "
+                     f"the last keys have none")
+    return dict(zip(keys, values))
+
+
+def _rate(header: dict, path) -> float:
+    key = "DataRate" if header.get("DataRate") else "CameraRate"
+    rate = _number(header.get(key, ""), path, 3, key)
+    if not (MIN_FRAME_RATE_HZ <= rate <= MAX_FRAME_RATE_HZ):
+        raise UnreadableFileError(path, f"{key} {header[key]} is not a frame rate (expected "
+                                        f"a number of frames per second > 0)", line=3)
+    return rate
+
+
+def _count(header: dict, key: str, path) -> int | None:
+    text = header.get(key, "")
+    if not text:
+        return None
+    value = _number(text, path, 3, key)
+    if not value.is_integer() or value < 0:
+        raise UnreadableFileError(path, f"{key} {text} is not a count (expected a whole "
+                                        f"number >= 0)", line=3)
+    return int(value)
+
+
+def _units(header: dict, path, notes: list[str]) -> str:
+    text = header.get("Units", "")
+    if not text:
+        notes.append("no Units in the header: millimetres assumed (as BTK does)")
+        return "mm"
+    unit = normalise_unit_name(text)
+    if unit is None or unit not in METRES_PER_UNIT:
+        raise UnsupportedFeatureError(path, f"unknown Units {text!r} (expected mm, cm or m)", line=3)
+    return unit
+
+
+def _labels(line: str) -> list[str]:
+    fields = line.split("\t")
+    return [f.strip() for f in fields[2:] if f.strip()]
+
+
+def _is_data_row(line: str) -> bool:
+    first = line.split("\t", 1)[0].strip()
+    try:
+        float(first)
+    except ValueError:
+        return False
+    return True
+
+
+def _values(block: str, count: int, rows: list[str], starts: list[int], path) -> np.ndarray:
+    """The ``count`` tab-separated fields of ``block`` as floats, empty ones NaN; on a bad
+    token, the line it is on (``rows``: its tokens per row, ``starts``: line numbers)."""
+    try:
+        out = np.array(_EMPTY_FIELD.sub("nan", block).split("\t"), dtype=np.float64)
+    except ValueError:
+        out = None
+    if out is None or out.size != count:
+        for row, line_no in zip(rows, starts):
+            for token in row.split("\t"):
+                try:
+                    float(token or "nan")
+                except ValueError:
+                    raise UnreadableFileError(path, f"{token.strip()!r} is not a number "
+                                                    f"(expected a coordinate, or an empty "
+                                                    f"field for a missing one)",
+                                              line=line_no) from None
+        raise UnreadableFileError(path, "malformed data rows")
+    return out
+
+
+def read(path, fps: float | None = None, **options) -> Motion:
+    """Read a TRC file (see the module docstring)."""
+    path = Path(path)
+    raw = read_input_bytes(path)
+    refuse_wide_text(path, raw, "TRC")
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError:
+        text = raw.decode("latin-1")
+    bom = "\ufeff" if text.startswith("\ufeff") else ""
+    lines, endings = _split_lines(text[len(bom):])
+    notes: list[str] = []
+    header = _header(lines, path, notes)
+    rate = _rate(header, path)
+    units = _units(header, path, notes)
+    declared_markers = _count(header, "NumMarkers", path)
+    declared_frames = _count(header, "NumFrames", path)
+    names = _labels(lines[3])
+    J = len(names)
+    if declared_markers is not None and declared_markers != J:
+        notes.append(f"NumMarkers says {declared_markers} but line 4 labels {J} markers; "
+                     f"the labels were read")
+    first = 5 if len(lines) > 4 and not _is_data_row(lines[4]) else 4
+    data_lines = [i for i in range(first, len(lines)) if lines[i].strip()]
+    skip: list[int] = []
+    if (len(data_lines) > 1 and endings[data_lines[-1]] == ""
+            and len(lines[data_lines[-1]].split("\t")) < len(lines[data_lines[-2]].split("\t"))):
+        skip = [data_lines.pop()]
+        notes.append(f"last line (line {skip[0] + 1}) is shorter than the one before and "
+                     f"has no line break: the file looks truncated; that line was dropped")
+    if not data_lines:
+        raise UnreadableFileError(path, f"no data rows after the header (expected rows "
+                                        f"'frame<TAB>time<TAB>x<TAB>y<TAB>z...' from line {first + 1})")
+    T, width = len(data_lines), 3 * J
+    rows, extra = [], 0
+    for i in data_lines:
+        f = lines[i].split("\t")
+        n = len(f)
+        if n < 2 + width + 1:
+            f += [""] * (2 + width - n)
+        elif n > 2 + width + 1 or (n == 2 + width + 1 and f[-1].strip()):
+            extra += sum(1 for v in f[2 + width:] if v.strip())
+        rows.append("\t".join(f[:2 + width]))
+    values = _values("\t".join(rows), T * (2 + width), rows, [i + 1 for i in data_lines], path)
+    values = values.reshape(T, 2 + width)
+    times = values[:, 1].copy()
+    if not np.isfinite(times).all():
+        k = int(np.flatnonzero(~np.isfinite(times))[0])
+        raise UnreadableFileError(path, "empty or non-finite Time (expected seconds in "
+                                        "column 2)", line=data_lines[k] + 1)
+    positions = np.ascontiguousarray(values[:, 2:]).reshape(T, J, 3)
+    missing = missing_samples(positions)
+    positions[missing] = np.nan
+    if declared_frames is not None and declared_frames != T:
+        notes.append(f"NumFrames says {declared_frames} but the file has {T} data rows; "
+                     f"the rows were read")
+    if extra:
+        notes.append(f"{extra} values lie beyond the {J} labelled markers (unlabelled "
+                     f"columns); they were not read and are written back unchanged")
+    if T > 1 and not (np.diff(times) > 0).all():
+        notes.append("the Time column does not increase on every row")
+    source = TRCSource(bom=bom, lines=lines, endings=endings,
+                       data_lines=np.asarray(data_lines, dtype=np.intp), names=list(names),
+                       header=header, original=positions.copy(), missing=missing,
+                       decimals=_common_decimals(rows[: min(T, 50)]), skip_lines=skip,
+                       unlabelled_values=extra)
+    return Motion(positions, list(names), float(fps) if fps else rate, units=units,
+                  metres_per_unit=METRES_PER_UNIT[units], format=NAME, times=times,
+                  source=source, notes=notes)
+
+
+def _common_decimals(rows: list[str]) -> int:
+    counts = Counter(len(t) - t.index(".") - 1 for row in rows for t in row.split("\t")[2:]
+                     if "." in t and "e" not in t.lower())
+    return counts.most_common(1)[0][0] if counts else DECIMALS
+
+
+# ---------------------------------------------------------------------------------------
+# what a TRC cannot hold
+# ---------------------------------------------------------------------------------------
+def _markers(motion: Motion) -> np.ndarray:
+    """Indices of the points a TRC file holds (every point unless ``kinds`` says)."""
+    if motion.kinds is None:
+        return np.arange(motion.n_joints)
+    return np.array([j for j, k in enumerate(motion.kinds) if k == "marker"], dtype=np.intp)
+
+
+def _clean_name(name: str, j: int) -> str:
+    name = re.sub(r"[\t\r\n]", " ", str(name)).strip()
+    return name or f"M{j + 1}"
+
+
+def losses(motion: Motion) -> list[str]:
+    """Human-readable notes of what writing ``motion`` as TRC leaves out or changes."""
+    source = motion.source
+    if isinstance(source, TRCSource) and _fits(source, motion):
+        return []
+    out = []
+    if motion.kinds is not None:
+        other = Counter(k for k in motion.kinds if k != "marker")
+        if other:
+            kinds = ", ".join(f"{n} {k}{'s' if n > 1 else ''}" for k, n in sorted(other.items()))
+            out.append(f"{sum(other.values())} points that are not markers ({kinds}) are "
+                       f"not written: a TRC file holds marker positions only")
+    if motion.channels is not None or motion.rig is not None:
+        n = 0 if motion.channels is None else motion.channels.shape[-1]
+        out.append(f"the rig's joint rotations ({n} channels) and skeleton are not written: "
+                   f"a TRC file holds the joint positions only")
+    if motion.confidence is not None:
+        out.append("per-sample confidence (tracking state) is not written")
+    analog = getattr(source, "analog", None)
+    if analog is not None and getattr(analog, "size", 0):
+        per = max(int(getattr(source, "analog_per_frame", 1) or 1), 1)
+        out.append(f"{analog.shape[1] // per} analog channels of the C3D file are not written")
+    events = list(getattr(source, "events", None) or [])
+    try:
+        events += list(getattr(source, "parameter_events", None) or [])
+    except (AttributeError, TypeError, ValueError):
+        pass
+    if events:
+        out.append(f"{len(events)} events of the C3D file are not written")
+    if motion.units not in METRES_PER_UNIT:
+        out.append(f"positions are converted from the unit {motion.units!r} "
+                   f"({motion.metres_per_unit:g} m) to mm: a TRC file names its unit")
+    if isinstance(source, TRCSource) and source.unlabelled_values:
+        out.append(f"{source.unlabelled_values} values in unlabelled columns of the original "
+                   f"TRC file are not written")
+    renamed = [motion.names[j] for j in _markers(motion).tolist()
+               if _clean_name(motion.names[j], j) != motion.names[j]]
+    if renamed:
+        out.append(f"{len(renamed)} marker names with tabs, line breaks, surrounding blanks "
+                   f"or no text are written changed: {', '.join(repr(n) for n in renamed[:5])}")
+    return out
+
+
+# ---------------------------------------------------------------------------------------
+# writing
+# ---------------------------------------------------------------------------------------
+def write(motion: Motion, path, **options) -> list[Path]:
+    """Write ``motion`` as TRC (see the module docstring); returns ``[path]``."""
+    path = Path(path)
+    source = motion.source
+    if isinstance(source, TRCSource) and _fits(source, motion):
+        text = _patched_text(source, motion)
+    else:
+        text = _fresh_text(motion, path)
+    try:
+        atomic_write_bytes(path, text.encode("utf-8"))
+    except OSError as exc:
+        raise WriteError(path, f"cannot write: {exc.strerror or exc}") from None
+    return [path]
+
+
+def _fits(source: TRCSource, motion: Motion) -> bool:
+    return source.original.shape == motion.positions.shape and source.names == list(motion.names)
+
+
+def _changed(source: TRCSource, motion: Motion) -> tuple[np.ndarray, np.ndarray]:
+    """(T, J) masks: samples whose fields must change, and samples missing now."""
+    now_missing = ~np.isfinite(motion.positions).all(axis=2)
+    same = np.all(motion.positions == source.original, axis=2)
+    return np.where(source.missing, ~now_missing, ~same | now_missing), now_missing
+
+
+def _patched_text(source: TRCSource, motion: Motion) -> str:
+    lines = list(source.lines)
+    changed, now_missing = _changed(source, motion)
+    rows = np.flatnonzero(changed.any(axis=1))
+    J = motion.n_joints
+    if len(rows):
+        width = 2 + 3 * J
+        fields = [lines[i].split("\t") for i in source.data_lines[rows].tolist()]
+        for f in fields:
+            if len(f) < width:
+                f += [""] * (width - len(f))
+        cells = np.array([f[2:width] for f in fields], dtype=object).reshape(len(rows), J, 3)
+        edit = changed[rows]
+        gone = edit & now_missing[rows]
+        moved = edit & ~gone
+        cells[gone] = ""
+        r, j = np.nonzero(moved)
+        old = cells[r, j].reshape(-1).astype(str)           # (n * 3,) old tokens
+        new = _format_like(motion.positions[rows[r], j].reshape(-1), old, source.decimals)
+        cells[np.repeat(r, 3), np.repeat(j, 3), np.tile(np.arange(3), len(r))] = new
+        for k, (i, f) in enumerate(zip(source.data_lines[rows].tolist(), fields)):
+            lines[i] = "\t".join(f[:2] + cells[k].reshape(-1).tolist() + f[width:])
+    skip = set(source.skip_lines)
+    return source.bom + "".join(line + end for i, (line, end) in
+                                enumerate(zip(lines, source.endings)) if i not in skip)
+
+
+def _format_like(values: np.ndarray, old: np.ndarray, default: int) -> list[str]:
+    """``values`` as text, each with the decimals of the token it replaces (``default``
+    where that token was empty, a whole number or not plain decimal), blanks around the
+    token kept."""
+    stripped = np.char.strip(old)
+    dot = np.char.find(stripped, ".")
+    plain = (dot >= 0) & (np.char.find(np.char.lower(stripped), "e") < 0) \
+        & (np.char.find(np.char.lower(stripped), "n") < 0)
+    decimals = np.where(plain, np.char.str_len(stripped) - dot - 1, default)
+    out = np.empty(len(values), dtype=object)
+    for d in np.unique(decimals).tolist():
+        at = np.flatnonzero(decimals == d)
+        out[at] = ((f"%.{d}f\t" * len(at)) % tuple(values[at].tolist())).split("\t")[:-1]
+    padded = np.flatnonzero(np.char.str_len(stripped) != np.char.str_len(old))
+    for k in padded.tolist():
+        token = old[k]
+        start = token.index(stripped[k]) if stripped[k] else 0
+        out[k] = token[:start] + out[k] + token[start + len(stripped[k]):]
+    return out.tolist()
+
+
+def _written_units(motion: Motion, path) -> tuple[str, float]:
+    """The unit name a fresh file states, and the factor from the motion's unit to it: the
+    motion's own unit where TRC can name it, else millimetres (a BVH of unknown unit whose
+    size the reader guessed)."""
+    if motion.units in METRES_PER_UNIT:
+        return motion.units, 1.0
+    mpu = float(motion.metres_per_unit)
+    if not (np.isfinite(mpu) and mpu > 0):
+        raise WriteError(path, f"unit {motion.units!r} has no known size: a TRC file must "
+                               f"state its unit")
+    return "mm", mpu / METRES_PER_UNIT["mm"]
+
+
+def _rate_text(fps: float) -> str:
+    """``100.00`` as TRC writers print rates, or every digit where two decimals lose some."""
+    return f"{fps:.2f}" if float(f"{fps:.2f}") == fps else repr(float(fps))
+
+
+def _fresh_text(motion: Motion, path: Path) -> str:
+    keep = _markers(motion)
+    if len(keep) == 0:
+        raise WriteError(path, "no markers to write: a TRC file holds marker positions")
+    if not (np.isfinite(motion.fps) and motion.fps > 0):
+        raise WriteError(path, f"frame rate {motion.fps} is not positive")
+    names = [_clean_name(motion.names[j], int(j)) for j in keep]
+    units, scale = _written_units(motion, path)
+    pos = motion.positions[:, keep] * scale if scale != 1.0 else motion.positions[:, keep]
+    T, J = pos.shape[:2]
+    if motion.times is not None and len(motion.times) == T:
+        times = np.asarray(motion.times, dtype=np.float64) - float(motion.times[0])
+    else:
+        times = np.arange(T) / motion.fps
+    rate = _rate_text(motion.fps)
+    head = [f"PathFileType\t4\t(X/Y/Z)\t{_clean_name(path.name, 0)}",
+            "\t".join(_HEADER_KEYS),
+            f"{rate}\t{rate}\t{T}\t{J}\t{units}\t{rate}\t1\t{T}",
+            "Frame#\tTime\t" + "".join(f"{n}\t\t\t" for n in names),
+            "\t\t" + "".join(f"X{k}\tY{k}\tZ{k}\t" for k in range(1, J + 1)),
+            ""]
+    values = pos.reshape(T, 3 * J)
+    gaps = ~np.isfinite(values)
+    cells = (f"%.{DECIMALS}f\t" * values.size) % tuple(np.where(gaps, 0.0, values).ravel().tolist())
+    cells = np.array(cells.split("\t")[:-1], dtype=object).reshape(T, 3 * J)
+    cells[np.repeat(missing_samples(pos), 3, axis=1)] = ""
+    stamps = (("%d\t%.6f\n" * T) % tuple(x for t in range(T) for x in (t + 1, times[t]))).split("\n")
+    # every row ends with a tab, as Motion Analysis writes them: OpenSim's reader drops
+    # one trailing empty field, so a row ending in a missing sample would lose a column
+    body = ["\t".join([stamps[t]] + cells[t].tolist()) + "\t" for t in range(T)]
+    return "\n".join(head + body) + "\n"
