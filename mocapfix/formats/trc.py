@@ -24,7 +24,8 @@ Reading (decisions):
   is in columns ``2 + 3k .. 4 + 3k``. ``NumMarkers`` differing from the labels is noted
   (the labels win, as in BTK). A file with ``NumMarkers 0`` and no labels reads as a motion
   with no markers.
-* Missing samples are empty (or blank) fields, ``NaN``/``nan`` too; a row shorter than
+* Missing samples are empty (or blank) fields, ``NaN``/``nan`` too (an infinite value,
+  ``1e999``, is missing as well, with a note); a row shorter than
   the labelled columns (writers that trim trailing empty fields) is missing there. A
   sample with any of X, Y, Z missing is missing. Values in columns beyond the labelled
   markers (unlabelled trajectories some exporters append, e.g. ``btk_Gait.trc``) are not
@@ -65,12 +66,17 @@ from __future__ import annotations
 
 import re
 from collections import Counter
+from itertools import chain
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from mocapfix.core.errors import UnreadableFileError, UnsupportedFeatureError, WriteError
+from mocapfix.core.errors import (
+    UnreadableFileError,
+    UnsupportedFeatureError,
+    WriteError,
+)
 from mocapfix.core.fileio import atomic_write_bytes, read_input_bytes
 from mocapfix.core.motion import Motion, missing_samples
 from mocapfix.core.quantity import MAX_FRAME_RATE_HZ, MIN_FRAME_RATE_HZ
@@ -86,8 +92,8 @@ SNIFF_ORDER = 1
 DECIMALS = 5
 _HEADER_KEYS = ("DataRate", "CameraRate", "NumFrames", "NumMarkers", "Units",
                 "OrigDataRate", "OrigDataStartFrame", "OrigNumFrames")
-#: a field that is empty or blanks only (a missing coordinate), between tabs
-_EMPTY_FIELD = re.compile(r"(?<![^\t])[ ]*(?![^\t])")
+#: a field of blanks only (a missing coordinate), between tabs
+_BLANK_FIELD = re.compile(r"(?<![^\t]) +(?![^\t])")
 
 
 @dataclass
@@ -116,8 +122,13 @@ def sniff(head: bytes) -> bool:
 
 def _split_lines(text: str) -> tuple[list[str], list[str]]:
     """Lines and their endings, so that joining them gives ``text`` back."""
-    parts = re.split(r"(\r\n|\n|\r)", text)
-    lines, endings = parts[0::2], parts[1::2] + [""]
+    if "\r" not in text or text.count("\r") == text.count("\r\n") == text.count("\n"):
+        eol = "\r\n" if "\r" in text else "\n"
+        lines = text.split(eol)
+        endings = [eol] * (len(lines) - 1) + [""]
+    else:                                       # mixed or old-Mac line endings
+        parts = re.split(r"(\r\n|\n|\r)", text)
+        lines, endings = parts[0::2], parts[1::2] + [""]
     if lines and lines[-1] == "" and len(lines) > 1:
         lines.pop()
         endings.pop()
@@ -161,6 +172,9 @@ def _header(lines: list[str], path, notes: list[str]) -> dict:
 
 def _rate(header: dict, path) -> float:
     key = "DataRate" if header.get("DataRate") else "CameraRate"
+    if not header.get(key):
+        raise UnreadableFileError(path, "DataRate has no value (expected frames per second)",
+                                  line=3)
     rate = _number(header.get(key, ""), path, 3, key)
     if not (MIN_FRAME_RATE_HZ <= rate <= MAX_FRAME_RATE_HZ):
         raise UnreadableFileError(path, f"{key} {header[key]} is not a frame rate (expected "
@@ -204,25 +218,60 @@ def _is_data_row(line: str) -> bool:
     return True
 
 
-def _values(block: str, count: int, rows: list[str], starts: list[int], path) -> np.ndarray:
-    """The ``count`` tab-separated fields of ``block`` as floats, empty ones NaN; on a bad
-    token, the line it is on (``rows``: its tokens per row, ``starts``: line numbers)."""
+def _nan_for_empty(block: str) -> str:
+    """``block`` (tab-separated fields) with every empty or blank field made ``nan``."""
+    if " " in block:
+        block = _BLANK_FIELD.sub("", block)
+    block = block.replace("\t\t", "\tnan\t").replace("\t\t", "\tnan\t")
+    if block.startswith("\t"):
+        block = "nan" + block
+    return block + "nan" if block.endswith("\t") else block
+
+
+def _floats(block: str, count: int) -> np.ndarray | None:
+    """The ``count`` fields of ``block`` as floats, or None if one is not a number."""
     try:
-        out = np.array(_EMPTY_FIELD.sub("nan", block).split("\t"), dtype=np.float64)
+        out = np.array(_nan_for_empty(block).split("\t"), dtype=np.float64)
     except ValueError:
-        out = None
-    if out is None or out.size != count:
-        for row, line_no in zip(rows, starts):
-            for token in row.split("\t"):
-                try:
-                    float(token or "nan")
-                except ValueError:
-                    raise UnreadableFileError(path, f"{token.strip()!r} is not a number "
-                                                    f"(expected a coordinate, or an empty "
-                                                    f"field for a missing one)",
-                                              line=line_no) from None
-        raise UnreadableFileError(path, "malformed data rows")
-    return out
+        return None
+    return out if out.size == count else None
+
+
+def _bad_token(rows: list[str], line_numbers: list[int], path) -> UnreadableFileError:
+    for row, line_no in zip(rows, line_numbers):
+        for token in row.split("\t"):
+            try:
+                float(token.strip() or "nan")
+            except ValueError:
+                return UnreadableFileError(path, f"{token.strip()[:40]!r} is not a number "
+                                                 f"(expected a coordinate, or an empty field "
+                                                 f"for a missing one)", line=line_no)
+    return UnreadableFileError(path, "malformed data rows")
+
+
+def _table(data: list[str], J: int, line_numbers: list[int], path) -> tuple[np.ndarray, int]:
+    """(T, 2 + 3J) floats of the data rows (NaN where empty), and how many values lie beyond
+    the labelled columns. Rows of one length (most files) are converted as one block; ragged
+    rows are first cut or padded to the labelled columns."""
+    T, width = len(data), 2 + 3 * J
+    tabs = {row.count("\t") for row in data}
+    if len(tabs) == 1 and (columns := tabs.pop() + 1) >= width:
+        values = _floats("\t".join(data), T * columns)
+        if values is not None:
+            values = values.reshape(T, columns)
+            return values[:, :width], int(np.count_nonzero(~np.isnan(values[:, width:])))
+    rows, extra = [], 0
+    for row in data:
+        f = row.split("\t")
+        if len(f) < width:
+            f += [""] * (width - len(f))
+        elif len(f) > width:
+            extra += sum(1 for v in f[width:] if v.strip())
+        rows.append("\t".join(f[:width]))
+    values = _floats("\t".join(rows), T * width)
+    if values is None:
+        raise _bad_token(rows, line_numbers, path)
+    return values.reshape(T, width), extra
 
 
 def read(path, fps: float | None = None, **options) -> Motion:
@@ -258,25 +307,21 @@ def read(path, fps: float | None = None, **options) -> Motion:
     if not data_lines:
         raise UnreadableFileError(path, f"no data rows after the header (expected rows "
                                         f"'frame<TAB>time<TAB>x<TAB>y<TAB>z...' from line {first + 1})")
-    T, width = len(data_lines), 3 * J
-    rows, extra = [], 0
-    for i in data_lines:
-        f = lines[i].split("\t")
-        n = len(f)
-        if n < 2 + width + 1:
-            f += [""] * (2 + width - n)
-        elif n > 2 + width + 1 or (n == 2 + width + 1 and f[-1].strip()):
-            extra += sum(1 for v in f[2 + width:] if v.strip())
-        rows.append("\t".join(f[:2 + width]))
-    values = _values("\t".join(rows), T * (2 + width), rows, [i + 1 for i in data_lines], path)
-    values = values.reshape(T, 2 + width)
+    T = len(data_lines)
+    rows = [lines[i] for i in data_lines]
+    values, extra = _table(rows, J, [i + 1 for i in data_lines], path)
     times = values[:, 1].copy()
     if not np.isfinite(times).all():
         k = int(np.flatnonzero(~np.isfinite(times))[0])
         raise UnreadableFileError(path, "empty or non-finite Time (expected seconds in "
                                         "column 2)", line=data_lines[k] + 1)
     positions = np.ascontiguousarray(values[:, 2:]).reshape(T, J, 3)
-    missing = missing_samples(positions)
+    infinite = np.isinf(positions).any(axis=2)
+    if infinite.any():
+        t, j = np.argwhere(infinite)[0]
+        notes.append(f"{int(infinite.sum())} samples hold an infinite value (first: line "
+                     f"{data_lines[t] + 1}, {names[j]}): read as missing")
+    missing = missing_samples(positions) | infinite
     positions[missing] = np.nan
     if declared_frames is not None and declared_frames != T:
         notes.append(f"NumFrames says {declared_frames} but the file has {T} data rows; "
@@ -297,7 +342,8 @@ def read(path, fps: float | None = None, **options) -> Motion:
 
 
 def _common_decimals(rows: list[str]) -> int:
-    counts = Counter(len(t) - t.index(".") - 1 for row in rows for t in row.split("\t")[2:]
+    counts = Counter(len(t) - t.index(".") - 1 for row in rows
+                     for t in map(str.strip, row.split("\t")[2:])
                      if "." in t and "e" not in t.lower())
     return counts.most_common(1)[0][0] if counts else DECIMALS
 
@@ -393,48 +439,67 @@ def _patched_text(source: TRCSource, motion: Motion) -> str:
     lines = list(source.lines)
     changed, now_missing = _changed(source, motion)
     rows = np.flatnonzero(changed.any(axis=1))
-    J = motion.n_joints
-    if len(rows):
+    R, J = len(rows), motion.n_joints
+    if R:
         width = 2 + 3 * J
-        fields = [lines[i].split("\t") for i in source.data_lines[rows].tolist()]
+        at = source.data_lines[rows].tolist()
+        fields = [lines[i].split("\t") for i in at]
         for f in fields:
             if len(f) < width:
                 f += [""] * (width - len(f))
-        cells = np.array([f[2:width] for f in fields], dtype=object).reshape(len(rows), J, 3)
+        cells = np.array(list(chain.from_iterable(f[2:width] for f in fields)),
+                         dtype=object).reshape(R, J, 3)
         edit = changed[rows]
         gone = edit & now_missing[rows]
         moved = edit & ~gone
+        if moved.any():
+            new = _format_like(motion.positions[rows][moved].ravel(),
+                               cells[moved].ravel().tolist(), source.decimals)
+            cells[moved] = np.array(new, dtype=object).reshape(-1, 3)
         cells[gone] = ""
-        r, j = np.nonzero(moved)
-        old = cells[r, j].reshape(-1).astype(str)           # (n * 3,) old tokens
-        new = _format_like(motion.positions[rows[r], j].reshape(-1), old, source.decimals)
-        cells[np.repeat(r, 3), np.repeat(j, 3), np.tile(np.arange(3), len(r))] = new
-        for k, (i, f) in enumerate(zip(source.data_lines[rows].tolist(), fields)):
-            lines[i] = "\t".join(f[:2] + cells[k].reshape(-1).tolist() + f[width:])
+        for k, (i, f) in enumerate(zip(at, fields)):
+            lines[i] = "\t".join(f[:2] + cells[k].ravel().tolist() + f[width:])
     skip = set(source.skip_lines)
+    if not skip:
+        return source.bom + "".join(map(str.__add__, lines, source.endings))
     return source.bom + "".join(line + end for i, (line, end) in
                                 enumerate(zip(lines, source.endings)) if i not in skip)
 
 
-def _format_like(values: np.ndarray, old: np.ndarray, default: int) -> list[str]:
+#: a character that no plain decimal number nor the tab between two has
+_NOT_PLAIN = re.compile(r"[^0-9.+\t-]")
+
+
+def _all_plain(old: list[str], decimals: int) -> bool:
+    """True when every token of ``old`` (valid numbers, as read) is empty or a plain
+    decimal number with ``decimals`` decimals: no blanks, exponents or ``nan``, one point
+    in each non-empty token, followed by ``decimals`` digits."""
+    joined = "\t".join(old)
+    if _NOT_PLAIN.search(joined):
+        return False
+    points = joined.count(".")
+    return (points == len(old) - old.count("")
+            and len(re.findall(rf"\.[0-9]{{{decimals}}}(?![0-9])", joined)) == points)
+
+
+def _format_like(values: np.ndarray, old: list[str], default: int) -> list[str]:
     """``values`` as text, each with the decimals of the token it replaces (``default``
     where that token was empty, a whole number or not plain decimal), blanks around the
-    token kept."""
-    stripped = np.char.strip(old)
-    dot = np.char.find(stripped, ".")
-    plain = (dot >= 0) & (np.char.find(np.char.lower(stripped), "e") < 0) \
-        & (np.char.find(np.char.lower(stripped), "n") < 0)
-    decimals = np.where(plain, np.char.str_len(stripped) - dot - 1, default)
-    out = np.empty(len(values), dtype=object)
-    for d in np.unique(decimals).tolist():
-        at = np.flatnonzero(decimals == d)
-        out[at] = ((f"%.{d}f\t" * len(at)) % tuple(values[at].tolist())).split("\t")[:-1]
-    padded = np.flatnonzero(np.char.str_len(stripped) != np.char.str_len(old))
-    for k in padded.tolist():
-        token = old[k]
-        start = token.index(stripped[k]) if stripped[k] else 0
-        out[k] = token[:start] + out[k] + token[start + len(stripped[k]):]
-    return out.tolist()
+    token kept. When every old token has ``default`` decimals or is empty (the usual
+    file), one format call does them all."""
+    if _all_plain(old, default):
+        return ((f"%.{default}f\t" * len(values)) % tuple(values.tolist())).split("\t")[:-1]
+    out = []
+    for value, token in zip(values.tolist(), old):
+        core = token.strip()
+        dot = core.find(".")
+        digits = core[dot + 1:] if dot >= 0 else ""
+        text = f"{value:.{len(digits) if digits.isdigit() else default}f}"
+        if core and core != token:
+            start = token.index(core)
+            text = token[:start] + text + token[start + len(core):]
+        out.append(text)
+    return out
 
 
 def _written_units(motion: Motion, path) -> tuple[str, float]:

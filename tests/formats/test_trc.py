@@ -9,8 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
 from conftest import FORMATS_DATA, REQUIRE_DATA, need, shared, shared_files
+
 from mocapfix import formats
 from mocapfix.core.errors import UnreadableFileError, WriteError
 from mocapfix.core.motion import Motion
