@@ -66,8 +66,8 @@ from __future__ import annotations
 
 import re
 from collections import Counter
-from itertools import chain
 from dataclasses import dataclass, field
+from itertools import chain
 from pathlib import Path
 
 import numpy as np
@@ -93,7 +93,7 @@ DECIMALS = 5
 _HEADER_KEYS = ("DataRate", "CameraRate", "NumFrames", "NumMarkers", "Units",
                 "OrigDataRate", "OrigDataStartFrame", "OrigNumFrames")
 #: a field of blanks only (a missing coordinate), between tabs
-_BLANK_FIELD = re.compile(r"(?<![^\t]) +(?![^\t])")
+_BLANK_FIELD = re.compile(r"\t +(?=\t|\Z)")
 
 
 @dataclass
@@ -221,7 +221,9 @@ def _is_data_row(line: str) -> bool:
 def _nan_for_empty(block: str) -> str:
     """``block`` (tab-separated fields) with every empty or blank field made ``nan``."""
     if " " in block:
-        block = _BLANK_FIELD.sub("", block)
+        block = _BLANK_FIELD.sub("\t", block)
+        if block.startswith(" ") and block.lstrip(" ").startswith("\t"):   # a blank first field
+            block = block.lstrip(" ")
     block = block.replace("\t\t", "\tnan\t").replace("\t\t", "\tnan\t")
     if block.startswith("\t"):
         block = "nan" + block
@@ -334,17 +336,21 @@ def read(path, fps: float | None = None, **options) -> Motion:
     source = TRCSource(bom=bom, lines=lines, endings=endings,
                        data_lines=np.asarray(data_lines, dtype=np.intp), names=list(names),
                        header=header, original=positions.copy(), missing=missing,
-                       decimals=_common_decimals(rows[: min(T, 50)]), skip_lines=skip,
+                       decimals=_common_decimals(rows), skip_lines=skip,
                        unlabelled_values=extra)
     return Motion(positions, list(names), float(fps) if fps else rate, units=units,
                   metres_per_unit=METRES_PER_UNIT[units], format=NAME, times=times,
                   source=source, notes=notes)
 
 
-def _common_decimals(rows: list[str]) -> int:
-    counts = Counter(len(t) - t.index(".") - 1 for row in rows
-                     for t in map(str.strip, row.split("\t")[2:])
-                     if "." in t and "e" not in t.lower())
+def _common_decimals(rows: list[str], enough: int = 300) -> int:
+    """The most common number of decimals among the first ``enough`` values of ``rows``."""
+    counts: Counter = Counter()
+    for row in rows:
+        counts.update(len(t) - t.index(".") - 1 for t in map(str.strip, row.split("\t")[2:])
+                      if "." in t and "e" not in t.lower())
+        if counts.total() >= enough:
+            break
     return counts.most_common(1)[0][0] if counts else DECIMALS
 
 
@@ -444,8 +450,10 @@ def _patched_text(source: TRCSource, motion: Motion) -> str:
         width = 2 + 3 * J
         at = source.data_lines[rows].tolist()
         fields = [lines[i].split("\t") for i in at]
-        for f in fields:
+        short = {}                              # trimmed rows: index -> their field count
+        for k, f in enumerate(fields):
             if len(f) < width:
+                short[k] = len(f)
                 f += [""] * (width - len(f))
         cells = np.array(list(chain.from_iterable(f[2:width] for f in fields)),
                          dtype=object).reshape(R, J, 3)
@@ -458,7 +466,11 @@ def _patched_text(source: TRCSource, motion: Motion) -> str:
             cells[moved] = np.array(new, dtype=object).reshape(-1, 3)
         cells[gone] = ""
         for k, (i, f) in enumerate(zip(at, fields)):
-            lines[i] = "\t".join(f[:2] + cells[k].ravel().tolist() + f[width:])
+            values = cells[k].ravel().tolist()
+            if k in short:                      # stays trimmed after its last value
+                while len(values) > short[k] - 2 and values[-1] == "":
+                    values.pop()
+            lines[i] = "\t".join(f[:2] + values + f[width:])
     skip = set(source.skip_lines)
     if not skip:
         return source.bom + "".join(map(str.__add__, lines, source.endings))

@@ -245,6 +245,37 @@ def test_nan_tokens_short_rows_and_units(tmp_path):
         assert m.metres_per_unit == scale
 
 
+@pytest.mark.parametrize("variant", ["crlf", "cr", "mixed", "bom", "no-final-newline",
+                                     "blank-fields"])
+def test_odd_texts_write_back_byte_identical_and_edit_cleanly(variant, tmp_path):
+    text = _small()
+    text = {"crlf": text.replace("\n", "\r\n"), "cr": text.replace("\n", "\r"),
+            "mixed": text.replace("\n", "\r\n", 4), "bom": "\ufeff" + text,
+            "no-final-newline": text.replace("\t4.2\n", "\t4.2\tnan\tnan"),
+            "blank-fields": text.replace("\t\t\t\n", "\t \t \t \n")}[variant]
+    path = _text_file(tmp_path, text)
+    m = formats.read(path)
+    assert m.missing.tolist() == [[False, False], [True, True], [True, True]]
+    out = tmp_path / "out.trc"
+    formats.write(m, out)
+    assert out.read_bytes() == path.read_bytes()
+    m.positions[0, 1] = [7.0, 8.0, 9.0]
+    m.positions[2, 0] = [1.0, 2.0, 3.0]
+    formats.write(m, out)
+    back = formats.read(out)
+    assert back.positions[0, 1].tolist() == [7.0, 8.0, 9.0]
+    assert back.positions[2, 0].tolist() == [1.0, 2.0, 3.0]
+    assert back.missing.tolist() == [[False, False], [True, True], [False, True]]
+    kept = out.read_bytes().decode().replace("7.0\t8.0\t9.0", "4.0\t5.0\t6.0")
+    assert kept.replace("3\t0.04\t1.0\t2.0\t3.0", "3\t0.04\tnan\tnan\tnan") == path.read_bytes().decode()
+
+
+def test_short_last_row_without_line_break_is_a_truncation(tmp_path):
+    m = formats.read(_text_file(tmp_path, _small().rstrip("\n")))
+    assert m.n_frames == 2
+    assert any("line 9) is shorter than the one before" in n for n in m.notes)
+
+
 def test_header_frames_disagreeing_with_rows_is_a_note(tmp_path):
     m = formats.read(_text_file(tmp_path, _small(frames=10 ** 12)))
     assert m.n_frames == 3
