@@ -56,11 +56,14 @@ Writing:
     else a TRC cannot hold, so that a converter can say so. Tabs and line breaks in names
     are replaced by spaces (also listed by :func:`losses`).
 
-Why hand-written: TRC is a small tab-separated text layout. The PyPI packages that read it
-(``trc-data-reader``; OpenSim's 200 MB C++ bindings; the wider ``pyomeca`` and
-``kineticstoolkit``) either do not keep the text needed for a byte-identical write-back,
-or are far too heavy for a runtime dependency; OpenSim is used by the tests as the
-independent reader of what we write.
+Why hand-written: TRC is a small tab-separated text layout. Of the PyPI packages that
+read it, ``trc-data-reader`` (one maintainer) parses token by token into a dict of
+per-frame lists and saves files anew: it keeps nothing of the text, so it cannot give the
+byte-identical, change-only write-back above; ``pyomeca`` and ``kineticstoolkit`` are whole analysis
+toolkits (xarray/pandas stacks) for one text layout; ``opensim`` is a 72 MB wheel of C++
+bindings (~280 MB installed) that refuses files real exporters write (rows longer than
+the labels, as in ``btk_Gait.trc``). None is a runtime dependency; OpenSim's reader is
+the tests' independent check of the files we write (dev extra).
 """
 from __future__ import annotations
 

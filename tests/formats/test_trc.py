@@ -9,9 +9,19 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import FORMATS_DATA, REQUIRE_DATA, need, shared, shared_files
+from click.testing import CliRunner
+from conftest import (
+    FORMATS_DATA,
+    REQUIRE_DATA,
+    config_file,
+    need,
+    no_traceback,
+    shared,
+    shared_files,
+)
 
 from mocapfix import formats
+from mocapfix.cli import main
 from mocapfix.core.errors import UnreadableFileError, WriteError
 from mocapfix.core.motion import Motion
 from mocapfix.formats import trc
@@ -345,6 +355,25 @@ def test_no_markers_is_a_write_error(tmp_path):
     m = _motion(names=("ang",), kinds=["angle"])
     with pytest.raises(WriteError):
         formats.write(m, tmp_path / "none.trc")
+
+
+def test_losses_of_a_c3d_name_its_analog_channels():
+    gait = formats.read(shared("c3d/btk_Gait.c3d"))    # SOURCES.md: 28 analog channels
+    assert "28 analog channels of the C3D file are not written" in trc.losses(gait)
+
+
+def test_clean_command_writes_a_trc(tmp_path):
+    src = trc_file("btk_Res16bits.trc")                # 3 short gaps
+    r = CliRunner().invoke(main, ["clean", str(src), "-o", str(tmp_path / "out"),
+                                  "-c", config_file(tmp_path)])
+    no_traceback(r)
+    out = tmp_path / "out" / src.name
+    cleaned, before = formats.read(out), formats.read(src)
+    assert cleaned.names == before.names
+    assert cleaned.missing.sum() < before.missing.sum()
+    assert not (cleaned.missing & ~before.missing).any()     # nothing removed by a fill
+    seen = ~before.missing
+    assert np.array_equal(cleaned.positions[seen], before.positions[seen])
 
 
 def test_losses_of_rig_and_confidence_and_nothing_for_a_trc():
