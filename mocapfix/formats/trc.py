@@ -52,9 +52,11 @@ Writing:
     ``Time`` = ``times - times[0]`` (else ``i / fps``) printed ``%.6f``, positions printed
     ``%.5f`` (a precision of 5e-6 units: 5 nm in mm files), missing samples as empty
     fields -- never carried forward. Points whose ``kinds`` entry is not ``"marker"`` (C3D
-    angles, forces, moments) are not written; :func:`losses` lists them and everything
-    else a TRC cannot hold, so that a converter can say so. Tabs and line breaks in names
-    are replaced by spaces (also listed by :func:`losses`).
+    angles, forces, moments) are not written. Tabs and line breaks in names are replaced
+    by spaces. What a conversion leaves out is named, never dropped silently:
+    :func:`losses` (what a TRC cannot hold) and :func:`kept_only_here` (what only a TRC
+    source holds: unlabelled columns) feed :func:`mocapfix.formats.losses`, which
+    ``mocapfix convert`` prints.
 
 Why hand-written: TRC is a small tab-separated text layout. Of the PyPI packages that
 read it, ``trc-data-reader`` (one maintainer) parses token by token into a dict of
@@ -372,41 +374,36 @@ def _clean_name(name: str, j: int) -> str:
     return name or f"M{j + 1}"
 
 
+def kept_only_here(motion: Motion) -> list[str]:
+    """What of a motion read from a TRC file no other format carries: the values in
+    columns beyond the labelled markers. For :func:`mocapfix.formats.losses`."""
+    source = motion.source
+    if isinstance(source, TRCSource) and source.unlabelled_values:
+        return [f"{source.unlabelled_values} value(s) in unlabelled columns of the TRC file "
+                f"are not carried"]
+    return []
+
+
 def losses(motion: Motion) -> list[str]:
-    """Human-readable notes of what writing ``motion`` as TRC leaves out or changes."""
+    """What a fresh TRC file changes or leaves out of ``motion``, one note each, beyond
+    what :func:`mocapfix.formats.losses` already names (the source format's
+    ``kept_only_here``: a C3D's analog channels, events and model outputs, a Kinect file's
+    tracking states; the rotations of a rig): points that are not markers (of a motion not
+    read from a C3D, whose own note names them), a unit TRC cannot name (converted to mm),
+    and names with tabs, line breaks or surrounding blanks (changed)."""
     source = motion.source
     if isinstance(source, TRCSource) and _fits(source, motion):
         return []
     out = []
-    if motion.kinds is not None:
+    if motion.kinds is not None and motion.format != "c3d":
         other = Counter(k for k in motion.kinds if k != "marker")
         if other:
             kinds = ", ".join(f"{n} {k}{'s' if n > 1 else ''}" for k, n in sorted(other.items()))
             out.append(f"{sum(other.values())} points that are not markers ({kinds}) are "
-                       f"not written: a TRC file holds marker positions only")
-    if motion.channels is not None or motion.rig is not None:
-        n = 0 if motion.channels is None else motion.channels.shape[-1]
-        out.append(f"the rig's joint rotations ({n} channels) and skeleton are not written: "
-                   f"a TRC file holds the joint positions only")
-    if motion.confidence is not None:
-        out.append("per-sample confidence (tracking state) is not written")
-    analog = getattr(source, "analog", None)
-    if analog is not None and getattr(analog, "size", 0):
-        per = max(int(getattr(source, "analog_per_frame", 1) or 1), 1)
-        out.append(f"{analog.shape[1] // per} analog channels of the C3D file are not written")
-    events = list(getattr(source, "events", None) or [])
-    try:
-        events += list(getattr(source, "parameter_events", None) or [])
-    except (AttributeError, TypeError, ValueError):
-        pass
-    if events:
-        out.append(f"{len(events)} events of the C3D file are not written")
+                       f"left out: a TRC file holds marker positions only")
     if motion.units not in METRES_PER_UNIT:
         out.append(f"positions are converted from the unit {motion.units!r} "
                    f"({motion.metres_per_unit:g} m) to mm: a TRC file names its unit")
-    if isinstance(source, TRCSource) and source.unlabelled_values:
-        out.append(f"{source.unlabelled_values} values in unlabelled columns of the original "
-                   f"TRC file are not written")
     renamed = [motion.names[j] for j in _markers(motion).tolist()
                if _clean_name(motion.names[j], j) != motion.names[j]]
     if renamed:

@@ -357,9 +357,24 @@ def test_no_markers_is_a_write_error(tmp_path):
         formats.write(m, tmp_path / "none.trc")
 
 
-def test_losses_of_a_c3d_name_its_analog_channels():
+def test_what_a_c3d_to_trc_conversion_leaves_out_is_named(tmp_path):
     gait = formats.read(shared("c3d/btk_Gait.c3d"))    # SOURCES.md: 28 analog channels
-    assert "28 analog channels of the C3D file are not written" in trc.losses(gait)
+    assert any(n.startswith("28 analog channel") for n in formats.losses(gait, "trc"))
+    pig = formats.read(shared("c3d/btk_PiG_Motion-FlatFoot-Hole.c3d"))   # angles, forces ...
+    notes = formats.losses(pig, "trc")
+    assert sum("not markers" in n or "model outputs" in n for n in notes) == 1   # said once
+    r = CliRunner().invoke(main, ["convert", str(shared("c3d/btk_Gait.c3d")), "-o",
+                                  str(tmp_path / "o"), "--to", "trc"])
+    assert r.exit_code == 0, r.output
+    assert "not carried into trc: 28 analog channel" in r.output
+    got = formats.read(tmp_path / "o" / "btk_Gait.trc")
+    assert got.names == gait.names and np.array_equal(got.missing, gait.missing)
+
+
+def test_what_a_trc_source_alone_holds_is_named():
+    gait = formats.read(trc_file("btk_Gait.trc"))
+    assert formats.losses(gait, "c3d") == [
+        "10065 value(s) in unlabelled columns of the TRC file are not carried"]
 
 
 def test_clean_command_writes_a_trc(tmp_path):
@@ -376,11 +391,11 @@ def test_clean_command_writes_a_trc(tmp_path):
     assert np.array_equal(cleaned.positions[seen], before.positions[seen])
 
 
-def test_losses_of_rig_and_confidence_and_nothing_for_a_trc():
-    m = _motion(confidence=np.ones((4, 2)))
-    assert any("confidence" in n for n in trc.losses(m))
+def test_losses_of_a_kinect_file_and_nothing_for_a_trc_written_back():
+    kinect = formats.read(shared("kinect/kv2_laban_Ges01_wavehand.csv"))
+    assert any("tracking state" in n for n in formats.losses(kinect, "trc"))
     unchanged = formats.read(trc_file("btk_Anto.trc"))
-    assert trc.losses(unchanged) == []
+    assert trc.losses(unchanged) == [] and formats.losses(unchanged, "trc") == []
 
 
 @pytest.mark.parametrize("path", C3D_FILES)
@@ -390,9 +405,8 @@ def test_c3d_to_trc_to_c3d(path, tmp_path):
     src = formats.read(need(path))
     marker = np.arange(src.n_joints) if src.kinds is None else \
         np.array([j for j, k in enumerate(src.kinds) if k == "marker"])
-    losses = trc.losses(src)
     if src.kinds is not None and len(marker) < src.n_joints:
-        assert any("not markers" in n for n in losses)
+        assert any("model outputs" in n for n in formats.losses(src, "trc"))
     out = tmp_path / "x.trc"
     formats.write(src, out)
     t = formats.read(out)
@@ -414,7 +428,7 @@ def test_c3d_to_trc_to_c3d(path, tmp_path):
 @pytest.mark.parametrize("path", shared_files("bvh", "cmu_cgspeed_131_01.bvh"))
 def test_bvh_joint_positions_to_trc(path, tmp_path):
     src = formats.read(need(path))
-    losses = trc.losses(src)
+    losses = formats.losses(src, "trc")
     assert any("rotations" in n for n in losses)
     assert src.units == "unknown" and any("converted from the unit 'unknown'" in n for n in losses)
     out = tmp_path / "joints.trc"
