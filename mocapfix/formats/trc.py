@@ -379,8 +379,8 @@ def kept_only_here(motion: Motion) -> list[str]:
     columns beyond the labelled markers. For :func:`mocapfix.formats.losses`."""
     source = motion.source
     if isinstance(source, TRCSource) and source.unlabelled_values:
-        return [f"{source.unlabelled_values} value(s) in unlabelled columns of the TRC file "
-                f"are not carried"]
+        note = f"{source.unlabelled_values} value(s) in unlabelled columns of the TRC file"
+        return [f"{note} are not carried"]
     return []
 
 
