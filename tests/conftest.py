@@ -19,6 +19,8 @@ REPO = Path(__file__).resolve().parents[1]
 DATA = Path(os.environ.get("MOCAPFIX_DATA", REPO.parent / "shared" / "data"))
 REQUIRE_DATA = os.environ.get("MOCAPFIX_REQUIRE_DATA") == "1"
 SAMPLE_DATA = REPO / "sample_data"
+#: real files of formats beyond the four, ``<format>/<file>`` (../shared/formats, SOURCES.md)
+FORMATS_DATA = Path(os.environ.get("MOCAPFIX_FORMATS_DATA", DATA.parent / "formats"))
 
 
 def _missing(what: str):

@@ -1,8 +1,9 @@
-"""A seeded corpus of malformed inputs over the four formats and configs.
+"""A seeded corpus of malformed inputs over the formats and configs.
 
 :func:`cases` returns at least 500 :class:`Case` objects built from the bundled
-``sample_data`` files and from a small independent C3D writer (:func:`c3d_bytes`, written
-from the C3D manual, not from our reader): truncations, bit flips, garbage (whole files and
+``sample_data`` files and from small independent C3D and TRC writers (:func:`c3d_bytes`,
+written from the C3D manual, :func:`trc_bytes` from OpenSim's TRC layout, not from our
+readers): truncations, bit flips, garbage (whole files and
 spliced blocks), huge counts, deep nesting, bad encodings, wrong columns, bad timestamps,
 and hostile configs. The same seed gives the same corpus byte for byte.
 
@@ -110,6 +111,25 @@ def small_c3d_points(T=60, P=5, seed=0) -> np.ndarray:
     pts = 500 + 300 * np.sin(2 * np.pi * 0.8 * t + rng.uniform(0, 6, (1, P, 3)))
     pts[10:14, 1] = np.nan
     return pts
+
+
+# ------------------------------------------------------------------ an independent TRC writer
+def trc_bytes(points: np.ndarray, labels: list[str], rate: float = 100.0, *, units: str = "mm",
+              frames: str | None = None, markers: str | None = None) -> bytes:
+    """An OpenSim-4 TRC file of ``points`` (T, P, 3), NaN = missing as empty fields, written
+    from OpenSim's documented layout (not from our writer). ``frames``/``markers`` override
+    the NumFrames/NumMarkers header values."""
+    T, P, _ = points.shape
+    nf, nm = frames or str(T), markers or str(P)
+    lines = ["PathFileType\t4\t(X/Y/Z)\tgen.trc",
+             "DataRate\tCameraRate\tNumFrames\tNumMarkers\tUnits\tOrigDataRate\tOrigDataStartFrame\tOrigNumFrames",
+             f"{rate}\t{rate}\t{nf}\t{nm}\t{units}\t{rate}\t1\t{nf}",
+             "Frame#\tTime\t" + "\t\t\t".join(labels) + "\t\t\t",
+             "\t\t" + "\t".join(f"X{k}\tY{k}\tZ{k}" for k in range(1, P + 1)), ""]
+    for t in range(T):
+        cells = ["" if np.isnan(v) else f"{v:.5f}" for v in points[t].ravel()]
+        lines.append("\t".join([str(t + 1), f"{t / 100:.3f}"] + cells))
+    return ("\n".join(lines) + "\n").encode()
 
 
 # ------------------------------------------------------------------------ mutations
@@ -338,6 +358,38 @@ def _c3d_specials(rng) -> list[tuple[str, bytes]]:
     return out
 
 
+def _trc_specials(valid: bytes) -> list[tuple[str, bytes]]:
+    pts = small_c3d_points()
+    labels = [f"M{j}" for j in range(pts.shape[1])]
+    lines = valid.split(b"\n")
+    out = [(f"cut-line{k}", b"\n".join(lines[:k]) + b"\n") for k in range(1, 6)]
+    out += [
+        ("cols-short-row", b"\n".join(lines[:8] + [lines[8].rsplit(b"\t", 4)[0]] + lines[9:])),
+        ("cols-long-row", b"\n".join(lines[:8] + [lines[8] + b"\t1.5" * 7] + lines[9:])),
+        ("cols-no-labels", b"\n".join(lines[:3] + [b"Frame#\tTime"] + lines[4:])),
+        ("cols-bad-number", valid.replace(lines[9].split(b"\t")[3], b"1.2.3", 1)),
+        ("cols-word", valid.replace(lines[9].split(b"\t")[3], b"abc", 1)),
+        ("cols-no-time", b"\n".join(lines[:9] + [b"3\t\t1\t2\t3"] + lines[10:])),
+        ("frames-huge", trc_bytes(pts, labels, frames=str(10 ** 12))),
+        ("frames-neg", trc_bytes(pts, labels, frames="-5")),
+        ("frames-word", trc_bytes(pts, labels, frames="many")),
+        ("labels-huge", trc_bytes(pts, labels, markers=str(10 ** 12))),
+        ("labels-zero", trc_bytes(pts, labels, markers="0")),
+        ("units-odd", trc_bytes(pts, labels, units="furlongs")),
+        ("units-none", valid.replace(b"\tmm\t", b"\t\t", 1)),
+        ("all-missing", trc_bytes(np.full_like(pts, np.nan), labels)),
+        ("header-only", b"\n".join(lines[:6]) + b"\n"),
+        ("bomb-field", valid.replace(lines[9].split(b"\t")[3], b"7" * 5_000_000, 1)),
+        ("bomb-field-beyond", b"\n".join(lines[:9] + [lines[9] + b"\t" + b"7" * 5_000_000] + lines[10:])),
+        ("cols-inf", valid.replace(lines[9].split(b"\t")[3], b"1e999", 1)),
+        ("bomb-label", b"\n".join(lines[:3] + [lines[3] + b"x" * 5_000_000] + lines[4:])),
+        ("garbage-binary", lines[0] + b"\n" + bytes(range(256)) * 40),
+    ]
+    for rate in ("0", "-100", "nan", "inf", "1e-30", "1e30", "abc", ""):
+        out.append((f"rate-{rate or 'empty'}", trc_bytes(pts, labels, rate=rate)))
+    return out
+
+
 # ------------------------------------------------------------------------ configs
 def config_cases(rng) -> list[tuple[str, bytes]]:
     """Hostile configs; each either loads or is one ConfigError."""
@@ -431,6 +483,12 @@ def cases(seed: int = SEED) -> list[Case]:
     out += [Case(f"c3dgen-{t}", family(t), "gen.c3d", {"gen.c3d": raw}) for t, raw in _c3d_specials(rng)]
     out += [Case(f"config-{t}", family(t), "config.yaml", {"config.yaml": raw}, kind="config")
             for t, raw in config_cases(rng)]
+    # TRC last, from a generator of its own, so that the cases above keep their bytes
+    trc_rng = np.random.default_rng([seed, 5])
+    pts = small_c3d_points()
+    trc = trc_bytes(pts, [f"M{j}" for j in range(pts.shape[1])])
+    out += _generic("gen.trc", trc, trc_rng, {}, True, "trc")
+    out += [Case(f"trc-{t}", family(t), "gen.trc", {"gen.trc": raw}) for t, raw in _trc_specials(trc)]
     ids = [c.id for c in out]
     assert len(ids) == len(set(ids)), "case ids must be unique"
     return out
