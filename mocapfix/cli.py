@@ -233,6 +233,56 @@ def info(inputs, as_json, fps, include, exclude):
         sys.exit(EXIT_UNREADABLE)
 
 
+@main.command()
+@click.argument("files", nargs=-1, type=GivenPath(dir_okay=False))
+@click.option("--before", "before", type=GivenPath(dir_okay=False), default=None,
+              help="The capture as it was (with --after: a before/after overlay).")
+@click.option("--after", "after", type=GivenPath(dir_okay=False), default=None,
+              help="Its cleaned output.")
+@click.option("-o", "--output", "output", type=GivenPath(dir_okay=False), default="view.html",
+              show_default=True, help="The HTML file to write.")
+@click.option("--open", "open_it", is_flag=True, help="Open the page in the web browser.")
+@click.option("--budget", type=click.FloatRange(0.05, 1000), default=3.0, show_default=True,
+              help="MB of positions the page may hold; longer takes keep every k-th frame.")
+@click.option("--fps", type=FPS, default=None,
+              help="Frame rate for formats that do not store one (AMC; default 120).")
+@common
+def view(files, before, after, output, open_it, budget, fps):
+    """Write one self-contained HTML page that plays FILE(s) in 3D (no network needed).
+    Two files with the same points and frames — a capture and its cleaned output — are
+    overlaid as before and after (or name them with --before/--after); other files are
+    overlaid as they are."""
+    from pathlib import Path
+
+    from mocapfix.formats import read
+    from mocapfix.quality import viewer
+
+    obj = _ctx()
+    debug = obj["debug"]
+    if (before is None) != (after is None):
+        _fail("--before and --after go together", debug)
+    if before is not None and files:
+        _fail("give FILE... or --before/--after, not both", debug)
+    if before is None and not files:
+        _fail("nothing to view: give FILE... or --before IN --after OUT", debug)
+    options = {"default_fps": fps} if fps else {}
+    try:
+        paths = [before, after] if before is not None else list(files)
+        motions = [read(p, **options) for p in paths]
+        limit = int(budget * 1e6)
+        if before is not None or (len(motions) == 2 and viewer.comparable(*motions)):
+            page = viewer.before_after(*motions, budget=limit)
+        else:
+            page = viewer.single(motions, budget=limit)
+        Path(output).write_text(page, encoding="utf-8")
+    except (MocapfixError, ValueError, OSError) as exc:
+        _fail(one_line(str(exc)), debug, exc)
+    Out(obj["verbosity"]).line(f"wrote {output} ({len(page.encode()) / 1e6:.2f} MB)")
+    if open_it:
+        import webbrowser
+        webbrowser.open(Path(output).resolve().as_uri())
+
+
 # -- cleaners / configs --------------------------------------------------------------------------
 
 @main.command("cleaners")

@@ -986,6 +986,21 @@ def _old_fills(source: C3DSource) -> list[tuple]:
     return [tuple(c[i] for c in cols) for i in range(n)]
 
 
+def listed_fills(motion: Motion) -> list[tuple]:
+    """``(label, start, length, error_mm, bound_mm)`` of every filled run a mocapfix run
+    listed in the ``MOCAPFIX`` group of a C3D as read (start: index into the frames read;
+    error and bound None where not estimated). Empty for a file without the group."""
+    source = motion.source
+    if not isinstance(source, C3DSource):
+        return []
+    out = []
+    for label, first, last, _conf, _long, error, bound, _extra in _old_fills(source):
+        start = int(round(first)) - int(source.first_frame)
+        out.append((label, start, int(round(last - first)) + 1,
+                    None if error < 0 else float(error), None if bound < 0 else float(bound)))
+    return out
+
+
 def _left_runs(motion: Motion, missing: np.ndarray) -> list[tuple]:
     """``(point, start, length, error_mm, bound_mm, extrapolated)`` of every gap the
     pipeline left as too uncertain to fill (``Motion.fill_errors`` entries not written)

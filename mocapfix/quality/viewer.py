@@ -1,0 +1,236 @@
+"""`mocapfix view`: captures played in 3D in one self-contained HTML file.
+
+:func:`to_html` turns one or more :class:`~mocapfix.core.motion.Motion` into a single page
+that needs nothing but a browser (no network, no CDN; a Content-Security-Policy forbids any
+request): markers as points, skeleton bones as lines, play/pause, scrub, speed, orbit and
+zoom with the mouse, a ground grid and the joint's name on hover. Given a capture and its
+cleaned output (:func:`before_after`), the two are overlaid: the input in grey, the output
+in colour, samples the cleaner filled coloured by their estimated error (the ``MOCAPFIX``
+group of a cleaned C3D, or ``Motion.fill_errors``) or as "filled" when no estimate is
+known, and samples it moved or deleted marked.
+
+Size: positions are converted to metres and quantised to int16 per axis relative to each
+layer's bounding box (a 5 m box gives 0.08 mm steps; -32768 = missing), base64-encoded
+(8 bytes of text per sample). The "before" layer of an overlay stores only the samples
+that differ from the "after" layer when that is smaller. When the positions would exceed
+``budget`` bytes (3 MB by default) every layer keeps every k-th frame, the smallest k that
+fits; the page says so. A 4,500-frame × 41-marker capture is about 1.5 MB alone and
+2.0 MB as a before/after overlay of a gap fill (``benchmarks/viewer_size.py``).
+
+Why hand-written: the page draws at most a few hundred points and lines per frame, which
+Canvas 2D does in well under a millisecond; ``viewer.js`` (perspective projection, orbit
+camera, grid, picking) is ~15 KB unminified. three.js 0.170.0's ``build/three.module.min.js``
+alone is 691,648 bytes (measured from the npm tarball), would be vendored with its licence
+and pinned, and would still need our own controls, picking and colouring code — 45x the
+size for features (meshes, lights, shaders) points and lines do not use.
+"""
+from __future__ import annotations
+
+import base64
+import html
+import json
+import math
+import re
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+
+from mocapfix.core.motion import Motion, missing_samples
+
+#: bytes of positions text a page may hold (the rest of the page is ~30 KB plus the names)
+DEFAULT_BUDGET = 3_000_000
+MISSING = -32768
+_STEPS = 65534                          # int16 codes -32767..32767 for present samples
+
+
+def _template(name: str) -> str:
+    return resources.files("mocapfix.quality").joinpath(name).read_text(encoding="utf-8")
+
+
+def _markers(motion: Motion) -> np.ndarray:
+    """Indices of the points drawn: markers and joints, not a C3D's model outputs."""
+    if motion.kinds is None:
+        return np.arange(motion.n_joints)
+    return np.array([j for j, k in enumerate(motion.kinds) if k == "marker"], dtype=np.intp)
+
+
+def _bones(motion: Motion, keep: np.ndarray) -> list[list[int]]:
+    if motion.skeleton is None:
+        return []
+    where = {int(j): n for n, j in enumerate(keep)}
+    return [[where[a], where[b]] for a, b in motion.skeleton.bones if a in where and b in where]
+
+
+def up_axis(metres: np.ndarray) -> int:
+    """The vertical axis of a capture of people: per frame, the extent of the points along
+    each axis; a body is taller than it is wide or deep, so the axis of the largest median
+    extent is up (Y for BVH/AMC/Kinect, Z for most C3D)."""
+    with np.errstate(all="ignore"):
+        extent = np.nanmax(metres, axis=1) - np.nanmin(metres, axis=1)      # (T, 3)
+        med = np.nanmedian(extent, axis=0)
+    if not np.isfinite(med).any():
+        return 2
+    return int(np.nanargmax(med))
+
+
+def _box(*arrays: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    lo = np.full(3, np.inf)
+    hi = np.full(3, -np.inf)
+    for a in arrays:
+        flat = a.reshape(-1, 3)
+        ok = ~missing_samples(flat[None])[0]
+        if ok.any():
+            lo = np.minimum(lo, flat[ok].min(axis=0))
+            hi = np.maximum(hi, flat[ok].max(axis=0))
+    if not np.isfinite(lo).all():
+        return np.zeros(3), np.full(3, 1e-6)
+    return lo, np.maximum((hi - lo) / _STEPS, 1e-9)
+
+
+def quantise(metres: np.ndarray, origin: np.ndarray, step: np.ndarray) -> np.ndarray:
+    """(T, J, 3) int16 codes; a sample with any NaN coordinate is MISSING on all three."""
+    codes = np.rint((metres - origin) / step) - 32767
+    gone = missing_samples(metres)
+    codes[gone] = 0
+    out = np.clip(codes, -32767, 32767).astype("<i2")
+    out[gone] = MISSING
+    return out
+
+
+def _b64(array: np.ndarray) -> str:
+    return base64.b64encode(np.ascontiguousarray(array).tobytes()).decode("ascii")
+
+
+def _b64_len(n_bytes: int) -> int:
+    return 4 * math.ceil(n_bytes / 3)
+
+
+def _fill_runs(motion: Motion, keep: np.ndarray) -> list[list]:
+    """``[joint, start, length, error_mm, bound_mm]`` of every run the cleaner filled, from
+    ``Motion.fill_errors`` or, for a C3D read back from disk, its ``MOCAPFIX`` group
+    (error/bound None when not estimated)."""
+    where = {motion.names[int(j)]: n for n, j in enumerate(keep)}
+    out = []
+    if motion.fill_errors:
+        for name, entries in motion.fill_errors.items():
+            for e in entries:
+                if name in where and (len(e) < 6 or e[5]):
+                    out.append([where[name], int(e[0]), int(e[1]), e[2], e[3]])
+        return out
+    if motion.format == "c3d" and motion.source is not None:
+        from mocapfix.formats.c3d import listed_fills
+        for name, start, length, error, bound in listed_fills(motion):
+            if name in where:
+                out.append([where[name], start, length, error, bound])
+    return out
+
+
+class Layer:
+    """One capture as drawn: its markers in metres, names, bones and fills."""
+
+    def __init__(self, motion: Motion, label: str, role: str = "motion"):
+        self.keep = _markers(motion)
+        self.metres = motion.positions[:, self.keep] * float(motion.metres_per_unit or 1.0)
+        self.names = [str(motion.names[j]) for j in self.keep]
+        self.bones = _bones(motion, self.keep)
+        self.fps = float(motion.fps) if motion.fps and motion.fps > 0 else 30.0
+        self.label = label
+        self.role = role
+        self.fills = _fill_runs(motion, self.keep) if role == "after" else []
+
+
+def _encode(layers: list[Layer], stride: int) -> tuple[list[dict], int]:
+    """The layers' JSON at one frame stride, and the bytes of positions text it holds."""
+    out, size = [], 0
+    by_after = {}
+    for n, layer in enumerate(layers):
+        if layer.role == "after":
+            by_after[n] = layer
+    for n, layer in enumerate(layers):
+        pos = layer.metres[::stride]
+        entry = {"label": layer.label, "role": layer.role, "names": layer.names,
+                 "bones": layer.bones, "fps": layer.fps / stride, "frames": int(pos.shape[0]),
+                 "stride": stride, "fills": layer.fills}
+        partner = by_after.get(n + 1) if layer.role == "before" else None
+        if layer.role == "after" and n > 0 and layers[n - 1].role == "before":
+            origin, step = _box(pos, layers[n - 1].metres[::stride])
+        elif partner is not None:
+            origin, step = _box(pos, partner.metres[::stride])
+        else:
+            origin, step = _box(pos)
+        codes = quantise(pos, origin, step)
+        entry.update(origin=origin.tolist(), step=step.tolist())
+        if partner is not None:
+            other = quantise(partner.metres[::stride], origin, step)
+            differ = np.flatnonzero((codes != other).any(axis=2).ravel()).astype("<u4")
+            if differ.size * 10 < codes.size * 2:
+                entry.update(base=n + 1, diffIndex=_b64(differ),
+                             diffValues=_b64(codes.reshape(-1, 3)[differ]))
+                size += _b64_len(differ.size * 4) + _b64_len(differ.size * 6)
+                out.append(entry)
+                continue
+        entry["positions"] = _b64(codes)
+        size += _b64_len(codes.nbytes)
+        out.append(entry)
+    return out, size
+
+
+def payload(layers: list[Layer], budget: int = DEFAULT_BUDGET) -> dict:
+    """What the page reads: the layers at the smallest frame stride whose positions fit
+    in ``budget`` bytes of text, the up axis and the budget."""
+    # a lower bound: the layers stored whole (a "before" may shrink to its differences)
+    whole = sum(_b64_len(l.metres.shape[0] * l.metres.shape[1] * 6) for l in layers
+                if l.role != "before")
+    stride = max(1, math.ceil(whole / budget))
+    while True:
+        encoded, size = _encode(layers, stride)
+        if size <= budget or all(l.metres.shape[0] <= stride for l in layers):
+            break
+        stride += 1
+    main = layers[-1].metres
+    return {"layers": encoded, "up": up_axis(main[::max(1, main.shape[0] // 500)]),
+            "stride": stride, "budget": budget, "bytes": size}
+
+
+def _json_for_script(data) -> str:
+    """JSON safe inside a <script> element: no '<', '>' or '&' (so no '</script>' or
+    '<!--' in a name can end it) and no raw line separators."""
+    text = json.dumps(data, ensure_ascii=True, separators=(",", ":"), allow_nan=False)
+    return text.replace("<", "\\u003c").replace(">", "\\u003e").replace("&", "\\u0026")
+
+
+def to_html(layers: list[Layer], title: str, budget: int = DEFAULT_BUDGET) -> str:
+    """The page: template + script + data, all inline."""
+    data = payload(layers, budget)
+    values = {"TITLE": html.escape(title), "SCRIPT": _template("viewer.js"),
+              "DATA": _json_for_script(data)}
+    # one pass, so a title holding "{{DATA}}" is not filled in
+    return re.sub(r"\{\{(TITLE|SCRIPT|DATA)\}\}", lambda m: values[m.group(1)],
+                  _template("viewer.html"))
+
+
+def _label(path) -> str:
+    return Path(path).name if path else "motion"
+
+
+def single(motions: list[Motion], budget: int = DEFAULT_BUDGET) -> str:
+    """A page playing each motion (several are overlaid, each its own colour)."""
+    layers = [Layer(m, _label(m.path)) for m in motions]
+    return to_html(layers, " + ".join(l.label for l in layers), budget)
+
+
+def before_after(before: Motion, after: Motion, budget: int = DEFAULT_BUDGET) -> str:
+    """A page overlaying a capture and its cleaned output. They must hold the same points
+    and frames (a cleaned file does); otherwise use :func:`single`."""
+    if before.n_frames != after.n_frames or list(before.names) != list(after.names):
+        raise ValueError("before and after differ in frames or point names: not a capture "
+                         "and its cleaned output")
+    layers = [Layer(before, "before: " + _label(before.path), "before"),
+              Layer(after, "after: " + _label(after.path), "after")]
+    return to_html(layers, f"{layers[0].label[8:]} → {layers[1].label[7:]}", budget)
+
+
+def comparable(a: Motion, b: Motion) -> bool:
+    """True when ``b`` can be the cleaned output of ``a`` (same frames and point names)."""
+    return a.n_frames == b.n_frames and list(a.names) == list(b.names)
