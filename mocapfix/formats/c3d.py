@@ -995,8 +995,8 @@ def listed_fills(motion: Motion) -> list[tuple]:
         return []
     out = []
     for label, first, last, _conf, _long, error, bound, _extra in _old_fills(source):
-        start = int(round(first)) - int(source.first_frame)
-        out.append((label, start, int(round(last - first)) + 1,
+        start = round(first) - int(source.first_frame)
+        out.append((label, start, round(last - first) + 1,
                     None if error < 0 else float(error), None if bound < 0 else float(bound)))
     return out
 

@@ -26,6 +26,10 @@
   for (const L of layers) {
     if (L.codes) continue;
     L.codes = layers[L.base].codes.slice();
+    if (L.delta) {
+      const d = new Int8Array(bytes(L.delta));
+      for (let i = 0; i < d.length; i++) if (d[i]) L.codes[i] += d[i];
+    }
     const idx = new Uint32Array(bytes(L.diffIndex)), val = new Int16Array(bytes(L.diffValues));
     for (let k = 0; k < idx.length; k++) {
       const at = idx[k] * 3;

@@ -11,17 +11,19 @@ known, and samples it moved or deleted marked.
 
 Size: positions are converted to metres and quantised to int16 per axis relative to each
 layer's bounding box (a 5 m box gives 0.08 mm steps; -32768 = missing), base64-encoded
-(8 bytes of text per sample). The "before" layer of an overlay stores only the samples
-that differ from the "after" layer when that is smaller. When the positions would exceed
-``budget`` bytes (3 MB by default) every layer keeps every k-th frame, the smallest k that
-fits; the page says so. A 4,500-frame × 41-marker capture is about 1.5 MB alone and
-2.0 MB as a before/after overlay of a gap fill (``benchmarks/viewer_size.py``).
+(8 bytes of text per sample). The "before" layer of an overlay is stored as its
+differences from the "after" layer (int8 steps where a sample moved a little, the sample
+itself where it was filled, deleted or moved far) when that is smaller. When the page would
+exceed ``budget`` bytes (3 MB by default) every layer keeps every k-th frame, the smallest
+k that fits; the page says so. Measured (``benchmarks/viewer_size.py``): a 4,500-frame ×
+41-marker capture is 1.49 MB alone and 2.40 MB as a before/after overlay of a cleaned
+corruption, both with every frame, interactive in 0.1–0.2 s in headless Chromium.
 
 Why hand-written: the page draws at most a few hundred points and lines per frame, which
 Canvas 2D does in well under a millisecond; ``viewer.js`` (perspective projection, orbit
-camera, grid, picking) is ~15 KB unminified. three.js 0.170.0's ``build/three.module.min.js``
+camera, grid, picking) is 15 KB unminified, the page's HTML and CSS 2 KB. three.js 0.170.0's ``build/three.module.min.js``
 alone is 691,648 bytes (measured from the npm tarball), would be vendored with its licence
-and pinned, and would still need our own controls, picking and colouring code — 45x the
+and pinned, and would still need our own controls, picking and colouring code — 40x the
 size for features (meshes, lights, shaders) points and lines do not use.
 """
 from __future__ import annotations
@@ -140,6 +142,26 @@ class Layer:
         self.fills = _fill_runs(motion, self.keep) if role == "after" else []
 
 
+def _as_differences(codes: np.ndarray, base: np.ndarray) -> tuple[dict, int] | None:
+    """A layer's codes as differences from ``base`` (its "after"), when that is smaller
+    than the codes: ``delta`` (int8 per axis, where both are present and every axis moved
+    by at most 127 steps; absent when no sample moved) plus ``diffIndex``/``diffValues``,
+    the samples a delta cannot hold (flat index, codes). None when storing whole is
+    smaller."""
+    both = (codes[..., 0] != MISSING) & (base[..., 0] != MISSING)
+    step = codes.astype(np.int32) - base
+    small = both & (np.abs(step) <= 127).all(axis=2)
+    moved = small & (step != 0).any(axis=2)
+    other = np.flatnonzero(((codes != base).any(axis=2) & ~small).ravel()).astype("<u4")
+    out = {"diffIndex": _b64(other), "diffValues": _b64(codes.reshape(-1, 3)[other])}
+    size = _b64_len(other.size * 4) + _b64_len(other.size * 6)
+    if moved.any():
+        delta = np.where(small[..., None], step, 0).astype("i1")
+        out["delta"] = _b64(delta)
+        size += _b64_len(delta.nbytes)
+    return (out, size) if size < _b64_len(codes.nbytes) else None
+
+
 def _encode(layers: list[Layer], stride: int) -> tuple[list[dict], int]:
     """The layers' JSON at one frame stride, and the bytes of positions text it holds."""
     out, size = [], 0
@@ -162,12 +184,10 @@ def _encode(layers: list[Layer], stride: int) -> tuple[list[dict], int]:
         codes = quantise(pos, origin, step)
         entry.update(origin=origin.tolist(), step=step.tolist())
         if partner is not None:
-            other = quantise(partner.metres[::stride], origin, step)
-            differ = np.flatnonzero((codes != other).any(axis=2).ravel()).astype("<u4")
-            if differ.size * 10 < codes.size * 2:
-                entry.update(base=n + 1, diffIndex=_b64(differ),
-                             diffValues=_b64(codes.reshape(-1, 3)[differ]))
-                size += _b64_len(differ.size * 4) + _b64_len(differ.size * 6)
+            stored = _as_differences(codes, quantise(partner.metres[::stride], origin, step))
+            if stored is not None:
+                entry.update(base=n + 1, **stored[0])
+                size += stored[1]
                 out.append(entry)
                 continue
         entry["positions"] = _b64(codes)
@@ -201,13 +221,16 @@ def _json_for_script(data) -> str:
 
 
 def to_html(layers: list[Layer], title: str, budget: int = DEFAULT_BUDGET) -> str:
-    """The page: template + script + data, all inline."""
-    data = payload(layers, budget)
-    values = {"TITLE": html.escape(title), "SCRIPT": _template("viewer.js"),
-              "DATA": _json_for_script(data)}
+    """The page: template + script + data, all inline, in at most ``budget`` bytes when
+    the names alone leave room for one frame."""
+    page, script = _template("viewer.html"), _template("viewer.js")
+    text = _json_for_script([[l.names, l.bones, l.fills, l.label] for l in layers])
+    fixed = len(page) + len(script) + len(text) + 6 * len(title) + 2048
+    data = payload(layers, max(budget - fixed, 1))
+    data["budget"] = budget
+    values = {"TITLE": html.escape(title), "SCRIPT": script, "DATA": _json_for_script(data)}
     # one pass, so a title holding "{{DATA}}" is not filled in
-    return re.sub(r"\{\{(TITLE|SCRIPT|DATA)\}\}", lambda m: values[m.group(1)],
-                  _template("viewer.html"))
+    return re.sub(r"\{\{(TITLE|SCRIPT|DATA)\}\}", lambda m: values[m.group(1)], page)
 
 
 def _label(path) -> str:

@@ -10,7 +10,6 @@ import json
 import re
 import subprocess
 
-import numpy as np
 import pytest
 from click.testing import CliRunner
 
@@ -229,7 +228,8 @@ def test_hostile_names_are_text(tmp_path, make):
     assert not missing, f"the reader did not keep {missing}"
     probe = _probe(_view(tmp_path, path), tmp_path, hover=hostile)
     _check_clean_page(probe)
-    flat = lambda text: " ".join(text.split())  # noqa: E731 — as the page lays text out
+    def flat(text):                       # as the page lays text out
+        return " ".join(text.split())
     assert probe["title"] == flat(f"{path.name} — mocapfix view")
     assert probe["labels"] == [path.name]
     assert flat(path.name) in flat(probe["legend"])
