@@ -43,6 +43,7 @@
       for (let a = 0; a < 3; a++) xyz[i + a] = L.origin[a] + (c[i + a] + 32767) * L.step[a];
     }
     L.xyz = xyz;
+    L.conf = L.confidence ? new Uint8Array(bytes(L.confidence)) : null;
     L.joints = L.names.length;
     L.color = L.role === "before" ? BEFORE : PALETTE[n_of(L)];
   }
@@ -84,7 +85,7 @@
     return [y, z, x];
   }
   const cam = { yaw: -0.7, pitch: 0.3, dist: 5, fov: 40 * Math.PI / 180, t: [0, 0, 0] };
-  const scene = { lo: [0, 0, 0], hi: [1, 1, 1], radius: 1, ground: 0 };
+  const scene = { lo: [0, 0, 0], hi: [1, 1, 1], radius: 1, ground: 0, body: 1 };
   function frameScene() {
     const lo = [Infinity, Infinity, Infinity], hi = [-Infinity, -Infinity, -Infinity];
     for (const L of layers) {
@@ -98,7 +99,34 @@
     scene.lo = lo; scene.hi = hi; scene.ground = lo[2];
     scene.radius = Math.max(0.5, Math.hypot(hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]) / 2);
     cam.t = [(lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, (lo[2] + hi[2]) / 2];
-    cam.dist = scene.radius * 2.6;
+    cam.dist = scene.radius * 3;
+    // the size of the body: median over frames of the half-diagonal of its points
+    const sizes = [], J = main.joints;
+    for (let f = 0; f < main.frames; f += Math.max(1, Math.floor(main.frames / 200))) {
+      const l = [Infinity, Infinity, Infinity], h = [-Infinity, -Infinity, -Infinity];
+      for (let j = 0; j < J; j++) {
+        const i = (f * J + j) * 3;
+        if (Number.isNaN(main.xyz[i])) continue;
+        for (let a = 0; a < 3; a++) { l[a] = Math.min(l[a], main.xyz[i + a]); h[a] = Math.max(h[a], main.xyz[i + a]); }
+      }
+      if (Number.isFinite(l[0])) sizes.push(Math.hypot(h[0] - l[0], h[1] - l[1], h[2] - l[2]) / 2);
+    }
+    sizes.sort((a, b) => a - b);
+    scene.body = Math.max(0.25, sizes.length ? sizes[sizes.length >> 1] : scene.radius);
+    if (follow) cam.dist = scene.body * 4;
+  }
+  function centre() {               // where the camera looks when following: the body
+    const L = layers.find((o) => o.visible && o.role !== "before") || layers.find((o) => o.visible);
+    if (!L) return;
+    const f = frameOf(L), J = L.joints, c = [0, 0, 0];
+    let n = 0;
+    for (let j = 0; j < J; j++) {
+      const i = (f * J + j) * 3;
+      if (Number.isNaN(L.xyz[i])) continue;
+      const v = viewOf(L.xyz, i);
+      c[0] += v[0]; c[1] += v[1]; c[2] += v[2]; n++;
+    }
+    if (n) cam.t = [c[0] / n, c[1] / n, c[2] / n];
   }
   let W = 0, H = 0, focal = 1, cy = 0, sy = 0, cp = 0, sp = 0;
   function setupCamera() {
@@ -118,7 +146,7 @@
   // -- time ---------------------------------------------------------------------------
   const main = layers.reduce((a, b) => (b.frames / b.fps > a.frames / a.fps ? b : a), layers[0]);
   const duration = Math.max(0, (main.frames - 1) / main.fps);
-  let time = 0, playing = true, speed = 1;
+  let time = 0, playing = true, speed = 1, follow = false;
   const scrub = $("scrub");
   scrub.max = String(Math.max(0, main.frames - 1));
   function frameOf(L) { return Math.max(0, Math.min(L.frames - 1, Math.round(time * L.fps))); }
@@ -155,6 +183,7 @@
     ctx.stroke();
   }
   function draw() {
+    if (follow) centre();
     setupCamera();
     ctx.fillStyle = BG;
     ctx.fillRect(0, 0, W, H);
@@ -184,14 +213,16 @@
       for (let j = 0; j < J; j++) {
         if (!ok[j]) continue;
         const s = f * J + j, m = L.mark ? L.mark[s] : 0;
-        let color = L.color, r = L.role === "before" ? 3 : 3.5;
+        let color = L.color, r = L.role === "before" ? 6 : 3.5;
         if (m === 1) { const e = L.error[s]; color = e >= 0 ? errorColor(e) : FILLED; r = 5; }
         else if (m === 2) { color = CHANGED; r = 4.5; }
         else if (m === 3) { color = DELETED; r = 5; }
-        ctx.fillStyle = color;
+        // a "before" sample is a ring around its "after" dot; so is a low-confidence one
+        const ring = m === 0 && (L.role === "before" || (L.conf && L.conf[s] < 255));
         ctx.beginPath();
         ctx.arc(sx[j], syy[j], r, 0, 2 * Math.PI);
-        ctx.fill();
+        if (ring) { ctx.strokeStyle = color; ctx.lineWidth = 1.5; ctx.stroke(); }
+        else { ctx.fillStyle = color; ctx.fill(); }
         picks.push([sx[j], syy[j], L.index, j, s]);
         drawn[drawn.length - 1]++;
       }
@@ -210,12 +241,14 @@
       box.addEventListener("change", () => { layer.visible = box.checked; draw(); });
       row.appendChild(box);
     }
-    dot.className = "swatch"; dot.style.background = color;
+    dot.className = "swatch";
+    if (color === "ring") dot.style.border = "1.5px solid #e6e8eb"; else dot.style.background = color;
     row.appendChild(dot);
     row.appendChild(document.createTextNode(text));
     $("legend").appendChild(row);
   }
   for (const L of layers) legendRow(L.color, L.label, L);
+  if (layers.some((L) => L.conf)) legendRow("ring", "inferred / low confidence");
   const overlay = layers.some((L) => L.mark);
   if (overlay) {
     legendRow(errorColor(1), "filled, est. error 1 mm");
@@ -235,6 +268,12 @@
   function setPlaying(on) { playing = on; $("play").textContent = on ? "Pause" : "Play"; last = null; }
   scrub.addEventListener("input", () => { time = Number(scrub.value) / main.fps; draw(); });
   $("speed").addEventListener("change", (e) => { speed = Number(e.target.value); });
+  function setFollow(on) {
+    follow = on; $("follow").checked = on;
+    if (on) cam.dist = scene.body * 4; else frameScene();
+    draw();
+  }
+  $("follow").addEventListener("change", (e) => setFollow(e.target.checked));
   $("up").addEventListener("change", (e) => { up = Number(e.target.value); frameScene(); draw(); });
   window.addEventListener("keydown", (e) => {
     if (e.target.tagName === "INPUT" && e.target.type !== "range") return;
@@ -258,6 +297,7 @@
       const dx = e.clientX - drag.x, dy = e.clientY - drag.y;
       drag.x = e.clientX; drag.y = e.clientY;
       if (drag.pan) {
+        if (follow) setFollow(false);
         const k = cam.dist / focal;
         cam.t[0] -= k * (cy * dx - sy * sp * dy) ;
         cam.t[1] -= k * (sy * dx + cy * sp * dy);
@@ -273,7 +313,7 @@
   canvas.addEventListener("wheel", (e) => {
     cam.dist = Math.max(0.05, cam.dist * Math.exp(e.deltaY * 0.001)); draw(); e.preventDefault();
   }, { passive: false });
-  canvas.addEventListener("dblclick", () => { frameScene(); draw(); });
+  canvas.addEventListener("dblclick", () => { frameScene(); draw(); });   // reset the view
 
   const tip = $("tip");
   function describe(p) {
@@ -283,14 +323,15 @@
     if (m === 1) lines.push(L.error[p[4]] >= 0 ? "filled, est. error " + L.error[p[4]].toFixed(1) + " mm" : "filled");
     if (m === 2) lines.push("moved by the cleaner");
     if (m === 3) lines.push("deleted by the cleaner");
+    if (L.conf && L.conf[p[4]] < 255) lines.push("confidence " + (L.conf[p[4]] / 255).toFixed(2));
     return lines.join("\n");
   }
   function hover(x, y) {
     const r = canvas.getBoundingClientRect();
-    let best = null, bestD = 64;
+    let best = null, bestD = 63;
     for (const p of picks) {
       const d = (p[0] + r.left - x) ** 2 + (p[1] + r.top - y) ** 2;
-      if (d < bestD) { bestD = d; best = p; }
+      if (d <= bestD) { bestD = d; best = p; }      // ties: the later layer (the "after")
     }
     if (!best) { tip.hidden = true; return; }
     tip.textContent = describe(best);
@@ -324,6 +365,8 @@
   const start = /frame=(\d+)/.exec(location.hash);   // view.html#frame=120: paused there
   if (start) { playing = false; $("play").textContent = "Play"; time = Number(start[1]) / main.stride / main.fps; }
   frameScene();
+  // a take that travels (a walk across the room) is followed; one in place is framed whole
+  if (scene.radius > 3 * scene.body) { follow = true; $("follow").checked = true; cam.dist = scene.body * 4; }
   resize();
   requestAnimationFrame(tick);
   // for tests and scripts: the state and a way to hold a frame

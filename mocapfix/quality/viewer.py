@@ -140,6 +140,10 @@ class Layer:
         self.label = label
         self.role = role
         self.fills = _fill_runs(motion, self.keep) if role == "after" else []
+        #: Kinect tracking state / confidence (Inferred = 0.5): drawn as rings below 1
+        conf = motion.confidence
+        self.confidence = (None if motion.format != "kinect" or conf is None
+                           or not (conf[:, self.keep] < 1).any() else conf[:, self.keep])
 
 
 def _as_differences(codes: np.ndarray, base: np.ndarray) -> tuple[dict, int] | None:
@@ -183,6 +187,10 @@ def _encode(layers: list[Layer], stride: int) -> tuple[list[dict], int]:
             origin, step = _box(pos)
         codes = quantise(pos, origin, step)
         entry.update(origin=origin.tolist(), step=step.tolist())
+        if layer.confidence is not None:
+            level = np.rint(np.clip(np.nan_to_num(layer.confidence[::stride]), 0, 1) * 255)
+            entry["confidence"] = _b64(level.astype("u1"))
+            size += _b64_len(level.size)
         if partner is not None:
             stored = _as_differences(codes, quantise(partner.metres[::stride], origin, step))
             if stored is not None:

@@ -150,6 +150,15 @@ def test_names_cannot_end_the_data_element():
     assert _data(page)["layers"][0]["names"] == HOSTILE
 
 
+def test_kinect_tracking_state_is_carried():
+    motion = read(SAMPLE_DATA / "walk_kinect_v2.csv")
+    motion.confidence[5:9, 2] = 0.5                            # Inferred
+    (entry,) = _data(viewer.single([motion]))["layers"]
+    level = np.frombuffer(base64.b64decode(entry["confidence"]), "u1").reshape(entry["frames"], -1)
+    assert (level[5:9, 2] == 128).all() and level[~np.isnan(motion.positions[..., 0])].min() >= 128
+    assert "confidence" not in _data(viewer.single([read(SAMPLE_DATA / "walk.bvh")]))["layers"][0]
+
+
 def test_the_template_and_script_are_package_data():
     files = resources.files("mocapfix.quality")
     assert "{{DATA}}" in files.joinpath("viewer.html").read_text(encoding="utf-8")
