@@ -102,7 +102,7 @@ def clean_file(source: Path, output: Path, pipeline: Pipeline, reports=("json",)
     report = build_report(result, pipeline.report)
     paths = report_paths(output, reports)
     writers = {"json": lambda: to_json(report), "md": lambda: to_markdown(report),
-               "html": lambda: to_html(report, result)}
+               "html": lambda: to_html(report, result, viewer=pipeline.report.get("viewer", True))}
     texts = {kind: writers[kind]() for kind in paths}
     written: list[Path] = []
     try:

@@ -337,9 +337,10 @@ def svg_trajectory(before: np.ndarray, after: np.ndarray, filled: np.ndarray,
     return "".join(parts)
 
 
-def to_html(report: dict, result, n_plots: int = 6) -> str:
-    """The report as one page: summary, steps and joints tables, and trajectory plots of
-    the joints cleaning changed most."""
+def to_html(report: dict, result, n_plots: int = 6, viewer: bool = True) -> str:
+    """The report as one page: summary, steps and joints tables, the 3D before/after
+    viewer (:func:`mocapfix.quality.viewer.embed`; ``viewer=False``: left out) and
+    trajectory plots of the joints cleaning changed most."""
     before, after = result.original, result.cleaned
     filled = np.zeros(before.positions.shape[:2], bool)
     for r in result.records:
@@ -357,11 +358,20 @@ def to_html(report: dict, result, n_plots: int = 6) -> str:
             f"<title>{html.escape(name)} — mocapfix report</title>"
             "<style>body{font-family:sans-serif;max-width:1100px;margin:2em auto}"
             "table{border-collapse:collapse;font-size:12px}td,th{border:1px solid #ccc;padding:2px 6px}"
-            "</style></head><body>" + body +
+            "</style></head><body>" + body + _viewer_section(result, viewer) +
             "<h2>Trajectories of the joints cleaning changed most</h2><p>grey: input; colour: "
             "cleaned; the last panel is the distance between them; red shading: missing in the "
             "input; green: filled by a cleaner.</p>"
             + ("".join(plots) or "<p>No joint was changed.</p>") + "</body></html>")
+
+
+def _viewer_section(result, viewer: bool) -> str:
+    if not viewer:
+        return ""
+    from mocapfix.quality.viewer import embed
+    return ("<h2>3D view</h2><p>grey rings: input; colour: cleaned; filled samples coloured "
+            "by their estimated error. Drag to orbit, wheel to zoom, hover for names.</p>"
+            + embed(result.original, result.cleaned))
 
 
 _INLINE = re.compile(r"`([^`]+)`|\*\*([^*]+)\*\*")

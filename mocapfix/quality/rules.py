@@ -624,7 +624,7 @@ def report_thresholds(section: dict | None = None, fmt: str | None = None) -> di
 
 def validate_report_section(data, source: str) -> dict:
     """Check a config's ``report:`` mapping: known threshold keys with finite, non-negative
-    numbers, and optionally ``rules:`` (a list of rules on cleaned-stage metrics). Returns
+    numbers, optionally ``rules:`` (a list of rules on cleaned-stage metrics) and ``viewer:`` (false: no 3D view in the HTML report). Returns
     the plain mapping (line marks stripped). Raises ConfigError naming the line."""
     if data is None:
         return {}
@@ -642,8 +642,13 @@ def validate_report_section(data, source: str) -> dict:
                 parse_rule(raw, f"{source}: report rule {n}", "cleaned")
             out[key] = _strip(value)
             continue
+        if key == "viewer":                 # the 3D view in the HTML report (default true)
+            if not isinstance(value, bool):
+                raise ConfigError(f"{where}: viewer must be true or false, got {value!r}")
+            out[key] = value
+            continue
         if key not in REPORT_KEYS:
-            raise ConfigError(f"{where}: unknown key {key!r} (known: {', '.join(list(REPORT_KEYS) + ['rules'])})")
+            raise ConfigError(f"{where}: unknown key {key!r} (known: {', '.join(list(REPORT_KEYS) + ['rules', 'viewer'])})")
         if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value < 0:
             raise ConfigError(f"{where}: {key} must be a finite number >= 0, got {value!r}")
         if key.endswith(("_missing_after", "_uncertain", "_fraction", "_variation")) and value > 1:

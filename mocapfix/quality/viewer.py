@@ -40,8 +40,9 @@ import numpy as np
 
 from mocapfix.core.motion import Motion, missing_samples
 
-#: bytes of positions text a page may hold (the rest of the page is ~30 KB plus the names)
+#: bytes a page may hold; the viewer embedded in a clean report holds half
 DEFAULT_BUDGET = 3_000_000
+EMBED_BUDGET = DEFAULT_BUDGET // 2
 MISSING = -32768
 _STEPS = 65534                          # int16 codes -32767..32767 for present samples
 
@@ -265,3 +266,14 @@ def before_after(before: Motion, after: Motion, budget: int = DEFAULT_BUDGET) ->
 def comparable(a: Motion, b: Motion) -> bool:
     """True when ``b`` can be the cleaned output of ``a`` (same frames and point names)."""
     return a.n_frames == b.n_frames and list(a.names) == list(b.names)
+
+
+def embed(before: Motion, after: Motion, budget: int = EMBED_BUDGET) -> str:
+    """The viewer of a cleaned motion as an ``<iframe>`` for another page (the HTML report
+    of ``clean``): its document inline in ``srcdoc``, sandboxed to scripts only, so it can
+    neither reach the page around it nor the network."""
+    page = (before_after(before, after, budget) if comparable(before, after)
+            else single([after], budget))
+    return ('<iframe class="mocapfix-view" title="3D view" sandbox="allow-scripts" '
+            'style="width:100%;height:560px;border:1px solid #ccc" srcdoc="'
+            + html.escape(page, quote=True) + '"></iframe>')

@@ -217,3 +217,22 @@ def test_a_cleaned_c3d_read_back_gives_its_fills_and_their_errors(tmp_path):
     assert [f[:3] for f in fills] == [[after.names.index(r[0]), r[1], r[2]] for r in runs]
     assert all(f[3] is None or f[3] >= 0 for f in fills)
     assert viewer.Layer(read(SAMPLE_DATA / "walk_markers.c3d"), "x", "after").fills == []
+
+
+@pytest.mark.parametrize("config,embedded", [("", True), ("report: {viewer: false}\n", False)])
+def test_the_html_report_embeds_the_viewer_unless_told(tmp_path, config, embedded):
+    cfg = tmp_path / "c.yaml"
+    cfg.write_text("version: 1\npipeline: []\n" + config)
+    r = CliRunner().invoke(main, ["clean", str(SAMPLE_DATA / "walk.bvh"), "-o", str(tmp_path / "out"),
+                                  "-c", str(cfg), "--report", "html", "-q"])
+    assert r.exit_code == 0, r.output
+    report = (tmp_path / "out" / "walk.bvh.report.html").read_text(encoding="utf-8")
+    assert ('<iframe class="mocapfix-view"' in report) == embedded
+
+
+def test_report_viewer_must_be_a_boolean(tmp_path):
+    cfg = tmp_path / "c.yaml"
+    cfg.write_text("version: 1\npipeline: []\nreport: {viewer: 0}\n")
+    r = CliRunner().invoke(main, ["clean", str(SAMPLE_DATA / "walk.bvh"), "-o", str(tmp_path / "out"),
+                                  "-c", str(cfg)])
+    assert r.exit_code == 2 and "viewer must be true or false" in r.output, r.output

@@ -238,3 +238,21 @@ def test_hostile_names_are_text(tmp_path, make):
         assert shown is not None, f"{name[:40]!r} was not hovered"
         text = name if len(name) <= 300 else name[:300] + "…"
         assert shown == text + "\n" + path.name
+
+
+def test_the_clean_report_embeds_the_viewer(tmp_path):
+    """The HTML report of `clean` holds the before/after viewer in a sandboxed iframe; its
+    document, taken out of ``srcdoc``, plays as the page of `mocapfix view` does."""
+    path = shared("c3d/ktk_tennis_serve_nan.c3d")
+    r = CliRunner().invoke(main, ["clean", str(path), "-o", str(tmp_path / "out"), "-q",
+                                  "--report", "html"])
+    assert r.exit_code == 0, r.output
+    report = (tmp_path / "out" / (path.name + ".report.html")).read_text(encoding="utf-8")
+    frames = re.findall(r'<iframe class="mocapfix-view"[^>]*sandbox="allow-scripts"[^>]*'
+                        r'srcdoc="([^"]*)"></iframe>', report)
+    assert len(frames) == 1
+    page = tmp_path / "embedded.html"
+    page.write_text(html.unescape(frames[0]), encoding="utf-8")
+    probe = _probe(page, tmp_path)
+    _check_clean_page(probe, layers=2)
+    assert probe["counts"]["filled"] > 0 and "filled, est. error" in probe["filledTip"]
