@@ -15,6 +15,7 @@ from mocapfix.core.errors import UnreadableFileError
 from mocapfix.core.fileio import NAME_MAX, atomic_write_text
 from mocapfix.core.motion import Motion
 from mocapfix.pipeline.steps import Pipeline
+from mocapfix.quality.render import ranked
 from mocapfix.quality.report import CleanResult, build_report, to_html, to_json, to_markdown
 from mocapfix.pipeline.selection import own_channels
 from mocapfix.core.writeback import write_back
@@ -128,6 +129,7 @@ def clean_file(source: Path, output: Path, pipeline: Pipeline, reports=("json",)
         "samples_flagged": f["samples_flagged"], "seconds": round(result.seconds, 4),
         "reasons": sorted({r for j in report["joints"] for r in j["reasons"] if r.startswith(f["status"])})[:3]
         or f.get("reasons", []),
+        "worst": [[j["name"], j["status"]] for j in ranked(report)[:3] if j["status"] != "OK"],
         **({"format": to, "not_carried": [n for n in result.cleaned.notes if n not in motion.notes]}
            if to and to != motion.format else {}),
     }

@@ -288,6 +288,10 @@ def run_clean(plan: CleanPlan, *, workers: int = 1, spec=None,
             _take_back(plan.made)
         raise
     plan.manifest.close()
+    if "html" in plan.reports and plan.manifest.records:
+        from mocapfix.quality.index import index_html
+        atomic_write_text(plan.outdir / "index.html",
+                          index_html(list(plan.manifest.records.values()), plan.outdir))
     failed = sum(r["status"] == "ERROR" for r in results)
     if failed < len(results) or plan.resumed:
         atomic_write_text(plan.config_file, plan.config_text)

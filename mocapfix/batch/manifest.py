@@ -12,7 +12,8 @@ folder), ``status`` (``done``, ``failed``, or ``started`` — written for every 
 before it begins), ``quality`` (OK/WARN/FAIL), ``config_sha256`` (of the effective config
 text), ``models_sha256`` (``{path: sha256}`` of the model files the pipeline may read),
 ``reports``, ``read_options``, ``version`` (mocapfix), ``time``; ``error`` for a failed
-file.
+file; ``summary`` (frames, missing, filled, flagged, worst joints: what the batch index shows)
+for a cleaned one.
 
 A file is *finished* when its last record is ``done`` with this run's config and model
 hashes, report kinds, read options and mocapfix version, the sha256 of its input and of the
@@ -37,6 +38,9 @@ from mocapfix.core.fileio import atomic_write_text, file_sha256
 MANIFEST_NAME = "mocapfix-manifest.jsonl"
 _KEY_FIELDS = ("config_sha256", "models_sha256", "reports", "read_options", "version")
 _INPUT_FIELDS = ("input_sha256", "companions_sha256")
+#: what the batch index (:mod:`mocapfix.quality.index`) shows of a file, kept in its record
+SUMMARY_FIELDS = ("frames", "joints", "missing_before", "missing_after", "samples_filled",
+                  "samples_flagged", "worst")
 
 
 def run_key(config_text: str, reports, read_options: dict | None, model_files=(),
@@ -184,6 +188,7 @@ class Manifest:
         else:
             files = [*result.get("written", []), *result.get("reports", [])]
             rec.update(status="done", quality=result["status"], files=[self._rel(f) for f in files],
+                       summary={k: result[k] for k in SUMMARY_FIELDS if k in result},
                        **{f: result.get(f) for f in _INPUT_FIELDS})
         self._append([rec])
 

@@ -32,7 +32,9 @@ import base64
 import html
 import json
 import math
+import os
 import re
+import warnings
 from importlib import resources
 from pathlib import Path
 
@@ -69,7 +71,8 @@ def up_axis(metres: np.ndarray) -> int:
     """The vertical axis of a capture of people: per frame, the extent of the points along
     each axis; a body is taller than it is wide or deep, so the axis of the largest median
     extent is up (Y for BVH/AMC/Kinect, Z for most C3D)."""
-    with np.errstate(all="ignore"):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)     # frames where nothing is seen
         extent = np.nanmax(metres, axis=1) - np.nanmin(metres, axis=1)      # (T, 3)
         med = np.nanmedian(extent, axis=0)
     if not np.isfinite(med).any():
@@ -243,7 +246,8 @@ def to_html(layers: list[Layer], title: str, budget: int = DEFAULT_BUDGET) -> st
 
 
 def _label(path) -> str:
-    return Path(path).name if path else "motion"
+    """The file's name; bytes that are not UTF-8 (held as surrogates) as U+FFFD."""
+    return os.fsencode(Path(path).name).decode("utf-8", "replace") if path else "motion"
 
 
 def single(motions: list[Motion], budget: int = DEFAULT_BUDGET) -> str:

@@ -236,3 +236,12 @@ def test_report_viewer_must_be_a_boolean(tmp_path):
     r = CliRunner().invoke(main, ["clean", str(SAMPLE_DATA / "walk.bvh"), "-o", str(tmp_path / "out"),
                                   "-c", str(cfg)])
     assert r.exit_code == 2 and "viewer must be true or false" in r.output, r.output
+
+
+def test_a_file_name_that_is_not_utf8_is_viewed(tmp_path):
+    name = tmp_path / "take\udcff.bvh"
+    name.write_bytes((SAMPLE_DATA / "walk.bvh").read_bytes())
+    out = tmp_path / "v.html"
+    r = CliRunner().invoke(main, ["view", str(name), "-o", str(out)])
+    assert r.exit_code == 0, r.output
+    assert _data(out.read_text(encoding="utf-8"))["layers"][0]["label"] == "take\ufffd.bvh"
