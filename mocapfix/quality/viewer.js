@@ -10,7 +10,7 @@
   const BG = "#16191d", GRID = "#3a4048", AXIS = "#59616c", BEFORE = "#8a9099";
   const PALETTE = ["#4fc3f7", "#ffb74d", "#aed581", "#ce93d8", "#f06292", "#fff176"];
   const FILLED = "#ff4fd8", CHANGED = "#b388ff", DELETED = "#ff1744";
-  const CHANGE_M = 0.001;           // a sample moved by less than 1 mm is not marked
+  const CHANGE_M = 0.001;           // a sample moved by less than 1 mm is never marked
   const MISSING = -32768;
 
   function bytes(text) {
@@ -51,19 +51,27 @@
 
   // -- marks of an overlay: filled (with its error), moved, deleted ---------------------
   const counts = { filled: 0, changed: 0, deleted: 0 };
+  let changeM = CHANGE_M;
   for (const A of layers) {
     if (A.role !== "after" || !layers[A.index - 1] || layers[A.index - 1].role !== "before") continue;
     const B = layers[A.index - 1];
     A.mark = new Uint8Array(A.frames * A.joints);
     B.mark = new Uint8Array(B.frames * B.joints);
     A.error = new Float32Array(A.frames * A.joints).fill(NaN);
+    const moved = new Float32Array(A.mark.length);
     for (let s = 0; s < A.mark.length; s++) {
       const i = 3 * s, gb = B.codes[i] === MISSING, ga = A.codes[i] === MISSING;
       if (gb && !ga) { A.mark[s] = 1; counts.filled++; }
       else if (!gb && ga) { B.mark[s] = 3; counts.deleted++; }
-      else if (!gb && Math.hypot(A.xyz[i] - B.xyz[i], A.xyz[i + 1] - B.xyz[i + 1],
-                                 A.xyz[i + 2] - B.xyz[i + 2]) >= CHANGE_M) { A.mark[s] = 2; counts.changed++; }
+      else if (!gb) moved[s] = Math.hypot(A.xyz[i] - B.xyz[i], A.xyz[i + 1] - B.xyz[i + 1], A.xyz[i + 2] - B.xyz[i + 2]);
     }
+    // a filter moves every sample a little: mark only what moved well beyond the typical
+    // move (3x the median of the samples it moved), and never under 1 mm
+    const some = [];
+    for (let s = 0; s < moved.length; s += Math.max(1, Math.floor(moved.length / 50000))) if (moved[s] > 0) some.push(moved[s]);
+    some.sort((a, b) => a - b);
+    changeM = Math.max(CHANGE_M, 3 * (some.length ? some[some.length >> 1] : 0));
+    for (let s = 0; s < moved.length; s++) if (moved[s] >= changeM) { A.mark[s] = 2; counts.changed++; }
     for (const [j, start, length, err] of A.fills) {
       const lo = Math.ceil(start / A.stride), hi = Math.floor((start + length - 1) / A.stride);
       for (let f = Math.max(lo, 0); f <= Math.min(hi, A.frames - 1); f++) {
@@ -254,7 +262,7 @@
     legendRow(errorColor(1), "filled, est. error 1 mm");
     legendRow(errorColor(30), "filled, est. error ≥ 30 mm");
     legendRow(FILLED, "filled (no estimate)");
-    legendRow(CHANGED, "moved ≥ 1 mm");
+    legendRow(CHANGED, "moved ≥ " + (changeM * 1000).toFixed(1) + " mm");
     legendRow(DELETED, "deleted (before)");
   }
   const notes = [];
