@@ -370,8 +370,8 @@ def _viewer_section(result, viewer: bool) -> str:
         return ""
     from mocapfix.quality.viewer import embed
     return ("<h2>3D view</h2><p>grey rings: input; colour: cleaned; filled samples coloured "
-            "by their estimated error. Drag to orbit, wheel to zoom, hover for names.</p>"
-            + embed(result.original, result.cleaned))
+            "by their estimated error, samples a step judged wrong by step. Drag to orbit, wheel to zoom, hover for names.</p>"
+            + embed(result.original, result.cleaned, result.records))
 
 
 _INLINE = re.compile(r"`([^`]+)`|\*\*([^*]+)\*\*")

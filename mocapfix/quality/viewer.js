@@ -10,6 +10,7 @@
   const BG = "#16191d", GRID = "#3a4048", AXIS = "#59616c", BEFORE = "#8a9099";
   const PALETTE = ["#4fc3f7", "#ffb74d", "#aed581", "#ce93d8", "#f06292", "#fff176"];
   const FILLED = "#ff4fd8", CHANGED = "#b388ff", DELETED = "#ff1744";
+  const FLAGS = ["#ffee58", "#ff7043", "#26c6da", "#8d6e63", "#ec407a", "#9ccc65"];  // by step
   const CHANGE_M = 0.001;           // a sample moved by less than 1 mm is never marked
   const MISSING = -32768;
 
@@ -58,6 +59,12 @@
     A.mark = new Uint8Array(A.frames * A.joints);
     B.mark = new Uint8Array(B.frames * B.joints);
     A.error = new Float32Array(A.frames * A.joints).fill(NaN);
+    A.flag = new Uint8Array(A.frames * A.joints);            // 0: none; k + 1: flagKinds[k]
+    for (const [j, start, length, kind] of A.flags) {
+      const lo = Math.ceil(start / A.stride), hi = Math.floor((start + length - 1) / A.stride);
+      for (let f = Math.max(lo, 0); f <= Math.min(hi, A.frames - 1); f++) A.flag[f * A.joints + j] = kind + 1;
+    }
+    B.flag = A.flag; B.flagKinds = A.flagKinds;
     const moved = new Float32Array(A.mark.length);
     for (let s = 0; s < A.mark.length; s++) {
       const i = 3 * s, gb = B.codes[i] === MISSING, ga = A.codes[i] === MISSING;
@@ -71,7 +78,9 @@
     for (let s = 0; s < moved.length; s += Math.max(1, Math.floor(moved.length / 50000))) if (moved[s] > 0) some.push(moved[s]);
     some.sort((a, b) => a - b);
     changeM = Math.max(CHANGE_M, 3 * (some.length ? some[some.length >> 1] : 0));
-    for (let s = 0; s < moved.length; s++) if (moved[s] >= changeM) { A.mark[s] = 2; counts.changed++; }
+    for (let s = 0; s < moved.length; s++) {
+      if (moved[s] >= changeM || (A.flag[s] && moved[s] > 0)) { A.mark[s] = 2; counts.changed++; }
+    }
     for (const [j, start, length, err] of A.fills) {
       const lo = Math.ceil(start / A.stride), hi = Math.floor((start + length - 1) / A.stride);
       for (let f = Math.max(lo, 0); f <= Math.min(hi, A.frames - 1); f++) {
@@ -225,6 +234,7 @@
         if (m === 1) { const e = L.error[s]; color = e >= 0 ? errorColor(e) : FILLED; r = 5; }
         else if (m === 2) { color = CHANGED; r = 4.5; }
         else if (m === 3) { color = DELETED; r = 5; }
+        if (L.flag && L.flag[s] && (m === 2 || m === 3)) color = FLAGS[(L.flag[s] - 1) % FLAGS.length];
         // a "before" sample is a ring around its "after" dot; so is a low-confidence one
         const ring = m === 0 && (L.role === "before" || (L.conf && L.conf[s] < 255));
         ctx.beginPath();
@@ -264,6 +274,9 @@
     legendRow(FILLED, "filled (no estimate)");
     legendRow(CHANGED, "moved ≥ " + (changeM * 1000).toFixed(1) + " mm");
     legendRow(DELETED, "deleted (before)");
+    for (const L of layers) {
+      if (L.role === "after") L.flagKinds.forEach((k, n) => legendRow(FLAGS[n % FLAGS.length], "judged wrong by " + k));
+    }
   }
   const notes = [];
   if (data.stride > 1) notes.push("every " + data.stride + "th frame shown (size budget " + (data.budget / 1e6).toFixed(1) + " MB)");
@@ -331,6 +344,7 @@
     if (m === 1) lines.push(L.error[p[4]] >= 0 ? "filled, est. error " + L.error[p[4]].toFixed(1) + " mm" : "filled");
     if (m === 2) lines.push("moved by the cleaner");
     if (m === 3) lines.push("deleted by the cleaner");
+    if (L.flag && L.flag[p[4]]) lines.push("judged wrong by " + L.flagKinds[L.flag[p[4]] - 1]);
     if (L.conf && L.conf[p[4]] < 255) lines.push("confidence " + (L.conf[p[4]] / 255).toFixed(2));
     return lines.join("\n");
   }

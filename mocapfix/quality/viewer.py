@@ -144,6 +144,8 @@ class Layer:
         self.label = label
         self.role = role
         self.fills = _fill_runs(motion, self.keep) if role == "after" else []
+        self.flags: list[list[int]] = []       # [joint, start, length, kind]
+        self.flag_kinds: list[str] = []
         #: Kinect tracking state / confidence (Inferred = 0.5): drawn as rings below 1
         conf = motion.confidence
         self.confidence = (None if motion.format != "kinect" or conf is None
@@ -181,7 +183,8 @@ def _encode(layers: list[Layer], stride: int) -> tuple[list[dict], int]:
         pos = layer.metres[::stride]
         entry = {"label": layer.label, "role": layer.role, "names": layer.names,
                  "bones": layer.bones, "fps": layer.fps / stride, "frames": int(pos.shape[0]),
-                 "stride": stride, "fills": layer.fills}
+                 "stride": stride, "fills": layer.fills, "flags": layer.flags,
+                 "flagKinds": layer.flag_kinds}
         partner = by_after.get(n + 1) if layer.role == "before" else None
         if layer.role == "after" and n > 0 and layers[n - 1].role == "before":
             origin, step = _box(pos, layers[n - 1].metres[::stride])
@@ -256,14 +259,32 @@ def single(motions: list[Motion], budget: int = DEFAULT_BUDGET) -> str:
     return to_html(layers, " + ".join(l.label for l in layers), budget)
 
 
-def before_after(before: Motion, after: Motion, budget: int = DEFAULT_BUDGET) -> str:
+def _flag_runs(layer: Layer, records) -> None:
+    """The samples each step judged wrong (flagged or replaced: ``StepRecord.outliers``) as
+    runs ``[joint, start, length, kind]``, kind indexing ``layer.flag_kinds`` (the steps)."""
+    from mocapfix.core.gaps import runs
+
+    for record in records:
+        col, start, length = runs(record.outliers[:, layer.keep])
+        if col.size:
+            kind = len(layer.flag_kinds)
+            layer.flag_kinds.append(record.step if record.cleaner in record.step
+                                    else f"{record.step} ({record.cleaner})")
+            layer.flags += np.column_stack([col, start, length, np.full(col.size, kind)]).tolist()
+
+
+def before_after(before: Motion, after: Motion, budget: int = DEFAULT_BUDGET,
+                 records=()) -> str:
     """A page overlaying a capture and its cleaned output. They must hold the same points
-    and frames (a cleaned file does); otherwise use :func:`single`."""
+    and frames (a cleaned file does); otherwise use :func:`single`. ``records``: the
+    pipeline's :class:`~mocapfix.pipeline.steps.StepRecord` list, when known (the clean
+    report), colours the samples each step judged wrong by step."""
     if before.n_frames != after.n_frames or list(before.names) != list(after.names):
         raise ValueError("before and after differ in frames or point names: not a capture "
                          "and its cleaned output")
     layers = [Layer(before, "before: " + _label(before.path), "before"),
               Layer(after, "after: " + _label(after.path), "after")]
+    _flag_runs(layers[1], records)
     return to_html(layers, f"{layers[0].label[8:]} → {layers[1].label[7:]}", budget)
 
 
@@ -272,11 +293,11 @@ def comparable(a: Motion, b: Motion) -> bool:
     return a.n_frames == b.n_frames and list(a.names) == list(b.names)
 
 
-def embed(before: Motion, after: Motion, budget: int = EMBED_BUDGET) -> str:
+def embed(before: Motion, after: Motion, records=(), budget: int = EMBED_BUDGET) -> str:
     """The viewer of a cleaned motion as an ``<iframe>`` for another page (the HTML report
     of ``clean``): its document inline in ``srcdoc``, sandboxed to scripts only, so it can
     neither reach the page around it nor the network."""
-    page = (before_after(before, after, budget) if comparable(before, after)
+    page = (before_after(before, after, budget, records) if comparable(before, after)
             else single([after], budget))
     return ('<iframe class="mocapfix-view" title="3D view" sandbox="allow-scripts" '
             'style="width:100%;height:560px;border:1px solid #ccc" srcdoc="'

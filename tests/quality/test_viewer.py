@@ -245,3 +245,18 @@ def test_a_file_name_that_is_not_utf8_is_viewed(tmp_path):
     r = CliRunner().invoke(main, ["view", str(name), "-o", str(out)])
     assert r.exit_code == 0, r.output
     assert _data(out.read_text(encoding="utf-8"))["layers"][0]["label"] == "take\ufffd.bvh"
+
+
+def test_samples_a_step_judged_wrong_are_runs_by_step():
+    from mocapfix.clean import clean_motion
+    from mocapfix.config import load_config
+    from mocapfix.core.presets import resolve_config
+
+    motion = read(SAMPLE_DATA / "walk_markers.c3d")
+    motion.positions[50, 4] += 300.0
+    result = clean_motion(motion, load_config(resolve_config("default")), None)
+    data = _data(viewer.before_after(result.original, result.cleaned, records=result.records))
+    after = data["layers"][1]
+    assert after["flagKinds"], "no step judged the spike wrong"
+    hits = [f for f in after["flags"] if f[0] == 4 and f[1] <= 50 < f[1] + f[2]]
+    assert hits and all(0 <= f[3] < len(after["flagKinds"]) for f in after["flags"])

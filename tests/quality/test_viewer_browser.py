@@ -256,3 +256,5 @@ def test_the_clean_report_embeds_the_viewer(tmp_path):
     probe = _probe(page, tmp_path)
     _check_clean_page(probe, layers=2)
     assert probe["counts"]["filled"] > 0 and "filled, est. error" in probe["filledTip"]
+    # the samples a step judged wrong, by step (the report knows the steps; a file does not)
+    assert re.search(r"judged wrong by step \d+ \(\w+\)", probe["legend"]), probe["legend"]
