@@ -7,7 +7,10 @@ zoom with the mouse, a ground grid and the joint's name on hover. Given a captur
 cleaned output (:func:`before_after`), the two are overlaid: the input in grey, the output
 in colour, samples the cleaner filled coloured by their estimated error (the ``MOCAPFIX``
 group of a cleaned C3D, or ``Motion.fill_errors``) or as "filled" when no estimate is
-known, and samples it moved or deleted marked.
+known, samples it moved or deleted marked, and — in the clean report, which knows the
+steps (:func:`embed`) — the samples each step judged wrong coloured by step. Kinect joints
+that were inferred or of low confidence are rings. A take that travels is followed by the
+camera. ``view.html#frame=N`` opens paused at frame N.
 
 Size: positions are converted to metres and quantised to int16 per axis relative to each
 layer's bounding box (a 5 m box gives 0.08 mm steps; -32768 = missing), base64-encoded
@@ -16,15 +19,18 @@ differences from the "after" layer (int8 steps where a sample moved a little, th
 itself where it was filled, deleted or moved far) when that is smaller. When the page would
 exceed ``budget`` bytes (3 MB by default) every layer keeps every k-th frame, the smallest
 k that fits; the page says so. Measured (``benchmarks/viewer_size.py``): a 4,500-frame ×
-41-marker capture is 1.49 MB alone and 2.40 MB as a before/after overlay of a cleaned
-corruption, both with every frame, interactive in 0.1–0.2 s in headless Chromium.
+41-marker capture is 1.50 MB alone and 2.40 MB as a before/after overlay of a cleaned
+corruption, both with every frame, interactive in 0.12 and 0.25 s in headless Chromium.
+Embedded in a clean report the budget is 1.5 MB (the shared data's 53 reports: 17.6 MB
+without the viewer, 30.4 MB with it).
 
 Why hand-written: the page draws at most a few hundred points and lines per frame, which
 Canvas 2D does in well under a millisecond; ``viewer.js`` (perspective projection, orbit
-camera, grid, picking) is 15 KB unminified, the page's HTML and CSS 2 KB. three.js 0.170.0's ``build/three.module.min.js``
-alone is 691,648 bytes (measured from the npm tarball), would be vendored with its licence
-and pinned, and would still need our own controls, picking and colouring code — 40x the
-size for features (meshes, lights, shaders) points and lines do not use.
+camera, grid, picking, marks) is 19 KB unminified, the page's HTML and CSS 2 KB. three.js
+0.170.0's ``build/three.module.min.js`` alone is 691,648 bytes (measured from the npm
+tarball), would be vendored with its licence and pinned, and would still need our own
+controls, picking and colouring code: 35x the size, for features (meshes, lights, shaders)
+that points and lines do not use.
 """
 from __future__ import annotations
 
