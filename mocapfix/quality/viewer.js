@@ -22,7 +22,7 @@
 
   // -- decode: int16 codes, a "before" rebuilt from its base, then metres ---------------
   const layers = data.layers.map((L, n) => Object.assign({}, L, {
-    index: n, visible: true, codes: L.positions ? new Int16Array(bytes(L.positions)) : null,
+    index: n, visible: true, codes: L.positions !== undefined ? new Int16Array(bytes(L.positions)) : null,
   }));
   for (const L of layers) {
     if (L.codes) continue;

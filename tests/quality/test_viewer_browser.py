@@ -10,6 +10,7 @@ import json
 import re
 import subprocess
 
+import numpy as np
 import pytest
 from click.testing import CliRunner
 
@@ -44,7 +45,7 @@ window.addEventListener('load', () => {
   const frames = v.main.frames, seen = [];
   for (let f = 0; f < frames; f += Math.max(1, Math.floor(frames / 50))) {
     v.setFrame(f); if (v.drawn().reduce((a, b) => a + b, 0) > 0) seen.push(f); }
-  const f0 = seen[0], f1 = seen[Math.floor(seen.length / 2)];
+  const f0 = seen.length ? seen[0] : 0, f1 = seen.length ? seen[Math.floor(seen.length / 2)] : 0;
   v.setFrame(f0); const a = snap(); v.setFrame(f0); const a2 = snap();
   v.setFrame(f1); const b = snap();
   const boxes = [...document.querySelectorAll('#legend input')];
@@ -258,3 +259,16 @@ def test_the_clean_report_embeds_the_viewer(tmp_path):
     assert probe["counts"]["filled"] > 0 and "filled, est. error" in probe["filledTip"]
     # the samples a step judged wrong, by step (the report knows the steps; a file does not)
     assert re.search(r"judged wrong by step \d+ \(\w+\)", probe["legend"]), probe["legend"]
+
+
+@pytest.mark.parametrize("frames,seen", [(1, True), (40, False), (0, False)],
+                         ids=["one-frame", "nothing-seen", "no-frames"])
+def test_degenerate_takes_load_without_errors(tmp_path, frames, seen):
+    from mocapfix.core.motion import Motion
+    from mocapfix.quality import viewer
+
+    pos = np.zeros((frames, 3, 3)) if seen else np.full((frames, 3, 3), np.nan)
+    page = tmp_path / "v.html"
+    page.write_text(viewer.single([Motion(pos, ["a", "b", "c"], 30.0)]), encoding="utf-8")
+    probe = _probe(page, tmp_path)
+    _check_clean_page(probe)
