@@ -118,6 +118,10 @@ def _b64_len(n_bytes: int) -> int:
     return 4 * math.ceil(n_bytes / 3)
 
 
+def _finite(x) -> float | None:
+    return float(x) if x is not None and math.isfinite(x) else None
+
+
 def _fill_runs(motion: Motion, keep: np.ndarray) -> list[list]:
     """``[joint, start, length, error_mm, bound_mm]`` of every run the cleaner filled, from
     ``Motion.fill_errors`` or, for a C3D read back from disk, its ``MOCAPFIX`` group
@@ -128,7 +132,7 @@ def _fill_runs(motion: Motion, keep: np.ndarray) -> list[list]:
         for name, entries in motion.fill_errors.items():
             for e in entries:
                 if name in where and (len(e) < 6 or e[5]):
-                    out.append([where[name], int(e[0]), int(e[1]), e[2], e[3]])
+                    out.append([where[name], int(e[0]), int(e[1]), _finite(e[2]), _finite(e[3])])
         return out
     if motion.format == "c3d" and motion.source is not None:
         from mocapfix.formats.c3d import listed_fills
@@ -179,40 +183,37 @@ def _as_differences(codes: np.ndarray, base: np.ndarray) -> tuple[dict, int] | N
 
 
 def _encode(layers: list[Layer], stride: int) -> tuple[list[dict], int]:
-    """The layers' JSON at one frame stride, and the bytes of positions text it holds."""
+    """The layers' JSON at one frame stride, and the bytes of positions text it holds. A
+    "before" layer followed by its "after" shares its quantisation grid and is stored as
+    its differences from it when that is smaller."""
     out, size = [], 0
-    by_after = {}
-    for n, layer in enumerate(layers):
-        if layer.role == "after":
-            by_after[n] = layer
     for n, layer in enumerate(layers):
         pos = layer.metres[::stride]
         entry = {"label": layer.label, "role": layer.role, "names": layer.names,
                  "bones": layer.bones, "fps": layer.fps / stride, "frames": int(pos.shape[0]),
                  "stride": stride, "fills": layer.fills, "flags": layer.flags,
                  "flagKinds": layer.flag_kinds}
-        partner = by_after.get(n + 1) if layer.role == "before" else None
-        if layer.role == "after" and n > 0 and layers[n - 1].role == "before":
-            origin, step = _box(pos, layers[n - 1].metres[::stride])
-        elif partner is not None:
-            origin, step = _box(pos, partner.metres[::stride])
-        else:
-            origin, step = _box(pos)
+        partner = None
+        if layer.role == "before" and n + 1 < len(layers) and layers[n + 1].role == "after":
+            partner = layers[n + 1]
+        elif layer.role == "after" and n > 0 and layers[n - 1].role == "before":
+            partner = layers[n - 1]
+        origin, step = _box(pos, *([] if partner is None else [partner.metres[::stride]]))
         codes = quantise(pos, origin, step)
         entry.update(origin=origin.tolist(), step=step.tolist())
         if layer.confidence is not None:
             level = np.rint(np.clip(np.nan_to_num(layer.confidence[::stride]), 0, 1) * 255)
             entry["confidence"] = _b64(level.astype("u1"))
             size += _b64_len(level.size)
-        if partner is not None:
+        stored = None
+        if partner is not None and layer.role == "before":
             stored = _as_differences(codes, quantise(partner.metres[::stride], origin, step))
-            if stored is not None:
-                entry.update(base=n + 1, **stored[0])
-                size += stored[1]
-                out.append(entry)
-                continue
-        entry["positions"] = _b64(codes)
-        size += _b64_len(codes.nbytes)
+        if stored is not None:
+            entry.update(base=n + 1, **stored[0])
+            size += stored[1]
+        else:
+            entry["positions"] = _b64(codes)
+            size += _b64_len(codes.nbytes)
         out.append(entry)
     return out, size
 

@@ -260,3 +260,13 @@ def test_samples_a_step_judged_wrong_are_runs_by_step():
     assert after["flagKinds"], "no step judged the spike wrong"
     hits = [f for f in after["flags"] if f[0] == 4 and f[1] <= 50 < f[1] + f[2]]
     assert hits and all(0 <= f[3] < len(after["flagKinds"]) for f in after["flags"])
+
+
+def test_fill_estimates_of_any_number_type_or_none_are_carried():
+    before = _walk(60, 3, gaps=False)
+    after = before.copy()
+    after.fill_errors = {"M0": [[1, 2, np.float32(1.5), np.float32(3.0), "fill", True, False]],
+                         "M1": [[3, 4, float("nan"), None, "fill", True, False]],
+                         "M2": [[5, 6, 1.0, 2.0, "fill", False, False]]}        # left, not written
+    data = _data(viewer.before_after(before, after))
+    assert data["layers"][1]["fills"] == [[0, 1, 2, 1.5, 3.0], [1, 3, 4, None, None]]
