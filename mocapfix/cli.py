@@ -243,7 +243,7 @@ def info(inputs, as_json, fps, include, exclude):
               show_default=True, help="The HTML file to write.")
 @click.option("--open", "open_it", is_flag=True, help="Open the page in the web browser.")
 @click.option("--budget", type=click.FloatRange(0.05, 1000), default=3.0, show_default=True,
-              help="MB of positions the page may hold; longer takes keep every k-th frame.")
+              help="MB the page may hold; longer takes keep every k-th frame.")
 @click.option("--fps", type=FPS, default=None,
               help="Frame rate for formats that do not store one (AMC; default 120).")
 @common
