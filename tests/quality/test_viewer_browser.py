@@ -58,6 +58,18 @@ window.addEventListener('load', () => {
   boxes.forEach((o, m) => { if (o.checked !== (m === boxes.length - 1)) o.click(); });
   const lastOnly = snap();
   boxes.forEach(o => { if (!o.checked) o.click(); });
+  // orbit (drag) and zoom (wheel) with the mouse, then speed and play from the controls
+  v.setFrame(f1); const still = snap();
+  const at = (type, x, y, extra) => (type === 'mousedown' ? c : window).dispatchEvent(
+    new MouseEvent(type, Object.assign({clientX: x, clientY: y, bubbles: true}, extra || {})));
+  at('mousedown', 300, 300); at('mousemove', 420, 330); at('mouseup', 420, 330);
+  const orbited = differ(still, snap());
+  c.dispatchEvent(new WheelEvent('wheel', {deltaY: -400, clientX: 400, clientY: 300, bubbles: true, cancelable: true}));
+  const zoomed = differ(still, snap());
+  const speed = document.getElementById('speed'); speed.value = '2'; speed.dispatchEvent(new Event('change'));
+  document.getElementById('play').click();
+  const playing = document.getElementById('play').textContent;
+  document.getElementById('play').click();
   // hover every drawn point at a frame where it is seen; keep what the tooltip says
   const tip = document.getElementById('tip'), r = c.getBoundingClientRect(), hovered = {};
   const want = new Set(window.__hover || []);
@@ -87,6 +99,7 @@ window.addEventListener('load', () => {
     labels: v.layers.map(L => L.label), counts: v.counts,
     legend: document.getElementById('legend').innerText,
     hovered: hovered, filledTip: filledTip, filledPixel: filledPixel,
+    orbited: orbited, zoomed: zoomed, playing: playing,
   }));
 });
 </script>"""
@@ -135,6 +148,8 @@ def test_a_shared_capture_plays(tmp_path, relpath):
     assert probe["brightA"] > 50 and probe["brightB"] > 50, "nothing drawn"
     assert probe["repeat"] == 0, "the same frame drawn twice differs"
     assert probe["changed"] > 50, "advancing the frame did not change the picture"
+    assert probe["orbited"] > 50 and probe["zoomed"] > 50, "the mouse does not move the camera"
+    assert probe["playing"] == "Pause"
     motion = read(path)
     assert probe["labels"] == [path.name]
     assert max(probe["alone"][0]["drawn"]) <= motion.n_joints
