@@ -76,8 +76,11 @@ window.addEventListener('load', () => {
   let filledTip = null, filledPixel = null;
   for (const f of seen) {
     v.setFrame(f);
-    for (const p of v.picks()) {
+    const picks = v.picks();
+    for (const p of picks) {
       const L = v.layers[p[2]], name = L.names[p[3]];
+      // a point another one hides (within the 8 px of a hover) is hovered at another frame
+      if (picks.some(q => q !== p && (q[0] - p[0]) ** 2 + (q[1] - p[1]) ** 2 <= 64)) continue;
       const mark = L.mark ? L.mark[p[4]] : 0;
       if (!(want.has(name) && !(name in hovered)) && !(mark === 1 && filledTip === null)) continue;
       window.dispatchEvent(new MouseEvent('mousemove', {clientX: p[0] + r.left, clientY: p[1] + r.top}));
