@@ -65,17 +65,19 @@
       for (let f = Math.max(lo, 0); f <= Math.min(hi, A.frames - 1); f++) A.flag[f * A.joints + j] = kind + 1;
     }
     B.flag = A.flag; B.flagKinds = A.flagKinds;
-    const moved = new Float32Array(A.mark.length);
+    // a filter moves every sample a little: mark only what moved well beyond the typical
+    // move (3x the median move of the samples present before and after), never under 1 mm
+    const moved = new Float32Array(A.mark.length), some = [];
+    const every = Math.max(1, Math.floor(A.mark.length / 50000));
     for (let s = 0; s < A.mark.length; s++) {
       const i = 3 * s, gb = B.codes[i] === MISSING, ga = A.codes[i] === MISSING;
       if (gb && !ga) { A.mark[s] = 1; counts.filled++; }
       else if (!gb && ga) { B.mark[s] = 3; counts.deleted++; }
-      else if (!gb) moved[s] = Math.hypot(A.xyz[i] - B.xyz[i], A.xyz[i + 1] - B.xyz[i + 1], A.xyz[i + 2] - B.xyz[i + 2]);
+      else if (!gb) {
+        moved[s] = Math.hypot(A.xyz[i] - B.xyz[i], A.xyz[i + 1] - B.xyz[i + 1], A.xyz[i + 2] - B.xyz[i + 2]);
+        if (s % every === 0) some.push(moved[s]);
+      }
     }
-    // a filter moves every sample a little: mark only what moved well beyond the typical
-    // move (3x the median of the samples it moved), and never under 1 mm
-    const some = [];
-    for (let s = 0; s < moved.length; s += Math.max(1, Math.floor(moved.length / 50000))) if (moved[s] > 0) some.push(moved[s]);
     some.sort((a, b) => a - b);
     changeM = Math.max(CHANGE_M, 3 * (some.length ? some[some.length >> 1] : 0));
     for (let s = 0; s < moved.length; s++) {

@@ -176,6 +176,11 @@ def test_before_after_of_a_gap_filled_c3d(tmp_path):
     assert b["drawn"][0] > 0 and b["drawn"][1] == 0 and a["drawn"][0] == 0 and a["drawn"][1] > 0
     assert probe["bothVsLast"] > 0, "the before layer adds nothing to the picture"
     assert probe["counts"]["filled"] == filled
+    # moved: beyond 3x the median move of the samples seen in both, and at least 1 mm
+    both = ~before.missing & ~after.missing
+    move = np.linalg.norm(after.positions - before.positions, axis=2)[both] * before.metres_per_unit
+    moved = int((move >= max(0.001, 3 * np.median(move))).sum())
+    assert abs(probe["counts"]["changed"] - moved) <= 2, (probe["counts"], moved)
     # a filled sample carries the error estimate the cleaned C3D lists, in its own colour
     assert re.search(r"filled, est\. error \d+\.\d mm", probe["filledTip"]), probe["filledTip"]
     assert probe["filledPixel"][:3] != [0x4f, 0xc3, 0xf7]
