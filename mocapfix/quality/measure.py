@@ -437,6 +437,10 @@ def measure_cleaning(result: CleanResult) -> dict:
                 if refusals:
                     left["rejected_by"] = refusals
                 gaps_left.append(left)
+        removed = [{"start": int(s), "length": int(n),
+                    "removed_by": ", ".join(dict.fromkeys(
+                        r.step for r in records if r.flagged[s:s + n, j].any()))}
+                   for s, n in zip(*runs((~miss_b & miss_a)[:, j:j + 1])[1:])]
         mv = moved[:, j]
         has_mv = np.isfinite(mv).any()
         correction = {"mean": finite(np.nanmean(mv)) if has_mv else 0.0,
@@ -458,6 +462,8 @@ def measure_cleaning(result: CleanResult) -> dict:
                      "filled": gaps_filled, "unfilled": gaps_left},
             "fill_bound_mm": max(bounds, default=None),
             "left_uncertain": finite(left_uncertain[span, j].mean()) if T_take else 0.0,
+            # samples seen in the input, judged wrong and left missing (no fill trusted)
+            "removed": removed,
             "outliers_flagged": int(flagged[:, j].sum()),
             "correction_mm": correction,
             "jitter_before": finite(jitter_b[j]),

@@ -88,7 +88,8 @@ def _fill_summary(f: dict) -> str:
 
 def _gaps_left(report: dict, shown: int = 12) -> list[str]:
     """Markdown section listing the gaps no step filled completely, with the reasons the
-    steps gave for refusing their fills (``rejected_by``); gaps of one span and one reason
+    steps gave for refusing their fills (``rejected_by``), and the samples judged wrong and
+    left missing (``removed``); gaps of one span and one reason
     share a row (a whole-body dropout is one row, not one per marker). None: no section."""
     fps, frames = report["file"].get("fps") or 0, report["file"]["frames"]
     rows: dict[tuple, list[str]] = {}
@@ -98,6 +99,9 @@ def _gaps_left(report: dict, shown: int = 12) -> list[str]:
             if not why and g["length"] == frames:
                 why = "never seen in the input"
             rows.setdefault((g["start"], g["length"], g["filled_frames"], why), []).append(j["name"])
+        for g in j.get("removed", ()):
+            why = f"seen in the input, judged wrong ({g['removed_by']}), no fill trusted"
+            rows.setdefault((g["start"], g["length"], 0, why), []).append(j["name"])
     if not rows:
         return []
     out = ["", "## Gaps left unfilled", "",
