@@ -256,11 +256,13 @@ def list_cleaners(markdown):
 
 @main.command("formats")
 def list_formats():
-    """The file formats mocapfix reads and writes: name (for --to), suffixes."""
+    """The file formats mocapfix reads and writes: name (for --to and a config's
+    formats:), family (what its points are; a config may name it), suffixes."""
     from mocapfix import formats
 
+    family = {n: f for f, names in formats.FAMILIES.items() for n in names}
     for name in formats.NAMES:
-        click.echo(f"{name:<12} {' '.join(formats.suffixes(name))}")
+        click.echo(f"{name:<12} {family[name]:<10} {' '.join(formats.suffixes(name))}")
 
 
 @main.command("configs")

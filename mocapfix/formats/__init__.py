@@ -1,8 +1,11 @@
 """Format registry: picks a reader by suffix and content, a writer by suffix.
 
 A format is one module of this package that declares, at its top level and as literals,
-``NAME = "..."``, ``SUFFIXES = (".ext", ...)`` and optionally ``SNIFF_ORDER = n`` (where
-its sniffer runs when a file's suffix does not settle the format; lower first), and defines
+``NAME = "..."``, ``SUFFIXES = (".ext", ...)``, ``FAMILY = "..."`` (what its points are:
+``markers`` for optical marker files, ``rotations`` for joint-rotation files, ``skeletons``
+for depth-sensor skeletons; a config's ``formats:`` may name a family) and optionally
+``SNIFF_ORDER = n`` (where its sniffer runs when a file's suffix does not settle the
+format; lower first), and defines
 ``sniff(head: bytes) -> bool``, ``read(path, **options) -> Motion`` and
 ``write(motion, path, **options) -> list[Path]`` (writers use
 :mod:`mocapfix.core.fileio` so outputs appear atomically); one whose reader reads other
@@ -24,7 +27,7 @@ from mocapfix.core.errors import MocapfixError, UnreadableFileError, WriteError
 from mocapfix.core.motion import Motion
 
 #: a module-level declaration of a format module (module docstring)
-_DECLARATION = re.compile(r"^(NAME|SUFFIXES|SNIFF_ORDER) = (.+)$", re.MULTILINE)
+_DECLARATION = re.compile(r"^(NAME|SUFFIXES|SNIFF_ORDER|FAMILY) = (.+)$", re.MULTILINE)
 
 
 def _declared_formats(paths) -> dict:
@@ -39,7 +42,12 @@ def _declared_formats(paths) -> dict:
         if "NAME" in decl and "SUFFIXES" in decl:
             found.append((decl.get("SNIFF_ORDER", 10), decl["NAME"], f"{__name__}.{info.name}",
                           tuple(s.lower() for s in decl["SUFFIXES"])))
+            _FAMILY[decl["NAME"]] = decl.get("FAMILY", decl["NAME"])
     return {name: (mod, suffixes) for _, name, mod, suffixes in sorted(found)}
+
+
+#: format name -> its family (filled by :func:`_declared_formats`)
+_FAMILY: dict[str, str] = {}
 
 
 #: The one format table: name -> (module, suffixes), sniffing order. Configs, rule files and
@@ -47,6 +55,17 @@ def _declared_formats(paths) -> dict:
 FORMATS = _declared_formats(__path__)
 #: format names, as configs and rule files spell them in ``formats:``
 NAMES = tuple(FORMATS)
+#: family -> its format names (``markers``: c3d, trc and the vendors' exports)
+FAMILIES = {family: tuple(n for n in NAMES if _FAMILY[n] == family)
+            for family in dict.fromkeys(_FAMILY[n] for n in NAMES)}
+#: the formats whose points are optical markers
+MARKER_FORMATS = FAMILIES["markers"]
+
+
+def matches(name: str, listed) -> bool:
+    """Format ``name`` is among ``listed`` (format or family names: a config's or a rule
+    file's ``formats:``)."""
+    return name in listed or _FAMILY.get(name) in listed
 _SUFFIXES = {suffix: name for name, (_, suffixes) in FORMATS.items() for suffix in suffixes}
 #: suffixes of files that hold motions (``.asf`` alone is a skeleton, read as a rest pose)
 MOTION_SUFFIXES = tuple(suffix for suffix in _SUFFIXES if suffix != ".asf")

@@ -74,6 +74,8 @@ from mocapfix.core.units import asf_length_unit
 
 NAME = "asfamc"
 SUFFIXES = (".amc", ".asf")
+#: what its points are (configs and rule files may name the family: ``formats: [rotations]``)
+FAMILY = "rotations"
 #: where its sniffer runs when the suffix does not tell (lower first: the stricter tests)
 SNIFF_ORDER = 2
 DEFAULT_FPS = 120.0

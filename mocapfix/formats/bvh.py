@@ -81,6 +81,8 @@ from mocapfix.core.quantity import MAX_FRAME_RATE_HZ, MIN_FRAME_RATE_HZ
 
 NAME = "bvh"
 SUFFIXES = (".bvh",)
+#: what its points are (configs and rule files may name the family: ``formats: [rotations]``)
+FAMILY = "rotations"
 #: where its sniffer runs when the suffix does not tell (lower first: the stricter tests)
 SNIFF_ORDER = 1
 

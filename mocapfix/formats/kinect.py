@@ -94,6 +94,8 @@ from mocapfix.core.units import METRES_PER_UNIT, normalise_unit_name
 
 NAME = "kinect"
 SUFFIXES = (".csv", ".txt", ".tsv")
+#: what its points are (configs and rule files may name the family: ``formats: [skeletons]``)
+FAMILY = "skeletons"
 #: where its sniffer runs when the suffix does not tell (lower first: the stricter tests)
 SNIFF_ORDER = 3
 

@@ -90,6 +90,8 @@ from mocapfix.formats.textenc import refuse_wide_text
 
 NAME = "trc"
 SUFFIXES = (".trc",)
+#: what its points are (configs and rule files may name the family: ``formats: [markers]``)
+FAMILY = "markers"
 #: where its sniffer runs when the suffix does not tell (a fixed first word: strict)
 SNIFF_ORDER = 1
 

@@ -24,6 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from mocapfix.formats import MARKER_FORMATS
 from mocapfix.cleaners import build
 from mocapfix.cleaners.base import REJECTED_FILLS
 from mocapfix.solvers.spikes import hampel_flags
@@ -149,7 +150,7 @@ MAX_SWAP_POINTS = 120
 def suspected_swaps(motion: Motion) -> list[dict] | None:
     """Label swaps the ``swaps`` cleaner finds (optical marker data without a rig);
     None when not searched (not marker data, or more than MAX_SWAP_POINTS points)."""
-    if motion.rig is not None or motion.format not in ("c3d", "unknown") or motion.n_joints < 3:
+    if motion.rig is not None or motion.format not in (*MARKER_FORMATS, "unknown") or motion.n_joints < 3:
         return []
     if motion.n_joints > MAX_SWAP_POINTS:
         return None

@@ -118,3 +118,24 @@ def test_clean_to_trc_leaves_empty_exactly_what_the_report_lists_as_left(name, t
             listed[:, names.index(point["name"])] = read.missing[:, read.names.index(point["name"])]
     assert empty.any() and report["file"]["samples_filled"] > 0
     assert np.array_equal(empty, listed), np.argwhere(empty != listed)[:5]
+
+
+def test_a_trc_is_cleaned_as_its_c3d_is(tmp_path):
+    """The shipped configs name the ``markers`` family: a TRC converted from a C3D gets the
+    same steps, fills, flags and gaps left as the C3D itself."""
+    src = shared("c3d/c3dorg_s28_dynamic.C3D")
+    assert CliRunner().invoke(main, ["convert", str(src), "-o", str(tmp_path / "t"), "--to", "trc"]).exit_code == 0
+    trc = tmp_path / "t" / "c3dorg_s28_dynamic.trc"
+    for given, out in ((src, "a"), (trc, "b")):
+        r = CliRunner().invoke(main, ["clean", str(given), "-o", str(tmp_path / out)])
+        assert "ERROR" not in r.output, r.output
+    a = json.loads((tmp_path / "a" / "c3dorg_s28_dynamic.C3D.report.json").read_text())
+    b = json.loads((tmp_path / "b" / "c3dorg_s28_dynamic.trc.report.json").read_text())
+    assert [s["skipped"] if "skipped" in s else None for s in b["steps"]] == \
+        [s["skipped"] if "skipped" in s else None for s in a["steps"]]
+    for key in ("samples_filled", "samples_flagged", "samples_left_uncertain", "missing_after"):
+        assert a["file"][key] == b["file"][key], key
+    assert a["file"]["samples_filled"] > 0
+    ca, cb = formats.read(tmp_path / "a" / "c3dorg_s28_dynamic.C3D"), formats.read(tmp_path / "b" / "c3dorg_s28_dynamic.trc")
+    assert np.array_equal(ca.missing, cb.missing)
+    assert np.nanmax(np.abs(ca.positions - cb.positions)) < 0.01      # mm: float32 and %.5f
