@@ -104,13 +104,10 @@ def detect(path) -> str:
         if module(name).sniff(head):
             return name
     if path.suffix.lower() in TEXT_SUFFIXES and claim:
-        from mocapfix.formats.texttable import is_text
+        from mocapfix.formats.texttable import not_text, unknown_layout
         if not head.strip():
             raise UnreadableFileError(path, "file is empty")
-        if not is_text(head):
-            return claim[-1]  # its reader names the encoding or the undecodable byte
-        from mocapfix.formats.texttable import unknown_layout
-        raise UnreadableFileError(path, unknown_layout(head))
+        raise UnreadableFileError(path, not_text(head) or unknown_layout(head))
     if claim:
         return claim[0]  # let the reader explain what is wrong
     raise UnreadableFileError(path, "unknown file format (expected .c3d, .bvh, .amc/.asf, "

@@ -169,11 +169,9 @@ def fresh_text(motion: Motion, path: Path | None = None) -> str:
 
 def losses(motion: Motion) -> list[str]:
     out = tt.common_losses(motion, "a Motive CSV")
-    source = motion.source
-    if isinstance(source, tt.TableSource) and source.layout == LAYOUT and source.extra["other_kinds"]:
-        kept = ", ".join(source.extra["other_kinds"])
-        out.append(f"{kept} columns are not cleaned: written back as read when the frames and "
-                   f"markers are unchanged, dropped otherwise")
+    if isinstance(motion.source, tt.TableSource) and motion.source.layout == LAYOUT:
+        kept = ", ".join(motion.source.extra["other_kinds"])
+        out += tt.kept_verbatim(motion, LAYOUT, kept and f"{kept} columns")
     if motion.units not in _UNIT_WORDS:
         out.append(f"Motive stores m, cm or mm: positions in {motion.units} are converted to mm")
     return out

@@ -167,6 +167,9 @@ def fresh_text(motion: Motion, path: Path | None = None) -> str:
 
 def losses(motion: Motion) -> list[str]:
     out = tt.common_losses(motion, "a Nexus CSV")
+    if isinstance(motion.source, tt.TableSource) and motion.source.layout == LAYOUT:
+        others = [x for x in motion.source.extra["sections"] if x != "Trajectories"]
+        out += tt.kept_verbatim(motion, LAYOUT, others and f"{', '.join(others)} sections")
     if motion.units not in METRES_PER_UNIT:
         out.append(f"unit {motion.units!r} is written as mm without conversion")
     return out

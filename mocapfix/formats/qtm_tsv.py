@@ -202,6 +202,8 @@ def fresh_text(motion: Motion, path: Path | None = None) -> str:
 
 def losses(motion: Motion) -> list[str]:
     out = tt.common_losses(motion, "a QTM TSV")
+    out += tt.kept_verbatim(motion, LAYOUT, "the header lines (time stamp, description, "
+                                            "trajectory types, events)")
     if motion.units != "mm":
         out.append(f"QTM TSV stores millimetres: positions in {motion.units} are converted")
     return out

@@ -57,16 +57,19 @@ def head_lines(head: bytes, n: int = 12) -> list[str]:
     return [ln.rstrip("\r") for ln in lines[:n]]
 
 
-def is_text(head: bytes) -> bool:
-    """``head`` (a file's first bytes) is UTF-8 text, not UTF-16/32 (a multi-byte character
-    cut at the end of the head is allowed)."""
-    if wide_encoding(head) is not None or b"\x00" in head:
-        return False
+def not_text(head: bytes) -> str | None:
+    """Why ``head`` (a file's first bytes) is not UTF-8 text -- UTF-16/32, or the offset of
+    an undecodable byte -- or None (a multi-byte character cut at the end is allowed)."""
+    wide = wide_encoding(head)
+    if wide is not None:
+        return (f"text table is {wide} text; mocapfix reads ASCII/UTF-8 text tables: save it "
+                "as UTF-8 (e.g. iconv -f UTF-16 -t UTF-8)")
     try:
         head.decode("utf-8")
     except UnicodeDecodeError as exc:
-        return exc.start >= len(head) - 3 and len(head) >= 4096
-    return True
+        if not (exc.start >= len(head) - 3 and len(head) >= 4096):
+            return f"not a text file (undecodable byte at offset {exc.start})"
+    return None
 
 
 def unknown_layout(head: bytes) -> str:
@@ -309,3 +312,14 @@ def common_losses(motion: Motion, layout: str) -> list[str]:
             out.append(f"{layout} rows are evenly spaced: the irregular time stamps are "
                        f"replaced by frames at {motion.fps:g} Hz")
     return out
+
+
+def kept_verbatim(motion: Motion, layout: str, what: str) -> list[str]:
+    """The note for what a layout keeps from its source without cleaning it (``what``:
+    "Devices, Model Outputs sections"), when ``motion`` came from ``layout``."""
+    source = motion.source
+    if not (isinstance(source, TableSource) and source.layout == layout and what):
+        return []
+    how = ("written back as read" if fits(source, motion, layout) else
+           "dropped: the frames or markers changed, so a fresh file is written")
+    return [f"{what} not cleaned: {how}"]

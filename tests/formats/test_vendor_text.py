@@ -178,6 +178,11 @@ def test_cross_format_through_c3d(name, fmt, expected, tmp_path):
 def test_losses_name_what_the_layout_drops():
     motive = formats.read(VENDOR / "motive_doc.csv")
     assert any("Rigid Body" in n for n in formats.losses(motive, "motive_csv"))
+    nexus = formats.read(VENDOR / "nexus_sections_doc.csv")
+    assert formats.losses(nexus, "nexus_csv") == [
+        "Devices, Model Outputs sections not cleaned: written back as read"]
+    fewer = nexus.replace(positions=nexus.positions[:2], times=nexus.times[:2])
+    assert "dropped" in formats.losses(fewer, "nexus_csv")[0]
     conf = Motion(np.zeros((3, 2, 3)), ["a", "b"], 30.0, confidence=np.ones((3, 2)))
     for fmt in ("nexus_csv", "qtm_tsv", "motive_csv"):
         assert any("confidence" in n for n in formats.losses(conf, fmt))
