@@ -232,3 +232,29 @@ def test_malformed_vendor_files_name_the_line(tmp_path, name, edit, expect):
     message = str(info.value)
     assert expect in message and "\n" not in message and len(message) < 400
     assert info.value.line is not None or "rate" in message
+
+
+def test_qtm_headed_missing_is_empty_or_nan_and_zeros_are_kept(tmp_path):
+    """The documented decision: in the headed layout empty/NaN fields are missing and an
+    exact 0,0,0 triple is a position (noted) unless zero_missing=True."""
+    lines = (VENDOR / "qtm_hand_embodiment_recording.tsv").read_text().split("\n")
+    row = lines[13].split("\t")            # frame 2
+    row[2:5] = ["", "", ""]                # hand_top empty
+    row[5:8] = ["NaN", "NaN", "NaN"]       # hand_left NaN
+    row[8:11] = ["0.000", "0.000", "0.000"]  # hand_right exact zeros
+    lines[13] = "\t".join(row)
+    path = tmp_path / "gaps.tsv"
+    path.write_text("\n".join(lines))
+    motion = formats.read(path)
+    assert motion.missing[1, :3].tolist() == [True, True, False]
+    assert motion.positions[1, 2].tolist() == [0.0, 0.0, 0.0]
+    assert any("exactly (0, 0, 0): kept as positions" in n for n in motion.notes)
+    assert formats.read(path, zero_missing=True).missing[1, 2]
+    out = tmp_path / "out.tsv"
+    formats.write(motion, out)
+    assert out.read_bytes() == path.read_bytes()
+    motion.positions[1, 0] = [1.0, 2.0, 3.0]
+    motion.positions[2, 0] = np.nan
+    formats.write(motion, out)
+    assert out.read_text().split("\n")[13].split("\t")[2:5] == ["1.000", "2.000", "3.000"]
+    assert out.read_text().split("\n")[14].split("\t")[2:5] == ["NaN", "NaN", "NaN"]
