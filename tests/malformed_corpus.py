@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 SAMPLE_DATA = Path(__file__).resolve().parents[1] / "sample_data"
+VENDOR_DATA = Path(__file__).resolve().parent / "data" / "vendor"
 SEED = 13
 
 
@@ -451,6 +452,37 @@ def config_cases(rng) -> list[tuple[str, bytes]]:
     return out
 
 
+def _vendor_specials(name: str, data: bytes) -> list[tuple[str, bytes]]:
+    """Vendor marker tables (Nexus CSV, QTM TSV, Motive CSV): bad rates, huge counts, a
+    5 MB field, a truncated last row, a binary block in the data."""
+    lines = data.split(b"\n")
+    out = []
+    if name.endswith(".tsv"):
+        rate = next(i for i, ln in enumerate(lines) if ln.startswith(b"FREQUENCY"))
+        for tag, value in (("ratenan", b"nan"), ("ratezero", b"0"), ("rateneg", b"-100"),
+                           ("rateword", b"fast")):
+            out.append((tag, b"\n".join(lines[:rate] + [b"FREQUENCY\t" + value] + lines[rate + 1:])))
+        count = next(i for i, ln in enumerate(lines) if ln.startswith(b"NO_OF_MARKERS"))
+        out.append(("bombmarkers", b"\n".join(lines[:count] + [b"NO_OF_MARKERS\t" + b"9" * 15]
+                                              + lines[count + 1:])))
+        out.append(("bombframes", data.replace(lines[0], b"NO_OF_FRAMES\t" + b"9" * 30, 1)))
+    elif lines[0].startswith(b"Format Version"):
+        for tag, value in (("ratenan", b"nan"), ("ratezero", b"0.000000"), ("rateneg", b"-120")):
+            out.append((tag, data.replace(b"Export Frame Rate,120.000000",
+                                          b"Export Frame Rate," + value, 1)))
+        out.append(("labelsgone", data.replace(b",Name,", b",Nom,", 1)))
+    else:
+        at = lines.index(next(ln for ln in lines if ln.rstrip(b"\r,") == b"Trajectories"))
+        for tag, value in (("ratenan", b"nan"), ("ratezero", b"0"), ("rateneg", b"-100")):
+            out.append((tag, b"\n".join(lines[:at + 1] + [value] + lines[at + 2:])))
+        out.append(("labelsgone", b"\n".join(lines[:at + 2] + [b""] + lines[at + 3:])))
+    last = max(i for i, ln in enumerate(lines) if ln.strip())
+    out.append(("cuttail", b"\n".join(lines[:last] + [lines[last][:len(lines[last]) // 2]])))
+    out.append(("bombfield", b"\n".join(lines[:last] + [lines[last] + b"7" * 5_000_000])))
+    out.append(("garbageblock", b"\n".join(lines[:last] + [bytes(range(256)) * 4])))
+    return out
+
+
 # ------------------------------------------------------------------------ the corpus
 def cases(seed: int = SEED) -> list[Case]:
     rng = np.random.default_rng(seed)
@@ -480,6 +512,14 @@ def cases(seed: int = SEED) -> list[Case]:
             for t, raw in _lines_edit(amc, rng, 12, b" ")]
     out += [Case(f"kinect-{t}", family(t), "walk_kinect_v2.csv", {"walk_kinect_v2.csv": raw})
             for t, raw in _kinect_specials(kin) + _lines_edit(kin, rng, 12, b",")]
+    vrng = np.random.default_rng(seed + 1)   # its own stream: the other cases stay as they were
+    for prefix, name in (("nexus", "nexus_sections_doc.csv"), ("qtm", "qtm_old_doc.tsv"),
+                         ("qtmhdr", "qtm_hand_embodiment_recording.tsv"), ("motive", "motive_doc.csv")):
+        raw = (VENDOR_DATA / name).read_bytes()
+        out += _generic(name, raw, vrng, {}, True, prefix)[::2]
+        out += [Case(f"{prefix}-{t}", family(t), name, {name: v}) for t, v in _vendor_specials(name, raw)]
+        sep = b"\t" if name.endswith(".tsv") else b","
+        out += [Case(f"{prefix}-{t}", "cols", name, {name: v}) for t, v in _lines_edit(raw, vrng, 8, sep)]
     out += [Case(f"c3dgen-{t}", family(t), "gen.c3d", {"gen.c3d": raw}) for t, raw in _c3d_specials(rng)]
     out += [Case(f"config-{t}", family(t), "config.yaml", {"config.yaml": raw}, kind="config")
             for t, raw in config_cases(rng)]
