@@ -449,8 +449,6 @@ def _run_clean(inputs, outdir, make_pipeline, reports, jobs, as_json, fps, allow
         _fail(str(exc), debug, exc)
     failed = [r for r in results if r["status"] == "ERROR"]
     skipped = [str(j.source) for j, _ in plan.skipped]
-    for problem in plan.problems:
-        out.error(f"mocapfix: error: {one_line(problem)}")
     if as_json:
         click.echo(json.dumps({"files": results, "cleaned": len(results) - len(failed),
                                "failed": len(failed), "skipped": skipped,
@@ -465,6 +463,8 @@ def _run_clean(inputs, outdir, make_pipeline, reports, jobs, as_json, fps, allow
                                       if s in graded) if graded else "")
                  + (f"; {len(failed)} failed (ERROR): " + ", ".join(one_line(r["input"]) for r in failed)
                     if failed else ""), level=-1, err=bool(failed))
+    for problem in plan.problems:       # the manifest or the config record not written
+        out.error(f"mocapfix: error: {one_line(problem)}")
     sys.exit(EXIT_SOME_FAILED if failed or plan.problems else EXIT_OK)
 
 

@@ -8,7 +8,9 @@ the output folder's manifest, :mod:`mocapfix.batch.manifest` — or kept by
 ``policy="skip"``), and refuses with one :class:`~mocapfix.core.errors.MocapfixError` what
 the run must not do (outputs of another run in the way without a policy, two configs or
 models mixed in one folder by ``"skip"``, an AMC whose ASF copy would pair it with the
-wrong skeleton, an output folder that cannot be written). :func:`run_clean` runs the plan:
+wrong skeleton, an output folder that cannot be written, or one another run holds: the
+folder's run lock, :func:`~mocapfix.batch.manifest.lock_output_folder`, held from the plan
+to the end of the run). :func:`run_clean` runs the plan:
 it records each finished file in the manifest (a killed run resumes), leaves nothing of a
 file that failed, takes back the folders it made when nothing ran, and writes the run's
 effective config beside the outputs. :func:`clean_batch` is both in one call, for a

@@ -77,8 +77,12 @@ def pool_worker_init(threads: int = 1, creator: int | None = None) -> None:
     once ``creator``, the process that started the pool, is gone -- also when it died
     before this worker got here: a ``kill -9`` of ``mocapfix clean -j N`` left its idle
     workers waiting forever on a queue whose other end their siblings keep open. (Dask's
-    worker processes watch their parent themselves.)"""
+    worker processes watch their parent themselves.) The run's output-folder lock is not
+    held by the worker (:func:`~mocapfix.batch.manifest.drop_inherited_locks`)."""
+    from mocapfix.batch.manifest import drop_inherited_locks
+
     _kill_me_with_parent()
+    drop_inherited_locks()
     if creator is not None:
         threading.Thread(target=_exit_when_gone, args=(creator,), daemon=True,
                          name="mocapfix-parent-watch").start()

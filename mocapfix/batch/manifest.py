@@ -22,6 +22,10 @@ output whose last record is ``started`` under the same run key was written by an
 interrupted run of this same config (killed between writing and recording) and may be
 replaced without ``--overwrite``. At the end of a run the journal is rewritten (atomically)
 with one record per input and output.
+
+The journal is never written through a link (one at its name is refused); a write the disk
+refuses is a :class:`~mocapfix.core.errors.WriteError`, with no torn line left. One run at a
+time writes into a folder: :func:`lock_output_folder`.
 """
 from __future__ import annotations
 
@@ -260,7 +264,22 @@ def lock_output_folder(outdir, soft: bool = False) -> int | None:
     with contextlib.suppress(OSError):  # who holds it, for the message above (a full disk: none)
         os.ftruncate(fd, 0)
         os.write(fd, f"{os.getpid()}\n".encode("ascii"))
+    _HELD.add(fd)
     return fd
+
+
+#: the descriptors of the run locks this process holds
+_HELD: set[int] = set()
+
+
+def drop_inherited_locks() -> None:
+    """In a forked worker: close the run locks' descriptors copied from its parent, so that
+    only the run holds its lock (a worker still dying after a ``kill -9`` of the run kept
+    the folder locked for the run that came next)."""
+    for fd in _HELD:
+        with contextlib.suppress(OSError):
+            os.close(fd)
+    _HELD.clear()
 
 
 def unlock_output_folder(outdir, fd: int | None) -> None:
@@ -274,6 +293,7 @@ def unlock_output_folder(outdir, fd: int | None) -> None:
         os.unlink(Path(outdir) / LOCK_NAME)
     with contextlib.suppress(OSError):
         fcntl.flock(fd, fcntl.LOCK_UN)
+    _HELD.discard(fd)
     os.close(fd)
 
 

@@ -13,14 +13,14 @@ import subprocess
 
 import pytest
 from click.testing import CliRunner
+from conftest import SAMPLE_DATA, config_file, md5_tree, no_traceback
 
 from mocapfix.cli import main
 from mocapfix.core import fileio
 from mocapfix.core.errors import WriteError
 
-from conftest import SAMPLE_DATA, config_file, md5_tree, no_traceback
-
-BVH, KIN = SAMPLE_DATA / "walk.bvh", SAMPLE_DATA / "walk_kinect_v2.csv"
+BVH, KIN, C3D = (SAMPLE_DATA / "walk.bvh", SAMPLE_DATA / "walk_kinect_v2.csv",
+                 SAMPLE_DATA / "walk_markers.c3d")
 
 
 def _inputs(tmp_path):
@@ -90,7 +90,7 @@ def small_disk(path, size: str):
     elsewhere the test is skipped and the injected-error tests below still run)."""
     path.mkdir()
     r = subprocess.run(["mount", "-t", "tmpfs", "-o", f"size={size}", "tmpfs", str(path)],
-                       capture_output=True)
+                       capture_output=True, check=False)
     if r.returncode != 0:
         pytest.skip(f"cannot mount a tmpfs here: {r.stderr.decode().strip()}")
     try:
@@ -103,13 +103,13 @@ def _fill(folder, leave: int):
     """Fill the file system of ``folder`` up to ``leave`` bytes free."""
     st = os.statvfs(folder)
     free = st.f_bavail * st.f_frsize
-    with open(folder / "filler", "wb") as fh:
-        with contextlib.suppress(OSError):
-            fh.write(b"\0" * max(0, free - leave))
+    with open(folder / "filler", "wb") as fh, contextlib.suppress(OSError):
+        fh.write(b"\0" * max(0, free - leave))
 
 
 def test_a_full_disk_fails_each_file_with_its_path_and_the_run_ends_with_its_summary(tmp_path):
     src = _inputs(tmp_path)
+    shutil.copy(C3D, src / "c.c3d")          # its writer writes inside atomic_open
     before = md5_tree(src)
     with small_disk(tmp_path / "disk", "2m") as disk:
         _fill(disk, 8192)                   # room for the manifest's first lines, no output
@@ -118,11 +118,11 @@ def test_a_full_disk_fails_each_file_with_its_path_and_the_run_ends_with_its_sum
         no_traceback(r)
         assert r.exit_code == 1, r.output
         assert "internal error" not in r.output
-        for name in ("a.bvh", "b.csv"):
+        for name in ("a.bvh", "b.csv", "c.c3d"):
             assert f"{out / name}: cannot write: No space left on device" in r.output
-        assert "cleaned 0 of 2 files; 2 failed (ERROR)" in r.output
+        assert "cleaned 0 of 3 files; 3 failed (ERROR)" in r.output
         left = sorted(p.name for p in out.iterdir())
-        assert not [n for n in left if n.endswith(".part") or n.startswith(("a.", "b."))], left
+        assert not [n for n in left if n.endswith(".part") or n.startswith(("a.", "b.", "c."))], left
         # space again: the same command finishes the batch
         (disk / "filler").unlink()
         r = _clean(tmp_path, src, out)

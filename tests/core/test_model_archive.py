@@ -10,12 +10,11 @@ import zipfile
 import numpy as np
 import pytest
 from click.testing import CliRunner
+from conftest import SAMPLE_DATA, no_traceback
 
 from mocapfix.cli import main
 from mocapfix.core import models
 from mocapfix.core.errors import ConfigError
-
-from conftest import SAMPLE_DATA, no_traceback
 
 
 def _bomb(path, zeros: int, level: int = 9):

@@ -4,12 +4,12 @@ from __future__ import annotations
 
 import shutil
 
+import numpy as np
 from click.testing import CliRunner
+from conftest import SAMPLE_DATA, config_file, no_traceback
 
 from mocapfix.cli import main
 from mocapfix.core.errors import MAX_FIELD, MAX_REASON, UnreadableFileError
-
-from conftest import SAMPLE_DATA, config_file, no_traceback
 
 
 def test_a_5mb_number_in_a_kinect_csv_fails_that_file_with_a_short_line(tmp_path):
@@ -54,3 +54,29 @@ def test_a_bvh_full_of_garbage_gets_an_excerpt_not_the_garbage(tmp_path):
 def test_no_unreadable_file_error_keeps_a_reason_longer_than_the_cap():
     exc = UnreadableFileError("x.bvh", "y" * 100_000)
     assert len(exc.reason) <= MAX_REASON and exc.reason.endswith("(cut: 100,000 characters in all)")
+
+
+def test_a_long_number_within_the_cap_does_not_size_the_kinect_writer(tmp_path):
+    # each cell was copied into one fixed-width string array as wide as the longest token:
+    # 139 numbers of 999 characters made 47 MB of it (a 5 MB one: 211 GiB)
+    import tracemalloc
+
+    from mocapfix import formats
+
+    rows = (SAMPLE_DATA / "walk_kinect_v2.csv").read_text().split("\n")
+    for n in range(1, 140):
+        cells = rows[n].split(",")
+        cells[2] = cells[2] + "0" * (MAX_FIELD - 1 - len(cells[2]))
+        rows[n] = ",".join(cells)
+    (tmp_path / "long.csv").write_text("\n".join(rows))
+    motion = formats.read(tmp_path / "long.csv")
+    moved = motion.replace(positions=motion.positions + 0.001)
+    tracemalloc.start()
+    try:
+        formats.write(moved, tmp_path / "out.csv")
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 15e6, f"{peak / 1e6:.0f} MB to write a 500 KB file"
+    again = formats.read(tmp_path / "out.csv")
+    np.testing.assert_allclose(again.positions, moved.positions, atol=1e-6)

@@ -8,10 +8,9 @@ import json
 import re
 
 from click.testing import CliRunner
+from conftest import config_file, no_traceback
 
 from mocapfix.cli import main
-
-from conftest import config_file, no_traceback
 
 LABELS = ["<script>alert(1)</script>", "<img src=x onerror=alert(1)>", "\x1b[31mred\x07", "a&b"]
 
