@@ -218,8 +218,14 @@ class Manifest:
             os.close(self._fd)
             self._fd = None
         if compact and self.records:
-            atomic_write_text(self.path, "".join(json.dumps(r, sort_keys=True) + "\n"
-                                                 for r in self.records.values()))
+            from mocapfix.core.errors import WriteError
+
+            try:
+                atomic_write_text(self.path, "".join(json.dumps(r, sort_keys=True) + "\n"
+                                                     for r in self.records.values()))
+            except WriteError as exc:   # said as the appends say it (one line for both)
+                raise WriteError(self.path, "cannot write the manifest: "
+                                 + exc.reason.removeprefix("cannot write: ")) from None
 
 
 def lock_output_folder(outdir, soft: bool = False) -> int | None:

@@ -85,8 +85,8 @@ from pathlib import Path
 
 import numpy as np
 
-from mocapfix.core.errors import (MAX_FIELD, UnreadableFileError, UnsupportedFeatureError,
-                                  WriteError, excerpt)
+from mocapfix.core.errors import UnreadableFileError, UnsupportedFeatureError, WriteError, excerpt
+from mocapfix.formats.textenc import refuse_long_fields
 from mocapfix.core.fileio import atomic_write_bytes, read_input_bytes
 from mocapfix.core.quantity import MAX_FRAME_RATE_HZ, MIN_FRAME_RATE_HZ
 from mocapfix.core import kinect_joints as kl
@@ -179,21 +179,6 @@ def _content_indices(lines: list[str]) -> list[int]:
     """Indices of lines that hold data or a header (not blank, not ``#`` comments)."""
     return [i for i, line in enumerate(lines)
             if line.strip() and not line.lstrip().startswith("#")]
-
-
-def _refuse_long_fields(path, lines: list[str]) -> None:
-    """An UnreadableFileError naming the line of a field (a number, a name) longer than
-    :data:`~mocapfix.core.errors.MAX_FIELD` characters: no layout has one, and a 5 MB
-    "number" made the writer ask for a 211 GiB array."""
-    for i, line in enumerate(lines):
-        if len(line) > MAX_FIELD:
-            long = next((t for t in _FIELD_SEP.split(line) if len(t) > MAX_FIELD), None)
-            if long is not None:
-                raise UnreadableFileError(path, f"a field longer than {MAX_FIELD:,} characters: "
-                                                f"{excerpt(long)}", line=i + 1)
-
-
-_FIELD_SEP = re.compile(r"[,;\t ]")
 
 
 def _is_number(token: str) -> bool:
@@ -328,7 +313,7 @@ def read(path, fps: float | None = None, units: str | None = None,
     idx = _content_indices(lines)
     if not idx:
         raise UnreadableFileError(path, "file holds no data lines")
-    _refuse_long_fields(path, lines)
+    refuse_long_fields(path, lines)
     layout = options.get("layout") or _classify([lines[i] for i in idx[:40]])
     if layout not in _READERS and layout is not None:
         raise UnreadableFileError(path, f"unknown Kinect layout {layout!r}; known: "

@@ -141,8 +141,10 @@ def test_a_disk_that_fills_before_the_manifest_is_a_problem_line_not_an_internal
         no_traceback(r)
         assert r.exit_code == 1, r.output
         assert "internal error" not in r.output
-        assert f"mocapfix: error: {out / 'mocapfix-manifest.jsonl'}: cannot write the manifest: " \
-               "No space left on device" in r.output
+        problem = (f"mocapfix: error: {out / 'mocapfix-manifest.jsonl'}: cannot write the "
+                   "manifest: No space left on device")
+        assert r.output.count(problem) == 1, r.output
+        assert r.output.rstrip().endswith(problem), "not after the summary"
         assert "cleaned 0 of 2 files" in r.output
 
 
@@ -217,3 +219,18 @@ def test_a_config_record_linked_to_dev_null_is_a_problem_not_swallowed(tmp_path)
     assert r.exit_code == 1, r.output
     assert f"{out / 'mocapfix-config.yaml'}: cannot write: it is a device" in r.output
     assert "cleaned 2 of 2 files" in r.output
+
+
+def test_an_asf_copy_onto_a_device_fails_its_amc(tmp_path):
+    src = tmp_path / "in"
+    src.mkdir()
+    for name in ("walker.asf", "walker_01.amc"):
+        shutil.copy(SAMPLE_DATA / name, src / name)
+    out = tmp_path / "o"
+    out.mkdir()
+    (out / "walker.asf").symlink_to("/dev/null")
+    r = _clean(tmp_path, src, out, "--overwrite")
+    no_traceback(r)
+    assert r.exit_code == 1, r.output
+    assert f"{out / 'walker.asf'}: cannot write: it is a device or a named pipe (FIFO)" in r.output
+    assert os.readlink(out / "walker.asf") == "/dev/null" and not (out / "walker_01.amc").exists()

@@ -80,3 +80,25 @@ def test_a_long_number_within_the_cap_does_not_size_the_kinect_writer(tmp_path):
     assert peak < 15e6, f"{peak / 1e6:.0f} MB to write a 500 KB file"
     again = formats.read(tmp_path / "out.csv")
     np.testing.assert_allclose(again.positions, moved.positions, atol=1e-6)
+
+
+def test_a_huge_field_in_an_amc_or_its_asf_is_refused_with_an_excerpt(tmp_path):
+    from mocapfix import formats
+
+    for damaged in ("walker_01.amc", "walker.asf"):
+        folder = tmp_path / damaged.replace(".", "_")
+        folder.mkdir()
+        for name in ("walker.asf", "walker_01.amc"):
+            data = (SAMPLE_DATA / name).read_bytes()
+            if name == damaged:
+                lines = data.split(b"\n")
+                lines[10] += b" " + b"5" * 5_000_000
+                data = b"\n".join(lines)
+            (folder / name).write_bytes(data)
+        try:
+            formats.read(folder / "walker_01.amc")
+        except UnreadableFileError as exc:
+            assert str(exc).startswith(f"{folder / damaged}:11: a field longer than 1,000 characters")
+            assert len(str(exc)) < 300
+        else:
+            raise AssertionError(f"a 5 MB field in {damaged} was read")
