@@ -12,6 +12,7 @@ Each case is a set of files (name -> bytes) and the one to open; configs are run
 """
 from __future__ import annotations
 
+import os
 import re
 import struct
 import zlib
@@ -22,7 +23,8 @@ import numpy as np
 
 SAMPLE_DATA = Path(__file__).resolve().parents[1] / "sample_data"
 VENDOR_DATA = Path(__file__).resolve().parent / "data" / "vendor"
-SEED = 13
+#: MOCAPFIX_CORPUS_SEED=N gives another corpus of the same kinds (a fuzzing run)
+SEED = int(os.environ.get("MOCAPFIX_CORPUS_SEED", "13"))
 
 
 @dataclass
@@ -484,6 +486,33 @@ def _vendor_specials(name: str, data: bytes) -> list[tuple[str, bytes]]:
 
 
 # ------------------------------------------------------------------------ the corpus
+def _huge_fields(bvh: bytes, kin: bytes) -> list[tuple[str, str, bytes]]:
+    """(tag, file name, bytes): a 5 MB number in a Kinect CSV (the writer once asked for a
+    211 GiB array), 40,000 bytes of garbage as a BVH joint name, offset, frame count and
+    channel value (a 120 KB one-line error quoted them whole), C3D labels that are HTML
+    or terminal escapes."""
+    rows = kin.split(b"\n")
+    cells = rows[3].split(b",")
+    cells[2] = b"1" * 5_000_000
+    rows[3] = b",".join(cells)
+    junk = b"x" * 40_000
+    head, _, motion = bvh.partition(b"MOTION")
+    first_frame = motion.split(b"\n")[3]
+    out = [
+        ("huge-number", "walk_kinect_v2.csv", b"\n".join(rows)),
+        ("huge-name-line", "walk_kinect_v2.csv", kin.replace(b"\n", b"\n" + junk + b"\n", 1)),
+        ("huge-joint-name", "walk.bvh", head.replace(b"ROOT ", b"ROOT " + junk, 1) + b"MOTION" + motion),
+        ("huge-offset", "walk.bvh", head.replace(b"OFFSET ", b"OFFSET " + b"9" * 40_000 + b" ", 1)
+         + b"MOTION" + motion),
+        ("huge-frames", "walk.bvh", re.sub(rb"Frames:\s*\d+", b"Frames: " + b"7" * 4_000, bvh)),
+        ("huge-value", "walk.bvh", bvh.replace(first_frame, b"1" * 40_000 + first_frame[1:], 1)),
+        ("huge-garbage", "walk.bvh", b"HIERARCHY\n" + bytes(range(33, 127)) * 2_000),
+    ]
+    labels = ["<script>alert(1)</script>", "<img src=x onerror=alert(1)>", "\x1b[31m\x07", "a\nb"]
+    out.append(("hostile-labels", "gen.c3d", c3d_bytes(small_c3d_points(P=4), labels)))
+    return out
+
+
 def cases(seed: int = SEED) -> list[Case]:
     rng = np.random.default_rng(seed)
     bvh = (SAMPLE_DATA / "walk.bvh").read_bytes()
@@ -529,6 +558,10 @@ def cases(seed: int = SEED) -> list[Case]:
     trc = trc_bytes(pts, [f"M{j}" for j in range(pts.shape[1])])
     out += _generic("gen.trc", trc, trc_rng, {}, True, "trc")
     out += [Case(f"trc-{t}", family(t), "gen.trc", {"gen.trc": raw}) for t, raw in _trc_specials(trc)]
+    # huge fields and hostile names (issue 40), last again: they draw nothing from rng
+    prefix = {"walk_kinect_v2.csv": "kinect", "walk.bvh": "bvh", "gen.c3d": "c3dgen"}
+    out += [Case(f"{prefix[name]}-{t}", "huge", name, {name: raw})
+            for t, name, raw in _huge_fields(bvh, kin)]
     ids = [c.id for c in out]
     assert len(ids) == len(set(ids)), "case ids must be unique"
     return out

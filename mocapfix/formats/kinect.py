@@ -85,7 +85,8 @@ from pathlib import Path
 
 import numpy as np
 
-from mocapfix.core.errors import UnreadableFileError, UnsupportedFeatureError, WriteError
+from mocapfix.core.errors import UnreadableFileError, UnsupportedFeatureError, WriteError, excerpt
+from mocapfix.formats.textenc import refuse_long_fields
 from mocapfix.core.fileio import atomic_write_bytes, read_input_bytes
 from mocapfix.core.quantity import MAX_FRAME_RATE_HZ, MIN_FRAME_RATE_HZ
 from mocapfix.core import kinect_joints as kl
@@ -195,7 +196,7 @@ def _numbers(tokens: list[str], token_lines: np.ndarray, path, empty_is_nan=Fals
     except ValueError:
         for k, token in enumerate(tokens):
             if not _is_number(token):
-                raise UnreadableFileError(path, f"non-numeric value {token.strip()!r}",
+                raise UnreadableFileError(path, f"non-numeric value {excerpt(token.strip())}",
                                           line=int(token_lines[k]) + 1) from None
         raise UnreadableFileError(path, "non-numeric value") from None
 
@@ -314,6 +315,7 @@ def read(path, fps: float | None = None, units: str | None = None,
     idx = _content_indices(lines)
     if not idx:
         raise UnreadableFileError(path, "file holds no data lines")
+    refuse_long_fields(path, lines)
     layout = options.get("layout") or _classify([lines[i] for i in idx[:40]])
     if layout not in _READERS and layout is not None:
         raise UnreadableFileError(path, f"unknown Kinect layout {layout!r}; known: "
@@ -1064,9 +1066,11 @@ def _fast_csv_text(source: KinectSource, motion: Motion) -> str:
         r, j = np.nonzero(moved)
         r, coords = np.repeat(r, 3), ((1 + 4 * j)[:, None] + np.arange(3)).ravel()
         values = new[rows[b]][moved].ravel()
-        old = cells[r, coords].astype(str)
-        dot = np.char.find(old, ".")
-        decimals = np.maximum(np.where(dot < 0, 0, np.char.str_len(old) - dot - 1), 6)
+        # (as a fixed-width string array, one long token sized every cell like itself)
+        old = cells[r, coords].tolist()
+        dot = np.fromiter((t.find(".") for t in old), np.int64, len(old))
+        size = np.fromiter(map(len, old), np.int64, len(old))
+        decimals = np.maximum(np.where(dot < 0, 0, size - dot - 1), 6)
         for d in np.unique(decimals):
             at = np.flatnonzero(decimals == d)
             text = (f"%.{d}f," * len(at)) % tuple(values[at].tolist())

@@ -39,6 +39,7 @@ from mocapfix.core.fileio import read_input_bytes
 from mocapfix.core.motion import Motion
 from mocapfix.core.units import METRES_PER_UNIT, normalise_unit_name
 from mocapfix.formats import texttable as tt
+from mocapfix.formats.textenc import refuse_long_fields
 
 NAME = "motive_csv"
 SUFFIXES = (".csv",)
@@ -72,6 +73,7 @@ def read(path, fps: float | None = None, units: str | None = None, **options) ->
     path = Path(path)
     bom, text = tt.decode(read_input_bytes(path), path, "Motive CSV")
     lines, endings = tt.split_lines(text)
+    refuse_long_fields(path, lines)
     settings = _settings(lines[0])
     if "Format Version" not in settings:
         raise UnreadableFileError(path, "line 1 does not start with 'Format Version,'", line=1)

@@ -43,6 +43,7 @@ from mocapfix.core.fileio import read_input_bytes
 from mocapfix.core.motion import Motion
 from mocapfix.core.units import METRES_PER_UNIT, normalise_unit_name
 from mocapfix.formats import texttable as tt
+from mocapfix.formats.textenc import refuse_long_fields
 
 NAME = "nexus_csv"
 SUFFIXES = (".csv",)
@@ -74,6 +75,7 @@ def read(path, fps: float | None = None, units: str | None = None, **options) ->
     path = Path(path)
     bom, text = tt.decode(read_input_bytes(path), path, "Nexus CSV")
     lines, endings = tt.split_lines(text)
+    refuse_long_fields(path, lines)
     starts = [i for i, ln in enumerate(lines)
               if ln.strip(", \t") in SECTIONS and (i == 0 or not lines[i - 1].strip(", \t"))]
     traj = next((i for i in starts if lines[i].strip(", \t") == "Trajectories"), None)

@@ -39,6 +39,7 @@ from mocapfix.core.errors import UnreadableFileError
 from mocapfix.core.fileio import read_input_bytes
 from mocapfix.core.motion import Motion
 from mocapfix.formats import texttable as tt
+from mocapfix.formats.textenc import refuse_long_fields
 
 NAME = "qtm_tsv"
 SUFFIXES = (".tsv",)
@@ -69,6 +70,7 @@ def read(path, fps: float | None = None, units: str | None = None,
     path = Path(path)
     bom, text = tt.decode(read_input_bytes(path), path, "QTM TSV")
     lines, endings = tt.split_lines(text)
+    refuse_long_fields(path, lines)
     header: dict[str, tuple[int, list[str]]] = {}
     i = 0
     while i < len(lines):

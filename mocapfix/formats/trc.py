@@ -86,7 +86,7 @@ from mocapfix.core.fileio import atomic_write_bytes, read_input_bytes
 from mocapfix.core.motion import Motion, missing_samples
 from mocapfix.core.quantity import MAX_FRAME_RATE_HZ, MIN_FRAME_RATE_HZ
 from mocapfix.core.units import METRES_PER_UNIT, normalise_unit_name
-from mocapfix.formats.textenc import refuse_wide_text
+from mocapfix.formats.textenc import refuse_long_fields, refuse_wide_text
 
 NAME = "trc"
 SUFFIXES = (".trc",)
@@ -294,6 +294,7 @@ def read(path, fps: float | None = None, **options) -> Motion:
         text = raw.decode("latin-1")
     bom = "\ufeff" if text.startswith("\ufeff") else ""
     lines, endings = _split_lines(text[len(bom):])
+    refuse_long_fields(path, lines)
     notes: list[str] = []
     header = _header(lines, path, notes)
     rate = _rate(header, path)

@@ -102,7 +102,7 @@ def _take(s: dict) -> str:
 
 
 def _list(names, limit):
-    shown = ", ".join(names[:limit])
+    shown = ", ".join(map(one_line, names[:limit]))
     more = len(names) - limit
     return f"{shown}{f' … (+{more}; -v lists all)' if more > 0 else ''}"
 

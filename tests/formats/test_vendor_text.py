@@ -223,7 +223,8 @@ def test_unknown_text_layout_is_named(tmp_path, name, text):
     ("motive_doc.csv", lambda s: s.replace("Export Frame Rate,120.000000", "Export Frame Rate,-1"),
      "not a usable frame rate"),
     ("motive_doc.csv", lambda s: s.replace("301.500000", "9" * 5_000_000 + "x"),
-     "is not a number"),
+     "a field longer than 1,000 characters"),
+    ("motive_doc.csv", lambda s: s.replace("301.500000", "30x.5"), "'30x.5' is not a number"),
     ("qtm_hand_embodiment_recording.tsv", lambda s: s.replace("hand_top X", "hand_top Q"),
      "expected 'hand_top X'"),
 ])
