@@ -194,6 +194,17 @@ def atomic_write_text(path, text: str) -> Path:
     return atomic_write_bytes(path, text.encode("utf-8", errors="backslashreplace"))
 
 
+def write_output_text(path, text: str) -> list:
+    """Write a text output (UTF-8) atomically; any OS failure is a
+    :class:`~mocapfix.core.errors.WriteError` naming ``path``. Returns ``[path]``, as a
+    format's writer does."""
+    try:
+        atomic_write_bytes(path, text.encode("utf-8"))
+    except OSError as exc:
+        raise _write_error(Path(path), exc) from None
+    return [Path(path)]
+
+
 def read_input_bytes(path) -> bytes:
     """The bytes of an input file; any OS failure or an empty (or whitespace-only) file is
     an :class:`~mocapfix.core.errors.UnreadableFileError` naming the file."""

@@ -85,9 +85,9 @@ from pathlib import Path
 
 import numpy as np
 
-from mocapfix.core.errors import UnreadableFileError, UnsupportedFeatureError, WriteError, excerpt
+from mocapfix.core.errors import UnreadableFileError, UnsupportedFeatureError, excerpt
 from mocapfix.formats.textenc import refuse_long_fields
-from mocapfix.core.fileio import atomic_write_bytes, read_input_bytes
+from mocapfix.core.fileio import read_input_bytes, write_output_text
 from mocapfix.core.quantity import MAX_FRAME_RATE_HZ, MIN_FRAME_RATE_HZ
 from mocapfix.core import kinect_joints as kl
 from mocapfix.core.motion import Motion, Skeleton
@@ -952,11 +952,7 @@ def write(motion: Motion, path, **options) -> list[Path]:
         text = _patched_text(source, motion)
     else:
         text = _wide_csv_text(motion)
-    try:
-        atomic_write_bytes(path, text.encode("utf-8"))
-    except OSError as exc:
-        raise WriteError(path, f"cannot write: {exc.strerror or exc}") from None
-    return [path]
+    return write_output_text(path, text)
 
 
 def _fits(source: KinectSource, motion: Motion) -> bool:

@@ -21,8 +21,8 @@ from pathlib import Path
 
 import numpy as np
 
-from mocapfix.core.errors import UnreadableFileError, WriteError
-from mocapfix.core.fileio import atomic_write_bytes
+from mocapfix.core.errors import UnreadableFileError
+from mocapfix.core.fileio import write_output_text
 from mocapfix.core.motion import Motion
 from mocapfix.core.quantity import MAX_FRAME_RATE_HZ, MIN_FRAME_RATE_HZ
 from mocapfix.formats.kinect import _decode
@@ -281,17 +281,8 @@ def write_table(motion: Motion, path, layout: str, fresh) -> list[Path]:
     """Write ``motion``: its source patched when it came from ``layout`` and fits, else
     ``fresh(motion, path)``."""
     if fits(motion.source, motion, layout):
-        return write_text(path, patched_text(motion.source, motion))
-    return write_text(path, fresh(motion, Path(path)))
-
-
-def write_text(path, text: str) -> list[Path]:
-    path = Path(path)
-    try:
-        atomic_write_bytes(path, text.encode("utf-8"))
-    except OSError as exc:
-        raise WriteError(path, f"cannot write: {exc.strerror or exc}") from None
-    return [path]
+        return write_output_text(path, patched_text(motion.source, motion))
+    return write_output_text(path, fresh(motion, Path(path)))
 
 
 def common_losses(motion: Motion, layout: str) -> list[str]:

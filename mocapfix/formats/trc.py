@@ -82,7 +82,7 @@ from mocapfix.core.errors import (
     UnsupportedFeatureError,
     WriteError,
 )
-from mocapfix.core.fileio import atomic_write_bytes, read_input_bytes
+from mocapfix.core.fileio import read_input_bytes, write_output_text
 from mocapfix.core.motion import Motion, missing_samples
 from mocapfix.core.quantity import MAX_FRAME_RATE_HZ, MIN_FRAME_RATE_HZ
 from mocapfix.core.units import METRES_PER_UNIT, normalise_unit_name
@@ -426,11 +426,7 @@ def write(motion: Motion, path, **options) -> list[Path]:
         text = _patched_text(source, motion)
     else:
         text = _fresh_text(motion, path)
-    try:
-        atomic_write_bytes(path, text.encode("utf-8"))
-    except OSError as exc:
-        raise WriteError(path, f"cannot write: {exc.strerror or exc}") from None
-    return [path]
+    return write_output_text(path, text)
 
 
 def _fits(source: TRCSource, motion: Motion) -> bool:
