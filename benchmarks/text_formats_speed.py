@@ -5,10 +5,12 @@ reader).
 
 One motion — CMU 85_02's 41 markers (C3D, mm) looped to ``--frames`` frames, with 2 % of
 the samples missing — is written fresh by every text format's writer; then each file is
-read ``--repeat`` times and written back ``--repeat`` times (the write-back of a motion
-read from that file: the path ``clean`` takes). Times are medians, in microseconds per
+read ``--repeat`` times and written back ``--repeat`` times, as read (nothing changed) and
+with every sample moved by 0.1 mm (what a smoother's output costs): the path ``clean``
+takes. Times are medians, in microseconds per
 sample (one marker on one frame), and the ratio to the Kinect format's; a ratio ≤ 1 is
-as fast as the Kinect reader or faster.
+as fast as the Kinect reader or faster. The formats are timed in turn, round by round, so
+that a busy spell of the machine slows them alike.
 
     python benchmarks/text_formats_speed.py [--frames 20000] [--repeat 3]
 """
@@ -42,15 +44,6 @@ def take(frames: int) -> Motion:
     return Motion(P, list(src.names), src.fps, units=src.units, metres_per_unit=src.metres_per_unit)
 
 
-def timed(fn, repeat: int) -> float:
-    times = []
-    for _ in range(repeat):
-        started = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - started)
-    return statistics.median(times)
-
-
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--frames", type=int, default=20_000)
@@ -60,22 +53,42 @@ def main():
     samples = motion.n_frames * motion.n_joints
     rows = {}
     with tempfile.TemporaryDirectory() as tmp:
+        files, backs, moved = {}, {}, {}
         for name in ["kinect", *TEXT]:
-            path = Path(tmp) / f"take{formats.suffixes(name)[0]}"
+            path = Path(tmp) / f"take_{name}{formats.suffixes(name)[0]}"
             formats.write(motion, path, format=name)
-            read = timed(lambda: formats.read(path, name), args.repeat)
-            back = formats.read(path, name)
-            out = Path(tmp) / f"back{formats.suffixes(name)[0]}"
-            write = timed(lambda: formats.write(back, out, format=name), args.repeat)
-            rows[name] = (read, write, path.stat().st_size)
-    ref_read, ref_write, _ = rows["kinect"]
+            files[name], backs[name] = path, formats.read(path, name)
+            moved[name] = backs[name].replace(positions=backs[name].positions + 0.1)
+        # the formats in turn, ``repeat`` rounds: a machine busy for a while slows every
+        # format alike instead of the one timed then
+        reads = {name: [] for name in files}
+        writes = {name: [] for name in files}
+        rewrites = {name: [] for name in files}
+        for _ in range(args.repeat):
+            for name, path in files.items():
+                started = time.perf_counter()
+                formats.read(path, name)
+                reads[name].append(time.perf_counter() - started)
+                out = Path(tmp) / f"back_{name}{formats.suffixes(name)[0]}"
+                started = time.perf_counter()
+                formats.write(backs[name], out, format=name)
+                writes[name].append(time.perf_counter() - started)
+                started = time.perf_counter()
+                formats.write(moved[name], out, format=name)
+                rewrites[name].append(time.perf_counter() - started)
+        for name, path in files.items():
+            rows[name] = (statistics.median(reads[name]), statistics.median(writes[name]),
+                          statistics.median(rewrites[name]), path.stat().st_size)
+    ref_read, ref_write, ref_moved, _ = rows["kinect"]
     print(f"{motion.n_frames} frames x {motion.n_joints} markers ({samples:,} samples), "
           f"median of {args.repeat}\n")
-    print("| format | read µs/sample | ÷ Kinect | write-back µs/sample | ÷ Kinect | file MB |")
-    print("|---|---:|---:|---:|---:|---:|")
-    for name, (read, write, size) in rows.items():
+    print("| format | read µs/sample | ÷ Kinect | write-back unchanged | ÷ Kinect | "
+          "write-back, every sample moved | ÷ Kinect | file MB |")
+    print("|---|---:|---:|---:|---:|---:|---:|---:|")
+    for name, (read, write, rewrite, size) in rows.items():
         print(f"| {name} | {1e6 * read / samples:.2f} | {read / ref_read:.2f} | "
-              f"{1e6 * write / samples:.2f} | {write / ref_write:.2f} | {size / 1e6:.1f} |")
+              f"{1e6 * write / samples:.2f} | {write / ref_write:.2f} | "
+              f"{1e6 * rewrite / samples:.2f} | {rewrite / ref_moved:.2f} | {size / 1e6:.1f} |")
 
 
 if __name__ == "__main__":

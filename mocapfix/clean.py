@@ -12,7 +12,7 @@ import numpy as np
 
 from mocapfix import formats
 from mocapfix.core.errors import UnreadableFileError
-from mocapfix.core.fileio import NAME_MAX, atomic_write_text
+from mocapfix.core.fileio import NAME_MAX, atomic_write_text, is_stream, refuse_stream
 from mocapfix.core.motion import Motion
 from mocapfix.pipeline.steps import Pipeline
 from mocapfix.quality.render import ranked
@@ -71,11 +71,12 @@ def output_files(output: Path) -> list[Path]:
 def remove_outputs(paths) -> None:
     """Remove the files at ``paths`` that exist. Never raises: it runs after a failure,
     whose error is the one to report, and must not stop the batch. A folder where an
-    output would go is not an output (it is left); a file that cannot be removed stays."""
+    output would go is not an output (it is left), nor a device or a pipe (or a link to
+    one) that refused the output; a file that cannot be removed stays."""
     for p in paths:
         p = Path(p)
         try:
-            if stat.S_ISDIR(os.lstat(p).st_mode):
+            if stat.S_ISDIR(os.lstat(p).st_mode) or is_stream(p):
                 continue
         except OSError:     # not there, or a name the file system refuses (over 255 bytes:
             continue        # Path.is_dir raised that, replacing the error and ending the batch)
@@ -95,7 +96,9 @@ def clean_file(source: Path, output: Path, pipeline: Pipeline, reports=("json",)
     Every report is rendered before anything is written, and a failure while writing
     removes the output and its reports, so a failed file leaves nothing behind (but the
     ASF an AMC is written beside, which the subject's other AMCs there share). Reports of kinds
-    not asked for this time are removed beside the new output (no stale reports)."""
+    not asked for this time are removed beside the new output (no stale reports). An output
+    or report path that is a device or a pipe, or a link to one, is a WriteError before
+    anything is written (it would swallow the output)."""
     motion = formats.read(source, **(read_options or {}))
     if motion.n_frames == 0:
         raise UnreadableFileError(source, "holds no frames; nothing to clean")
@@ -105,6 +108,8 @@ def clean_file(source: Path, output: Path, pipeline: Pipeline, reports=("json",)
     writers = {"json": lambda: to_json(report), "md": lambda: to_markdown(report),
                "html": lambda: to_html(report, result, viewer=pipeline.report.get("viewer", True))}
     texts = {kind: writers[kind]() for kind in paths}
+    for path in (output, *paths.values()):
+        refuse_stream(path)
     written: list[Path] = []
     try:
         # in the format that was read, which the content decided, not the name: a BVH

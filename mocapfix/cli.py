@@ -7,25 +7,15 @@ import contextlib
 import functools
 import json
 import os
-import re
 import sys
 
 import click
 
 from mocapfix import __version__
-from mocapfix.core.errors import MocapfixError, UnreadableFileError, name_the_file, one_line
+from mocapfix.core.errors import (MocapfixError, UnreadableFileError, name_the_file, one_line,
+                                  printable)
 
 EXIT_OK, EXIT_SOME_FAILED, EXIT_USAGE, EXIT_UNREADABLE = 0, 1, 2, 3
-
-
-_CONTROL = re.compile("[\x00-\x08\x0b-\x1f\x7f-\x9f]")
-
-
-def printable(text: str) -> str:
-    """``text`` with control characters shown as ``\\xNN``: a file named with an escape
-    sequence (``"\\x1b[31m.bvh"``) must not recolour or rewrite the user's terminal, nor a
-    name with a carriage return hide the line before it."""
-    return _CONTROL.sub(lambda m: f"\\x{ord(m.group()):02x}", text)
 
 
 def _fail(message: str, debug: bool, exc: BaseException | None = None, code: int = EXIT_USAGE):
@@ -306,11 +296,13 @@ def list_cleaners(markdown):
 
 @main.command("formats")
 def list_formats():
-    """The file formats mocapfix reads and writes: name (for --to), suffixes."""
+    """The file formats mocapfix reads and writes: name (for --to and a config's
+    formats:), family (what its points are; a config may name it), suffixes."""
     from mocapfix import formats
 
+    family = {n: f for f, names in formats.FAMILIES.items() for n in names}
     for name in formats.NAMES:
-        click.echo(f"{name:<12} {' '.join(formats.suffixes(name))}")
+        click.echo(f"{name:<12} {family[name]:<10} {' '.join(formats.suffixes(name))}")
 
 
 @main.command("configs")
@@ -512,7 +504,8 @@ def _run_clean(inputs, outdir, make_pipeline, reports, jobs, as_json, fps, allow
     if as_json:
         click.echo(json.dumps({"files": results, "cleaned": len(results) - len(failed),
                                "failed": len(failed), "skipped": skipped,
-                               "config": str(pipeline.source)}, indent=1))
+                               "config": str(pipeline.source),
+                               **({"problems": plan.problems} if plan.problems else {})}, indent=1))
     else:
         graded = [r["status"] for r in results if r["status"] != "ERROR"]
         out.line(f"{verb} {len(results) - len(failed)} of {len(results)} files"
@@ -522,7 +515,9 @@ def _run_clean(inputs, outdir, make_pipeline, reports, jobs, as_json, fps, allow
                                       if s in graded) if graded else "")
                  + (f"; {len(failed)} failed (ERROR): " + ", ".join(one_line(r["input"]) for r in failed)
                     if failed else ""), level=-1, err=bool(failed))
-    sys.exit(EXIT_SOME_FAILED if failed else EXIT_OK)
+    for problem in plan.problems:       # the manifest or the config record not written
+        out.error(f"mocapfix: error: {one_line(problem)}")
+    sys.exit(EXIT_SOME_FAILED if failed or plan.problems else EXIT_OK)
 
 
 # -- check ---------------------------------------------------------------------------------

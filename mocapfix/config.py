@@ -34,7 +34,7 @@ from mocapfix.cleaners.base import FittedCleaner
 from mocapfix.core.errors import ConfigError
 from mocapfix.core.presets import CONFIG_DIR
 from mocapfix.core.yamlsafe import load_marked_yaml, read_bounded
-from mocapfix.formats import NAMES
+from mocapfix.formats import FAMILIES, NAMES
 from mocapfix.pipeline.selection import Selection
 from mocapfix.pipeline.steps import (CONFIG_VERSION, DEFAULT_MAX_FILL_ERROR, Pipeline, Step,
                                      parse_max_fill_error)
@@ -96,8 +96,10 @@ def parse_config(data, source: str = "<config>") -> Pipeline:
         if formats is not None:
             if isinstance(formats, str):
                 formats = [formats]
-            if not isinstance(formats, list) or not all(isinstance(f, str) and f in NAMES for f in formats):
-                raise ConfigError(f"{where}: 'formats' must list some of {', '.join(sorted(NAMES))}, "
+            if not isinstance(formats, list) or not all(isinstance(f, str) and (f in NAMES or f in FAMILIES)
+                                                        for f in formats):
+                raise ConfigError(f"{where}: 'formats' must list some of "
+                                  f"{', '.join((*sorted(NAMES), *FAMILIES))} (a family: its formats), "
                                   f"got {_strip_lines(formats)!r}")
             formats = tuple(formats)
         label = f"step {n} ({raw.get('name') or name}){_line_of(raw)}"

@@ -12,6 +12,7 @@ Each case is a set of files (name -> bytes) and the one to open; configs are run
 """
 from __future__ import annotations
 
+import os
 import re
 import struct
 import zlib
@@ -21,7 +22,9 @@ from pathlib import Path
 import numpy as np
 
 SAMPLE_DATA = Path(__file__).resolve().parents[1] / "sample_data"
-SEED = 13
+VENDOR_DATA = Path(__file__).resolve().parent / "data" / "vendor"
+#: MOCAPFIX_CORPUS_SEED=N gives another corpus of the same kinds (a fuzzing run)
+SEED = int(os.environ.get("MOCAPFIX_CORPUS_SEED", "13"))
 
 
 @dataclass
@@ -451,7 +454,65 @@ def config_cases(rng) -> list[tuple[str, bytes]]:
     return out
 
 
+def _vendor_specials(name: str, data: bytes) -> list[tuple[str, bytes]]:
+    """Vendor marker tables (Nexus CSV, QTM TSV, Motive CSV): bad rates, huge counts, a
+    5 MB field, a truncated last row, a binary block in the data."""
+    lines = data.split(b"\n")
+    out = []
+    if name.endswith(".tsv"):
+        rate = next(i for i, ln in enumerate(lines) if ln.startswith(b"FREQUENCY"))
+        for tag, value in (("ratenan", b"nan"), ("ratezero", b"0"), ("rateneg", b"-100"),
+                           ("rateword", b"fast")):
+            out.append((tag, b"\n".join(lines[:rate] + [b"FREQUENCY\t" + value] + lines[rate + 1:])))
+        count = next(i for i, ln in enumerate(lines) if ln.startswith(b"NO_OF_MARKERS"))
+        out.append(("bombmarkers", b"\n".join(lines[:count] + [b"NO_OF_MARKERS\t" + b"9" * 15]
+                                              + lines[count + 1:])))
+        out.append(("bombframes", data.replace(lines[0], b"NO_OF_FRAMES\t" + b"9" * 30, 1)))
+    elif lines[0].startswith(b"Format Version"):
+        for tag, value in (("ratenan", b"nan"), ("ratezero", b"0.000000"), ("rateneg", b"-120")):
+            out.append((tag, data.replace(b"Export Frame Rate,120.000000",
+                                          b"Export Frame Rate," + value, 1)))
+        out.append(("labelsgone", data.replace(b",Name,", b",Nom,", 1)))
+    else:
+        at = lines.index(next(ln for ln in lines if ln.rstrip(b"\r,") == b"Trajectories"))
+        for tag, value in (("ratenan", b"nan"), ("ratezero", b"0"), ("rateneg", b"-100")):
+            out.append((tag, b"\n".join(lines[:at + 1] + [value] + lines[at + 2:])))
+        out.append(("labelsgone", b"\n".join(lines[:at + 2] + [b""] + lines[at + 3:])))
+    last = max(i for i, ln in enumerate(lines) if ln.strip())
+    out.append(("cuttail", b"\n".join(lines[:last] + [lines[last][:len(lines[last]) // 2]])))
+    out.append(("bombfield", b"\n".join(lines[:last] + [lines[last] + b"7" * 5_000_000])))
+    out.append(("garbageblock", b"\n".join(lines[:last] + [bytes(range(256)) * 4])))
+    return out
+
+
 # ------------------------------------------------------------------------ the corpus
+def _huge_fields(bvh: bytes, kin: bytes) -> list[tuple[str, str, bytes]]:
+    """(tag, file name, bytes): a 5 MB number in a Kinect CSV (the writer once asked for a
+    211 GiB array), 40,000 bytes of garbage as a BVH joint name, offset, frame count and
+    channel value (a 120 KB one-line error quoted them whole), C3D labels that are HTML
+    or terminal escapes."""
+    rows = kin.split(b"\n")
+    cells = rows[3].split(b",")
+    cells[2] = b"1" * 5_000_000
+    rows[3] = b",".join(cells)
+    junk = b"x" * 40_000
+    head, _, motion = bvh.partition(b"MOTION")
+    first_frame = motion.split(b"\n")[3]
+    out = [
+        ("huge-number", "walk_kinect_v2.csv", b"\n".join(rows)),
+        ("huge-name-line", "walk_kinect_v2.csv", kin.replace(b"\n", b"\n" + junk + b"\n", 1)),
+        ("huge-joint-name", "walk.bvh", head.replace(b"ROOT ", b"ROOT " + junk, 1) + b"MOTION" + motion),
+        ("huge-offset", "walk.bvh", head.replace(b"OFFSET ", b"OFFSET " + b"9" * 40_000 + b" ", 1)
+         + b"MOTION" + motion),
+        ("huge-frames", "walk.bvh", re.sub(rb"Frames:\s*\d+", b"Frames: " + b"7" * 4_000, bvh)),
+        ("huge-value", "walk.bvh", bvh.replace(first_frame, b"1" * 40_000 + first_frame[1:], 1)),
+        ("huge-garbage", "walk.bvh", b"HIERARCHY\n" + bytes(range(33, 127)) * 2_000),
+    ]
+    labels = ["<script>alert(1)</script>", "<img src=x onerror=alert(1)>", "\x1b[31m\x07", "a\nb"]
+    out.append(("hostile-labels", "gen.c3d", c3d_bytes(small_c3d_points(P=4), labels)))
+    return out
+
+
 def cases(seed: int = SEED) -> list[Case]:
     rng = np.random.default_rng(seed)
     bvh = (SAMPLE_DATA / "walk.bvh").read_bytes()
@@ -480,6 +541,14 @@ def cases(seed: int = SEED) -> list[Case]:
             for t, raw in _lines_edit(amc, rng, 12, b" ")]
     out += [Case(f"kinect-{t}", family(t), "walk_kinect_v2.csv", {"walk_kinect_v2.csv": raw})
             for t, raw in _kinect_specials(kin) + _lines_edit(kin, rng, 12, b",")]
+    vrng = np.random.default_rng(seed + 1)   # its own stream: the other cases stay as they were
+    for prefix, name in (("nexus", "nexus_sections_doc.csv"), ("qtm", "qtm_old_doc.tsv"),
+                         ("qtmhdr", "qtm_hand_embodiment_recording.tsv"), ("motive", "motive_doc.csv")):
+        raw = (VENDOR_DATA / name).read_bytes()
+        out += _generic(name, raw, vrng, {}, True, prefix)[::2]
+        out += [Case(f"{prefix}-{t}", family(t), name, {name: v}) for t, v in _vendor_specials(name, raw)]
+        sep = b"\t" if name.endswith(".tsv") else b","
+        out += [Case(f"{prefix}-{t}", "cols", name, {name: v}) for t, v in _lines_edit(raw, vrng, 8, sep)]
     out += [Case(f"c3dgen-{t}", family(t), "gen.c3d", {"gen.c3d": raw}) for t, raw in _c3d_specials(rng)]
     out += [Case(f"config-{t}", family(t), "config.yaml", {"config.yaml": raw}, kind="config")
             for t, raw in config_cases(rng)]
@@ -489,6 +558,10 @@ def cases(seed: int = SEED) -> list[Case]:
     trc = trc_bytes(pts, [f"M{j}" for j in range(pts.shape[1])])
     out += _generic("gen.trc", trc, trc_rng, {}, True, "trc")
     out += [Case(f"trc-{t}", family(t), "gen.trc", {"gen.trc": raw}) for t, raw in _trc_specials(trc)]
+    # huge fields and hostile names (issue 40), last again: they draw nothing from rng
+    prefix = {"walk_kinect_v2.csv": "kinect", "walk.bvh": "bvh", "gen.c3d": "c3dgen"}
+    out += [Case(f"{prefix[name]}-{t}", "huge", name, {name: raw})
+            for t, name, raw in _huge_fields(bvh, kin)]
     ids = [c.id for c in out]
     assert len(ids) == len(set(ids)), "case ids must be unique"
     return out

@@ -8,7 +8,9 @@ the output folder's manifest, :mod:`mocapfix.batch.manifest` — or kept by
 ``policy="skip"``), and refuses with one :class:`~mocapfix.core.errors.MocapfixError` what
 the run must not do (outputs of another run in the way without a policy, two configs or
 models mixed in one folder by ``"skip"``, an AMC whose ASF copy would pair it with the
-wrong skeleton, an output folder that cannot be written). :func:`run_clean` runs the plan:
+wrong skeleton, an output folder that cannot be written, or one another run holds: the
+folder's run lock, :func:`~mocapfix.batch.manifest.lock_output_folder`, held from the plan
+to the end of the run). :func:`run_clean` runs the plan:
 it records each finished file in the manifest (a killed run resumes), leaves nothing of a
 file that failed, takes back the folders it made when nothing ran, and writes the run's
 effective config beside the outputs. :func:`clean_batch` is both in one call, for a
@@ -25,12 +27,12 @@ from pathlib import Path
 from typing import Callable
 
 from mocapfix.batch.discovery import discover_inputs
-from mocapfix.batch.manifest import Manifest, run_key
+from mocapfix.batch.manifest import Manifest, lock_output_folder, run_key, unlock_output_folder
 from mocapfix.batch.plan import Job, check_output_folder, plan_outputs, skeleton_conflicts
 from mocapfix.batch.tasks import error_result, internal_error, run_tasks
 from mocapfix.clean import output_files, remove_outputs
-from mocapfix.core.errors import MocapfixError, name_the_file
-from mocapfix.core.fileio import atomic_write_text, remove_stale_temporaries
+from mocapfix.core.errors import MocapfixError, WriteError, name_the_file
+from mocapfix.core.fileio import atomic_write_text, refuse_stream, remove_stale_temporaries
 from mocapfix.pipeline.steps import Pipeline
 
 #: what a run may do with outputs of an earlier run in its way (None: refuse)
@@ -152,6 +154,17 @@ class CleanPlan:
     made: list = field(default_factory=list)
     #: the output format (None: each input's own)
     to: str | None = None
+    #: what :func:`run_clean` could not write besides the files (the manifest, the config
+    #: record: a full disk), one line each; the run's files went on
+    problems: list = field(default_factory=list)
+    #: the output folder's run lock, held from the plan to the end of :func:`run_clean`
+    #: (:func:`~mocapfix.batch.manifest.lock_output_folder`; None: a dry run)
+    lock: int | None = None
+
+    def release(self) -> None:
+        """Release the output folder's run lock (:func:`run_clean` does, when it ends)."""
+        unlock_output_folder(self.outdir, self.lock)
+        self.lock = None
 
     @property
     def resumed(self) -> bool:
@@ -190,6 +203,21 @@ def plan_clean(files, outdir, pipeline: Pipeline, *, inputs=(), reports=("json",
         raise MocapfixError("no motion files found in " + ", ".join(map(str, inputs or files)))
     config_file = outdir / "mocapfix-config.yaml"
     config_text = f"# effective config of this run (from {pipeline.source})\n" + pipeline.dump()
+    # the run lock before anything of the folder is read (a folder made below, or one that
+    # takes no file: after check_output_folder)
+    lock = [None if dry_run or not outdir.is_dir() else lock_output_folder(outdir, soft=True)]
+    try:
+        return _plan(outdir, pipeline, jobs, config_file, config_text, lock, reports=reports,
+                     policy=policy, fps=fps, dry_run=dry_run, to=to)
+    except BaseException:
+        unlock_output_folder(outdir, lock[0])
+        raise
+
+
+def _plan(outdir: Path, pipeline: Pipeline, jobs, config_file: Path, config_text: str,
+          lock: list, *, reports, policy, fps, dry_run, to) -> CleanPlan:
+    """The body of :func:`plan_clean`; ``lock``: ``[the folder's run lock]``, taken here
+    when the folder is made here."""
     manifest = Manifest(outdir, run_key(config_text, reports, {"fps": fps} if fps else None,
                                         pipeline.model_files(), to))
     finished = set() if policy == "overwrite" else {j for j in jobs if manifest.finished(j)}
@@ -216,6 +244,8 @@ def plan_clean(files, outdir, pipeline: Pipeline, *, inputs=(), reports=("json",
                             "models in one folder (use --overwrite or another output folder)")
     made = [p for p in (outdir, *outdir.parents) if not os.path.lexists(p)]
     check_output_folder(outdir, create=not dry_run)
+    if lock[0] is None and not dry_run:
+        lock[0] = lock_output_folder(outdir)
     if config_file.is_dir():
         raise MocapfixError(f"{config_file}: is a folder; the run's config record "
                             "cannot be written there (move it away)")
@@ -228,11 +258,13 @@ def plan_clean(files, outdir, pipeline: Pipeline, *, inputs=(), reports=("json",
                for j in jobs if j not in todo]
     conflicts = skeleton_conflicts(todo)
     if conflicts:
+        unlock_output_folder(outdir, lock[0])
+        lock[0] = None
         _take_back(made)
         more = f" (and {len(conflicts) - 1} more)" if len(conflicts) > 1 else ""
         raise MocapfixError(conflicts[0] + more + "; nothing was cleaned")
     return CleanPlan(pipeline, outdir, tuple(reports), {"default_fps": fps} if fps else None,
-                     manifest, config_text, config_file, todo, skipped, made, to)
+                     manifest, config_text, config_file, todo, skipped, made, to, lock=lock[0])
 
 
 def convert_pipeline() -> Pipeline:
@@ -263,21 +295,37 @@ def run_clean(plan: CleanPlan, *, workers: int = 1, spec=None,
     earlier run; each finished file is recorded in the manifest; the effective config is
     written when this config produced (or kept) at least one output. When the batch cannot
     start (e.g. a Dask scheduler that cannot be reached) before any file finished, the
-    manifest and the folders the run made are taken back and the error raised."""
+    manifest and the folders the run made are taken back and the error raised. The output
+    folder's run lock taken by the plan is released when it returns or raises."""
+    try:
+        return _run(plan, workers, spec, on_result)
+    finally:
+        plan.release()
+
+
+def _run(plan: CleanPlan, workers: int, spec, on_result) -> list[dict]:
     # a killed run leaves its half-written temporaries; the files this run writes anew
-    # take theirs away (never anything else)
+    # take theirs away (never anything else; another run's are safe: the run lock)
     remove_stale_temporaries(f for j in plan.todo for f in output_files(j.output))
     finished_here: list[str] = []
+
+    def noted(write, *args):
+        """``write(*args)``; a WriteError (a full disk) is one of the run's problems."""
+        try:
+            write(*args)
+        except WriteError as exc:
+            if str(exc) not in plan.problems:
+                plan.problems.append(str(exc))
 
     def record(result):
         finished_here.append(result["input"])
         if result["status"] == "ERROR":
             remove_outputs(output_files(Path(result["output"])))
-        plan.manifest.record(result)            # resumable: one record per finished file
+        noted(plan.manifest.record, result)     # resumable: one record per finished file
         if on_result is not None:
             on_result(result)
 
-    plan.manifest.start(plan.todo)
+    noted(plan.manifest.start, plan.todo)
     try:
         results = run_batch(plan.todo, plan.pipeline.config(), str(plan.pipeline.source),
                             plan.reports, workers, plan.read_options, on_result=record, spec=spec,
@@ -285,17 +333,30 @@ def run_clean(plan: CleanPlan, *, workers: int = 1, spec=None,
     except MocapfixError:
         if not finished_here:               # nothing ran: leave the folder as it was
             plan.manifest.abandon()
+            plan.release()
             _take_back(plan.made)
         raise
-    plan.manifest.close()
+    noted(plan.manifest.close)
     if "html" in plan.reports and plan.manifest.records:
-        from mocapfix.quality.index import index_html
-        atomic_write_text(plan.outdir / "index.html",
-                          index_html(list(plan.manifest.records.values()), plan.outdir))
+        noted(_write_index, plan)
     failed = sum(r["status"] == "ERROR" for r in results)
     if failed < len(results) or plan.resumed:
-        atomic_write_text(plan.config_file, plan.config_text)
+        noted(_write_config_record, plan)
     return results
+
+
+def _write_config_record(plan: CleanPlan) -> None:
+    refuse_stream(plan.config_file)
+    atomic_write_text(plan.config_file, plan.config_text)
+
+
+def _write_index(plan: CleanPlan) -> None:
+    """``OUTDIR/index.html``: every file of the folder's manifest (:mod:`mocapfix.quality.index`)."""
+    from mocapfix.quality.index import index_html
+
+    path = plan.outdir / "index.html"
+    refuse_stream(path)
+    atomic_write_text(path, index_html(list(plan.manifest.records.values()), plan.outdir))
 
 
 def clean_batch(inputs, outdir, config="default", *, reports=("json",), policy: str | None = None,
@@ -307,7 +368,8 @@ def clean_batch(inputs, outdir, config="default", *, reports=("json",), policy: 
     no cleaning, as ``mocapfix convert``); ``policy`` None, ``"overwrite"`` or ``"skip"``
     (the CLI's ``--overwrite`` and ``--skip-existing``); ``to`` the output format (None:
     each input's own). Returns ``{"files": [result per file cleaned], "skipped":
-    [(input, why), ...], "ignored": [(path, why) of files discovery passed over]}``;
+    [(input, why), ...], "ignored": [(path, why) of files discovery passed over],
+    "problems": [what the run could not write besides the files (:attr:`CleanPlan.problems`)]}``;
     raises :class:`~mocapfix.core.errors.MocapfixError` for what the run refuses."""
     from mocapfix.config import load_config
     from mocapfix.core.presets import resolve_config
@@ -320,4 +382,4 @@ def clean_batch(inputs, outdir, config="default", *, reports=("json",), policy: 
                       allow_inside_input=allow_inside_input, to=to)
     results = run_clean(plan, workers=workers, on_result=on_result)
     return {"files": results, "skipped": [(str(j.source), why) for j, why in plan.skipped],
-            "ignored": [(str(p), why) for p, why in found.skipped]}
+            "ignored": [(str(p), why) for p, why in found.skipped], "problems": plan.problems}

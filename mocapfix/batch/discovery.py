@@ -22,11 +22,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from mocapfix.core.errors import ConfigError
-from mocapfix.formats import MOTION_SUFFIXES, suffixes
-
+from mocapfix.formats import MOTION_SUFFIXES, TEXT_SUFFIXES
 
 _SKIP_SUFFIXES = (".report.json", ".report.md", ".report.html")
-TEXT_SUFFIXES = suffixes("kinect")
 
 
 @dataclass(frozen=True)
@@ -104,14 +102,12 @@ def unknown_layout(path: Path) -> str | None:
     head = _head(path)
     if head is None:
         return None
+    from mocapfix.formats import texttable
+
     lines = head.decode("utf-8", errors="replace").lstrip("\ufeff").splitlines()[:-1] or []
     rows = sum(sum(bool(_NUMBER.fullmatch(f)) for f in _FIELDS.split(line.strip())) >= 3
                for line in lines)
-    if rows < 3:
-        return None
-    first = next((line.strip() for line in lines if line.strip()), "")
-    shown = first[:60] + ("…" if len(first) > 60 else "")
-    return f"not a known layout (first line: {shown!r})"
+    return texttable.unknown_layout(head) if rows >= 3 else None
 
 
 def _matches(rel: str, patterns) -> bool:

@@ -5,7 +5,8 @@ Every choice is a ``concurrent.futures`` executor (or None: in this process), so
 injected executor"):
 
 - local (default): ``ProcessPoolExecutor`` whose workers start with one BLAS thread
-  (:func:`mocapfix.core.threads.worker_init`);
+  (:func:`mocapfix.core.threads.worker_init`), which exit when their parent dies
+  (:func:`pool_worker_init`);
 - Dask distributed (optional extra ``pip install 'mocapfix[dask]'``): ``--scheduler
   tcp://host:port`` connects to a running cluster, ``--dask-workers N`` starts a local
   cluster of N single-threaded worker processes; both through ``Client.get_executor()``.
@@ -17,6 +18,10 @@ Dask is imported only when asked for; without it the error names the extra.
 from __future__ import annotations
 
 import contextlib
+import os
+import sys
+import threading
+import time
 from dataclasses import dataclass
 
 from mocapfix.core.errors import ConfigError
@@ -67,6 +72,56 @@ def _check_address(address: str) -> None:
                           "give tcp://HOST:PORT") from None
 
 
+def pool_worker_init(threads: int = 1, creator: int | None = None) -> None:
+    """:func:`~mocapfix.core.threads.worker_init`, and the worker exits (within a second)
+    once ``creator``, the process that started the pool, is gone -- also when it died
+    before this worker got here: a ``kill -9`` of ``mocapfix clean -j N`` left its idle
+    workers waiting forever on a queue whose other end their siblings keep open. (Dask's
+    worker processes watch their parent themselves.) The run's output-folder lock is not
+    held by the worker (:func:`~mocapfix.batch.manifest.drop_inherited_locks`)."""
+    from mocapfix.batch.manifest import drop_inherited_locks
+
+    _kill_me_with_parent()
+    drop_inherited_locks()
+    if creator is not None:
+        threading.Thread(target=_exit_when_gone, args=(creator,), daemon=True,
+                         name="mocapfix-parent-watch").start()
+    worker_init(threads)
+
+
+def _kill_me_with_parent() -> None:
+    """On Linux, have the kernel SIGKILL this process when its parent dies (prctl
+    PR_SET_PDEATHSIG): at once, even while a task holds the GIL."""
+    if not sys.platform.startswith("linux"):
+        return
+    import ctypes
+    import signal
+
+    with contextlib.suppress(OSError, AttributeError):
+        ctypes.CDLL(None, use_errno=True).prctl(1, int(signal.SIGKILL), 0, 0, 0)  # PR_SET_PDEATHSIG
+
+
+def _exit_when_gone(pid: int, every: float = 0.5) -> None:
+    while not _gone(pid):
+        time.sleep(every)
+    os._exit(1)
+
+
+def _gone(pid: int) -> bool:
+    """Process ``pid`` has ended (a zombie not yet reaped counts as ended, on Linux)."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return True
+    except PermissionError:
+        return False
+    try:
+        with open(f"/proc/{pid}/stat") as fh:
+            return fh.read().rpartition(")")[2].split()[0] in ("Z", "X")
+    except (OSError, IndexError):
+        return False
+
+
 def import_distributed():
     try:
         import distributed
@@ -96,7 +151,8 @@ def open_executor(spec: ExecutorSpec, n_items: int):
         from concurrent.futures import ProcessPoolExecutor     # (multiprocessing: ~10 ms to import)
 
         workers = min(spec.jobs, n_items)
-        pool = ProcessPoolExecutor(max_workers=workers, initializer=worker_init, initargs=(1,))
+        pool = ProcessPoolExecutor(max_workers=workers, initializer=pool_worker_init,
+                                   initargs=(1, os.getpid()))
         try:
             yield Running(pool, workers, f"{workers} local processes")
         finally:

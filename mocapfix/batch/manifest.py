@@ -23,12 +23,19 @@ output whose last record is ``started`` under the same run key was written by an
 interrupted run of this same config (killed between writing and recording) and may be
 replaced without ``--overwrite``. At the end of a run the journal is rewritten (atomically)
 with one record per input and output.
+
+The journal is never written through a link (one at its name is refused); a write the disk
+refuses is a :class:`~mocapfix.core.errors.WriteError`, with no torn line left. One run at a
+time writes into a folder: :func:`lock_output_folder`.
 """
 from __future__ import annotations
 
+import contextlib
+import errno
 import hashlib
 import json
 import os
+import stat
 import time
 from pathlib import Path
 
@@ -36,6 +43,8 @@ from mocapfix.core.version import __version__
 from mocapfix.core.fileio import atomic_write_text, file_sha256
 
 MANIFEST_NAME = "mocapfix-manifest.jsonl"
+#: the run lock of an output folder (:func:`lock_output_folder`)
+LOCK_NAME = ".mocapfix.lock"
 _KEY_FIELDS = ("config_sha256", "models_sha256", "reports", "read_options", "version")
 _INPUT_FIELDS = ("input_sha256", "companions_sha256")
 #: what the batch index (:mod:`mocapfix.quality.index`) shows of a file, kept in its record
@@ -87,6 +96,7 @@ class Manifest:
         self.records: dict[tuple, dict] = {}       # (input, output) -> last record
         self._fd: int | None = None
         self._size_before: int | None = None     # the file's size before this run wrote
+        _refuse_link(self.path)
         if self.path.exists():
             try:
                 text = self.path.read_text(encoding="utf-8", errors="replace")
@@ -151,15 +161,30 @@ class Manifest:
     def _append(self, records: list[dict]) -> None:
         if not records:
             return
-        if self._fd is None:
-            self.outdir.mkdir(parents=True, exist_ok=True)
-            self._size_before = self.path.stat().st_size if self.path.exists() else None
-            self._fd = os.open(self.path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o666)
-        data = "".join(json.dumps(r, sort_keys=True) + "\n" for r in records).encode("utf-8")
-        os.write(self._fd, data)
-        os.fsync(self._fd)
         for r in records:
             self.records[_key(r)] = r
+        data = "".join(json.dumps(r, sort_keys=True) + "\n" for r in records).encode("utf-8")
+        try:
+            if self._fd is None:
+                self.outdir.mkdir(parents=True, exist_ok=True)
+                self._size_before = self.path.stat().st_size if self.path.exists() else None
+                # never through a link (it appended to the file a planted link named)
+                self._fd = os.open(self.path, os.O_WRONLY | os.O_APPEND | os.O_CREAT
+                                   | getattr(os, "O_NOFOLLOW", 0), 0o666)
+            end = os.fstat(self._fd).st_size
+            try:
+                while data:
+                    data = data[os.write(self._fd, data):]
+                os.fsync(self._fd)
+            except OSError:
+                os.ftruncate(self._fd, end)     # no torn line for the next record to join
+                raise
+        except OSError as exc:
+            from mocapfix.core.errors import WriteError
+
+            why = "is a link; not written through" if exc.errno == errno.ELOOP else \
+                exc.strerror or str(exc)
+            raise WriteError(self.path, f"cannot write the manifest: {why}") from None
 
     def start(self, jobs) -> None:
         """Record that these jobs are about to run (one write for all)."""
@@ -198,8 +223,104 @@ class Manifest:
             os.close(self._fd)
             self._fd = None
         if compact and self.records:
-            atomic_write_text(self.path, "".join(json.dumps(r, sort_keys=True) + "\n"
-                                                 for r in self.records.values()))
+            from mocapfix.core.errors import WriteError
+
+            try:
+                atomic_write_text(self.path, "".join(json.dumps(r, sort_keys=True) + "\n"
+                                                     for r in self.records.values()))
+            except WriteError as exc:   # said as the appends say it (one line for both)
+                raise WriteError(self.path, "cannot write the manifest: "
+                                 + exc.reason.removeprefix("cannot write: ")) from None
+
+
+def lock_output_folder(outdir, soft: bool = False) -> int | None:
+    """Take the run lock of ``outdir``: an exclusive ``flock`` on ``OUTDIR/.mocapfix.lock``
+    (never through a link), which the kernel releases when this process ends however it
+    ends. Returns its descriptor for :func:`unlock_output_folder` (None where there is no
+    ``flock``: no lock). A run that finds it held is refused, a ConfigError naming the
+    process that holds it: two runs in one folder removed each other's temporaries and
+    kept only their own manifest records. ``soft``: None, not an error, when the lock file
+    cannot be made (a folder that takes no files: its own check says so)."""
+    try:
+        import fcntl
+    except ImportError:                 # (Windows)
+        return None
+    path = Path(outdir) / LOCK_NAME
+    while True:
+        try:
+            fd = os.open(path, os.O_RDWR | os.O_CREAT | getattr(os, "O_NOFOLLOW", 0), 0o666)
+        except OSError as exc:
+            if soft:
+                return None
+            from mocapfix.core.errors import ConfigError
+
+            why = "is a link" if exc.errno == errno.ELOOP else exc.strerror or str(exc)
+            raise ConfigError(f"{path}: cannot take the output folder's run lock: {why}") from None
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            holder = os.read(fd, 32).decode("ascii", "replace").strip() or "?"
+            os.close(fd)
+            from mocapfix.core.errors import ConfigError
+
+            raise ConfigError(f"{outdir}: another mocapfix run (process {holder}) is writing "
+                              "into this output folder; wait for it to end, or choose another "
+                              "output folder") from None
+        try:                            # the holder before us may have removed the file
+            if os.fstat(fd).st_ino == os.lstat(path).st_ino:
+                break
+        except FileNotFoundError:
+            pass
+        os.close(fd)
+    with contextlib.suppress(OSError):  # who holds it, for the message above (a full disk: none)
+        os.ftruncate(fd, 0)
+        os.write(fd, f"{os.getpid()}\n".encode("ascii"))
+    _HELD.add(fd)
+    return fd
+
+
+#: the descriptors of the run locks this process holds
+_HELD: set[int] = set()
+
+
+def drop_inherited_locks() -> None:
+    """In a forked worker: close the run locks' descriptors copied from its parent, so that
+    only the run holds its lock (a worker still dying after a ``kill -9`` of the run kept
+    the folder locked for the run that came next)."""
+    for fd in _HELD:
+        with contextlib.suppress(OSError):
+            os.close(fd)
+    _HELD.clear()
+
+
+def unlock_output_folder(outdir, fd: int | None) -> None:
+    """Release and remove the lock :func:`lock_output_folder` took (the lock is released
+    for the worker processes that share the descriptor too)."""
+    if fd is None:
+        return
+    import fcntl
+
+    with contextlib.suppress(OSError):
+        os.unlink(Path(outdir) / LOCK_NAME)
+    with contextlib.suppress(OSError):
+        fcntl.flock(fd, fcntl.LOCK_UN)
+    _HELD.discard(fd)
+    os.close(fd)
+
+
+def _refuse_link(path: Path) -> None:
+    """A ConfigError when ``path`` is a symbolic link or not a regular file: the journal is
+    appended to in place, and a link planted there made a run write into its target."""
+    try:
+        mode = os.lstat(path).st_mode
+    except OSError:
+        return
+    if not stat.S_ISREG(mode):
+        from mocapfix.core.errors import ConfigError
+
+        what = "a symbolic link" if stat.S_ISLNK(mode) else "not a regular file"
+        raise ConfigError(f"{path}: the output folder's manifest is {what}; mocapfix does not "
+                          "write through it (remove it, or choose another output folder)")
 
 
 def _key(rec: dict) -> tuple:

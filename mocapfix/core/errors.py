@@ -6,6 +6,7 @@ to exit code 2.
 """
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 
@@ -13,6 +14,31 @@ def one_line(text) -> str:
     """``text`` (a path, a message naming one) with its line breaks shown as ``\\n``: a file
     named ``"a\\nb.bvh"`` must not split the line that names it in two."""
     return str(text).replace("\n", "\\n")
+
+
+_CONTROL = re.compile("[\x00-\x08\x0b-\x1f\x7f-\x9f]")
+
+
+def printable(text: str) -> str:
+    """``text`` with control characters shown as ``\\xNN``: a file named with an escape
+    sequence (``"\\x1b[31m.bvh"``) must not recolour or rewrite the user's terminal, nor a
+    name with a carriage return hide the line before it (tab and line break are kept)."""
+    return _CONTROL.sub(lambda m: f"\\x{ord(m.group()):02x}", text)
+
+
+#: the longest field (a number, a name) a text reader accepts: longer is a malformed file
+MAX_FIELD = 1000
+#: the longest reason an UnreadableFileError keeps (a reader quoting a file's garbage)
+MAX_REASON = 1000
+
+
+def excerpt(text, length: int = 40) -> str:
+    """``text`` quoted (``repr``), cut to its first ``length`` characters with its full
+    length said when longer: an error message quotes a file's garbage, never all of it."""
+    text = str(text)
+    if len(text) <= length:
+        return repr(text)
+    return f"{text[:length]!r}… ({len(text):,} characters)"
 
 
 class MocapfixError(Exception):
@@ -24,6 +50,8 @@ class UnreadableFileError(MocapfixError):
 
     def __init__(self, path, reason: str, line: int | None = None):
         self.path = str(path) if path is not None else "<memory>"
+        if len(reason) > MAX_REASON:
+            reason = f"{reason[:MAX_REASON - 100]}… (cut: {len(reason):,} characters in all)"
         self.reason = reason
         self.line = line
         where = f"{self.path}:{line}" if line is not None else self.path

@@ -37,13 +37,18 @@ def atomic_open(path, mode: str = "wb"):
     except OSError as exc:
         raise _write_error(path, exc) from None
     try:
-        with os.fdopen(fd, mode, **({} if "b" in mode else {"encoding": "utf-8", "newline": ""})) as fh:
-            yield fh
-            try:
-                fh.flush()
-                os.fsync(fh.fileno())
-            except OSError as exc:
-                raise _write_error(path, exc) from None
+        try:
+            with os.fdopen(fd, mode, **({} if "b" in mode else {"encoding": "utf-8", "newline": ""})) as fh:
+                yield fh
+                try:
+                    fh.flush()
+                    os.fsync(fh.fileno())
+                except OSError as exc:
+                    raise _write_error(path, exc) from None
+        except OSError as exc:      # the caller's writes, or the flush as the file closed
+            if exc.errno not in WRITE_FAILURES:
+                raise
+            raise _write_error(path, exc) from None
         try:
             os.chmod(tmp, 0o666 & ~current_umask())   # mkstemp made it 0600: honour the umask
             os.replace(tmp, path)
@@ -53,6 +58,22 @@ def atomic_open(path, mode: str = "wb"):
         with contextlib.suppress(OSError):
             os.unlink(tmp)
         raise
+
+
+#: errno values of a write that the disk or file system refused (full, over quota, failing,
+#: read-only, file too large): raised inside :func:`atomic_open`, they are a WriteError
+WRITE_FAILURES = frozenset(getattr(errno, n) for n in
+                           ("ENOSPC", "EDQUOT", "EIO", "EROFS", "EFBIG") if hasattr(errno, n))
+
+
+def refuse_stream(path) -> None:
+    """Raise a :class:`~mocapfix.core.errors.WriteError` when ``path`` is (or links to) a
+    character device or a pipe: a file of an output folder written there would be
+    swallowed (``/dev/null``) or sent away while the run records it as written."""
+    if is_stream(path):
+        from mocapfix.core.errors import WriteError
+        raise WriteError(path, "cannot write: it is a device or a named pipe (FIFO), or a link "
+                               "to one, not a file; remove it from the output folder")
 
 
 def is_stream(path) -> bool:
@@ -171,6 +192,17 @@ def atomic_write_text(path, text: str) -> Path:
     Python to lone surrogates such as ``\\udcff``) is written as that escape, so reports
     and JUnit XML that quote it stay valid UTF-8 text."""
     return atomic_write_bytes(path, text.encode("utf-8", errors="backslashreplace"))
+
+
+def write_output_text(path, text: str) -> list:
+    """Write a text output (UTF-8) atomically; any OS failure is a
+    :class:`~mocapfix.core.errors.WriteError` naming ``path``. Returns ``[path]``, as a
+    format's writer does."""
+    try:
+        atomic_write_bytes(path, text.encode("utf-8"))
+    except OSError as exc:
+        raise _write_error(Path(path), exc) from None
+    return [Path(path)]
 
 
 def read_input_bytes(path) -> bytes:

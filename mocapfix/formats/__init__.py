@@ -1,8 +1,11 @@
 """Format registry: picks a reader by suffix and content, a writer by suffix.
 
 A format is one module of this package that declares, at its top level and as literals,
-``NAME = "..."``, ``SUFFIXES = (".ext", ...)`` and optionally ``SNIFF_ORDER = n`` (where
-its sniffer runs when a file's suffix does not settle the format; lower first), and defines
+``NAME = "..."``, ``SUFFIXES = (".ext", ...)``, ``FAMILY = "..."`` (what its points are:
+``markers`` for optical marker files, ``rotations`` for joint-rotation files, ``skeletons``
+for depth-sensor skeletons; a config's ``formats:`` may name a family) and optionally
+``SNIFF_ORDER = n`` (where its sniffer runs when a file's suffix does not settle the
+format; lower first), and defines
 ``sniff(head: bytes) -> bool``, ``read(path, **options) -> Motion`` and
 ``write(motion, path, **options) -> list[Path]`` (writers use
 :mod:`mocapfix.core.fileio` so outputs appear atomically); one whose reader reads other
@@ -11,6 +14,14 @@ files cannot hold every value ``storable(motion) -> Motion``. The table :data:`F
 read off those declarations (the module's text, not its import), so a new module is found
 with nothing else edited, and modules are imported on first use so that ``mocapfix
 --help`` stays fast.
+
+Several formats may claim one suffix (``.csv``: Vicon Nexus, OptiTrack Motive and Kinect
+text; ``.tsv``: Qualisys QTM and Kinect text). :func:`detect` then runs the claiming
+formats' sniffers in sniffing order (the vendor sniffers are strict and run first), then
+the others'; a ``.csv``/``.txt``/``.tsv`` file that none accepts is refused with "not a
+known layout (first line: '...')". :func:`write` without a format writes the motion's own
+format when it claims the suffix, else the last (most general) claiming format -- see
+:func:`write_format`.
 """
 from __future__ import annotations
 
@@ -24,7 +35,7 @@ from mocapfix.core.errors import MocapfixError, UnreadableFileError, WriteError
 from mocapfix.core.motion import Motion
 
 #: a module-level declaration of a format module (module docstring)
-_DECLARATION = re.compile(r"^(NAME|SUFFIXES|SNIFF_ORDER) = (.+)$", re.MULTILINE)
+_DECLARATION = re.compile(r"^(NAME|SUFFIXES|SNIFF_ORDER|FAMILY) = (.+)$", re.MULTILINE)
 
 
 def _declared_formats(paths) -> dict:
@@ -39,7 +50,12 @@ def _declared_formats(paths) -> dict:
         if "NAME" in decl and "SUFFIXES" in decl:
             found.append((decl.get("SNIFF_ORDER", 10), decl["NAME"], f"{__name__}.{info.name}",
                           tuple(s.lower() for s in decl["SUFFIXES"])))
+            _FAMILY[decl["NAME"]] = decl.get("FAMILY", decl["NAME"])
     return {name: (mod, suffixes) for _, name, mod, suffixes in sorted(found)}
+
+
+#: format name -> its family (filled by :func:`_declared_formats`)
+_FAMILY: dict[str, str] = {}
 
 
 #: The one format table: name -> (module, suffixes), sniffing order. Configs, rule files and
@@ -47,9 +63,35 @@ def _declared_formats(paths) -> dict:
 FORMATS = _declared_formats(__path__)
 #: format names, as configs and rule files spell them in ``formats:``
 NAMES = tuple(FORMATS)
-_SUFFIXES = {suffix: name for name, (_, suffixes) in FORMATS.items() for suffix in suffixes}
+#: family -> its format names (``markers``: c3d, trc and the vendors' exports)
+FAMILIES = {family: tuple(n for n in NAMES if _FAMILY[n] == family)
+            for family in dict.fromkeys(_FAMILY[n] for n in NAMES)}
+#: the formats whose points are optical markers
+MARKER_FORMATS = FAMILIES["markers"]
+
+
+def matches(name: str, listed) -> bool:
+    """Format ``name`` is among ``listed`` (format or family names: a config's or a rule
+    file's ``formats:``)."""
+    return name in listed or _FAMILY.get(name) in listed
+
+
+#: suffix -> the formats that claim it, in sniffing order (``.csv``: the strict vendor
+#: layouts first, Kinect's general text layouts last)
+_SUFFIXES = {}
+for _name, (_, _suffixes) in FORMATS.items():
+    for _suffix in _suffixes:
+        _SUFFIXES[_suffix] = (*_SUFFIXES.get(_suffix, ()), _name)
 #: suffixes of files that hold motions (``.asf`` alone is a skeleton, read as a rest pose)
 MOTION_SUFFIXES = tuple(suffix for suffix in _SUFFIXES if suffix != ".asf")
+#: suffixes of text tables: a file of these no sniffer accepts is "not a known layout"
+TEXT_SUFFIXES = (".csv", ".txt", ".tsv")
+
+
+def claiming(suffix: str) -> tuple[str, ...]:
+    """The formats that claim ``suffix`` (any case), in sniffing order."""
+    names = _SUFFIXES.get(suffix.lower(), ())
+    return (names,) if isinstance(names, str) else tuple(names)
 
 
 def suffixes(name: str) -> tuple[str, ...]:
@@ -66,9 +108,12 @@ def module(name: str):
 
 
 def detect(path) -> str:
-    """Format name of ``path`` from its suffix, confirmed or overridden by its content."""
+    """Format name of ``path``: the sniffers of the formats that claim its suffix, in
+    sniffing order, then the others'. A text table (``.csv``, ``.txt``, ``.tsv``) that no
+    sniffer accepts is refused here as "not a known layout (first line: '...')"; for other
+    suffixes the claiming format's reader explains what is wrong."""
     path = Path(path)
-    by_suffix = _SUFFIXES.get(path.suffix.lower())
+    claim = claiming(path.suffix)
     try:
         with open(path, "rb") as fh:
             head = fh.read(4096)
@@ -76,15 +121,18 @@ def detect(path) -> str:
         raise UnreadableFileError(path, f"cannot open: {exc.strerror or exc}") from None
     if not head:
         raise UnreadableFileError(path, "file is empty")
-    if by_suffix is not None and module(by_suffix).sniff(head):
-        return by_suffix
-    for name in FORMATS:
-        if name != by_suffix and module(name).sniff(head):
+    for name in (*claim, *(n for n in FORMATS if n not in claim)):
+        if module(name).sniff(head):
             return name
-    if by_suffix is not None:
-        return by_suffix  # let the reader explain what is wrong
-    raise UnreadableFileError(path, "unknown file format (expected .c3d, .bvh, .amc/.asf, "
-                                    "or Kinect skeleton .csv/.txt)")
+    if path.suffix.lower() in TEXT_SUFFIXES and claim:
+        from mocapfix.formats.texttable import not_text, unknown_layout
+        if not head.strip():
+            raise UnreadableFileError(path, "file is empty")
+        raise UnreadableFileError(path, not_text(head) or unknown_layout(head))
+    if claim:
+        return claim[0]  # let the reader explain what is wrong
+    known = ", ".join(f"{name} ({'/'.join(suffixes(name))})" for name in NAMES)
+    raise UnreadableFileError(path, f"unknown file format (expected one of: {known})")
 
 
 def read(path, format: str | None = None, *, default_fps: float | None = None,
@@ -175,11 +223,27 @@ def losses(motion: Motion, name: str) -> list[str]:
     return notes
 
 
+def write_format(motion: Motion, path) -> str | None:
+    """The format :func:`write` uses for ``path`` when none is given: the motion's own
+    format if it claims the suffix; else, for a suffix several formats claim, the most
+    general of them -- the LAST in sniffing order (``.csv``/``.txt``/``.tsv``: Kinect's
+    headed wide CSV, which holds any motion; the vendor layouts are written only for
+    motions read from them or when named); else the suffix's one format; else the
+    motion's own format (None if none)."""
+    claim = claiming(Path(path).suffix)
+    if motion.format in claim:
+        return motion.format
+    if claim:
+        return claim[-1]
+    return motion.format if motion.format in FORMATS else None
+
+
 def write(motion: Motion, path, format: str | None = None, **options) -> list[Path]:
-    """Write ``motion`` to ``path`` (format from the suffix unless given). Returns the files
-    written (ASF/AMC writes the skeleton beside the motion)."""
+    """Write ``motion`` to ``path`` (format: ``format``, else :func:`write_format`). Returns
+    the files written (ASF/AMC writes the skeleton beside the motion)."""
     path = Path(path)
-    name = format or _SUFFIXES.get(path.suffix.lower()) or motion.format
+    name = format or write_format(motion, path)
     if name not in FORMATS:
         raise WriteError(path, f"cannot tell the output format from suffix {path.suffix!r}")
     return module(name).write(motion, path, **options)
+

@@ -66,14 +66,16 @@ from pathlib import Path
 import numpy as np
 
 from mocapfix.core.errors import UnreadableFileError, UnsupportedFeatureError, WriteError
-from mocapfix.core.fileio import atomic_write_bytes, read_input_bytes
-from mocapfix.formats.textenc import UTF8_BOM, refuse_wide_text
+from mocapfix.core.fileio import atomic_write_bytes, read_input_bytes, refuse_stream
+from mocapfix.formats.textenc import UTF8_BOM, refuse_long_fields, refuse_wide_text
 from mocapfix.core.kinematics import Rig, euler_to_matrix
 from mocapfix.core.motion import Motion, Skeleton
 from mocapfix.core.units import asf_length_unit
 
 NAME = "asfamc"
 SUFFIXES = (".amc", ".asf")
+#: what its points are (configs and rule files may name the family: ``formats: [rotations]``)
+FAMILY = "rotations"
 #: where its sniffer runs when the suffix does not tell (lower first: the stricter tests)
 SNIFF_ORDER = 2
 DEFAULT_FPS = 120.0
@@ -162,7 +164,9 @@ def _decode(path: Path, data: bytes) -> str:
     refuse_wide_text(path, data, Path(path).suffix.lstrip(".").upper() or "ASF/AMC")
     if b"\x00" in data[:4096]:
         raise UnreadableFileError(path, "binary data where ASF/AMC text was expected")
-    return data.decode("latin-1")    # byte-exact round trip, never fails
+    text = data.decode("latin-1")    # byte-exact round trip, never fails
+    refuse_long_fields(path, text.split("\n"))
+    return text
 
 
 def _floats(path, tokens: list[str], count: int, what: str, line: int) -> np.ndarray:
@@ -913,6 +917,7 @@ def _write_asf(target: Path, source: AsfAmcSource) -> Path:
             return target           # already there, identical (e.g. a second trial of a subject)
     except OSError:
         pass
+    refuse_stream(target)           # an output folder's device or FIFO would swallow it
     return atomic_write_bytes(target, source.asf_bytes)
 
 

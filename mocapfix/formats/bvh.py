@@ -72,7 +72,7 @@ from pathlib import Path
 
 import numpy as np
 
-from mocapfix.core.errors import UnreadableFileError, WriteError
+from mocapfix.core.errors import MAX_FIELD, UnreadableFileError, WriteError, excerpt
 from mocapfix.core.fileio import atomic_write_bytes, read_input_bytes
 from mocapfix.formats.textenc import refuse_wide_text
 from mocapfix.core.kinematics import Rig
@@ -81,6 +81,8 @@ from mocapfix.core.quantity import MAX_FRAME_RATE_HZ, MIN_FRAME_RATE_HZ
 
 NAME = "bvh"
 SUFFIXES = (".bvh",)
+#: what its points are (configs and rule files may name the family: ``formats: [rotations]``)
+FAMILY = "rotations"
 #: where its sniffer runs when the suffix does not tell (lower first: the stricter tests)
 SNIFF_ORDER = 1
 
@@ -163,6 +165,9 @@ class _Tokens:
             last = match.start()
             if self.lines and self.lines[-1] != line:
                 self.line_ends[-1] = True
+            if match.end() - match.start() > MAX_FIELD:
+                raise UnreadableFileError(path, f"a word longer than {MAX_FIELD:,} bytes: "
+                                                f"{excerpt(_text(match.group()))}", line=line)
             self.words.append(match.group())
             self.lines.append(line)
             self.line_ends.append(False)
@@ -194,7 +199,7 @@ class _Tokens:
         line = self.line()
         word = self.take(repr(keyword.decode()))
         if word.upper() != keyword.upper():
-            self.fail(f"expected {keyword.decode()!r}, found {_text(word)!r}", line)
+            self.fail(f"expected {keyword.decode()!r}, found {excerpt(_text(word))}", line)
 
     def rest_of_line(self, what: str) -> list[bytes]:
         """The tokens up to the end of the current line (at least one)."""
@@ -209,9 +214,9 @@ class _Tokens:
         try:
             value = float(word)
         except ValueError:
-            self.fail(f"{what}: {_text(word)!r} is not a number", line)
+            self.fail(f"{what}: {excerpt(_text(word))} is not a number", line)
         if not math.isfinite(value):
-            self.fail(f"{what}: {_text(word)!r} is not a finite number", line)
+            self.fail(f"{what}: {excerpt(_text(word))} is not a finite number", line)
         return value
 
 
@@ -270,10 +275,10 @@ def _parse_hierarchy(tokens: _Tokens) -> list[_Joint]:
             tokens.fail("unbalanced braces: '}' without an open joint", line)
         elif key in (b"ROOT", b"JOINT", b"END"):
             where = "inside a joint" if open_joints else "outside any ROOT"
-            tokens.fail(f"{_text(word)!r} {where} (unbalanced braces?)", line)
+            tokens.fail(f"{excerpt(_text(word))} {where} (unbalanced braces?)", line)
         else:
             expected = "JOINT, End Site or '}'" if open_joints else "ROOT or MOTION"
-            tokens.fail(f"expected {expected}, found {_text(word)!r}", line)
+            tokens.fail(f"expected {expected}, found {excerpt(_text(word))}", line)
     if not joints:
         tokens.fail("the hierarchy has no ROOT joint")
     return joints
@@ -305,7 +310,7 @@ def _parse_channels(tokens: _Tokens, joint_name: str) -> list[str]:
     try:
         count = int(word)
     except ValueError:
-        tokens.fail(f"CHANNELS of {joint_name!r}: count {_text(word)!r} is not an integer", line)
+        tokens.fail(f"CHANNELS of {joint_name!r}: count {excerpt(_text(word))} is not an integer", line)
     if count < 0 or count > len(tokens.words) - tokens.pos:
         tokens.fail(f"CHANNELS of {joint_name!r}: count {count} is impossible here", line)
     names = [_text(tokens.take("a channel name")) for _ in range(count)]
@@ -474,8 +479,11 @@ def _declared_frames(path, word: bytes, line: int) -> int:
     try:
         count = int(word)
     except ValueError:
-        raise UnreadableFileError(path, f"Frames: {_text(word)!r} is not a whole number",
+        raise UnreadableFileError(path, f"Frames: {excerpt(_text(word))} is not a whole number",
                                   line=line) from None
+    if abs(count) > 10 ** 12:
+        raise UnreadableFileError(path, f"Frames: {excerpt(count)} is not a frame count a file "
+                                        "can hold", line=line)
     if count < 0:
         raise UnreadableFileError(path, f"Frames: {count} is negative", line=line)
     if count == 0:
@@ -488,13 +496,13 @@ def _frame_time(path, word: bytes, line: int) -> float:
     try:
         value = float(word)
     except ValueError:
-        raise UnreadableFileError(path, f"Frame Time: {_text(word)!r} is not a number",
+        raise UnreadableFileError(path, f"Frame Time: {excerpt(_text(word))} is not a number",
                                   line=line) from None
     if not (math.isfinite(value) and value > 0):
-        raise UnreadableFileError(path, f"Frame Time: {_text(word)!r} must be a positive "
+        raise UnreadableFileError(path, f"Frame Time: {excerpt(_text(word))} must be a positive "
                                         "number of seconds", line=line)
     if not 1.0 / MAX_FRAME_RATE_HZ <= value <= 1.0 / MIN_FRAME_RATE_HZ:
-        raise UnreadableFileError(path, f"Frame Time: {_text(word)!r} s is a rate outside "
+        raise UnreadableFileError(path, f"Frame Time: {excerpt(_text(word))} s is a rate outside "
                                         f"{MIN_FRAME_RATE_HZ:g}-{MAX_FRAME_RATE_HZ:g} Hz "
                                         "(a corrupt field?)", line=line)
     return value

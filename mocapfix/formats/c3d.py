@@ -84,6 +84,8 @@ from mocapfix.core.units import METRES_PER_UNIT, normalise_unit_name
 
 NAME = "c3d"
 SUFFIXES = (".c3d",)
+#: what its points are (configs and rule files may name the family: ``formats: [markers]``)
+FAMILY = "markers"
 #: where its sniffer runs when the suffix does not tell (lower first: the stricter tests)
 SNIFF_ORDER = 0
 

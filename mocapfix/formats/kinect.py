@@ -85,8 +85,9 @@ from pathlib import Path
 
 import numpy as np
 
-from mocapfix.core.errors import UnreadableFileError, UnsupportedFeatureError, WriteError
-from mocapfix.core.fileio import atomic_write_bytes, read_input_bytes
+from mocapfix.core.errors import UnreadableFileError, UnsupportedFeatureError, excerpt
+from mocapfix.formats.textenc import refuse_long_fields
+from mocapfix.core.fileio import read_input_bytes, write_output_text
 from mocapfix.core.quantity import MAX_FRAME_RATE_HZ, MIN_FRAME_RATE_HZ
 from mocapfix.core import kinect_joints as kl
 from mocapfix.core.motion import Motion, Skeleton
@@ -94,6 +95,8 @@ from mocapfix.core.units import METRES_PER_UNIT, normalise_unit_name
 
 NAME = "kinect"
 SUFFIXES = (".csv", ".txt", ".tsv")
+#: what its points are (configs and rule files may name the family: ``formats: [skeletons]``)
+FAMILY = "skeletons"
 #: where its sniffer runs when the suffix does not tell (lower first: the stricter tests)
 SNIFF_ORDER = 3
 
@@ -193,7 +196,7 @@ def _numbers(tokens: list[str], token_lines: np.ndarray, path, empty_is_nan=Fals
     except ValueError:
         for k, token in enumerate(tokens):
             if not _is_number(token):
-                raise UnreadableFileError(path, f"non-numeric value {token.strip()!r}",
+                raise UnreadableFileError(path, f"non-numeric value {excerpt(token.strip())}",
                                           line=int(token_lines[k]) + 1) from None
         raise UnreadableFileError(path, "non-numeric value") from None
 
@@ -312,6 +315,7 @@ def read(path, fps: float | None = None, units: str | None = None,
     idx = _content_indices(lines)
     if not idx:
         raise UnreadableFileError(path, "file holds no data lines")
+    refuse_long_fields(path, lines)
     layout = options.get("layout") or _classify([lines[i] for i in idx[:40]])
     if layout not in _READERS and layout is not None:
         raise UnreadableFileError(path, f"unknown Kinect layout {layout!r}; known: "
@@ -948,11 +952,7 @@ def write(motion: Motion, path, **options) -> list[Path]:
         text = _patched_text(source, motion)
     else:
         text = _wide_csv_text(motion)
-    try:
-        atomic_write_bytes(path, text.encode("utf-8"))
-    except OSError as exc:
-        raise WriteError(path, f"cannot write: {exc.strerror or exc}") from None
-    return [path]
+    return write_output_text(path, text)
 
 
 def _fits(source: KinectSource, motion: Motion) -> bool:
@@ -1062,9 +1062,11 @@ def _fast_csv_text(source: KinectSource, motion: Motion) -> str:
         r, j = np.nonzero(moved)
         r, coords = np.repeat(r, 3), ((1 + 4 * j)[:, None] + np.arange(3)).ravel()
         values = new[rows[b]][moved].ravel()
-        old = cells[r, coords].astype(str)
-        dot = np.char.find(old, ".")
-        decimals = np.maximum(np.where(dot < 0, 0, np.char.str_len(old) - dot - 1), 6)
+        # (as a fixed-width string array, one long token sized every cell like itself)
+        old = cells[r, coords].tolist()
+        dot = np.fromiter((t.find(".") for t in old), np.int64, len(old))
+        size = np.fromiter(map(len, old), np.int64, len(old))
+        decimals = np.maximum(np.where(dot < 0, 0, size - dot - 1), 6)
         for d in np.unique(decimals):
             at = np.flatnonzero(decimals == d)
             text = (f"%.{d}f," * len(at)) % tuple(values[at].tolist())

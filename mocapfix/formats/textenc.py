@@ -9,7 +9,9 @@ saying how to convert the file.
 """
 from __future__ import annotations
 
-from mocapfix.core.errors import UnreadableFileError
+import re
+
+from mocapfix.core.errors import MAX_FIELD, UnreadableFileError, excerpt
 
 UTF8_BOM = b"\xef\xbb\xbf"
 _BOMS = (
@@ -43,3 +45,19 @@ def refuse_wide_text(path, data: bytes, what: str) -> None:
     if name is not None:
         raise UnreadableFileError(path, f"{what} file is {name} text; mocapfix reads ASCII/UTF-8 "
                                         f"{what}: save it as UTF-8 (e.g. iconv -f UTF-16 -t UTF-8)")
+
+
+def refuse_long_fields(path, lines) -> None:
+    """An UnreadableFileError naming the line of a field (a number, a name) longer than
+    :data:`~mocapfix.core.errors.MAX_FIELD` characters, quoting an excerpt: no text format
+    has one, and a 5 MB "number" made the Kinect writer ask for a 211 GiB array. Only
+    lines longer than that are split."""
+    for i, line in enumerate(lines):
+        if len(line) > MAX_FIELD:
+            long = next((t for t in _FIELD_SEP.split(line) if len(t) > MAX_FIELD), None)
+            if long is not None:
+                raise UnreadableFileError(path, f"a field longer than {MAX_FIELD:,} characters: "
+                                                f"{excerpt(long)}", line=i + 1)
+
+
+_FIELD_SEP = re.compile(r"[,;\t ]")

@@ -82,14 +82,16 @@ from mocapfix.core.errors import (
     UnsupportedFeatureError,
     WriteError,
 )
-from mocapfix.core.fileio import atomic_write_bytes, read_input_bytes
+from mocapfix.core.fileio import read_input_bytes, write_output_text
 from mocapfix.core.motion import Motion, missing_samples
 from mocapfix.core.quantity import MAX_FRAME_RATE_HZ, MIN_FRAME_RATE_HZ
 from mocapfix.core.units import METRES_PER_UNIT, normalise_unit_name
-from mocapfix.formats.textenc import refuse_wide_text
+from mocapfix.formats.textenc import refuse_long_fields, refuse_wide_text
 
 NAME = "trc"
 SUFFIXES = (".trc",)
+#: what its points are (configs and rule files may name the family: ``formats: [markers]``)
+FAMILY = "markers"
 #: where its sniffer runs when the suffix does not tell (a fixed first word: strict)
 SNIFF_ORDER = 1
 
@@ -292,6 +294,7 @@ def read(path, fps: float | None = None, **options) -> Motion:
         text = raw.decode("latin-1")
     bom = "\ufeff" if text.startswith("\ufeff") else ""
     lines, endings = _split_lines(text[len(bom):])
+    refuse_long_fields(path, lines)
     notes: list[str] = []
     header = _header(lines, path, notes)
     rate = _rate(header, path)
@@ -423,11 +426,7 @@ def write(motion: Motion, path, **options) -> list[Path]:
         text = _patched_text(source, motion)
     else:
         text = _fresh_text(motion, path)
-    try:
-        atomic_write_bytes(path, text.encode("utf-8"))
-    except OSError as exc:
-        raise WriteError(path, f"cannot write: {exc.strerror or exc}") from None
-    return [path]
+    return write_output_text(path, text)
 
 
 def _fits(source: TRCSource, motion: Motion) -> bool:

@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from mocapfix.formats import MARKER_FORMATS, matches
 from mocapfix.cleaners.base import (FILL_ERRORS, REJECTED_FILLS, REPLACED_FRAMES, Cleaner,
                                     FillGate, FittedCleaner)
 from mocapfix.core.errors import ConfigError
@@ -42,11 +43,12 @@ CONFIG_VERSION = 1
 #: (10–20 mm; Leardini et al. 2005, Gait Posture 21:212), which inverse-kinematics solvers
 #: already absorb; a fill that may be further off than that is not written as data
 DEFAULT_MAX_FILL_ERROR = "20 mm"
-#: formats where a fill is gated: they store a missing sample (C3D: residual −1) and would
-#: store a fill as a valid sample. Kinect files mark fills as Inferred (the sensor's own
+#: formats where a fill is gated: they store a missing sample (C3D: residual −1; TRC and the
+#: vendors' text exports: empty fields) and would store a fill as a valid sample (the
+#: ``markers`` family). Kinect files mark fills as Inferred (the sensor's own
 #: word for a joint it did not see) and are not gated; BVH/AMC cannot store a missing
 #: sample at all
-GATED_FORMATS = ("c3d",)
+GATED_FORMATS = MARKER_FORMATS
 
 
 
@@ -62,7 +64,7 @@ class Step:
         return self.cleaner.step
 
     def applies(self, motion: Motion) -> bool:
-        return self.formats is None or motion.format in self.formats
+        return self.formats is None or matches(motion.format, self.formats)
 
     def config(self) -> dict:
         out = {"cleaner": self.cleaner.name}

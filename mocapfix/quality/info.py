@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from mocapfix.formats import MARKER_FORMATS
 from mocapfix.core.errors import one_line
 from mocapfix.quality.measure import measure_input
 from mocapfix.core.motion import Motion
@@ -101,7 +102,7 @@ def _take(s: dict) -> str:
 
 
 def _list(names, limit):
-    shown = ", ".join(names[:limit])
+    shown = ", ".join(map(one_line, names[:limit]))
     more = len(names) - limit
     return f"{shown}{f' … (+{more}; -v lists all)' if more > 0 else ''}"
 
@@ -113,7 +114,7 @@ def format_text(summary: dict, verbose: bool = False) -> str:
         one_line(s["path"]),
         f"  format      {s['format']}",
         f"  frames      {s['frames']} at {s['fps']:g} fps ({s['duration_s']:.2f} s)",
-        f"  {'markers' if s['format'] == 'c3d' else 'joints':<11} {s['joints']}"
+        f"  {'markers' if s['format'] in MARKER_FORMATS else 'joints':<11} {s['joints']}"
         + (f" + {len(s['unlabelled'])} unlabelled trajector{'y' if len(s['unlabelled']) == 1 else 'ies'}"
            if s.get("unlabelled") else "")
         + (f" + {s['model_outputs']} model outputs" if s.get("model_outputs") else "")
@@ -135,7 +136,7 @@ def format_text(summary: dict, verbose: bool = False) -> str:
                  for a, n in s["empty_frames"]]
         total = sum(n for _, n in s["empty_frames"])
         lines.append(f"  empty       {total} frames with no "
-                     f"{'marker' if s['format'] == 'c3d' else 'joint'} seen: "
+                     f"{'marker' if s['format'] in MARKER_FORMATS else 'joint'} seen: "
                      f"{_list(spans, 4 if not verbose else limit)}")
     if "analog" in s:
         a = s["analog"]

@@ -24,6 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from mocapfix.formats import MARKER_FORMATS
 from mocapfix.cleaners import build
 from mocapfix.cleaners.base import REJECTED_FILLS
 from mocapfix.solvers.spikes import hampel_flags
@@ -149,7 +150,7 @@ MAX_SWAP_POINTS = 120
 def suspected_swaps(motion: Motion) -> list[dict] | None:
     """Label swaps the ``swaps`` cleaner finds (optical marker data without a rig);
     None when not searched (not marker data, or more than MAX_SWAP_POINTS points)."""
-    if motion.rig is not None or motion.format not in ("c3d", "unknown") or motion.n_joints < 3:
+    if motion.rig is not None or motion.format not in (*MARKER_FORMATS, "unknown") or motion.n_joints < 3:
         return []
     if motion.n_joints > MAX_SWAP_POINTS:
         return None
@@ -437,6 +438,10 @@ def measure_cleaning(result: CleanResult) -> dict:
                 if refusals:
                     left["rejected_by"] = refusals
                 gaps_left.append(left)
+        removed = [{"start": int(s), "length": int(n),
+                    "removed_by": ", ".join(dict.fromkeys(
+                        r.step for r in records if r.flagged[s:s + n, j].any()))}
+                   for s, n in zip(*runs((~miss_b & miss_a)[:, j:j + 1])[1:])]
         mv = moved[:, j]
         has_mv = np.isfinite(mv).any()
         correction = {"mean": finite(np.nanmean(mv)) if has_mv else 0.0,
@@ -458,6 +463,8 @@ def measure_cleaning(result: CleanResult) -> dict:
                      "filled": gaps_filled, "unfilled": gaps_left},
             "fill_bound_mm": max(bounds, default=None),
             "left_uncertain": finite(left_uncertain[span, j].mean()) if T_take else 0.0,
+            # samples seen in the input, judged wrong and left missing (no fill trusted)
+            "removed": removed,
             "outliers_flagged": int(flagged[:, j].sum()),
             "correction_mm": correction,
             "jitter_before": finite(jitter_b[j]),

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from mocapfix.core.errors import name_the_file, one_line
+from mocapfix.core.errors import name_the_file, one_line, printable
 from mocapfix.core.gaps import runs
 from mocapfix.core.gaps import LONG_FILL_S
 from mocapfix.quality.rules import METRICS, STATUS_ORDER
@@ -88,7 +88,8 @@ def _fill_summary(f: dict) -> str:
 
 def _gaps_left(report: dict, shown: int = 12) -> list[str]:
     """Markdown section listing the gaps no step filled completely, with the reasons the
-    steps gave for refusing their fills (``rejected_by``); gaps of one span and one reason
+    steps gave for refusing their fills (``rejected_by``), and the samples judged wrong and
+    left missing (``removed``); gaps of one span and one reason
     share a row (a whole-body dropout is one row, not one per marker). None: no section."""
     fps, frames = report["file"].get("fps") or 0, report["file"]["frames"]
     rows: dict[tuple, list[str]] = {}
@@ -98,6 +99,9 @@ def _gaps_left(report: dict, shown: int = 12) -> list[str]:
             if not why and g["length"] == frames:
                 why = "never seen in the input"
             rows.setdefault((g["start"], g["length"], g["filled_frames"], why), []).append(j["name"])
+        for g in j.get("removed", ()):
+            why = f"seen in the input, judged wrong ({g['removed_by']}), no fill trusted"
+            rows.setdefault((g["start"], g["length"], 0, why), []).append(j["name"])
     if not rows:
         return []
     out = ["", "## Gaps left unfilled", "",
@@ -139,14 +143,27 @@ def _not_cleaned(report: dict, shown: int = 12) -> list[str]:
                                      if rig else "passed through unchanged, ") + "not graded)", ""]
     for why, names in by_why.items():
         more = f", … (+{len(names) - shown})" if len(names) > shown else ""
-        out.append(f"- {len(names)} × {why}: {', '.join(names[:shown])}{more}")
+        out.append(f"- {len(names)} × {_md(why)}: {_md(', '.join(names[:shown]))}{more}")
     return out
 
 
 def _cell(text) -> str:
     """A name in a Markdown table cell: its pipes escaped and line breaks made spaces (a
-    C3D label "a|b" split its row into one column too many, in the HTML report too)."""
-    return " ".join(str(text).splitlines()).replace("|", "\\|")
+    C3D label "a|b" split its row into one column too many, in the HTML report too), and
+    as :func:`_md`."""
+    return _md(" ".join(str(text).splitlines())).replace("|", "\\|")
+
+
+_HTML_SPECIAL = re.compile(r"[<>&]")
+_HTML_ESCAPED = re.compile(r"\\([<>&])")
+
+
+def _md(text) -> str:
+    """Text from a file (a name, a path, a note quoting one) as Markdown text: ``<``, ``>``
+    and ``&`` backslash-escaped, so no Markdown viewer takes a label ``<script>`` or
+    ``<img onerror=...>`` for HTML, and control characters shown as ``\\xNN`` (see
+    :func:`printable`)."""
+    return _HTML_SPECIAL.sub(r"\\\g<0>", printable(str(text)))
 
 
 #: a step's ``info`` lists up to this many items in the Markdown (longer ones: the JSON)
@@ -177,10 +194,10 @@ def _step_findings(step: dict) -> str:
 def to_markdown(report: dict) -> str:
     f = report["file"]
     name = Path(f["path"]).name if f.get("path") else "motion"
-    out = [f"# mocapfix report: {name}", "",
+    out = [f"# mocapfix report: {_md(one_line(name))}", "",
            f"**Status: {f['status']}** — {f['frames']} frames at {f['fps']} fps, {f['joints']} "
            f"joints/markers ({f['format']}, units {f['units']}).", "",
-           f"- file: {f['path']}",
+           f"- file: {_md(one_line(f['path']))}",
            f"- missing before: {_pct(f['missing_before'])}, after: {_pct(f['missing_after'])}",
            f"- samples filled: {f['samples_filled']}, flagged as outliers: {f['samples_flagged']}",
            f"- gaps before: {f['gaps_before']}, after: {f.get('gaps_after', '–')} (input gaps "
@@ -198,7 +215,7 @@ def to_markdown(report: dict) -> str:
         out.append(f"- rotation write-back residual: mean {_num(wb['mean'], '{:.3f}')} mm, "
                    f"max {_num(wb['max'], '{:.3f}')} mm")
     for note in f["notes"]:
-        out.append(f"- note: {note}")
+        out.append(f"- note: {_md(one_line(note))}")
     run, other = _steps_run(report)
     out += ["", "## Steps", "", "| step | cleaner | filled | flagged | mean move (mm) | s |",
             "|---|---|---:|---:|---:|---:|"]
@@ -279,7 +296,7 @@ def svg_trajectory(before: np.ndarray, after: np.ndarray, filled: np.ndarray,
     panels.append((labels[3], None, diff, "#8e44ad"))
     height = H * len(panels)
     parts = [f'<svg xmlns="http://www.w3.org/2000/svg" class="plot" width="{W}" height="{height}" '
-             f'viewBox="0 0 {W} {height}" role="img"><title>{html.escape(title)}</title>']
+             f'viewBox="0 0 {W} {height}" role="img"><title>{html.escape(printable(title))}</title>']
 
     def X(i):
         return left + (W - left - right) * i / max(T - 1, 1)
@@ -349,13 +366,13 @@ def to_html(report: dict, result, n_plots: int = 6, viewer: bool = True) -> str:
     plots = []
     for j in changed_most(report)[:n_plots]:
         k = before.names.index(j["name"])
-        plots.append(f"<h3>{html.escape(j['name'])} — {j['status']}</h3>" + svg_trajectory(
+        plots.append(f"<h3>{html.escape(printable(j['name']))} — {j['status']}</h3>" + svg_trajectory(
             before.positions[:, k], after.positions[:, k], filled[:, k] & ~after.missing[:, k],
             before.missing[:, k], before.fps, j["name"], mm))
     name = Path(report["file"]["path"]).name if report["file"].get("path") else "motion"
     body = markdown_to_html(to_markdown(report))
     return ("<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'>"
-            f"<title>{html.escape(name)} — mocapfix report</title>"
+            f"<title>{html.escape(printable(name))} — mocapfix report</title>"
             "<style>body{font-family:sans-serif;max-width:1100px;margin:2em auto}"
             "table{border-collapse:collapse;font-size:12px}td,th{border:1px solid #ccc;padding:2px 6px}"
             "</style></head><body>" + body + _viewer_section(result, viewer) +
@@ -379,7 +396,8 @@ _PIPE = re.compile(r"(?<!\\)\|")            # a cell border: a pipe not escaped 
 
 
 def _inline(text: str) -> str:
-    """Escape, then turn `code` and **bold** into tags."""
+    """Escape, then turn `code` and **bold** into tags (``\\<`` of :func:`_md` is ``&lt;``)."""
+    text = _HTML_ESCAPED.sub(r"\1", text)
     out, pos = [], 0
     for m in _INLINE.finditer(text):
         out.append(html.escape(text[pos:m.start()]))
@@ -393,7 +411,7 @@ def _inline(text: str) -> str:
 def markdown_to_html(md: str) -> str:
     """Just enough Markdown (headings, lists, pipe tables, bold, code) for our reports."""
     out, in_table, in_list = [], False, False
-    for line in md.splitlines():
+    for line in printable(md).splitlines():
         if line.startswith("|"):
             cells = [c.strip().replace("\\|", "|") for c in _PIPE.split(line.strip().strip("|"))]
             if set("".join(cells)) <= set("-:"):

@@ -41,7 +41,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from mocapfix.core.errors import ConfigError
-from mocapfix.formats import NAMES
+from mocapfix.formats import FAMILIES, NAMES, matches
 from mocapfix.core.presets import RULES_DIR, resolve_preset
 from mocapfix.pipeline.unlabelled import Unlabelled
 from mocapfix.core.yamlsafe import load_marked_yaml, read_bounded
@@ -236,7 +236,7 @@ class Rule:
     where: str = ""
 
     def applies(self, fmt) -> bool:
-        return self.formats is None or fmt in self.formats
+        return self.formats is None or matches(fmt, self.formats)
 
     def selects(self, name: str) -> bool:
         if self.include and not any(fnmatch.fnmatchcase(name, p) for p in self.include):
@@ -321,8 +321,10 @@ def _formats(value, where):
         return None
     if isinstance(value, str):
         value = [value]
-    if not isinstance(value, list) or not value or not all(isinstance(v, str) and v in NAMES for v in value):
-        raise ConfigError(f"{where}: 'formats' must list some of {', '.join(NAMES)}, got {value!r}")
+    if not isinstance(value, list) or not value or not all(isinstance(v, str) and (v in NAMES or v in FAMILIES)
+                                                           for v in value):
+        raise ConfigError(f"{where}: 'formats' must list some of {', '.join((*NAMES, *FAMILIES))}, "
+                          f"got {value!r}")
     return tuple(value)
 
 

@@ -472,3 +472,21 @@ def test_training_mssa_on_a_bvh_and_a_c3d_says_one_model_per_skeleton(tmp_path):
     assert r.exit_code == 2, r.output
     assert f"{C3D}: has no rotation channels" in r.output and "one model per skeleton" in r.output
     assert not out.exists()
+
+
+def test_recurring_looks_for_recurrences_within_its_reach_only():
+    """A flick at every 32-frame cycle recurs: cleared. The same flick with its alike ones
+    farther than ``reach`` frames away is not (the reach keeps the test linear in the take's
+    length), and the whole-channel answer is the reach of the whole take."""
+    t = np.arange(640)
+    x = 10 * np.sin(2 * np.pi * t / 32.0)
+    flicks = np.zeros(len(t), bool)
+    for c in range(40, 600, 32):
+        x[c] += 6.0
+        flicks[c] = True
+    X, mask = x[:, None], flicks[:, None]
+    assert not glitches.recurring(X, mask).any()                  # REACH covers the take
+    assert not glitches.recurring(X, mask, reach=100).any()       # three cycles each side
+    one_cycle = glitches.recurring(X, mask, reach=40)             # one alike flick each side:
+    assert np.flatnonzero(one_cycle[:, 0]).tolist() == [40, 584]  # the end flicks have one
+    assert glitches.recurring(X, mask, reach=20)[flicks].all()    # none within reach

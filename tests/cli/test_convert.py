@@ -8,11 +8,12 @@ import hashlib
 import json
 
 import numpy as np
+import pytest
 from click.testing import CliRunner
 
 from mocapfix import formats
 from mocapfix.cli import main
-from conftest import SAMPLE_DATA, no_traceback
+from conftest import SAMPLE_DATA, no_traceback, shared
 
 C3D, BVH, KIN = SAMPLE_DATA / "walk_markers.c3d", SAMPLE_DATA / "walk.bvh", SAMPLE_DATA / "walk_kinect_v2.csv"
 
@@ -79,3 +80,62 @@ def test_convert_resumes_and_a_new_format_is_a_new_run(tmp_path):
     assert r.exit_code == 0 and "finished earlier" in r.output
     r = CliRunner().invoke(main, ["convert", str(C3D), "-o", str(tmp_path / "o"), "--to", "c3d"])
     assert r.exit_code == 0 and (tmp_path / "o" / "walk_markers.c3d").exists(), r.output
+
+
+def _trc_empty(path):
+    """(names, (T, M) empty) of a TRC, read with plain string splitting: a sample is empty
+    when its three fields are."""
+    lines = path.read_text().split("\n")
+    names = [n.strip() for n in lines[3].split("\t")[2::3] if n.strip()]
+    rows = [line.split("\t") for line in lines[5:] if line.strip() and line.split("\t")[0].strip().isdigit()]
+    empty = np.array([[all(not (row[2 + 3 * m + k].strip() if 2 + 3 * m + k < len(row) else "")
+                           for k in range(3)) for m in range(len(names))] for row in rows])
+    return names, empty
+
+
+@pytest.mark.parametrize("name", ["ktk_racing_full.c3d", "c3dorg_s28_dynamic.C3D"])
+def test_clean_to_trc_leaves_empty_exactly_what_the_report_lists_as_left(name, tmp_path):
+    """An IK solver reads the TRC: every empty field is a sample the report lists as left
+    (a gap not filled, or a point not cleaned), and every sample the report lists as left
+    is empty — nothing forward-filled, nothing left unsaid."""
+    src = shared(f"c3d/{name}")
+    r = CliRunner().invoke(main, ["clean", str(src), "-o", str(tmp_path / "o"), "--to", "trc"])
+    assert r.exit_code in (0, 1) and "ERROR" not in r.output, r.output
+    out = tmp_path / "o" / (src.stem + ".trc")
+    report = json.loads((tmp_path / "o" / (src.stem + ".trc.report.json")).read_text())
+    names, empty = _trc_empty(out)
+    listed = np.zeros_like(empty)
+    read = formats.read(src)
+    for joint in report["joints"]:
+        m = names.index(joint["name"])
+        for run in joint["gaps"]["unfilled"]:
+            assert run["filled_frames"] == 0, run
+            listed[run["start"]:run["start"] + run["length"], m] = True
+        for run in joint["removed"]:                   # judged wrong, no fill trusted
+            listed[run["start"]:run["start"] + run["length"], m] = True
+    for point in report.get("not_cleaned", []):          # left as read, gaps included
+        if point["name"] in names:
+            listed[:, names.index(point["name"])] = read.missing[:, read.names.index(point["name"])]
+    assert empty.any() and report["file"]["samples_filled"] > 0
+    assert np.array_equal(empty, listed), np.argwhere(empty != listed)[:5]
+
+
+def test_a_trc_is_cleaned_as_its_c3d_is(tmp_path):
+    """The shipped configs name the ``markers`` family: a TRC converted from a C3D gets the
+    same steps, fills, flags and gaps left as the C3D itself."""
+    src = shared("c3d/c3dorg_s28_dynamic.C3D")
+    assert CliRunner().invoke(main, ["convert", str(src), "-o", str(tmp_path / "t"), "--to", "trc"]).exit_code == 0
+    trc = tmp_path / "t" / "c3dorg_s28_dynamic.trc"
+    for given, out in ((src, "a"), (trc, "b")):
+        r = CliRunner().invoke(main, ["clean", str(given), "-o", str(tmp_path / out)])
+        assert "ERROR" not in r.output, r.output
+    a = json.loads((tmp_path / "a" / "c3dorg_s28_dynamic.C3D.report.json").read_text())
+    b = json.loads((tmp_path / "b" / "c3dorg_s28_dynamic.trc.report.json").read_text())
+    assert [s["skipped"] if "skipped" in s else None for s in b["steps"]] == \
+        [s["skipped"] if "skipped" in s else None for s in a["steps"]]
+    for key in ("samples_filled", "samples_flagged", "samples_left_uncertain", "missing_after"):
+        assert a["file"][key] == b["file"][key], key
+    assert a["file"]["samples_filled"] > 0
+    ca, cb = formats.read(tmp_path / "a" / "c3dorg_s28_dynamic.C3D"), formats.read(tmp_path / "b" / "c3dorg_s28_dynamic.trc")
+    assert np.array_equal(ca.missing, cb.missing)
+    assert np.nanmax(np.abs(ca.positions - cb.positions)) < 0.01      # mm: float32 and %.5f

@@ -95,4 +95,4 @@ def _names_the_file(exc, paths, strict=True):
     assert "Traceback" not in msg
     if strict:
         assert any(str(p) in msg for p in paths), f"message does not name the file: {msg}"
-    assert len(msg) < 2000
+    assert len(msg) < 1500, f"a message of {len(msg):,} characters"

@@ -211,9 +211,10 @@ def _rename_tokens(text, renames):
 
 
 def _hostile_bvh(folder):
-    # BVH names are single tokens: no spaces or newlines
+    # BVH names are single tokens: no spaces or newlines; the readers refuse a field longer
+    # than 1,000 characters (a 10,000-character name: _hostile_motion)
     hostile = ["<script>alert(1)</script>", "</script><img\tsrc=x\tonerror=alert(2)>".replace("\t", "_"),
-               "quote\"'`${alert(3)}", "{{DATA}}", "N" * 10_000]
+               "quote\"'`${alert(3)}", "{{DATA}}", "N" * 1000]
     renames = dict(zip(["Spine", "Chest", "Neck", "LeftShoulder", "RightShoulder"], hostile))
     text = (SAMPLE_DATA / "walk.bvh").read_text()
     for old, new in renames.items():
@@ -225,7 +226,7 @@ def _hostile_bvh(folder):
 
 def _hostile_amc(folder):
     hostile = ["<script>alert(1)</script>", "</script><img_src=x_onerror=alert(2)>",
-               "quote\"'`${alert(3)}", "{{DATA}}", "N" * 10_000]
+               "quote\"'`${alert(3)}", "{{DATA}}", "N" * 1000]
     renames = dict(zip(["lowerback", "upperback", "neck", "lhumerus", "rhumerus"], hostile))
     for name in ("walker.asf", "walker_01.amc"):
         (folder / name).write_text(_rename_tokens((SAMPLE_DATA / name).read_text(), renames))
@@ -241,16 +242,34 @@ def _hostile_kinect(folder):
     return path, []
 
 
-@pytest.mark.parametrize("make", [_hostile_c3d, _hostile_bvh, _hostile_amc, _hostile_kinect],
-                         ids=["c3d", "bvh", "amc", "kinect"])
+def _hostile_motion(folder):
+    """No reader: a Motion named as no file format allows (10,000 characters, newlines)."""
+    from mocapfix.quality import viewer
+
+    motion = read(SAMPLE_DATA / "walk.bvh")
+    hostile = ATTACKS + ["new\nline<b>x</b>", "M" * 10_000]
+    motion.names[1:1 + len(hostile)] = hostile
+    motion.path = str(folder / "motion.bvh")
+    page = folder / "page.html"
+    page.write_text(viewer.single([motion]), encoding="utf-8")
+    return page, hostile
+
+
+@pytest.mark.parametrize("make", [_hostile_c3d, _hostile_bvh, _hostile_amc, _hostile_kinect,
+                                  _hostile_motion],
+                         ids=["c3d", "bvh", "amc", "kinect", "in-memory"])
 def test_hostile_names_are_text(tmp_path, make):
     folder = tmp_path / "in"
     folder.mkdir()
     path, hostile = make(folder)
-    motion = read(path)
-    missing = [h[:40] for h in hostile if h not in motion.names]
-    assert not missing, f"the reader did not keep {missing}"
-    probe = _probe(_view(tmp_path, path), tmp_path, hover=hostile)
+    if make is _hostile_motion:
+        page, path = path, path.with_name("motion.bvh")
+    else:
+        motion = read(path)
+        missing = [h[:40] for h in hostile if h not in motion.names]
+        assert not missing, f"the reader did not keep {missing}"
+        page = _view(tmp_path, path)
+    probe = _probe(page, tmp_path, hover=hostile)
     _check_clean_page(probe)
     def flat(text):                       # as the page lays text out
         return " ".join(text.split())

@@ -1,0 +1,217 @@
+"""Qualisys Track Manager TSV exports of 3D data (File > Export > To TSV).
+
+Layout (QTM user manual, "Export to TSV format" / "3D data in TSV"; a real export is
+``tests/data/vendor/qtm_hand_embodiment_recording.tsv``): tab-separated; a header of
+``KEY<TAB>value...`` lines -- ``NO_OF_FRAMES``, ``NO_OF_CAMERAS``, ``NO_OF_MARKERS``,
+``FREQUENCY``, ``NO_OF_ANALOG``, ``ANALOG_FREQUENCY``, ``DESCRIPTION``, ``TIME_STAMP``,
+``DATA_INCLUDED<TAB>3D``, ``MARKER_NAMES<TAB>name<TAB>name...``, optionally
+``TRAJECTORY_TYPES`` and ``EVENT`` lines -- then
+
+* newer QTM (``Write column header`` on): a row ``Frame<TAB>Time<TAB>name X<TAB>name Y<TAB>
+  name Z...`` then rows ``frame<TAB>time<TAB>x<TAB>y<TAB>z...``;
+* older QTM (no column header): the rows directly, ``x y z`` per marker, with or without
+  leading frame and time columns (``Export time data for every frame``).
+
+Missing samples (decision): in the headed (newer) layout an empty field or ``NaN`` is
+missing and an exact ``0, 0, 0`` triple is read as a position (a note counts them; pass
+``zero_missing=True`` to read them as missing); in the older layout without a column
+header, whose QTM versions wrote gaps as zeros, an exact ``0, 0, 0`` triple is missing
+(``zero_missing=False`` turns that off). Writing back uses the file's own representation
+(zeros with the file's decimals, ``NaN``, or empty fields).
+
+Reading: names from ``MARKER_NAMES`` (as written), ``fps`` from ``FREQUENCY``, units mm
+(QTM exports 3D data in millimetres), ``times`` from the Time column or the frame count.
+``NO_OF_MARKERS`` must equal the number of names; a ``NO_OF_FRAMES`` that differs from the
+rows present is noted. Every other header line is kept verbatim for writing back.
+Malformations are one UnreadableFileError naming the line.
+
+Why hand-written: the layout is a plain table behind a key/value header; no dependency
+reads it and writes it back unchanged, and the parse is one vectorised pass.
+"""
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import numpy as np
+
+from mocapfix.core.errors import UnreadableFileError
+from mocapfix.core.fileio import read_input_bytes
+from mocapfix.core.motion import Motion
+from mocapfix.formats import texttable as tt
+from mocapfix.formats.textenc import refuse_long_fields
+
+NAME = "qtm_tsv"
+SUFFIXES = (".tsv",)
+#: what its points are (configs and rule files may name the family: ``formats: [markers]``)
+FAMILY = "markers"
+SNIFF_ORDER = 1
+
+LAYOUT = "qtm_tsv"
+_KEY = re.compile(r"^[A-Z][A-Z0-9_]*$")
+#: the header keys this reader needs
+_REQUIRED = ("NO_OF_FRAMES", "NO_OF_MARKERS", "FREQUENCY", "MARKER_NAMES")
+
+
+def sniff(head: bytes) -> bool:
+    """The first line is ``NO_OF_FRAMES<TAB>n`` (or ``FILE_VERSION``, then it) and a
+    ``MARKER_NAMES`` or ``NO_OF_MARKERS`` key follows."""
+    lines = tt.head_lines(head, 40)
+    keys = [ln.split("\t", 1)[0] for ln in lines if "\t" in ln]
+    if not keys:
+        return False
+    first = 1 if keys[0] == "FILE_VERSION" else 0
+    return (len(keys) > first and keys[first] == "NO_OF_FRAMES"
+            and ("NO_OF_MARKERS" in keys or "MARKER_NAMES" in keys))
+
+
+def read(path, fps: float | None = None, units: str | None = None,
+         zero_missing: bool | None = None, **options) -> Motion:
+    path = Path(path)
+    bom, text = tt.decode(read_input_bytes(path), path, "QTM TSV")
+    lines, endings = tt.split_lines(text)
+    refuse_long_fields(path, lines)
+    header: dict[str, tuple[int, list[str]]] = {}
+    i = 0
+    while i < len(lines):
+        key = lines[i].split("\t", 1)[0]
+        if not lines[i].strip():
+            i += 1
+            continue
+        if key in ("Frame", "Time") or not _KEY.match(key):
+            break
+        header.setdefault(key, (i, lines[i].split("\t")[1:]))
+        i += 1
+    for key in _REQUIRED:
+        if key not in header:
+            raise UnreadableFileError(path, f"QTM TSV header has no {key} line (expected "
+                                            f"NO_OF_FRAMES, NO_OF_MARKERS, FREQUENCY, "
+                                            "MARKER_NAMES before the data)", line=i + 1)
+    notes: list[str] = []
+    rate_line, rate_fields = header["FREQUENCY"]
+    rate = tt.positive_rate(path, (rate_fields or [""])[0], rate_line + 1, "FREQUENCY")
+    names_line, names = header["MARKER_NAMES"]
+    names = [n for n in names]
+    while names and not names[-1].strip():
+        names.pop()
+    J = len(names)
+    count = _count(path, header, "NO_OF_MARKERS")
+    if count != J:
+        raise UnreadableFileError(path, f"NO_OF_MARKERS says {count} but MARKER_NAMES lists {J}",
+                                  line=header["NO_OF_MARKERS"][0] + 1)
+    if J == 0:
+        raise UnreadableFileError(path, "MARKER_NAMES lists no marker", line=names_line + 1)
+    included = header.get("DATA_INCLUDED", (0, ["3D"]))[1]
+    if included and included[0].strip() != "3D":
+        raise UnreadableFileError(path, f"DATA_INCLUDED is {tt.quote(included[0])}: only 3D "
+                                        "marker exports are read", line=header["DATA_INCLUDED"][0] + 1)
+    headed = i < len(lines) and lines[i].split("\t", 1)[0] == "Frame"
+    column_line = i if headed else None
+    first = i + 1 if headed else i
+    while first < len(lines) and not lines[first].strip():
+        first += 1
+    stop = tt.block_end(lines, first, "\t")
+    if stop == first:
+        raise UnreadableFileError(path, "QTM TSV holds no data rows", line=first + 1)
+    if stop < len(lines) and any(ln.strip() for ln in lines[stop:]):
+        k = next(k for k in range(stop, len(lines)) if lines[k].strip())
+        raise UnreadableFileError(path, "data rows resume after a blank line (expected one "
+                                        "block of rows)", line=k + 1)
+    if headed:
+        columns = tt.fields_of(lines[column_line], "\t")
+        expected = ["Frame", "Time"] + [f"{n} {a}" for n in names for a in "XYZ"]
+        if columns[:2 + 3 * J] != expected:
+            bad = next(k for k, (a, b) in enumerate(zip(columns + [""] * len(expected), expected))
+                       if a != b)
+            raise UnreadableFileError(path, f"column {bad + 1} of the column header is "
+                                            f"{tt.quote(columns[bad] if bad < len(columns) else '')}"
+                                            f", expected {expected[bad]!r}", line=column_line + 1)
+        lead, n_fields = 2, len(columns)
+    else:
+        width = lines[first].rstrip("\t").count("\t") + 1
+        lead = 2 if width == 2 + 3 * J else 0
+        n_fields = lead + 3 * J
+    cols = np.arange(n_fields) if lead else np.arange(3 * J)
+    missing_tokens = ("", "NaN", "nan")
+    values = tt.parse_block(path, lines[first:stop], first, "\t", n_fields, cols,
+                            f"a data row of {n_fields} fields", missing_tokens)
+    T = len(values)
+    positions = tt.markers(values, lead, notes)
+    zeros = np.all(positions == 0.0, axis=2)
+    as_missing = (not headed) if zero_missing is None else bool(zero_missing)
+    data = lines[first:stop]
+    decimals = tt.max_decimals(data[0].split("\t")[lead:])
+    token = _missing_token(data, as_missing, decimals)
+    if zeros.any():
+        if as_missing:
+            positions[zeros] = np.nan
+            notes.append(f"{int(zeros.sum())} samples are exactly (0, 0, 0): read as missing "
+                         "(the QTM layout without a column header writes gaps as zeros)")
+        else:
+            notes.append(f"{int(zeros.sum())} samples are exactly (0, 0, 0): kept as positions "
+                         "(pass zero_missing=True if this QTM version wrote gaps as zeros)")
+    declared = _count(path, header, "NO_OF_FRAMES")
+    if declared != T:
+        notes.append(f"NO_OF_FRAMES says {declared} but the file holds {T} rows")
+    rate = float(fps) if fps is not None else rate
+    if lead:
+        times = tt.key_column(path, values[:, 1], first, "Time") - values[0, 1]
+    else:
+        times = np.arange(T) / rate
+    source = tt.TableSource(
+        layout=LAYOUT, bom=bom, lines=lines, endings=endings, sep="\t", names=names,
+        row_line=np.arange(first, stop), x_field=lead + 3 * np.arange(J),
+        original=positions.copy(), missing_token=token,
+        decimals=decimals, extra={"headed": headed, "zero_missing": as_missing})
+    return Motion(positions, names, rate, units="mm", metres_per_unit=0.001, times=times,
+                  source=source, notes=notes, kinds=["marker"] * J)
+
+
+def _count(path, header: dict, key: str) -> int:
+    line, fields = header[key]
+    token = (fields or [""])[0].strip()
+    if not token.isdigit() or len(token) > 12:
+        raise UnreadableFileError(path, f"{key} {tt.quote(token)} is not a count", line=line + 1)
+    return int(token)
+
+
+def _missing_token(data: list[str], zeros: bool, decimals: int) -> str:
+    """What this file writes for a missing coordinate."""
+    if zeros:
+        return f"{0:.{decimals}f}"
+    for line in data:
+        if "NaN" in line:
+            return "NaN"
+    return ""
+
+
+def write(motion: Motion, path, **options) -> list[Path]:
+    """Write back the file ``motion`` came from (changed samples only), or a fresh one."""
+    return tt.write_table(motion, path, LAYOUT, fresh_text)
+
+
+def fresh_text(motion: Motion, path: Path | None = None) -> str:
+    """A headed (newer) QTM TSV of ``motion`` in mm, 3 decimals, missing as empty fields."""
+    T, J = motion.n_frames, motion.n_joints
+    scale = motion.metres_per_unit / 0.001
+    names = [n.replace("\t", " ") for n in motion.names]
+    head = [f"NO_OF_FRAMES\t{T}", "NO_OF_CAMERAS\t0", f"NO_OF_MARKERS\t{J}",
+            f"FREQUENCY\t{motion.fps:g}", "NO_OF_ANALOG\t0", "ANALOG_FREQUENCY\t0",
+            "DESCRIPTION\t--", "TIME_STAMP\t--", "DATA_INCLUDED\t3D",
+            "MARKER_NAMES\t" + "\t".join(names),
+            "Frame\tTime\t" + "\t".join(f"{n} {a}" for n in names for a in "XYZ")]
+    keys = [f"{t + 1}\t{t / motion.fps:.5f}" for t in range(T)]
+    return tt.table_text(head, keys, motion.positions.reshape(T, 3 * J) * scale, "\t", "%.3f")
+
+
+def kept_only_here(motion: Motion) -> list[str]:
+    """The header lines of a QTM TSV, which only a QTM TSV written back holds."""
+    return tt.kept_verbatim(motion, LAYOUT, "the header lines (time stamp, description, "
+                                            "trajectory types, events)")
+
+
+def losses(motion: Motion) -> list[str]:
+    out = tt.common_losses(motion, "a QTM TSV")
+    if motion.units != "mm":
+        out.append(f"QTM TSV stores millimetres: positions in {motion.units} are converted")
+    return out

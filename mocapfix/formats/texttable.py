@@ -1,0 +1,313 @@
+"""Shared pieces of the vendor marker-table readers and writers (Vicon Nexus CSV, Qualisys
+QTM TSV, OptiTrack Motive CSV): one row of text per frame, one separator character, the X, Y,
+Z of each marker in three fixed columns.
+
+What is shared: decoding (UTF-8 with an optional byte-order mark; UTF-16/32 named and
+refused), the vectorised parse of a block of rows (one ``split`` of the joined block and
+one numpy conversion; a row with the wrong number of fields, a non-numeric value or a huge
+field is one :class:`UnreadableFileError` naming its line), the source kept for writing
+back (:class:`TableSource`), the write-back that re-formats only the changed samples
+(:func:`patched_text`: with the decimals of the token they replace; an unchanged motion
+writes back byte-identical), fresh-table formatting and the notes of what a layout cannot
+carry (:func:`common_losses`).
+
+Not a format module (no ``NAME``): the registry does not list it.
+"""
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from mocapfix.core.errors import UnreadableFileError
+from mocapfix.core.fileio import write_output_text
+from mocapfix.core.motion import Motion
+from mocapfix.core.quantity import MAX_FRAME_RATE_HZ, MIN_FRAME_RATE_HZ
+from mocapfix.formats.kinect import _decode
+from mocapfix.formats.kinect import _split_lines as split_lines  # noqa: F401  (re-exported)
+from mocapfix.formats.textenc import refuse_wide_text, wide_encoding
+
+#: the longest field quoted in a message
+_QUOTE = 40
+_NUMBER = re.compile(r"^\s*[+-]?(\d+\.?\d*([eE][+-]?\d+)?|\.\d+([eE][+-]?\d+)?|nan|inf)\s*$",
+                     re.IGNORECASE)
+
+
+def quote(token: str) -> str:
+    """``token`` for a one-line message: shortened, control characters shown as ``?``."""
+    token = "".join(c if c.isprintable() else "?" for c in token[:_QUOTE + 1])
+    return repr(token if len(token) <= _QUOTE else token[:_QUOTE] + "...")
+
+
+def decode(raw: bytes, path, what: str) -> tuple[str, str]:
+    """(byte-order mark, text) of a file's bytes; UTF-16/32 and undecodable bytes refused."""
+    refuse_wide_text(path, raw, what)
+    return _decode(raw, path)
+
+
+def head_lines(head: bytes, n: int = 12) -> list[str]:
+    """The first ``n`` complete lines of a file's first bytes (for sniffers), without line
+    endings or byte-order mark."""
+    text = head.decode("utf-8", errors="replace").lstrip("\ufeff")
+    lines = text.split("\n")
+    if len(head) >= 4096 and len(lines) > 1:
+        lines = lines[:-1]  # cut mid-line
+    return [ln.rstrip("\r") for ln in lines[:n]]
+
+
+def not_text(head: bytes) -> str | None:
+    """Why ``head`` (a file's first bytes) is not UTF-8 text -- UTF-16/32, or the offset of
+    an undecodable byte -- or None (a multi-byte character cut at the end is allowed)."""
+    wide = wide_encoding(head)
+    if wide is not None:
+        return (f"text table is {wide} text; mocapfix reads ASCII/UTF-8 text tables: save it "
+                "as UTF-8 (e.g. iconv -f UTF-16 -t UTF-8)")
+    try:
+        head.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        if not (exc.start >= len(head) - 3 and len(head) >= 4096):
+            return f"not a text file (undecodable byte at offset {exc.start})"
+    return None
+
+
+def unknown_layout(head: bytes) -> str:
+    """The registry's reason for a text file no sniffer accepts."""
+    lines = [ln for ln in head_lines(head, 50) if ln.strip()] or [""]
+    return f"not a known layout (first line: {lines[0][:60]!r})"
+
+
+def fields_of(line: str, sep: str) -> list[str]:
+    """``line`` split at ``sep``, trailing empty fields dropped (spreadsheets pad rows)."""
+    fields = line.split(sep)
+    while fields and not fields[-1].strip():
+        fields.pop()
+    return fields
+
+
+def max_decimals(tokens, default: int = 3) -> int:
+    """The most decimals of a number among ``tokens`` (how a file writes numbers)."""
+    return max([len(t) - t.index(".") - 1 for t in tokens if "." in t] or [default])
+
+
+def positive_rate(path, token: str, line: int, what: str) -> float:
+    """A frame rate read from ``token``: finite, in the accepted range, else an error."""
+    try:
+        rate = float(token)
+    except ValueError:
+        raise UnreadableFileError(path, f"{what} {quote(token)} is not a number", line=line) from None
+    if not (np.isfinite(rate) and MIN_FRAME_RATE_HZ <= rate <= MAX_FRAME_RATE_HZ):
+        raise UnreadableFileError(path, f"{what} {token.strip()} Hz is not a usable frame rate "
+                                        f"(expected {MIN_FRAME_RATE_HZ:g} to "
+                                        f"{MAX_FRAME_RATE_HZ:g} Hz)", line=line)
+    return rate
+
+
+# ---------------------------------------------------------------------------------------
+# the vectorised block parse
+# ---------------------------------------------------------------------------------------
+def parse_block(path, lines: list[str], first: int, sep: str, n_fields: int, cols: np.ndarray,
+                what: str, missing_tokens=("",)) -> np.ndarray:
+    """(n, len(cols)) float64 of the fields ``cols`` of ``lines`` (the file's lines
+    ``first``, ``first + 1``, ...), each of which must hold ``n_fields`` fields (one more,
+    empty, is taken as a trailing separator). ``missing_tokens`` read as NaN."""
+    n = len(lines)
+    if n == 0:
+        return np.empty((0, len(cols)))
+    counts = np.fromiter((ln.count(sep) for ln in lines), np.int64, n) + 1
+    if (counts != n_fields).any():
+        lines = list(lines)
+        for k in np.flatnonzero(counts == n_fields + 1).tolist():
+            if lines[k].endswith(sep):
+                lines[k] = lines[k][:-1]
+                counts[k] -= 1
+        bad = np.flatnonzero(counts != n_fields)
+        if len(bad):
+            k = int(bad[0])
+            tail = " (the file looks truncated)" if k == n - 1 and counts[k] < n_fields else ""
+            raise UnreadableFileError(path, f"{counts[k]} fields where {n_fields} were expected "
+                                            f"({what}){tail}", line=first + k + 1)
+    joined = sep.join(lines)   # rows of equal width: one split gives the (n, n_fields) grid
+    if "" in missing_tokens:   # empty fields -> "nan" by two passes of a C-level replace
+        double, filled = sep + sep, sep + "nan" + sep
+        joined = joined.replace(double, filled).replace(double, filled)
+        joined = ("nan" if joined.startswith(sep) else "") + joined + (
+            "nan" if joined.endswith(sep) else "")
+    try:                       # fast path: every field of the block is a number
+        return np.array(joined.split(sep), dtype=np.float64).reshape(n, n_fields)[:, cols]
+    except ValueError:         # a word somewhere (a time code column, or a bad value)
+        pass
+    tokens = np.array(sep.join(lines).split(sep), dtype=object).reshape(n, n_fields)[:, cols]
+    for token in missing_tokens:
+        tokens[tokens == token] = "nan"
+    try:
+        return tokens.astype(np.float64)
+    except (ValueError, TypeError):
+        for (r, c), token in np.ndenumerate(tokens):
+            if len(token) > 64 or not _NUMBER.match(token):   # (no regex over a huge field)
+                raise UnreadableFileError(path, f"{quote(token)} is not a number (column "
+                                                f"{int(cols[c]) + 1} of {what})",
+                                          line=first + r + 1) from None
+        raise UnreadableFileError(path, f"non-numeric value in {what}", line=first + 1) from None
+
+
+def markers(values: np.ndarray, lead: int, notes: list[str]) -> np.ndarray:
+    """(T, J, 3) positions from the parsed block's columns after ``lead``; a sample with any
+    coordinate empty, nan or inf is missing (all three NaN; the odd ones noted)."""
+    positions = values[:, lead:].reshape(len(values), -1, 3).copy()
+    bad = ~np.isfinite(positions).all(axis=2)
+    odd = bad & ~np.isnan(positions).all(axis=2)
+    if odd.any():
+        notes.append(f"{int(odd.sum())} samples with an inf or partly empty coordinate read "
+                     "as missing")
+    positions[bad] = np.nan
+    return positions
+
+
+def key_column(path, column: np.ndarray, first: int, what: str) -> np.ndarray:
+    """A Frame or Time column: every value present and finite, else an error naming the row."""
+    bad = ~np.isfinite(column)
+    if bad.any():
+        k = int(np.flatnonzero(bad)[0])
+        raise UnreadableFileError(path, f"{what} is empty or not finite", line=first + k + 1)
+    return column
+
+
+def block_end(lines: list[str], start: int, sep: str) -> int:
+    """Index of the first blank line (nothing but separators and spaces) at or after
+    ``start``, or ``len(lines)``."""
+    strip = sep + " \t"
+    for i in range(start, len(lines)):
+        if not lines[i].strip(strip):
+            return i
+    return len(lines)
+
+
+def frame_times(frames: np.ndarray, fps: float, notes: list[str]) -> np.ndarray:
+    """Times in seconds from frame numbers; a non-consecutive numbering is noted."""
+    steps = np.diff(frames)
+    if len(steps) and not np.all(steps == steps[0]):
+        notes.append(f"frame numbers are not evenly spaced ({int(np.sum(steps != 1))} "
+                     "irregular steps): times follow the numbers")
+    return (frames - frames[0]) / fps if len(frames) else frames
+
+
+# ---------------------------------------------------------------------------------------
+# writing back
+# ---------------------------------------------------------------------------------------
+@dataclass
+class TableSource:
+    """What a vendor-table writer needs to reproduce the file it was read from."""
+
+    layout: str                  # "nexus_csv", "qtm_tsv", "motive_csv"
+    bom: str
+    lines: list[str]             # every line of the file, without its ending
+    endings: list[str]           # each line's ending ("\n", "\r\n", "" for a last line without)
+    sep: str
+    names: list[str]
+    row_line: np.ndarray         # (T,) line index of each frame's row
+    x_field: np.ndarray          # (J,) field index of each marker's X (Y, Z follow)
+    original: np.ndarray         # (T, J, 3) as read (NaN: missing)
+    missing_token: str           # what the layout writes for each coordinate of a missing sample
+    decimals: int                # decimals of a number written where the file had none
+    extra: dict = field(default_factory=dict)
+
+
+def fits(source, motion: Motion, layout: str) -> bool:
+    """``motion`` can be written by patching the file it came from."""
+    return (isinstance(source, TableSource) and source.layout == layout
+            and source.original.shape == motion.positions.shape
+            and source.names == list(motion.names))
+
+
+def format_like(value: float, token: str, decimals: int) -> str:
+    """``value`` with as many decimals as ``token`` had (``decimals`` when it had none, or
+    was a missing marker); exponent notation kept."""
+    t = token.strip()
+    if "e" in t.lower() and any(ch.isdigit() for ch in t):
+        return f"{value:.9g}"
+    dot = t.find(".")
+    d = len(t) - dot - 1 if dot >= 0 and t.lower() != "nan" else decimals
+    return f"{value:.{d}f}"
+
+
+def changed_samples(source: TableSource, positions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(T, J) masks: the samples whose tokens must change, and the samples now missing."""
+    was_missing = np.isnan(source.original).any(axis=2)
+    now_missing = np.isnan(positions).any(axis=2)
+    same = np.all(positions == source.original, axis=2)
+    return np.where(was_missing, ~now_missing, ~same | now_missing), now_missing
+
+
+def patched_text(source: TableSource, motion: Motion) -> str:
+    """The source's text with the changed samples' tokens rewritten (moved and filled:
+    numbers with the replaced tokens' decimals; removed: the layout's missing token);
+    every other byte as read."""
+    changed, now_missing = changed_samples(source, motion.positions)
+    lines = list(source.lines)
+    sep = source.sep
+    for t in np.flatnonzero(changed.any(axis=1)).tolist():
+        li = int(source.row_line[t])
+        fields = lines[li].split(sep)
+        for j in np.flatnonzero(changed[t]).tolist():
+            f0 = int(source.x_field[j])
+            if now_missing[t, j]:
+                fields[f0:f0 + 3] = [source.missing_token] * 3
+            else:
+                for k, v in enumerate(motion.positions[t, j].tolist()):
+                    fields[f0 + k] = format_like(v, fields[f0 + k], source.decimals)
+        lines[li] = sep.join(fields)
+    return source.bom + "".join(line + end for line, end in zip(lines, source.endings))
+
+
+def number_cells(values: np.ndarray, fmt: str, missing: str) -> np.ndarray:
+    """(T, K) object array of formatted numbers, ``missing`` where NaN."""
+    cells = np.char.mod(fmt, np.nan_to_num(values)).astype(object)
+    cells[np.isnan(values)] = missing
+    return cells
+
+
+def table_text(head: list[str], keys: list[str], values: np.ndarray, sep: str, fmt: str) -> str:
+    """A fresh table: the ``head`` lines, then one row per frame -- its key fields
+    (``keys[t]``: frame and time, already joined by ``sep``) and ``values[t]`` formatted
+    with ``fmt``, empty where NaN -- each line ending in ``\n``."""
+    cells = number_cells(values, fmt, "")
+    rows = [keys[t] + sep + sep.join(cells[t]) for t in range(len(values))]
+    return "\n".join(head + rows) + "\n"
+
+
+def write_table(motion: Motion, path, layout: str, fresh) -> list[Path]:
+    """Write ``motion``: its source patched when it came from ``layout`` and fits, else
+    ``fresh(motion, path)``."""
+    if fits(motion.source, motion, layout):
+        return write_output_text(path, patched_text(motion.source, motion))
+    return write_output_text(path, fresh(motion, Path(path)))
+
+
+def common_losses(motion: Motion, layout: str) -> list[str]:
+    """What no vendor marker table can hold of ``motion`` (read in another format; what
+    only its own format keeps — rotations, tracking states, analog channels — is named by
+    that format: :func:`mocapfix.formats.losses`)."""
+    out = []
+    if motion.skeleton is not None and motion.channels is None:
+        out.append(f"{layout} stores no skeleton (bone hierarchy): dropped")
+    if motion.kinds is not None and any(k != "marker" for k in motion.kinds):
+        out.append(f"{layout} has no place for point kinds: model outputs are written as "
+                   "marker trajectories")
+    if motion.times is not None and len(motion.times) > 2:
+        steps = np.diff(np.asarray(motion.times, dtype=np.float64))
+        if np.ptp(steps) > 1e-3 * max(float(np.median(steps)), 1e-12):
+            out.append(f"{layout} rows are evenly spaced: the irregular time stamps are "
+                       f"replaced by frames at {motion.fps:g} Hz")
+    return out
+
+
+def kept_verbatim(motion: Motion, layout: str, what: str) -> list[str]:
+    """What a motion read from ``layout`` holds besides its markers (``what``: "Devices,
+    Model Outputs sections"), which its own layout writes back as read and no other
+    format carries: the note for :func:`mocapfix.formats.losses` (``kept_only_here``)."""
+    source = motion.source
+    if not (isinstance(source, TableSource) and source.layout == layout and what):
+        return []
+    return [f"{what} are not carried (only a {layout} holds them)"]
