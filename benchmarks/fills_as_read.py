@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from mocapfix import read
-from mocapfix.clean import clean_motion
+from mocapfix.cleaning import clean_motion
 from mocapfix.core.gaps import runs
 from mocapfix.config import load_config
 from mocapfix.pipeline.selection import not_cleaned

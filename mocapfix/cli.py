@@ -338,7 +338,7 @@ def list_configs(name, rules):
 # -- clean ---------------------------------------------------------------------------------
 
 def _parse_reports(value: str) -> tuple[str, ...]:
-    from mocapfix.clean import REPORT_KINDS
+    from mocapfix.cleaning import REPORT_KINDS
 
     kinds = tuple(k.strip().lower() for k in value.split(",") if k.strip())
     if not kinds:                   # (--report "" meant no reports, silently)

@@ -135,11 +135,9 @@ def _check_step_params(name: str, raw: dict, params: dict, where: str) -> None:
         if key not in known:
             raise ConfigError(f"{where}{line}: unknown parameter {key!r} for cleaner '{name}' "
                               f"(known: {', '.join(known) or 'none'})")
-        p, value = known[key], params[key]
-        if (p.kind in ("length", "time", "frequency") and isinstance(value, (int, float))
-                and not isinstance(value, bool)):
-            UNIT_WARNINGS.append(f"{where}{line}: {key}: {value} has no unit; read as "
-                                 f"'{value} {p.unit}' — write the unit to say so")
+        note = known[key].bare_number_note(params[key])
+        if note:
+            UNIT_WARNINGS.append(f"{where}{line}: {note}")
 
 
 #: warnings of the last configs parsed (bare numbers for physical parameters); the CLI

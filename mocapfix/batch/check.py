@@ -44,7 +44,7 @@ def check_motion(motion, rules: RuleSet, pipeline=None) -> dict:
 
 def would_clean(motion, pipeline) -> dict:
     """What ``pipeline`` would fill, move and leave uncertain (figures of clean's report)."""
-    from mocapfix.clean import clean_motion
+    from mocapfix.cleaning import clean_motion
     from mocapfix.quality.report import build_report
 
     report = build_report(clean_motion(motion, pipeline), pipeline.report)

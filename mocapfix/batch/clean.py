@@ -1,6 +1,6 @@
 """The clean batch: the policy of ``mocapfix clean`` as library functions, and one
 :class:`CleanTask` per planned job (read, clean, write the output and its reports:
-:func:`mocapfix.clean.clean_file`), each worker parsing the config once.
+:func:`mocapfix.cleaning.clean_file`), each worker parsing the config once.
 
 :func:`plan_clean` decides what a run does before anything is written: the jobs, which are
 skipped (finished earlier by the same config, models, report kinds and inputs — recorded in
@@ -30,7 +30,7 @@ from mocapfix.batch.discovery import discover_inputs
 from mocapfix.batch.manifest import Manifest, lock_output_folder, run_key, unlock_output_folder
 from mocapfix.batch.plan import Job, check_output_folder, plan_outputs, skeleton_conflicts
 from mocapfix.batch.tasks import error_result, internal_error, run_tasks
-from mocapfix.clean import output_files, remove_outputs
+from mocapfix.cleaning import output_files, remove_outputs
 from mocapfix.core.errors import MocapfixError, WriteError, name_the_file
 from mocapfix.core.fileio import atomic_write_text, refuse_stream, remove_stale_temporaries
 from mocapfix.pipeline.steps import Pipeline
@@ -51,7 +51,7 @@ class CleanTask:
     to: str | None = None
 
     def __call__(self, job: Job) -> dict:
-        from mocapfix.clean import clean_file
+        from mocapfix.cleaning import clean_file
 
         try:
             from mocapfix.batch.manifest import input_identity

@@ -3,7 +3,7 @@
 Every other protocol injects damage and scores the repair, which rewards recall. This one
 runs the method on the real file **exactly as read** (no corruption; BVH/AMC with their
 rig and channels, C3D with their residuals, Kinect with its tracking states) through
-:func:`mocapfix.clean.clean_motion` — what ``mocapfix clean`` writes, rotation write-back
+:func:`mocapfix.cleaning.clean_motion` — what ``mocapfix clean`` writes, rotation write-back
 included — and scores what it changed:
 
 - ``rms_mm``, ``p999_mm``, ``max_mm``: displacement of every sample seen in the input and
@@ -80,7 +80,7 @@ METRICS = [("max_mm", "max mm", 1), ("p999_mm", "99.9th pct mm", 2), ("rms_mm", 
 def clean(method, motion: Motion):
     """The :class:`~mocapfix.quality.measure.CleanResult` of ``method`` (a
     :class:`mocapfix.bench.Method`) on ``motion`` as ``mocapfix clean`` makes it."""
-    from mocapfix.clean import clean_motion
+    from mocapfix.cleaning import clean_motion
     from mocapfix.pipeline.steps import Pipeline
 
     return clean_motion(motion, method.pipeline if method.pipeline is not None else Pipeline([]))

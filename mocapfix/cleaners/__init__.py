@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import importlib
 import pkgutil
+import warnings
 
 from mocapfix.cleaners.base import Cleaner, Param
 from mocapfix.core.errors import ConfigError
@@ -49,11 +50,19 @@ def lookup(name: str) -> type[Cleaner] | None:
 
 
 def build(name: str, step: str | None = None, **params) -> Cleaner:
+    """The cleaner ``name`` with ``params``. From Python (no ``step``), a bare number for a
+    physical parameter gets the rule a YAML config gets: read in the parameter's default
+    unit, and said — here as a warning (``build("butterworth", cutoff=6)`` is 6 Hz)."""
     cls = lookup(name) if isinstance(name, str) else None
     if cls is None:
         reg = registry()
         raise ConfigError(f"{step or name}: unknown cleaner {name!r} "
                           f"(known: {', '.join(reg)})")
+    if step is None:
+        for p in cls.params:
+            note = p.bare_number_note(params[p.name]) if p.name in params else None
+            if note:
+                warnings.warn(f"{name}: {note}", UserWarning, stacklevel=2)
     return cls(step=step, **params)
 
 

@@ -89,6 +89,14 @@ class Param:
     rate is not known when the config is read), and never more than :data:`MAX_FRAMES`.
     """
 
+    def bare_number_note(self, value) -> str | None:
+        """The note for ``value`` when it is a bare number given to a physical parameter
+        (read in :attr:`unit`), None otherwise: YAML configs and Python say the same."""
+        if (self.kind in ("length", "time", "frequency") and isinstance(value, (int, float))
+                and not isinstance(value, bool)):
+            return f"{self.name}: {value} has no unit; read as '{value} {self.unit}' — write the unit to say so"
+        return None
+
     #: upper bound (SI) of each physical kind when a parameter declares none
     CEILINGS: ClassVar[dict] = {"length": 100.0, "time": 3600.0, "frequency": 1e5}
     MAX_RATE_HZ: ClassVar[float] = 10_000.0

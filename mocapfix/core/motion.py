@@ -105,6 +105,62 @@ class Motion:
         if self.kinds is not None and len(self.kinds) != len(self.names):
             raise ValueError(f"{len(self.kinds)} kinds for {len(self.names)} joints")
 
+    #: what :meth:`from_arrays` may say a motion's points are, and the format family a
+    #: config's ``formats:`` matches it by
+    KINDS = {"markers": "markers", "skeleton": "skeletons"}
+
+    @classmethod
+    def from_arrays(cls, positions, names, fps: float, *, kind: str = "markers",
+                    units: str = "mm", times=None, parents=None,
+                    confidence=None) -> "Motion":
+        """A motion built from arrays, that the shipped configs clean as a file of its kind.
+
+        Parameters
+        ----------
+        positions : array_like, shape (T, J, 3)
+            Positions in ``units``; NaN where a sample is missing.
+        names : list of str
+            One name per point.
+        fps : float
+            Frames per second.
+        kind : {"markers", "skeleton"}
+            Optical markers (cleaned as a C3D is) or a depth-sensor skeleton (cleaned as a
+            Kinect file is; give ``parents``).
+        units : {"mm", "cm", "m", "in"}
+            The length unit of ``positions``.
+        times : array_like, shape (T,), optional
+            Time stamps (s); default ``arange(T) / fps``.
+        parents : array_like of int, optional
+            The parent of each point (-1: a root), for a skeleton.
+        confidence : array_like, shape (T, J), optional
+            Per-sample confidence in 0..1 (a Kinect's tracking state: 1 tracked, 0.5
+            inferred).
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from mocapfix import Motion
+        >>> m = Motion.from_arrays(np.zeros((100, 2, 3)), ["LASI", "RASI"], 100.0)
+        >>> m.format, m.units, m.duration
+        ('markers', 'mm', 0.99)
+        """
+        from mocapfix.core.units import metres_per
+
+        if kind not in cls.KINDS:
+            raise ValueError(f"kind must be one of {', '.join(cls.KINDS)}, got {kind!r}")
+        fps = float(fps)
+        if not (np.isfinite(fps) and fps > 0):
+            raise ValueError(f"fps must be a positive number, got {fps!r}")
+        positions = np.asarray(positions, dtype=np.float64)
+        skeleton = None if parents is None else Skeleton(np.asarray(parents))
+        T = positions.shape[0] if positions.ndim else 0
+        times = np.arange(T) / fps if times is None else np.asarray(times, dtype=np.float64)
+        if times.shape != (T,):
+            raise ValueError(f"times must hold one stamp per frame ({T}), got shape {times.shape}")
+        return cls(positions, list(names), fps, units=units, metres_per_unit=metres_per(units),
+                   format=cls.KINDS[kind], skeleton=skeleton, times=times,
+                   confidence=confidence)
+
     # -- shape ---------------------------------------------------------------
     @property
     def n_frames(self) -> int:

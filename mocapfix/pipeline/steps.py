@@ -19,13 +19,14 @@ the report and the C3D writer.
 from __future__ import annotations
 
 import time
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 import yaml
 
-from mocapfix.formats import MARKER_FORMATS, matches
+from mocapfix.formats import FAMILIES, FORMATS, MARKER_FORMATS, matches
 from mocapfix.cleaners.base import (FILL_ERRORS, REJECTED_FILLS, REPLACED_FRAMES, Cleaner,
                                     FillGate, FittedCleaner)
 from mocapfix.core.errors import ConfigError
@@ -129,7 +130,15 @@ class Pipeline:
         seen, unlabelled trajectory for the steps after it."""
         records = []
         cleaned = np.array([why is None for why in self.not_cleaned(motion)], bool)
-        gated = self.max_fill_error is not None and motion.format in GATED_FORMATS
+        gated = self.max_fill_error is not None and matches(motion.format, (*GATED_FORMATS, "markers"))
+        unmatched = [s for s in self.steps if not s.applies(motion)]
+        if unmatched and motion.format not in FORMATS and motion.format not in FAMILIES:
+            # a Motion built in Python with no format: say so, or steps vanish silently
+            why = (f"Motion.format is {motion.format!r}: {len(unmatched)} of {len(self.steps)} "
+                   "steps (limited to formats) do not run; build it with "
+                   "Motion.from_arrays(..., kind='markers' or 'skeleton') or set its format")
+            warnings.warn(why, UserWarning, stacklevel=2)
+            motion = motion.replace(notes=[*motion.notes, why])
         # samples a step left as too uncertain to fill: no later step fills them
         settled = np.zeros(motion.positions.shape[:2], bool) if gated else None
         for step in self.steps:

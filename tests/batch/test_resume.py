@@ -257,7 +257,7 @@ def test_an_edited_skeleton_is_not_finished(tmp_path):
 
 
 def test_a_skeleton_edited_while_its_take_is_cleaned_is_not_recorded_as_finished(tmp_path, monkeypatch):
-    import mocapfix.clean as clean_module
+    import mocapfix.cleaning as clean_module
 
     src, cfg = _subject(tmp_path), _cfg(tmp_path)
     real = clean_module.clean_motion
@@ -346,7 +346,7 @@ def test_an_input_that_changes_while_it_is_cleaned_is_not_recorded_as_finished(t
     # the manifest took the input's sha256 after the clean: a file still being written
     # was recorded with its new content against an output of the old one, and the next
     # run skipped it as "finished earlier", keeping the stale output
-    import mocapfix.clean as clean_module
+    import mocapfix.cleaning as clean_module
 
     src = tmp_path / "in"
     src.mkdir()

@@ -84,7 +84,7 @@ def test_default_c3d_clean_loads_no_scipy():
     loaded = _modules_loaded_by(
         "from mocapfix import read\n"
         "from mocapfix.bench.corrupt import occlusion\n"
-        "from mocapfix.clean import clean_motion\n"
+        "from mocapfix.cleaning import clean_motion\n"
         "from mocapfix.config import load_config, default_config_path\n"
         "bad, _ = occlusion(read('sample_data/walk_markers.c3d'), 'mixed', 0)\n"
         "result = clean_motion(bad, load_config(default_config_path()))\n"
@@ -110,7 +110,7 @@ def test_a_new_format_module_is_found_by_the_format_table_alone(tmp_path, monkey
     import numpy as np
 
     from mocapfix import formats
-    from mocapfix.clean import clean_motion
+    from mocapfix.cleaning import clean_motion
     from mocapfix.config import load_config
     from mocapfix.core.presets import resolve_config
 

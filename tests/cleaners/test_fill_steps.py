@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from mocapfix import read
-from mocapfix.clean import clean_motion
+from mocapfix.cleaning import clean_motion
 from mocapfix.cleaners import build
 from mocapfix.config import default_config_path, load_config, parse_config
 from mocapfix.core.yamlsafe import load_marked_yaml
@@ -163,7 +163,7 @@ def test_the_report_says_which_step_refused_a_gaps_fill_and_why(tmp_path):
     under it. Under the default fill gate ``tsmc`` makes no fill (it has no error
     estimate); with the gate off (``max_fill_error: null``) it fills, its fill jumps, and
     the report gives both reasons."""
-    from mocapfix.clean import clean_file
+    from mocapfix.cleaning import clean_file
     import json
 
     def refusals(config, name):

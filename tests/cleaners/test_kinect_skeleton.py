@@ -492,7 +492,7 @@ def test_report_status_separates_good_kinect_recordings_from_bad(config):
     """Both shipped configs run the same Kinect step and grade it alike: the clean
     LabanotationSuite and MSR recordings OK, the glitchy UTKinect ones and KinectReader
     (32 % Inferred) WARN. With the optical markers' 50 mm every Kinect file warned."""
-    from mocapfix.clean import clean_motion
+    from mocapfix.cleaning import clean_motion
     from mocapfix.config import load_config
     from mocapfix.core.presets import resolve_config
     from mocapfix.quality.report import build_report

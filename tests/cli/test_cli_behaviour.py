@@ -464,12 +464,12 @@ def test_debug_shows_the_traceback_of_a_file_that_failed_unexpectedly(tmp_path, 
     # so the bug behind it could not be reported. Simulated failure (every known cause is
     # fixed); without --debug the output stays one line
     import mocapfix.batch.check
-    import mocapfix.clean
+    import mocapfix.cleaning
 
     def broken(*args, **kwargs):
         raise ValueError("simulated")
 
-    monkeypatch.setattr(mocapfix.clean, "build_report", broken)
+    monkeypatch.setattr(mocapfix.cleaning, "build_report", broken)
     monkeypatch.setattr(mocapfix.batch.check, "check_motion", broken)
     runs = {"clean": ["clean", str(KIN), "-o", str(tmp_path / "out"), "-c", config_file(tmp_path), "--overwrite"],
             "check": ["check", str(KIN)]}

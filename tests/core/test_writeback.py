@@ -152,7 +152,7 @@ def test_write_back_keeps_the_channels_of_rotation_cleaners_and_solves_moved_pos
     that moves positions still gets its channels solved."""
     from mocapfix import formats
     from mocapfix.core import writeback
-    from mocapfix.clean import clean_motion
+    from mocapfix.cleaning import clean_motion
     from mocapfix.config import loads_config
 
     m = formats.read(shared("bvh/cmu_cgspeed_131_01.bvh"))

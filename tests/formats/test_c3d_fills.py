@@ -164,7 +164,7 @@ def test_the_report_describes_the_fills_an_int16_file_could_not_hold(tmp_path):
     fills the writer dropped (they said 2.2 % missing and 4 gaps for a file with 2.9 % and
     28)."""
     import json
-    from mocapfix.clean import clean_file
+    from mocapfix.cleaning import clean_file
     from mocapfix.core.gaps import runs, take_frames
 
     out = tmp_path / "s09.c3d"

@@ -14,7 +14,7 @@ import pytest
 from conftest import SAMPLE_DATA, hang_guard
 from malformed_corpus import c3d_bytes, small_c3d_points
 
-from mocapfix.clean import clean_file
+from mocapfix.cleaning import clean_file
 from mocapfix.config import loads_config
 from mocapfix.core.errors import MocapfixError
 from mocapfix.formats import read

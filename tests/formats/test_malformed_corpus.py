@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from malformed_corpus import cases
-from mocapfix.clean import clean_file
+from mocapfix.cleaning import clean_file
 from mocapfix.core.errors import ConfigError, MocapfixError
 from mocapfix.formats import read
 from mocapfix.core.motion import Motion

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from mocapfix import formats
-from mocapfix.clean import clean_file
+from mocapfix.cleaning import clean_file
 from mocapfix.bench.corrupt import occlusion_gaps
 from mocapfix.core.errors import ConfigError
 from mocapfix.config import UNIT_WARNINGS, default_config_path, load_config, loads_config, parse_config

@@ -101,7 +101,7 @@ def test_bad_selection_is_a_config_error():
 # -- the report grades only what was cleaned ------------------------------------------------
 
 def _clean_report(path, config=None):
-    from mocapfix.clean import clean_motion
+    from mocapfix.cleaning import clean_motion
     from mocapfix.config import load_config
     from mocapfix.core.presets import resolve_config
     from mocapfix.quality.report import build_report
@@ -259,7 +259,7 @@ def test_a_rig_joint_left_out_keeps_its_channels_and_the_others_are_cleaned(wher
 
 
 def test_a_position_step_on_a_rig_keeps_the_left_out_joints_channels():
-    from mocapfix.clean import clean_motion
+    from mocapfix.cleaning import clean_motion
 
     motion, ch = _spiked_bandai()
     rig = motion.rig
@@ -278,7 +278,7 @@ def test_flag_then_fill_still_repairs_a_rig_when_joints_are_left_out(where):
     # (missing) samples became the old rotations' positions again, the fill after it had
     # nothing to fill, and a 60° knee glitch stayed in the file as soon as any joint was
     # excluded
-    from mocapfix.clean import clean_motion
+    from mocapfix.cleaning import clean_motion
 
     truth = read(shared("bvh/cmu_cgspeed_131_01.bvh"))
     rig = truth.rig

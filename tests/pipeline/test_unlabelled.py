@@ -15,7 +15,7 @@ from click.testing import CliRunner
 
 from mocapfix import formats, read
 from mocapfix.batch.check import check_motion
-from mocapfix.clean import clean_file, clean_motion
+from mocapfix.cleaning import clean_file, clean_motion
 from mocapfix.cli import main
 from mocapfix.core.errors import ConfigError
 from mocapfix.core.motion import Motion

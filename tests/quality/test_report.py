@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from mocapfix.clean import clean_motion
+from mocapfix.cleaning import clean_motion
 from mocapfix.cli import main
 from mocapfix.core.motion import Motion, Skeleton
 from mocapfix.config import loads_config

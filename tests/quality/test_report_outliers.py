@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from mocapfix import formats
-from mocapfix.clean import clean_motion
+from mocapfix.cleaning import clean_motion
 from mocapfix.config import loads_config
 from mocapfix.quality.report import build_report
 from conftest import shared

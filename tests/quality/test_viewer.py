@@ -248,7 +248,7 @@ def test_a_file_name_that_is_not_utf8_is_viewed(tmp_path):
 
 
 def test_samples_a_step_judged_wrong_are_runs_by_step():
-    from mocapfix.clean import clean_motion
+    from mocapfix.cleaning import clean_motion
     from mocapfix.config import load_config
     from mocapfix.core.presets import resolve_config
 

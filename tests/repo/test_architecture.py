@@ -10,7 +10,7 @@ Layers, bottom to top (a module may import its own layer and the ones below):
 3   ``mocapfix.cleaners`` — the cleaner classes over the kernels, and their registry
 4   ``mocapfix.pipeline`` — steps run on a Motion, which points they clean
 5   ``mocapfix.quality`` — measurements, rules, reports
-6   ``mocapfix.config``, ``mocapfix.clean`` — YAML to a pipeline; clean one file
+6   ``mocapfix.config``, ``mocapfix.cleaning`` — YAML to a pipeline; clean one file
 7   ``mocapfix.batch`` — discovery, planning, executors, the clean and check batches
 8   ``mocapfix.bench``, ``mocapfix.train`` — benchmarks, model training
 9   ``mocapfix.cli``, ``mocapfix.cli_options``, ``mocapfix.bench.cli`` — the commands;
@@ -33,7 +33,7 @@ LAYERS = [
     ("mocapfix.cleaners",),
     ("mocapfix.pipeline",),
     ("mocapfix.quality",),
-    ("mocapfix.config", "mocapfix.clean"),
+    ("mocapfix.config", "mocapfix.cleaning"),
     ("mocapfix.batch",),
     ("mocapfix.bench", "mocapfix.train"),
     ("mocapfix.cli", "mocapfix.cli_options", "mocapfix.bench.cli", "mocapfix"),
