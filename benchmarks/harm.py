@@ -30,7 +30,7 @@ from mocapfix.bench import harm as bench_harm
 from mocapfix.core import presets
 from mocapfix.batch.executors import ExecutorSpec  # noqa: E402
 from mocapfix.config import load_config  # noqa: E402
-from mocapfix.quality.render import svg_trajectory  # noqa: E402
+from mocapfix.quality.plots import rotation_channels, svg_trajectory  # noqa: E402
 
 #: folder of ../shared/data → the shipped configs run on its files
 FOLDERS = {"bvh": ["default", "animation-bvh"], "asfamc": ["default", "animation-bvh"],
@@ -72,19 +72,15 @@ def _draw(path: Path, method: bench.Method, cases: list[dict]) -> str:
         parts.append(svg_trajectory(before.positions[win, k], after.positions[win, k],
                                     np.zeros(win.stop - win.start, bool), before.missing[win, k],
                                     fps, title, mm, start_s=win.start / fps))
-        rig = before.rig
-        if rig is not None and case["point"] in rig.names:
-            j = rig.names.index(case["point"])
-            cols = rig.rot_columns[j]
-            if len(cols) == 3:
-                unit = 1.0 if rig.degrees else 180.0 / np.pi
-                parts.append(f"<p>{html.escape(case['point'])} rotation channels "
-                             f"({rig.rot_axes[j]}, degrees)</p>")
-                parts.append(svg_trajectory(
-                    before.channels[win][:, cols] * unit, after.channels[win][:, cols] * unit,
-                    np.zeros(win.stop - win.start, bool), np.zeros(win.stop - win.start, bool),
-                    fps, title, 1.0, labels=tuple(f"{a} (°)" for a in rig.rot_axes[j]) + ("change (°)",),
-                    start_s=win.start / fps))
+        cols, axes, unit = rotation_channels(before, case["point"] or "")
+        if len(cols) == 3:
+            parts.append(f"<p>{html.escape(case['point'])} rotation channels "
+                         f"({''.join(axes)}, degrees)</p>")
+            parts.append(svg_trajectory(
+                before.channels[win][:, cols] * unit, after.channels[win][:, cols] * unit,
+                np.zeros(win.stop - win.start, bool), np.zeros(win.stop - win.start, bool),
+                fps, title, 1.0, labels=tuple(f"{a} (°)" for a in axes) + ("change (°)",),
+                start_s=win.start / fps))
     if len(cases) > DRAWN:
         parts.append(f"<p>… and {len(cases) - DRAWN} more cases (see the table).</p>")
     return "".join(parts)

@@ -17,8 +17,8 @@ from pathlib import Path
 import numpy as np
 
 from mocapfix.core.errors import name_the_file, one_line, printable
-from mocapfix.core.gaps import runs
 from mocapfix.core.gaps import LONG_FILL_S
+from mocapfix.quality.plots import by_severity, joint_plot
 from mocapfix.quality.rules import METRICS, STATUS_ORDER
 from mocapfix.pipeline.unlabelled import is_unlabelled
 
@@ -39,19 +39,6 @@ def ranked(report: dict) -> list[dict]:
     """Joints worst first: status, then missing before, then name."""
     return sorted(report["joints"], key=lambda j: (-STATUS_ORDER[j["status"]],
                                                    -(j["missing_before"] or 0), j["name"]))
-
-
-def changed_most(report: dict) -> list[dict]:
-    """Joints by how much cleaning changed them (samples filled or flagged, then the
-    largest move); joints never seen and still missing are left out (nothing to plot)."""
-    T = report["file"]["frames"] or 1
-
-    def amount(j):
-        filled = (j["missing_before"] or 0) - (j["missing_after"] or 0)
-        return (filled + j["outliers_flagged"] / T, j["correction_mm"]["max"] or 0.0)
-
-    shown = [j for j in report["joints"] if (j["missing_after"] or 0) < 1.0]
-    return sorted(shown, key=lambda j: tuple(-x for x in amount(j)) + (j["name"],))
 
 
 def _steps_run(report: dict):
@@ -255,120 +242,17 @@ def to_markdown(report: dict) -> str:
 
 # -- HTML ------------------------------------------------------------------------------------
 
-def _ticks(lo: float, hi: float, n: int = 4) -> list[float]:
-    """Round tick values inside [lo, hi] (1-2-5 steps, about ``n`` intervals), at least two
-    of them: rounding the step up (2 → 5) can leave a single multiple in the range."""
-    span = hi - lo
-    if not np.isfinite(span) or span <= 0:
-        return [lo]
-    raw = span / n
-    mag = 10 ** np.floor(np.log10(raw))
-    steps = [m * mag for m in (0.5, 1, 2, 5, 10)]
-    k = next(i for i, m in enumerate(steps) if m >= raw)
-    while True:
-        step = steps[k]
-        first = np.ceil(lo / step) * step
-        ticks = [float(v) for v in np.arange(first, hi + step * 1e-9, step)]
-        if len(ticks) >= 2 or k == 0:
-            return ticks
-        k -= 1
-
-
-def _fmt_tick(v: float) -> str:
-    return f"{v:.0f}" if abs(v) >= 10 or v == int(v) else f"{v:.2g}"
-
-
-def svg_trajectory(before: np.ndarray, after: np.ndarray, filled: np.ndarray,
-                   missing_before: np.ndarray, fps: float, title: str, unit_mm: float,
-                   labels: tuple[str, ...] = ("x (mm)", "y (mm)", "z (mm)", "change (mm)"),
-                   start_s: float = 0.0) -> str:
-    """Inline SVG: three coordinates over time before (grey) and after (colour), and the
-    distance between them (the change cleaning made); missing spans shaded red, filled
-    green. Every panel has labelled axes with ticks (time in s from ``start_s``; ``labels``
-    name the three coordinates and the change, in mm unless they say otherwise: the values
-    are multiplied by ``unit_mm``)."""
-    W, H, left, right, top_pad, bottom = 760, 150, 64, 12, 10, 26
-    T = len(after)
-    duration = (T - 1) / fps if fps and T > 1 else float(max(T - 1, 1))
-    diff = np.linalg.norm(after - before, axis=1) * unit_mm
-    panels = [(labels[a], before[:, a] * unit_mm, after[:, a] * unit_mm, c)
-              for a, c in enumerate(("#c0392b", "#27ae60", "#2c6fbb"))]
-    panels.append((labels[3], None, diff, "#8e44ad"))
-    height = H * len(panels)
-    parts = [f'<svg xmlns="http://www.w3.org/2000/svg" class="plot" width="{W}" height="{height}" '
-             f'viewBox="0 0 {W} {height}" role="img"><title>{html.escape(printable(title))}</title>']
-
-    def X(i):
-        return left + (W - left - right) * i / max(T - 1, 1)
-
-    for p, (label, yb, ya, colour) in enumerate(panels):
-        top = p * H + top_pad
-        inner = H - top_pad - bottom
-        vals = [v[np.isfinite(v)] for v in (yb, ya) if v is not None]
-        both = np.concatenate(vals) if vals else np.zeros(0)
-        lo, hi = (float(both.min()), float(both.max())) if both.size else (0.0, 1.0)
-        if label.startswith("change"):
-            lo = 0.0
-        hi = hi if hi > lo else lo + 1.0
-
-        def Y(v, lo=lo, hi=hi, top=top, inner=inner):
-            return top + inner - inner * (v - lo) / (hi - lo)
-
-        parts.append(f'<g class="panel" data-axis="{html.escape(label)}">')
-        for mask, fill in ((missing_before, "#f6dada"), (filled, "#d6ecd6")):
-            _, s, n = runs(mask[:, None])
-            for a, m in zip(s, n):
-                parts.append(f'<rect x="{X(a):.1f}" y="{top:.1f}" width="{max(X(a + m) - X(a), 1):.1f}" '
-                             f'height="{inner:.1f}" fill="{fill}"/>')
-        # axes, ticks and labels
-        x0, x1, yb0 = left, W - right, top + inner
-        parts.append(f'<line class="axis x" x1="{x0}" y1="{yb0:.1f}" x2="{x1}" y2="{yb0:.1f}" stroke="#333"/>')
-        parts.append(f'<line class="axis y" x1="{x0}" y1="{top:.1f}" x2="{x0}" y2="{yb0:.1f}" stroke="#333"/>')
-        for v in _ticks(lo, hi):
-            y = Y(v)
-            parts.append(f'<line x1="{x0 - 4}" y1="{y:.1f}" x2="{x0}" y2="{y:.1f}" stroke="#333"/>'
-                         f'<text class="tick y" x="{x0 - 6}" y="{y + 4:.1f}" font-size="10" '
-                         f'text-anchor="end">{_fmt_tick(v)}</text>')
-        for v in _ticks(start_s, start_s + duration, 6):
-            x = X((v - start_s) * fps) if fps else X(v - start_s)
-            parts.append(f'<line x1="{x:.1f}" y1="{yb0:.1f}" x2="{x:.1f}" y2="{yb0 + 4:.1f}" stroke="#333"/>'
-                         f'<text class="tick x" x="{x:.1f}" y="{yb0 + 15:.1f}" font-size="10" '
-                         f'text-anchor="middle">{_fmt_tick(v)}</text>')
-        parts.append(f'<text class="label y" x="12" y="{top + inner / 2:.1f}" font-size="11" '
-                     f'transform="rotate(-90 12 {top + inner / 2:.1f})" text-anchor="middle">'
-                     f'{html.escape(label)}</text>')
-        parts.append(f'<text class="label x" x="{W - right}" y="{yb0 + 15:.1f}" font-size="10" '
-                     f'text-anchor="end">time (s)</text>')
-        lines = ([] if yb is None else [(yb, 'stroke="#999" stroke-width="1"')]) + \
-                [(ya, f'stroke="{colour}" stroke-width="1.3"')]
-        for y, style in lines:
-            ok = np.isfinite(y)
-            _, s, n = runs(ok[:, None])
-            for a, m in zip(s, n):
-                step = max(1, m // 1500)
-                idx = np.arange(a, a + m, step)
-                pts = " ".join(f"{X(i):.1f},{Y(y[i]):.1f}" for i in idx)
-                parts.append(f'<polyline fill="none" {style} points="{pts}"/>')
-        parts.append("</g>")
-    parts.append("</svg>")
-    return "".join(parts)
-
-
 def to_html(report: dict, result, n_plots: int = 6, viewer: bool = True) -> str:
     """The report as one page: summary, steps and joints tables, the 3D before/after
     viewer (:func:`mocapfix.quality.viewer.embed`; ``viewer=False``: left out) and
-    trajectory plots of the joints cleaning changed most."""
-    before, after = result.original, result.cleaned
-    filled = np.zeros(before.positions.shape[:2], bool)
+    plots of the joints cleaning changed, worst first (:mod:`mocapfix.quality.plots`)."""
+    shape = result.original.positions.shape[:2]
+    filled, outliers = np.zeros(shape, bool), np.zeros(shape, bool)
     for r in result.records:
         filled |= r.filled
-    mm = before.metres_per_unit * 1000.0
-    plots = []
-    for j in changed_most(report)[:n_plots]:
-        k = before.names.index(j["name"])
-        plots.append(f"<h3>{html.escape(printable(j['name']))} — {j['status']}</h3>" + svg_trajectory(
-            before.positions[:, k], after.positions[:, k], filled[:, k] & ~after.missing[:, k],
-            before.missing[:, k], before.fps, j["name"], mm))
+        outliers |= r.outliers
+    plots = [f"<h3>{html.escape(printable(j['name']))} — {j['status']}</h3>"
+             + joint_plot(result, j, filled, outliers) for j in by_severity(report)[:n_plots]]
     name = Path(report["file"]["path"]).name if report["file"].get("path") else "motion"
     body = markdown_to_html(to_markdown(report))
     return ("<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'>"
@@ -376,9 +260,14 @@ def to_html(report: dict, result, n_plots: int = 6, viewer: bool = True) -> str:
             "<style>body{font-family:sans-serif;max-width:1100px;margin:2em auto}"
             "table{border-collapse:collapse;font-size:12px}td,th{border:1px solid #ccc;padding:2px 6px}"
             "</style></head><body>" + body + _viewer_section(result, viewer) +
-            "<h2>Trajectories of the joints cleaning changed most</h2><p>grey: input; colour: "
-            "cleaned; the last panel is the distance between them; red shading: missing in the "
-            "input; green: filled by a cleaner.</p>"
+            "<h2>Trajectories of the joints cleaning changed</h2><p>FAIL first, then WARN, then "
+            "OK, each the largest change first; each drawn over the frames that changed, the "
+            "strip above it the whole take with those frames outlined. Grey: input; colour: "
+            "cleaned; the change panel is the distance between them and, for a fill, its "
+            "distance to the straight line across the gap; rotation panels: the joint's "
+            "rotation channels (BVH/AMC). Shading: red missing in the input, green filled (band: "
+            "the fill's 90 % error bound), orange judged wrong by a step; Kinect: a bar along the "
+            "top, yellow where the joint was Inferred, grey where NotTracked.</p>"
             + ("".join(plots) or "<p>No joint was changed.</p>") + "</body></html>")
 
 
