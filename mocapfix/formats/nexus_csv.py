@@ -162,11 +162,12 @@ def fresh_text(motion: Motion, path: Path | None = None) -> str:
     """One Trajectories section holding ``motion`` (numbers with 6 decimals)."""
     T, J = motion.n_frames, motion.n_joints
     unit = motion.units if motion.units in METRES_PER_UNIT else "mm"
+    scale = motion.metres_per_unit / METRES_PER_UNIT[unit]
     head = ["Trajectories", f"{motion.fps:g}",
             ",," + ",".join(f"{name},," for name in motion.names)[:-1],
             "Frame,Sub Frame" + ",X,Y,Z" * J, ",," + ",".join([unit] * (3 * J))]
     keys = [f"{t + 1},0" for t in range(T)]
-    return tt.table_text(head, keys, motion.positions.reshape(T, 3 * J), ",", "%.6f")
+    return tt.table_text(head, keys, motion.positions.reshape(T, 3 * J) * scale, ",", "%.6f")
 
 
 def kept_only_here(motion: Motion) -> list[str]:
@@ -181,5 +182,6 @@ def kept_only_here(motion: Motion) -> list[str]:
 def losses(motion: Motion) -> list[str]:
     out = tt.common_losses(motion, "a Nexus CSV")
     if motion.units not in METRES_PER_UNIT:
-        out.append(f"unit {motion.units!r} is written as mm without conversion")
+        out.append(f"positions in {motion.units} are converted to mm (a Nexus CSV names its "
+                   "unit per column: mm, cm or m)")
     return out

@@ -262,3 +262,18 @@ def test_qtm_headed_missing_is_empty_or_nan_and_zeros_are_kept(tmp_path):
     formats.write(motion, out)
     assert out.read_text().split("\n")[13].split("\t")[2:5] == ["1.000", "2.000", "3.000"]
     assert out.read_text().split("\n")[14].split("\t")[2:5] == ["NaN", "NaN", "NaN"]
+
+
+@pytest.mark.parametrize("fmt,suffix", [("nexus_csv", ".csv"), ("qtm_tsv", ".tsv"),
+                                        ("motive_csv", ".csv")])
+def test_a_fresh_file_holds_the_same_positions_in_metres_whatever_the_unit(tmp_path, fmt, suffix):
+    """An AMC's unit (1/0.45 inch) has no name in these layouts: the writer converts, and
+    the positions read back are the same in metres (a Nexus CSV once wrote the numbers
+    unconverted under 'mm')."""
+    amc = formats.read(SAMPLE_DATA / "walker_01.amc")
+    path = tmp_path / f"x{suffix}"
+    formats.write(amc, path, format=fmt)
+    back = formats.read(path)
+    metres = back.positions * back.metres_per_unit - amc.positions * amc.metres_per_unit
+    assert np.nanmax(np.abs(metres)) < 1e-6
+    assert any("are converted" in n for n in formats.losses(amc, fmt))
