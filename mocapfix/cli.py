@@ -349,10 +349,12 @@ def _parse_reports(value: str) -> tuple[str, ...]:
     return tuple(k for k in kinds if k != "none")
 
 
-def _clean_line(r: dict, verbose: bool) -> str:
+def _clean_line(r: dict, verbose: bool, graded: bool = True) -> str:
+    """A file's line; ``graded`` False (``convert``): DONE instead of the quality status,
+    which a conversion does not change (``check`` and the reports judge it)."""
     if r["status"] == "ERROR":
         return f"ERROR {one_line(name_the_file(r['input'], r['error']))}"
-    text = (f"{r['status']:<5} {one_line(r['input'])} -> {one_line(r['output'])} "
+    text = (f"{r['status'] if graded else 'DONE':<5} {one_line(r['input'])} -> {one_line(r['output'])} "
             f"(missing {100 * r['missing_before']:.1f} % -> {100 * r['missing_after']:.1f} %, "
             f"{r['seconds']:.2f} s)")
     if r.get("skipped"):
@@ -490,7 +492,8 @@ def _run_clean(inputs, outdir, make_pipeline, reports, jobs, as_json, fps, allow
         sys.exit(EXIT_OK)
 
     def stream(r):
-        out.line(_clean_line(r, obj["verbosity"] > 0), level=0 if r["status"] != "ERROR" else -1,
+        out.line(_clean_line(r, obj["verbosity"] > 0, verb == "cleaned"),
+                 level=0 if r["status"] != "ERROR" else -1,
                  err=True if r["status"] == "ERROR" else None)
         if debug and r.get("traceback"):
             out.error(r["traceback"].rstrip())
@@ -507,7 +510,7 @@ def _run_clean(inputs, outdir, make_pipeline, reports, jobs, as_json, fps, allow
                                "config": str(pipeline.source),
                                **({"problems": plan.problems} if plan.problems else {})}, indent=1))
     else:
-        graded = [r["status"] for r in results if r["status"] != "ERROR"]
+        graded = [r["status"] for r in results if r["status"] != "ERROR" and verb == "cleaned"]
         out.line(f"{verb} {len(results) - len(failed)} of {len(results)} files"
                  + (f" ({len(skipped)} skipped: {'finished earlier' if plan.resumed else 'output exists'})"
                     if skipped else "")
