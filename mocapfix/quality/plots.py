@@ -1,4 +1,5 @@
-"""The HTML report's plots: inline SVG, no plotting library, no script.
+"""The HTML report's plots: inline SVG, no plotting library (the report's one script only moves
+the time cursor line each plot holds).
 
 Each plotted joint is drawn over the span cleaning changed (with a margin) at the full
 plot width, under a thin strip of the whole take that marks where that span is: a 3-frame
@@ -122,7 +123,7 @@ def svg_plot(panels: list[Panel], shading: list[tuple[str, np.ndarray]], fps: fl
     height = strip + PANEL_H * len(panels)
     parts = [f'<svg xmlns="http://www.w3.org/2000/svg" class="plot" width="{WIDTH}" '
              f'height="{height}" viewBox="0 0 {WIDTH} {height}" role="img" '
-             f'data-frames="{f0} {f1}"><title>{html.escape(printable(title))}</title>']
+             f'data-frames="{f0} {f1}" data-x="{LEFT} {WIDTH - RIGHT}"><title>{html.escape(printable(title))}</title>']
 
     def seconds(i):
         return i / fps if fps else i
@@ -198,6 +199,9 @@ def svg_plot(panels: list[Panel], shading: list[tuple[str, np.ndarray]], fps: fl
             parts.append(f'<text class="legend" x="{LEFT + 8}" y="{top + 12 + 12 * i:.1f}" '
                          f'font-size="10">{html.escape(line)}</text>')
         parts.append("</g>")
+    # the report's script moves it to the 3D viewer's frame (hidden outside the window)
+    parts.append(f'<line class="cursor" x1="{LEFT}" y1="{strip}" x2="{LEFT}" y2="{height}" '
+                 f'stroke="#e00" stroke-width="1.5" visibility="hidden"/>')
     parts.append("</svg>")
     return "".join(parts)
 
