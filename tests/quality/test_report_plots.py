@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from mocapfix import formats
-from mocapfix.clean import clean_motion
+from mocapfix.cleaning import clean_motion
 from mocapfix.config import loads_config
 from mocapfix.core.motion import Motion
 from mocapfix.quality.measure import CleanResult
