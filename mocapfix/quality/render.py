@@ -265,8 +265,10 @@ def to_html(report: dict, result, n_plots: int = 6, viewer: bool = True) -> str:
             "svg.plot{cursor:crosshair}"
             "</style></head><body>" + body + _viewer_section(result, viewer) +
             "<h2>Trajectories of the joints cleaning changed</h2><p>FAIL first, then WARN, then "
-            "OK, each the largest change first; each drawn over the frames that changed, the "
-            "strip above it the whole take with those frames outlined. Grey: input; colour: "
+            "OK, each the largest change first; each drawn over the frames that changed (changes "
+            "far apart: a plot per span, up to 3, the largest first), the strip above it the "
+            "whole take with those frames outlined. The red line is the 3D view's frame; click "
+            "a plot to show that frame in the view. Grey: input; colour: "
             "cleaned; the change panel is the distance between them and, for a fill, its "
             "distance to the straight line across the gap; rotation panels: the joint's "
             "rotation channels (BVH/AMC). Shading: red missing in the input, green filled (band: "
