@@ -241,7 +241,8 @@ def view(files, before, after, output, open_it, budget, fps):
     """Write one self-contained HTML page that plays FILE(s) in 3D (no network needed).
     Two files with the same points and frames — a capture and its cleaned output — are
     overlaid as before and after (or name them with --before/--after); other files are
-    overlaid as they are."""
+    overlaid as they are. A clean report (OUT.report.json) overlays its input and output,
+    the samples each step judged wrong coloured by step."""
     from pathlib import Path
 
     from mocapfix.formats import read
@@ -258,12 +259,15 @@ def view(files, before, after, output, open_it, budget, fps):
     options = {"default_fps": fps} if fps else {}
     try:
         paths = [before, after] if before is not None else list(files)
-        motions = [read(p, **options) for p in paths]
         limit = int(budget * 1e6)
-        if before is not None or (len(motions) == 2 and viewer.comparable(*motions)):
-            page = viewer.before_after(*motions, budget=limit)
+        if len(paths) == 1 and str(paths[0]).endswith(viewer.REPORT_SUFFIX):
+            page = viewer.from_report(paths[0], budget=limit, **options)
         else:
-            page = viewer.single(motions, budget=limit)
+            motions = [read(p, **options) for p in paths]
+            if before is not None or (len(motions) == 2 and viewer.comparable(*motions)):
+                page = viewer.before_after(*motions, budget=limit)
+            else:
+                page = viewer.single(motions, budget=limit)
         Path(output).write_text(page, encoding="utf-8")
     except (MocapfixError, ValueError, OSError) as exc:
         _fail(one_line(str(exc)), debug, exc)

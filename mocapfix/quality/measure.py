@@ -511,7 +511,8 @@ def measure_cleaning(result: CleanResult) -> dict:
     steps = [{"step": r.step, "cleaner": r.cleaner, "seconds": finite(r.seconds),
               "filled": int(r.filled.sum()), "flagged": int(r.outliers.sum()),
               "moved_mean_mm": finite(np.mean(r.moved) * mm) if r.moved.size else 0.0,
-              **({"skipped": r.skipped} if r.skipped else {}), "info": r.info}
+              **({"skipped": r.skipped} if r.skipped else {}), "info": r.info,
+              **_judged_wrong(r, before.names)}
              for r in records]
     out = {"file": file, "steps": steps, "joints": joints}
     if not graded.all():
@@ -529,3 +530,15 @@ def measure_cleaning(result: CleanResult) -> dict:
         res = result.writeback_residual * mm
         file["writeback_residual_mm"] = {"mean": finite(np.nanmean(res)), "max": finite(np.nanmax(res))}
     return out
+
+
+def _judged_wrong(record, names) -> dict:
+    """``{"judged_wrong": [[point, start, length], ...]}``: the runs of samples the step
+    judged wrong (:attr:`StepRecord.outliers`), so that ``mocapfix view REPORT.json`` can
+    colour them by step as the report's own viewer does; empty when there are none."""
+    col, start, length = runs(record.outliers)
+    if not col.size:
+        return {}
+    return {"judged_wrong": [[names[c], s, n] for c, s, n in
+                             zip(col.tolist(), start.tolist(), length.tolist())]}
+

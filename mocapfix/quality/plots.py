@@ -1,8 +1,11 @@
-"""The HTML report's plots: inline SVG, no plotting library, no script.
+"""The HTML report's plots: inline SVG, no plotting library (the report's one script only moves
+the time cursor line each plot holds).
 
 Each plotted joint is drawn over the span cleaning changed (with a margin) at the full
 plot width, under a thin strip of the whole take that marks where that span is: a 3-frame
-edit in a 63 s take is a few hundred pixels wide instead of a fraction of one. The panels
+edit in a 63 s take is a few hundred pixels wide instead of a fraction of one. Changes far
+apart in time get a plot each (up to :data:`MOST_SPANS`, the largest first; the page says
+how many more there are). The panels
 are x, y, z before and after, the change (distance moved; for a fill, its distance to the
 straight bridge between the gap's ends, with the fill's estimated error and 90 % bound),
 and for BVH/AMC the joint's rotation channels when a step changed them. Kinect tracking
@@ -122,7 +125,7 @@ def svg_plot(panels: list[Panel], shading: list[tuple[str, np.ndarray]], fps: fl
     height = strip + PANEL_H * len(panels)
     parts = [f'<svg xmlns="http://www.w3.org/2000/svg" class="plot" width="{WIDTH}" '
              f'height="{height}" viewBox="0 0 {WIDTH} {height}" role="img" '
-             f'data-frames="{f0} {f1}"><title>{html.escape(printable(title))}</title>']
+             f'data-frames="{f0} {f1}" data-x="{LEFT} {WIDTH - RIGHT}"><title>{html.escape(printable(title))}</title>']
 
     def seconds(i):
         return i / fps if fps else i
@@ -198,6 +201,9 @@ def svg_plot(panels: list[Panel], shading: list[tuple[str, np.ndarray]], fps: fl
             parts.append(f'<text class="legend" x="{LEFT + 8}" y="{top + 12 + 12 * i:.1f}" '
                          f'font-size="10">{html.escape(line)}</text>')
         parts.append("</g>")
+    # the report's script moves it to the 3D viewer's frame (hidden outside the window)
+    parts.append(f'<line class="cursor" x1="{LEFT}" y1="{strip}" x2="{LEFT}" y2="{height}" '
+                 f'stroke="#e00" stroke-width="1.5" visibility="hidden"/>')
     parts.append("</svg>")
     return "".join(parts)
 
@@ -305,25 +311,41 @@ def rotation_channels(motion, name: str) -> tuple[list[int], list[str], float]:
     return list(rig.rot_columns[j]), list(rig.rot_axes[j]), 1.0 if rig.degrees else 180.0 / np.pi
 
 
-def _window(changed: np.ndarray, size: np.ndarray) -> tuple[int, int]:
-    """The frames to draw, (start, stop): of the spans of changed frames (changes closer
-    than :data:`MARGIN` frames are one span) the one with the largest ``size``, widened by
-    max(:data:`MARGIN`, half its length) each side within the take; the whole take when
-    nothing changed. The other spans stay marked in the overview strip."""
+#: plots a joint gets at most, one per span of changed frames, the largest first
+MOST_SPANS = 3
+
+
+def _windows(changed: np.ndarray, size: np.ndarray, most: int = MOST_SPANS
+             ) -> tuple[list[tuple[int, int]], int]:
+    """The frames to draw, as (start, stop) windows, the largest ``size`` first, and how
+    many more spans were left out: each span of changed frames (changes closer than
+    :data:`MARGIN` frames are one span) widened by max(:data:`MARGIN`, half its length)
+    each side within the take, windows that then overlap drawn as one; at most ``most``.
+    The whole take when nothing changed. Every span stays marked on each plot's strip."""
     T = len(changed)
     if not changed.any():
-        return 0, T
+        return [(0, T)], 0
     near = np.convolve(changed, np.ones(2 * MARGIN + 1), "same") > 0
-    _, s, n = runs(near[:, None])
-    best = int(np.argmax([size[a:a + m].max() for a, m in zip(s.tolist(), n.tolist())]))
-    where = np.flatnonzero(changed[s[best]:s[best] + n[best]]) + s[best]
-    a, b = int(where[0]), int(where[-1]) + 1
-    margin = max(MARGIN, (b - a + 1) // 2)
-    return max(0, a - margin), min(T, b + margin)
+    _, s, _ = runs(near[:, None])
+    at = np.flatnonzero(changed)
+    # every span holds a changed frame: its first and last one
+    new_span = np.flatnonzero(np.diff(np.searchsorted(s, at, side="right")))
+    a, b = at[np.r_[0, new_span + 1]], at[np.r_[new_span, at.size - 1]] + 1
+    margin = np.maximum(MARGIN, (b - a + 1) // 2)
+    lo, hi = np.maximum(0, a - margin), np.minimum(T, b + margin)
+    peak = np.maximum.reduceat(np.where(near, size, -np.inf), s)
+    joined = np.r_[0, np.flatnonzero(lo[1:] >= np.maximum.accumulate(hi)[:-1]) + 1]
+    lo, hi = lo[joined], np.maximum.reduceat(hi, joined)
+    peak = np.maximum.reduceat(peak, joined)
+    order = np.argsort(-peak, kind="stable")
+    shown = order[:most]
+    return [(int(lo[i]), int(hi[i])) for i in shown], int(order.size - shown.size)
 
 
 def joint_plot(result, joint: dict, filled_any: np.ndarray, outliers_any: np.ndarray) -> str:
-    """The plot of one joint of a report (see the module docstring); ``filled_any`` and
+    """The plots of one joint of a report, one per span of changed frames
+    (:func:`_windows`; see the module docstring), then a line naming the spans left out
+    when there are more; ``filled_any`` and
     ``outliers_any`` are the (T, J) samples any step filled / judged wrong."""
     before, after = result.original, result.cleaned
     k = before.names.index(joint["name"])
@@ -346,26 +368,34 @@ def joint_plot(result, joint: dict, filled_any: np.ndarray, outliers_any: np.nda
         bound[f["start"]:f["start"] + f["length"]] = f["bound_mm"]
     # the largest change in mm or, for a rotation channel, degrees
     size = np.maximum.reduce([moved_present, np.nan_to_num(bound), rot_change])
-    window = _window(changed, size)
+    windows, more = _windows(changed, size)
     panels = [Panel(f"{'xyz'[a]} (mm)", [(pb[:, a], "#999", 1), (pa[:, a], c, 1.3)],
                     band=(pa[:, a] - bound, pa[:, a] + bound) if fills else None)
               for a, c in enumerate(XYZ_COLOURS)]
     bridge = bridge_distance(pb, pa, filled)
-    legend = []
-    if filled.any():
-        legend.append("orange: a fill's distance to the straight line between its gap's ends")
-    in_view = [f for f in fills if f["start"] < window[1] and window[0] < f["start"] + f["length"]]
-    legend += [f"fill of frames {f['start']}–{f['start'] + f['length'] - 1}: estimated error "
-               f"{f['error_mm']:.1f} mm, 90 % bound {f['bound_mm']:.1f} mm (green band above)"
-               for f in in_view[:3]]
-    panels.append(Panel("change (mm)", [(moved, CHANGE_COLOUR, 1.3), (bridge, BRIDGE_COLOUR, 1.3)],
-                        zero=True, legend=legend))
+    rotations = []
     if cols and rot_change.max(initial=0.0) > 0:
-        panels += [Panel(f"{ax} rotation (°)", [(rot_b[:, i], "#999", 1), (rot_a[:, i], "#16a085", 1.3)])
-                   for i, ax in enumerate(axes)]
+        rotations = [Panel(f"{ax} rotation (°)", [(rot_b[:, i], "#999", 1), (rot_a[:, i], "#16a085", 1.3)])
+                     for i, ax in enumerate(axes)]
+
+    def change_panel(window):
+        legend = []
+        if filled.any():
+            legend.append("orange: a fill's distance to the straight line between its gap's ends")
+        in_view = [f for f in fills if f["start"] < window[1] and window[0] < f["start"] + f["length"]]
+        legend += [f"fill of frames {f['start']}–{f['start'] + f['length'] - 1}: estimated error "
+                   f"{f['error_mm']:.1f} mm, 90 % bound {f['bound_mm']:.1f} mm (green band above)"
+                   for f in in_view[:3]]
+        return Panel("change (mm)", [(moved, CHANGE_COLOUR, 1.3), (bridge, BRIDGE_COLOUR, 1.3)],
+                     zero=True, legend=legend)
 
     shading = [("missing", miss_b), ("filled", filled), ("outlier", outliers_any[:, k] & ~filled)]
     if before.format == "kinect" and before.confidence is not None:
         conf = np.nan_to_num(before.confidence[:, k])
         shading += [("inferred", (conf > 0) & (conf < 1)), ("nottracked", conf <= 0)]
-    return svg_plot(panels, shading, before.fps, joint["name"], window, overview=changed)
+    plots = [svg_plot(panels + [change_panel(w)] + rotations, shading, before.fps, joint["name"],
+                      w, overview=changed) for w in windows]
+    if more:
+        plots.append(f'<p class="more-spans">+{more} more span{"s" if more > 1 else ""} '
+                     "changed (marked on the strip above each plot)</p>")
+    return "".join(plots)

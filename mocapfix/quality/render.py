@@ -1,5 +1,6 @@
 """Rendering of judged measurements: the clean report as JSON, Markdown and a
-self-contained HTML page (inline SVG plots, no plotting library, no script), and
+self-contained HTML page (inline SVG plots, no plotting library; its one script links
+the embedded 3D viewer's frame to the plots), and
 ``check`` results as text lines, JSON and JUnit XML.
 
 Nothing here measures or judges: see :mod:`mocapfix.quality.measure` and :mod:`mocapfix.quality.rules`.
@@ -256,19 +257,62 @@ def to_html(report: dict, result, n_plots: int = 6, viewer: bool = True) -> str:
     name = Path(report["file"]["path"]).name if report["file"].get("path") else "motion"
     body = markdown_to_html(to_markdown(report))
     return ("<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'>"
+            "<meta http-equiv='Content-Security-Policy' content=\"default-src 'none'; "
+            "script-src 'unsafe-inline'; style-src 'unsafe-inline'; img-src data:\">"
             f"<title>{html.escape(printable(name))} — mocapfix report</title>"
             "<style>body{font-family:sans-serif;max-width:1100px;margin:2em auto}"
             "table{border-collapse:collapse;font-size:12px}td,th{border:1px solid #ccc;padding:2px 6px}"
+            "svg.plot{cursor:crosshair}"
             "</style></head><body>" + body + _viewer_section(result, viewer) +
             "<h2>Trajectories of the joints cleaning changed</h2><p>FAIL first, then WARN, then "
-            "OK, each the largest change first; each drawn over the frames that changed, the "
-            "strip above it the whole take with those frames outlined. Grey: input; colour: "
+            "OK, each the largest change first; each drawn over the frames that changed (changes "
+            "far apart: a plot per span, up to 3, the largest first), the strip above it the "
+            "whole take with those frames outlined. The red line is the 3D view's frame; click "
+            "a plot to show that frame in the view. Grey: input; colour: "
             "cleaned; the change panel is the distance between them and, for a fill, its "
             "distance to the straight line across the gap; rotation panels: the joint's "
             "rotation channels (BVH/AMC). Shading: red missing in the input, green filled (band: "
             "the fill's 90 % error bound), orange judged wrong by a step; Kinect: a bar along the "
             "top, yellow where the joint was Inferred, grey where NotTracked.</p>"
-            + ("".join(plots) or "<p>No joint was changed.</p>") + "</body></html>")
+            + ("".join(plots) or "<p>No joint was changed.</p>")
+            + (_CURSOR_SCRIPT if viewer else "") + "</body></html>")
+
+
+#: The report's one script: the 3D viewer's frame (its iframe posts
+#: ``{mocapfix: "frame", frame: N}``) drawn as a cursor line on every plot whose window
+#: holds it, and a click on a plot sent to the viewer as the frame under the mouse. Only
+#: messages of that shape from the viewer's own window are read.
+_CURSOR_SCRIPT = """<script>
+(function () {
+  "use strict";
+  const view = document.querySelector("iframe.mocapfix-view");
+  if (!view) return;
+  const plots = Array.from(document.querySelectorAll("svg.plot"), (svg) => {
+    const [f0, f1] = svg.getAttribute("data-frames").split(" ").map(Number);
+    const [x0, x1] = svg.getAttribute("data-x").split(" ").map(Number);
+    return { svg, f0, f1, x0, x1, span: Math.max(f1 - 1 - f0, 1), cursor: svg.querySelector("line.cursor") };
+  });
+  const isFrame = (m) => typeof m === "object" && m !== null && m.mocapfix === "frame"
+    && Number.isInteger(m.frame) && m.frame >= 0 && Object.keys(m).length === 2;
+  window.addEventListener("message", (e) => {
+    if (e.source !== view.contentWindow || !isFrame(e.data)) return;
+    const f = e.data.frame;
+    for (const p of plots) {
+      const inside = f >= p.f0 && f < p.f1, x = (p.x0 + (p.x1 - p.x0) * (f - p.f0) / p.span).toFixed(1);
+      p.cursor.setAttribute("visibility", inside ? "visible" : "hidden");
+      p.cursor.setAttribute("x1", x); p.cursor.setAttribute("x2", x);
+    }
+  });
+  for (const p of plots) {
+    p.svg.addEventListener("click", (e) => {
+      const r = p.svg.getBoundingClientRect(), x = (e.clientX - r.left) * p.svg.viewBox.baseVal.width / r.width;
+      const f = Math.round(p.f0 + (x - p.x0) / (p.x1 - p.x0) * p.span);
+      // "*": the sandboxed viewer has no origin to name
+      view.contentWindow.postMessage({ mocapfix: "frame", frame: Math.max(p.f0, Math.min(p.f1 - 1, f)) }, "*");
+    });
+  }
+})();
+</script>"""
 
 
 def _viewer_section(result, viewer: bool) -> str:

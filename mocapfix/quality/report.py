@@ -3,7 +3,9 @@ judged by the rule engine of :mod:`mocapfix.quality.rules`, rendered by :mod:`mo
 
 JSON schema ``mocapfix.report/1``::
 
-    {"schema": "mocapfix.report/1", "file": {...summary, "status"...}, "steps": [...],
+    {"schema": "mocapfix.report/1", "file": {...summary, "status"...}, "steps": [{"step",
+     "cleaner", "seconds", "filled", "flagged", "moved_mean_mm", "info", "judged_wrong":
+     [[point, start frame, frames], ...] (only when the step judged samples wrong)}],
      "thresholds": {...}, "rules": [...], "joints": [{"name", "status", "reasons",
      "missing_before", "missing_after", "uncertain", "gaps": {"count", "longest_frames",
      "filled": [{"start", "length", "seconds", "long", "confidence", "filled_by"}],

@@ -248,6 +248,7 @@
       }
     }
     const f = frameOf(main);
+    tell(f * main.stride);
     scrub.value = String(f);
     $("time").textContent = time.toFixed(2) + " s  frame " + (f * main.stride) + "/" + ((main.frames - 1) * main.stride);
   }
@@ -372,6 +373,26 @@
     draw();
   }
   window.addEventListener("resize", resize);
+
+  // -- the page around an embedded viewer (the clean report): the frame both ways ------
+  // {mocapfix: "frame", frame: N} (N in the file's frames) and nothing else; the report
+  // draws its time cursor from ours and sends the frame of a plot clicked.
+  const host = window.parent !== window ? window.parent : null;
+  let told = -1;
+  function tell(frame) {
+    if (!host || frame === told) return;
+    told = frame;
+    // "*": this sandboxed document has no origin to name, and a frame number is no secret
+    host.postMessage({ mocapfix: "frame", frame: frame }, "*");
+  }
+  window.addEventListener("message", (e) => {
+    const m = e.data;
+    if (!host || e.source !== host || typeof m !== "object" || m === null || m.mocapfix !== "frame"
+        || !Number.isInteger(m.frame) || m.frame < 0 || Object.keys(m).length !== 2) return;
+    setPlaying(false);
+    time = Math.min(duration, m.frame / main.stride / main.fps);
+    draw();
+  });
 
   let last = null;
   function tick(now) {

@@ -266,18 +266,69 @@ def single(motions: list[Motion], budget: int = DEFAULT_BUDGET) -> str:
     return to_html(layers, " + ".join(l.label for l in layers), budget)
 
 
+def _add_flags(layer: Layer, step: str, cleaner: str, col, start, length) -> None:
+    """One step's runs of samples judged wrong (``col`` indexing ``layer.keep``) as
+    ``[joint, start, length, kind]``, kind indexing ``layer.flag_kinds`` (the steps)."""
+    col = np.asarray(col, dtype=np.intp)
+    if col.size:
+        kind = len(layer.flag_kinds)
+        layer.flag_kinds.append(step if cleaner in step else f"{step} ({cleaner})")
+        layer.flags += np.column_stack([col, start, length, np.full(col.size, kind)]).tolist()
+
+
 def _flag_runs(layer: Layer, records) -> None:
-    """The samples each step judged wrong (flagged or replaced: ``StepRecord.outliers``) as
-    runs ``[joint, start, length, kind]``, kind indexing ``layer.flag_kinds`` (the steps)."""
+    """The samples each step judged wrong (flagged or replaced: ``StepRecord.outliers``)."""
     from mocapfix.core.gaps import runs
 
     for record in records:
-        col, start, length = runs(record.outliers[:, layer.keep])
-        if col.size:
-            kind = len(layer.flag_kinds)
-            layer.flag_kinds.append(record.step if record.cleaner in record.step
-                                    else f"{record.step} ({record.cleaner})")
-            layer.flags += np.column_stack([col, start, length, np.full(col.size, kind)]).tolist()
+        _add_flags(layer, record.step, record.cleaner, *runs(record.outliers[:, layer.keep]))
+
+
+def _report_flags(layer: Layer, steps: list[dict]) -> None:
+    """The same from a JSON report's steps (their ``judged_wrong`` runs, by point name);
+    points the layer does not draw are passed over."""
+    where = {name: n for n, name in enumerate(layer.names)}
+    for step in steps:
+        rows = [r for r in step.get("judged_wrong") or () if r[0] in where]
+        if rows:
+            _add_flags(layer, step["step"], step["cleaner"], [where[r[0]] for r in rows],
+                       [r[1] for r in rows], [r[2] for r in rows])
+
+
+REPORT_SUFFIX = ".report.json"
+
+
+def report_files(path) -> tuple[Path, Path, dict]:
+    """The input and output a clean report (``<output name>.report.json``) describes, and
+    the report: the input is its ``file.path``, the output the file beside the report.
+    A :class:`~mocapfix.core.errors.MocapfixError` naming what is gone when either is."""
+    from mocapfix.core.errors import MocapfixError
+
+    path = Path(path)
+    try:
+        report = json.loads(path.read_text(encoding="utf-8"))
+        source = report["file"]["path"]
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise MocapfixError(f"{path}: not a readable mocapfix clean report ({exc})") from exc
+    if not source:
+        raise MocapfixError(f"{path}: the report names no input file (cleaned from memory)")
+    before, after = Path(source), path.with_name(path.name[:-len(REPORT_SUFFIX)])
+    gone = [f"{what} {p}" for what, p in (("input", before), ("output", after)) if not p.is_file()]
+    if gone:
+        raise MocapfixError(f"{path}: the files this report describes are gone (moved or "
+                            f"deleted?): {', '.join(gone)}; view them by name instead")
+    return before, after, report
+
+
+def from_report(path, budget: int = DEFAULT_BUDGET, **read_options) -> str:
+    """A page overlaying the input and output of a clean report, the samples each step
+    judged wrong coloured by step as in the report's own viewer (:func:`embed`)."""
+    from mocapfix.formats import read
+
+    before_path, after_path, report = report_files(path)
+    layers = _overlay(read(before_path, **read_options), read(after_path, **read_options))
+    _report_flags(layers[1], report.get("steps") or [])
+    return _overlay_page(layers, budget)
 
 
 def before_after(before: Motion, after: Motion, budget: int = DEFAULT_BUDGET,
@@ -286,12 +337,20 @@ def before_after(before: Motion, after: Motion, budget: int = DEFAULT_BUDGET,
     and frames (a cleaned file does); otherwise use :func:`single`. ``records``: the
     pipeline's :class:`~mocapfix.pipeline.steps.StepRecord` list, when known (the clean
     report), colours the samples each step judged wrong by step."""
-    if before.n_frames != after.n_frames or list(before.names) != list(after.names):
+    layers = _overlay(before, after)
+    _flag_runs(layers[1], records)
+    return _overlay_page(layers, budget)
+
+
+def _overlay(before: Motion, after: Motion) -> list[Layer]:
+    if not comparable(before, after):
         raise ValueError("before and after differ in frames or point names: not a capture "
                          "and its cleaned output")
-    layers = [Layer(before, "before: " + _label(before.path), "before"),
-              Layer(after, "after: " + _label(after.path), "after")]
-    _flag_runs(layers[1], records)
+    return [Layer(before, "before: " + _label(before.path), "before"),
+            Layer(after, "after: " + _label(after.path), "after")]
+
+
+def _overlay_page(layers: list[Layer], budget: int) -> str:
     return to_html(layers, f"{layers[0].label[8:]} → {layers[1].label[7:]}", budget)
 
 

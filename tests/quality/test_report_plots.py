@@ -203,3 +203,43 @@ def test_no_text_of_a_plot_overlaps_another_in_chromium(tmp_path):
                          capture_output=True, text=True, timeout=120, check=True).stdout
     overlaps = html.unescape(re.search(r'data-overlaps="([^"]*)"', dom).group(1))
     assert overlaps == "[]"
+
+
+def _windows_of(page: str, name: str) -> list[tuple[str, tuple[int, int]]]:
+    """The SVGs drawn for ``name`` (up to the next joint's heading) and their windows."""
+    part = page.split(f"<h3>{name} — ", 1)[1].split("<h3>", 1)[0]
+    return [(svg, tuple(map(int, w.split()))) for svg, w in
+            re.findall(r'(<svg[^>]*data-frames="(\d+ \d+)".*?</svg>)', part, re.S)]
+
+
+def test_changes_far_apart_get_a_zoomed_plot_each_largest_first():
+    """Two edits of one joint 40 s apart: each its own plot, drawn wide (before: one plot
+    zoomed to the larger; the other only a tick on the strip)."""
+    T, fps = 6000, 100.0
+    before = _line(T, fps)[:, None, :]
+    after = before.copy()
+    before[1000:1003, 0] += [0, 0, 40.0]        # 10 s: 3 frames, 40 mm
+    before[5000:1005 + 4000, 0] += [0, 0, 90.0]  # 50 s: 5 frames, 90 mm (the larger)
+    result = CleanResult(Motion(before, ["A"], **MM_C3D), Motion(after, ["A"], **MM_C3D), [])
+    page = to_html(build_report(result), result, viewer=False)
+    plots = _windows_of(page, "A")
+    assert [w for _, w in plots] == [(4990, 5015), (990, 1013)]
+    assert "more span" not in page
+    for (svg, (f0, f1)), (a, n) in zip(plots, [(5000, 5), (1000, 3)]):
+        assert f0 <= a and a + n <= f1
+        (points,) = [p for _, p in POLYLINE.findall(_panel(svg, "change (mm)"))]
+        xy = _points(points)
+        moved = xy[xy[:, 1] < xy[:, 1].max() - 1]
+        assert len(moved) == n and moved[-1, 0] - moved[0, 0] > 60      # drawn wide (in one plot: < 1 px)
+
+
+def test_at_most_three_spans_are_plotted_and_the_rest_are_counted():
+    T = 6000
+    before = _line(T)[:, None, :]
+    after = before.copy()
+    for k, start in enumerate(range(500, 5500, 1000)):     # five edits, growing
+        before[start:start + 2, 0] += [0, 0, 20.0 + 10 * k]
+    result = CleanResult(Motion(before, ["A"], **MM_C3D), Motion(after, ["A"], **MM_C3D), [])
+    page = to_html(build_report(result), result, viewer=False)
+    assert [w[0] + 10 for _, w in _windows_of(page, "A")] == [4500, 3500, 2500]
+    assert '<p class="more-spans">+2 more spans' in page

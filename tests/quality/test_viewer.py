@@ -16,7 +16,7 @@ from click.testing import CliRunner
 from conftest import SAMPLE_DATA
 from mocapfix.cli import main
 from mocapfix.core.motion import Motion, Skeleton
-from mocapfix.formats import read
+from mocapfix.formats import read, write
 from mocapfix.quality import viewer
 
 
@@ -270,3 +270,46 @@ def test_fill_estimates_of_any_number_type_or_none_are_carried():
                          "M2": [[5, 6, 1.0, 2.0, "fill", False, False]]}        # left, not written
     data = _data(viewer.before_after(before, after))
     assert data["layers"][1]["fills"] == [[0, 1, 2, 1.5, 3.0], [1, 3, 4, None, None]]
+
+
+def test_view_of_a_clean_report_colours_what_the_report_viewer_does(tmp_path):
+    """The report's JSON carries the runs each step judged wrong: the page of `mocapfix
+    view REPORT.json` holds the same flags as the viewer the clean report embeds."""
+    from mocapfix.cleaning import clean_motion
+    from mocapfix.config import load_config
+    from mocapfix.core.presets import resolve_config
+
+    motion = read(SAMPLE_DATA / "walk_markers.c3d")
+    motion.positions[50, 4] += 300.0
+    motion.positions[200:210, 6] = np.nan
+    source = tmp_path / "spike.c3d"
+    write(motion.replace(source=None), source)
+    r = CliRunner().invoke(main, ["clean", str(source), "-o", str(tmp_path / "out"), "-q",
+                                  "--report", "json"])
+    assert r.exit_code == 0, r.output
+    out = tmp_path / "v.html"
+    r = CliRunner().invoke(main, ["view", str(tmp_path / "out" / "spike.c3d.report.json"), "-o", str(out)])
+    assert r.exit_code == 0, r.output
+    page = _data(out.read_text(encoding="utf-8"))
+    assert [L["role"] for L in page["layers"]] == ["before", "after"]
+    result = clean_motion(read(source), load_config(resolve_config("default")), None)
+    embedded = _data(viewer.before_after(result.original, result.cleaned, records=result.records))
+    assert page["layers"][1]["flagKinds"] and page["layers"][1]["flags"]
+    for key in ("flags", "flagKinds", "names"):
+        assert page["layers"][1][key] == embedded["layers"][1][key], key
+    assert page["layers"][1]["fills"], "the cleaned C3D's fills are not coloured"
+
+
+@pytest.mark.parametrize("gone", ["input", "output"])
+def test_view_of_a_report_whose_files_moved_is_one_clear_error(tmp_path, gone):
+    source = tmp_path / "walk.bvh"
+    source.write_bytes((SAMPLE_DATA / "walk.bvh").read_bytes())
+    r = CliRunner().invoke(main, ["clean", str(source), "-o", str(tmp_path / "out"), "-q",
+                                  "--report", "json"])
+    assert r.exit_code == 0, r.output
+    (source if gone == "input" else tmp_path / "out" / "walk.bvh").rename(tmp_path / "moved.bvh")
+    r = CliRunner().invoke(main, ["view", str(tmp_path / "out" / "walk.bvh.report.json"),
+                                  "-o", str(tmp_path / "v.html")])
+    assert r.exit_code == 2 and "Traceback" not in r.output and r.output.count("\n") == 1, r.output
+    assert "are gone" in r.output and f"{gone} " in r.output, r.output
+    assert not (tmp_path / "v.html").exists()

@@ -314,3 +314,23 @@ def test_degenerate_takes_load_without_errors(tmp_path, frames, seen):
     page.write_text(viewer.single([Motion(pos, ["a", "b", "c"], 30.0)]), encoding="utf-8")
     probe = _probe(page, tmp_path)
     _check_clean_page(probe)
+
+
+def test_view_of_a_clean_report_overlays_its_files_and_colours_by_step(tmp_path):
+    """`mocapfix view OUT.report.json` after a real `clean --report json,html`: the input
+    and output as before/after, the samples each step judged wrong in the step's colour,
+    as the report's own viewer shows them."""
+    path = shared("c3d/ktk_tennis_serve_nan.c3d")
+    r = CliRunner().invoke(main, ["clean", str(path), "-o", str(tmp_path / "out"), "-q",
+                                  "--report", "json,html"])
+    assert r.exit_code == 0, r.output
+    report = tmp_path / "out" / (path.name + ".report.json")
+    probe = _probe(_view(tmp_path, report), tmp_path)
+    _check_clean_page(probe, layers=2)
+    assert probe["labels"] == ["before: " + path.name, "after: " + path.name]
+    (b, a) = probe["alone"]
+    assert b["drawn"][0] > 0 and b["drawn"][1] == 0 and a["drawn"][0] == 0 and a["drawn"][1] > 0
+    assert probe["bothVsLast"] > 0, "the before layer adds nothing to the picture"
+    before, after = read(path), read(tmp_path / "out" / path.name)
+    assert probe["counts"]["filled"] == int((before.missing & ~after.missing).sum())
+    assert re.search(r"judged wrong by step \d+ \(\w+\)", probe["legend"]), probe["legend"]
