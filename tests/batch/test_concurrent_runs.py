@@ -34,8 +34,9 @@ def _inputs(folder: Path, n: int, sample: str = "walk_markers.c3d") -> Path:
 
 
 def _wait_for_lock(run, out: Path) -> None:
+    """Until the run holds the lock: the manifest it starts after taking it is there."""
     deadline = time.monotonic() + 60
-    while not (out / ".mocapfix.lock").exists():
+    while not ((out / ".mocapfix.lock").exists() and (out / "mocapfix-manifest.jsonl").exists()):
         assert run.poll() is None, "the first run ended before it was seen working"
         assert time.monotonic() < deadline
         time.sleep(0.05)
@@ -48,8 +49,14 @@ def test_a_second_run_into_a_busy_folder_is_refused_and_the_first_is_untouched(t
     first = _mocapfix("clean", a, "-o", out, "-c", cfg, wait=False)
     try:
         _wait_for_lock(first, out)
-        second = _mocapfix("clean", b, "-o", out, "-c", cfg)
-        assert first.poll() is None, "the first run ended before the second ran: no overlap shown"
+        # held mid-run while the second starts (a loaded machine once let the first finish
+        # before the second had started, and the overlap was not shown)
+        os.killpg(first.pid, signal.SIGSTOP)
+        try:
+            second = _mocapfix("clean", b, "-o", out, "-c", cfg)
+            assert first.poll() is None, "the first run ended before the second ran: no overlap shown"
+        finally:
+            os.killpg(first.pid, signal.SIGCONT)
         assert second.returncode == 2, second.stderr
         assert (f"{out}: another mocapfix run (process {first.pid}) is writing into this output "
                 "folder; wait for it to end, or choose another output folder") in second.stderr
