@@ -1,5 +1,5 @@
 """Command line: thin click commands over the library. Errors become one line and an exit
-code; see README "Exit codes". Each command is one function registered on ``main``; the
+code; see docs/commands.md "Exit codes". Each command is one function registered on ``main``; the
 options every command shares (``-q``, ``-v``, ``--debug``) come from :func:`common`."""
 from __future__ import annotations
 
@@ -280,7 +280,7 @@ def view(files, before, after, output, open_it, budget, fps):
 # -- cleaners / configs --------------------------------------------------------------------------
 
 @main.command("cleaners")
-@click.option("--markdown", is_flag=True, help="Print a Markdown table (as in the README).")
+@click.option("--markdown", is_flag=True, help="Print a Markdown table (as in docs/configs.md).")
 def list_cleaners(markdown):
     """List the cleaners a config can name, with their parameters and defaults."""
     from mocapfix.cleaners import registry

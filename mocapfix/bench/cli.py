@@ -32,7 +32,7 @@ def _debug(ctx) -> bool:
 @click.option("--protocol", required=True,
               type=click.Choice(["feng2015", "yang2019", "feng2014", "occlusion", "kinect", "rotations",
                                  "harm"]),
-              help="Corruption protocol (see the README, 'Benchmarks').")
+              help="Corruption protocol (see docs/benchmarks.md).")
 @click.option("--methods", default=None,
               help="Comma-separated registered cleaners and/or baselines (none, "
                    "linear+gaussian, pca+butterworth), named pipelines, or the oracle-"

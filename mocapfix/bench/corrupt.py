@@ -1,6 +1,6 @@
 """Seeded corruption of clean motions, for tests and ``mocapfix bench``.
 
-The ``occlusion`` scenarios model an optical capture (the README's
+The ``occlusion`` scenarios model an optical capture (docs/benchmarks.md,
 "Benchmarks" section): occlusion gaps of 0.1–1.5 s on a quarter of the markers,
 2 mm jitter with 2 % spikes of 20–100 mm, both together, and a marker swap. Physical
 sizes are converted to the motion's units. Every function returns the corrupted motion
@@ -102,7 +102,7 @@ def occlusion(motion: Motion, scenario: str, seed: int = 0):
 # ---------------------------------------------------------------------------------------
 # The research papers' protocols (Feng 2014, Feng 2015, Yang 2019), used by
 # ``mocapfix bench``. Every detail a paper leaves open is fixed here and named in the
-# docstring that uses it; the README's bench section repeats the list.
+# docstring that uses it; docs/benchmarks.md repeats the list.
 #
 # Common choices:
 # * Corruption acts on *samples* (one joint or marker at one frame, all three coordinates),

@@ -10,7 +10,7 @@ step, so each step writes to fresh pages and pays a page fault per 4 KB. Measure
 2-core VM this project runs on: ``X[rows] - mean`` for a 2,305 × 204 matrix 8.5 ms, 0.56 ms
 with the freed memory kept; the default clean of ``numediart_03_rolling.c3d`` 9.7–10.7 s
 against 12.8–14.6 s (the same settings given as MALLOC_* environment variables, two
-alternating runs each), peak RSS 200 → 235 MB. README, "Speed", has the CLI timings.
+alternating runs each), peak RSS 200 → 235 MB. docs/benchmarks.md ("Speed") has the CLI timings.
 
 An earlier ``mocapfix/allocator.py`` (32 MB mmap, 128 MB trim threshold, set where a batch
 ran its tasks) was removed in commit 12cd8a4: on the 4,500-frame case of

@@ -1,5 +1,5 @@
 """Two runs into one output folder (issue 40, item 3): the second is refused while the
-first holds the folder's run lock (README, "Output folders and resuming"); the first
+first holds the folder's run lock (docs/batches.md, "Output folders and resuming"); the first
 finishes untouched, and runs one after the other share the manifest."""
 from __future__ import annotations
 

@@ -49,7 +49,7 @@ def test_info_text_and_unreadable_exit_code(tmp_path):
     bad = tmp_path / "broken.bvh"
     bad.write_text("HIERARCHY\nROOT Hips\n{\n")
     result = CliRunner().invoke(main, ["info", str(SAMPLE_DATA / "walk.bvh"), str(bad)])
-    assert result.exit_code == 3            # unreadable input (README "Exit codes")
+    assert result.exit_code == 3            # unreadable input (docs/commands.md "Exit codes")
     assert "walk.bvh" in result.output and "broken.bvh" in result.output
     assert "Traceback" not in result.output
 

@@ -459,7 +459,7 @@ def test_an_unforeseen_failure_is_one_line_and_the_other_files_go_on(tmp_path, m
 
 
 def test_debug_shows_the_traceback_of_a_file_that_failed_unexpectedly(tmp_path, monkeypatch):
-    # README: --debug gives "tracebacks instead of one-line errors"; a file that failed in
+    # docs/commands.md: --debug gives "tracebacks instead of one-line errors"; a file that failed in
     # clean's or check's batch showed only "internal error TYPE: ..." even with --debug,
     # so the bug behind it could not be reported. Simulated failure (every known cause is
     # fixed); without --debug the output stays one line

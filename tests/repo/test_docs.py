@@ -1,0 +1,107 @@
+"""The README and the guide in docs/ stay true and whole: every relative link (README to
+docs/, docs pages to each other and to repository files) names a file that is there, and
+an anchor a heading that is there; the README's shell and Python examples run, in a
+temporary folder holding a copy of sample_data/, so a README command that breaks fails CI
+(the two set-up commands with `pip install` are run by .ci/run itself)."""
+from __future__ import annotations
+
+import os
+import re
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from conftest import REPO
+
+README = REPO / "README.md"
+PAGES = sorted((REPO / "docs").glob("*.md"))
+LINK = re.compile(r"\[[^\]]*\]\(([^)\s]+)\)")
+FENCE = re.compile(r"^```(\w*)\n(.*?)^```", re.S | re.M)
+
+
+def _without_code(text: str) -> str:
+    return FENCE.sub("", text)
+
+
+def _slug(heading: str) -> str:
+    """A heading's anchor as GitHub (and mkdocs' toc) makes it."""
+    text = heading.strip().lower().replace("`", "")
+    text = re.sub(r"[^\w\- ]", "", text)
+    return text.replace(" ", "-")
+
+
+def _anchors(page: Path) -> set[str]:
+    return {_slug(m.group(1)) for m in re.finditer(r"^#+ (.+)$", _without_code(
+        page.read_text(encoding="utf-8")), re.M)}
+
+
+def test_the_readme_is_short():
+    assert README.stat().st_size <= 12 * 1024, "README.md over 12 KB: move the detail into docs/"
+
+
+def test_the_guide_has_its_pages():
+    names = {p.name for p in PAGES}
+    for page in ("index.md", "install.md", "formats.md", "configs.md", "reports.md", "check.md",
+                 "batches.md", "models.md", "python.md", "troubleshooting.md", "benchmarks.md"):
+        assert page in names
+    nav = (REPO / "mkdocs.yml").read_text(encoding="utf-8")
+    assert not [p.name for p in PAGES if p.name not in nav], "a docs page missing from mkdocs.yml's nav"
+
+
+@pytest.mark.parametrize("page", [README, *PAGES], ids=lambda p: p.relative_to(REPO).as_posix())
+def test_every_relative_link_resolves(page):
+    broken = []
+    for target in LINK.findall(_without_code(page.read_text(encoding="utf-8"))):
+        if re.match(r"[a-z]+:", target):
+            continue                                    # https:, mailto:
+        path, _, anchor = target.partition("#")
+        dest = (page.parent / path).resolve() if path else page
+        if not dest.exists():
+            broken.append(target)
+        elif anchor and dest.suffix == ".md" and anchor not in _anchors(dest):
+            broken.append(target)
+    assert not broken, f"{page.name}: links to nothing: {broken}"
+
+
+def _readme_blocks(lang):
+    return [body for kind, body in FENCE.findall(README.read_text(encoding="utf-8")) if kind == lang]
+
+
+@pytest.fixture
+def workdir(tmp_path, monkeypatch):
+    shutil.copytree(REPO / "sample_data", tmp_path / "sample_data")
+    env = dict(os.environ)
+    env["PATH"] = f"{Path(sys.executable).parent}{os.pathsep}{env.get('PATH', '')}"   # mocapfix
+    env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(REPO), env.get("PYTHONPATH")]))
+    return tmp_path, env
+
+
+@pytest.mark.slow                                       # ~10 s: every README command
+def test_the_readme_shell_examples_run(workdir):
+    cwd, env = workdir
+    blocks = [b for b in _readme_blocks("bash") if "pip install" not in b]
+    assert sum("mocapfix " in b for b in blocks) >= 4
+    for body in blocks:
+        run = subprocess.run(["bash", "-euo", "pipefail", "-c", body], cwd=cwd, env=env,
+                             capture_output=True, text=True, timeout=600)
+        assert run.returncode == 0, f"README example failed:\n{body}\n{run.stdout[-2000:]}{run.stderr[-2000:]}"
+
+
+@pytest.mark.slow
+def test_the_readme_python_example_runs(workdir):
+    cwd, env = workdir
+    for body in _readme_blocks("python"):
+        run = subprocess.run([sys.executable, "-c", body], cwd=cwd, env=env,
+                             capture_output=True, text=True, timeout=600)
+        assert run.returncode == 0, f"README example failed:\n{body}\n{run.stderr[-2000:]}"
+
+
+def test_the_readme_setup_commands_are_what_ci_runs():
+    ci = (REPO / ".ci" / "run").read_text(encoding="utf-8")
+    setup = [b.strip() for b in _readme_blocks("bash") if "pip install" in b]
+    assert "pip install . && mocapfix clean sample_data -o cleaned --report json,md,html" in setup
+    assert "pip install -e '.[dev]' && python -m pytest -q" in setup
+    assert "pip install -q -e '.[dev]' && python -m pytest -q" in ci
