@@ -154,8 +154,7 @@ def write(motion: Motion, path, **options) -> list[Path]:
 def fresh_text(motion: Motion, path: Path | None = None) -> str:
     """A Motive CSV (format version 1.23) holding ``motion`` as Marker columns."""
     T, J = motion.n_frames, motion.n_joints
-    unit = motion.units if motion.units in _UNIT_WORDS else "mm"
-    scale = motion.metres_per_unit / METRES_PER_UNIT[unit]
+    unit, values = tt.flat_positions(motion, ("mm", *_UNIT_WORDS))
     names = [n.replace(",", ";") for n in motion.names]
     take = (path.stem if path is not None else "mocapfix").replace(",", ";")
     head = [(f"Format Version,1.23,Take Name,{take},Capture Frame Rate,{motion.fps:.6f},"
@@ -168,7 +167,7 @@ def fresh_text(motion: Motion, path: Path | None = None) -> str:
             "," + ",Position" * (3 * J),
             "Frame,Time (Seconds)" + ",X,Y,Z" * J]
     keys = [f"{t},{t / motion.fps:.6f}" for t in range(T)]
-    return tt.table_text(head, keys, motion.positions.reshape(T, 3 * J) * scale, ",", "%.6f")
+    return tt.table_text(head, keys, values, ",", "%.6f")
 
 
 def kept_only_here(motion: Motion) -> list[str]:

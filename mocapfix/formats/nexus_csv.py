@@ -161,13 +161,12 @@ def write(motion: Motion, path, **options) -> list[Path]:
 def fresh_text(motion: Motion, path: Path | None = None) -> str:
     """One Trajectories section holding ``motion`` (numbers with 6 decimals)."""
     T, J = motion.n_frames, motion.n_joints
-    unit = motion.units if motion.units in METRES_PER_UNIT else "mm"
-    scale = motion.metres_per_unit / METRES_PER_UNIT[unit]
+    unit, values = tt.flat_positions(motion, ("mm", *METRES_PER_UNIT))
     head = ["Trajectories", f"{motion.fps:g}",
             ",," + ",".join(f"{name},," for name in motion.names)[:-1],
             "Frame,Sub Frame" + ",X,Y,Z" * J, ",," + ",".join([unit] * (3 * J))]
     keys = [f"{t + 1},0" for t in range(T)]
-    return tt.table_text(head, keys, motion.positions.reshape(T, 3 * J) * scale, ",", "%.6f")
+    return tt.table_text(head, keys, values, ",", "%.6f")
 
 
 def kept_only_here(motion: Motion) -> list[str]:

@@ -193,7 +193,7 @@ def write(motion: Motion, path, **options) -> list[Path]:
 def fresh_text(motion: Motion, path: Path | None = None) -> str:
     """A headed (newer) QTM TSV of ``motion`` in mm, 3 decimals, missing as empty fields."""
     T, J = motion.n_frames, motion.n_joints
-    scale = motion.metres_per_unit / 0.001
+    _, values = tt.flat_positions(motion, ("mm",))
     names = [n.replace("\t", " ") for n in motion.names]
     head = [f"NO_OF_FRAMES\t{T}", "NO_OF_CAMERAS\t0", f"NO_OF_MARKERS\t{J}",
             f"FREQUENCY\t{motion.fps:g}", "NO_OF_ANALOG\t0", "ANALOG_FREQUENCY\t0",
@@ -201,7 +201,7 @@ def fresh_text(motion: Motion, path: Path | None = None) -> str:
             "MARKER_NAMES\t" + "\t".join(names),
             "Frame\tTime\t" + "\t".join(f"{n} {a}" for n in names for a in "XYZ")]
     keys = [f"{t + 1}\t{t / motion.fps:.5f}" for t in range(T)]
-    return tt.table_text(head, keys, motion.positions.reshape(T, 3 * J) * scale, "\t", "%.3f")
+    return tt.table_text(head, keys, values, "\t", "%.3f")
 
 
 def kept_only_here(motion: Motion) -> list[str]:

@@ -261,6 +261,17 @@ def patched_text(source: TableSource, motion: Motion) -> str:
     return source.bom + "".join(line + end for line, end in zip(lines, source.endings))
 
 
+def flat_positions(motion: Motion, units) -> tuple[str, np.ndarray]:
+    """(unit, (T, 3J) positions in it) for a fresh file whose layout names one of ``units``
+    (length-unit names, first the fallback): the motion's own unit when the layout can
+    name it, else converted to ``units[0]`` -- never the numbers relabelled."""
+    from mocapfix.core.units import METRES_PER_UNIT
+
+    unit = motion.units if motion.units in units else units[0]
+    T, J = motion.n_frames, motion.n_joints
+    return unit, motion.positions.reshape(T, 3 * J) * (motion.metres_per_unit / METRES_PER_UNIT[unit])
+
+
 def number_cells(values: np.ndarray, fmt: str, missing: str) -> np.ndarray:
     """(T, K) object array of formatted numbers, ``missing`` where NaN."""
     cells = np.char.mod(fmt, np.nan_to_num(values)).astype(object)
