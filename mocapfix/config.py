@@ -33,7 +33,7 @@ from mocapfix.cleaners import build
 from mocapfix.cleaners.base import FittedCleaner
 from mocapfix.core.errors import ConfigError
 from mocapfix.core.presets import CONFIG_DIR
-from mocapfix.core.yamlsafe import load_marked_yaml, read_bounded
+from mocapfix.core.yamlsafe import check_document, load_marked_yaml, read_bounded
 from mocapfix.formats import FAMILIES, NAMES
 from mocapfix.pipeline.selection import Selection
 from mocapfix.pipeline.steps import (CONFIG_VERSION, DEFAULT_MAX_FILL_ERROR, Pipeline, Step,
@@ -66,15 +66,8 @@ def _config_folder(source: str) -> Path | None:
 
 def parse_config(data, source: str = "<config>") -> Pipeline:
     """Validate a loaded config (dict, possibly carrying ``__line__`` marks)."""
-    if not isinstance(data, dict):
-        raise ConfigError(f"{source}: a config is a mapping with 'pipeline' (and 'version: 1', which may be left out)")
-    unknown = sorted(set(data) - _TOP_KEYS - {"__line__", "__keylines__"}, key=repr)
-    if unknown:
-        raise ConfigError(f"{source}: unknown top-level key(s) {', '.join(map(repr, unknown))} "
-                          f"(known: {', '.join(sorted(_TOP_KEYS))})")
-    version = data.get("version", CONFIG_VERSION)
-    if isinstance(version, bool) or version != CONFIG_VERSION:   # (True == 1 in Python)
-        raise ConfigError(f"{source}: unsupported config version {version!r} (this mocapfix reads {CONFIG_VERSION})")
+    check_document(data, source, what="a config", body="pipeline", known=_TOP_KEYS,
+                   kind="config", version=CONFIG_VERSION)
     steps_data = data.get("pipeline")
     if not isinstance(steps_data, list):
         raise ConfigError(f"{source}: 'pipeline' must be a list of steps ([] for a report-only run)")

@@ -219,3 +219,27 @@ def load_marked_yaml(text, source: str = "<config>"):
     """:func:`load_yaml` with line marks: every mapping carries ``__line__`` and
     ``__keylines__`` (:class:`LineLoader`)."""
     return load_yaml(text, source, loader=LineLoader)
+
+
+#: the keys :class:`LineLoader` adds to every mapping
+LINE_MARKS = ("__line__", "__keylines__")
+
+
+def check_document(data, source: str, *, what: str, body: str, known, kind: str,
+                   version: int, line_of=lambda key: "") -> None:
+    """One ConfigError for a loaded config or rules file (``what``: "a config") that is
+    not a mapping with ``body`` (its main key), holds a top-level key not in ``known``
+    (the first one's line from ``line_of``), or declares a ``version`` other than
+    ``version`` (``kind``: the word the message uses). A missing version is ``version``."""
+    if not isinstance(data, dict):
+        raise ConfigError(f"{source}: {what} is a mapping with '{body}' (and 'version: 1', "
+                          "which may be left out)")
+    unknown = sorted((k for k in data if k not in known and k not in LINE_MARKS), key=repr)
+    if unknown:
+        raise ConfigError(f"{source}{line_of(unknown[0])}: unknown top-level key(s) "
+                          f"{', '.join(map(repr, unknown))} (known: {', '.join(sorted(known))})")
+    declared = data.get("version", version)
+    if isinstance(declared, bool) or declared != version:    # (True == 1 in Python)
+        raise ConfigError(f"{source}: unsupported {kind} version {declared!r} (this mocapfix "
+                          f"reads {version})")
+

@@ -44,7 +44,7 @@ from mocapfix.core.errors import ConfigError
 from mocapfix.formats import FAMILIES, NAMES, matches
 from mocapfix.core.presets import RULES_DIR, resolve_preset
 from mocapfix.pipeline.unlabelled import Unlabelled
-from mocapfix.core.yamlsafe import load_marked_yaml, read_bounded
+from mocapfix.core.yamlsafe import check_document, load_marked_yaml, read_bounded
 
 STATUS_ORDER = {"OK": 0, "WARN": 1, "FAIL": 2}
 RULES_VERSION = 1
@@ -506,15 +506,8 @@ def parse_rules(data, source: str = "<rules>", stage: str = "input", _chain: tup
     ``_chain``: the files being read that extend this one (a cycle is an error)."""
     if data is None:
         data = {}
-    if not isinstance(data, dict):
-        raise ConfigError(f"{source}: a rules file is a mapping with 'rules' (and 'version: 1', which may be left out)")
-    unknown = sorted(k for k in data if k not in _TOP_KEYS and not str(k).startswith("__"))
-    if unknown:
-        raise ConfigError(f"{source}{_key_line(data, unknown[0])}: unknown top-level key(s) "
-                          f"{', '.join(map(repr, unknown))} (known: {', '.join(sorted(_TOP_KEYS))})")
-    version = data.get("version", RULES_VERSION)
-    if isinstance(version, bool) or version != RULES_VERSION:    # (True == 1 in Python)
-        raise ConfigError(f"{source}: unsupported rules version {version!r} (this mocapfix reads {RULES_VERSION})")
+    check_document(data, source, what="a rules file", body="rules", known=_TOP_KEYS,
+                   kind="rules", version=RULES_VERSION, line_of=lambda key: _key_line(data, key))
     rules: list[Rule] = []
     unlabelled = Unlabelled()
     extends = data.get("extends") or []
