@@ -14,7 +14,8 @@ from mocapfix import formats
 from mocapfix.core.errors import UnreadableFileError
 from mocapfix.core.fileio import NAME_MAX, atomic_write_text, is_stream, refuse_stream
 from mocapfix.core.motion import Motion
-from mocapfix.pipeline.steps import Pipeline
+from mocapfix.pipeline.steps import Pipeline, StepRecord, written_fill_errors
+from mocapfix.pipeline.windows import Windows, merge_info, paste, point_cuts, shifted_info, window_for
 from mocapfix.quality.render import ranked
 from mocapfix.quality.report import CleanResult, build_report, to_html, to_json, to_markdown
 from mocapfix.pipeline.selection import own_channels
@@ -23,17 +24,37 @@ from mocapfix.core.writeback import write_back
 REPORT_KINDS = ("json", "md", "html")
 
 
-def clean_motion(motion: Motion, pipeline: Pipeline, to: str | None = None) -> CleanResult:
+def clean_motion(motion: Motion, pipeline: Pipeline, to: str | None = None,
+                 windows: Windows | None | str = "budget") -> CleanResult:
     """Run ``pipeline`` on ``motion``. For BVH/AMC the cleaned positions are turned back
     into the file's channels and the written positions are their forward kinematics; a
     value the output file cannot hold is dropped as its writer will drop it
     (:func:`mocapfix.formats.storable`). ``to``: the format it will be written in (None:
     its own); what that format cannot carry is added to the cleaned motion's notes
-    (:func:`mocapfix.formats.losses`), so the report says it."""
+    (:func:`mocapfix.formats.losses`), so the report says it.
+
+    ``windows``: a take longer than the pipeline's ``memory_budget`` allows is cleaned in
+    overlapping windows (:mod:`mocapfix.pipeline.windows`; ``"budget"``, the default);
+    :class:`~mocapfix.pipeline.windows.Windows` to choose them, None to clean it whole."""
     started = time.perf_counter()
-    cleaned, records = pipeline.run(motion)
-    residual = None
     why = pipeline.not_cleaned(motion)
+    if windows == "budget":
+        windows = window_for(pipeline.memory_budget, motion.n_frames, motion.n_joints, motion.fps)
+    if windows is None or len(windows.cuts(motion.n_frames)) <= 2:
+        cleaned, records, residual = _clean_span(motion, pipeline, why)
+    else:
+        cleaned, records, residual = _clean_windowed(motion, pipeline, why, windows)
+    if to is not None and to != motion.format:
+        cleaned = cleaned.replace(notes=[*cleaned.notes, *formats.losses(cleaned, to)])
+    cleaned = formats.storable(cleaned, to)
+    return CleanResult(motion, cleaned, records, residual, time.perf_counter() - started, why)
+
+
+def _clean_span(motion: Motion, pipeline: Pipeline, why: list, points: np.ndarray | None = None):
+    """The pipeline's run and, for a rig, the write-back of its positions into channels:
+    ``(cleaned, records, residual)`` (residual None without a rig)."""
+    cleaned, records = pipeline.run(motion, points)
+    residual = None
     if cleaned.rig is not None and cleaned.channels is not None:
         channels, positions, residual = write_back(cleaned)
         excluded = np.array([w is not None for w in why], bool)
@@ -44,10 +65,72 @@ def clean_motion(motion: Motion, pipeline: Pipeline, to: str | None = None) -> C
             positions = cleaned.rig.positions(channels)
             residual = np.linalg.norm(positions - cleaned.positions, axis=-1)
         cleaned = cleaned.replace(channels=channels, positions=positions)
-    if to is not None and to != motion.format:
-        cleaned = cleaned.replace(notes=[*cleaned.notes, *formats.losses(cleaned, to)])
-    cleaned = formats.storable(cleaned, to)
-    return CleanResult(motion, cleaned, records, residual, time.perf_counter() - started, why)
+    return cleaned, records, residual
+
+
+def _clean_windowed(motion: Motion, pipeline: Pipeline, why: list, windows: Windows):
+    """:func:`_clean_span` over overlapping windows, put together frame by frame
+    (:mod:`mocapfix.pipeline.windows`). The points the pipeline cleans are decided once,
+    on the whole take."""
+    T, J = motion.n_frames, motion.n_joints
+    cuts = windows.cuts(T)
+    per_point = point_cuts(motion.missing, cuts, windows.overlap)
+    points = np.array([w is None for w in why], bool)
+    positions = motion.positions.copy()
+    confidence = None if motion.confidence is None else motion.confidence.copy()
+    channels = None if motion.channels is None else motion.channels.copy()
+    residual = None
+    notes = list(motion.notes)
+    masks: list[dict] = []
+    infos: list[list] = []
+    heads: list = []
+    for k in range(len(cuts) - 1):
+        lo, hi = max(cuts[k] - windows.overlap, 0), min(cuts[k + 1] + windows.overlap, T)
+        start, stop = per_point[k], per_point[k + 1]
+        part, records, res = _clean_span(motion.slice_frames(lo, hi), pipeline, why, points)
+        paste(positions, part.positions, lo, start, stop)
+        if part.confidence is not None:
+            if confidence is None:
+                confidence = (~motion.missing).astype(np.float64)
+            paste(confidence, part.confidence, lo, start, stop)
+        if channels is not None:
+            channels[cuts[k]:cuts[k + 1]] = part.channels[cuts[k] - lo:cuts[k + 1] - lo]
+        if res is not None:
+            residual = np.zeros((T, J)) if residual is None else residual
+            paste(residual, res, lo, start, stop)
+        notes += [n for n in part.notes if n not in notes]
+        if not masks:
+            heads = records
+            # float32 distances: the report gives their mean to 6 digits; half the memory
+            masks = [{"filled": np.zeros((T, J), bool), "flagged": np.zeros((T, J), bool),
+                      "moved": np.zeros((T, J), np.float32), "replaced": None} for _ in records]
+            infos = [[] for _ in records]
+        for rec, mask, info in zip(records, masks, infos):
+            info.append((shifted_info(rec.info, lo, start, stop, motion.names), rec.seconds,
+                         rec.skipped))
+            if rec.skipped:
+                continue            # nothing to paste: its masks stay zero pages, never touched
+            for key in ("filled", "flagged", "moved"):
+                paste(mask[key], getattr(rec, key), lo, start, stop)
+            if rec.replaced is not None:
+                if mask["replaced"] is None:
+                    mask["replaced"] = np.zeros((T, J), bool)
+                paste(mask["replaced"], rec.replaced, lo, start, stop)
+    records = []
+    for head, mask, info in zip(heads, masks, infos):
+        skipped = {s for _, _, s in info}
+        merged = merge_info([i for i, _, _ in info])
+        merged["windows"] = len(info)
+        skipped = skipped.pop() if len(skipped) == 1 else None
+        records.append(StepRecord(head.step, head.cleaner, sum(s for _, s, _ in info),
+                                  mask["filled"], mask["flagged"], mask["moved"],
+                                  merged if skipped is None else head.info, skipped,
+                                  mask["replaced"]))
+    note = (f"cleaned in {len(cuts) - 1} windows of {windows.frames} frames with "
+            f"{windows.overlap} frames of overlap (memory_budget)")
+    cleaned = motion.replace(positions=positions, confidence=confidence, channels=channels,
+                             notes=[*notes, note])
+    return cleaned.replace(fill_errors=written_fill_errors(cleaned, records)), records, residual
 
 
 def report_paths(output: Path, kinds) -> dict[str, Path]:

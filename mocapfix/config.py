@@ -15,6 +15,8 @@ Config shape (safe-loaded, bounded: :mod:`mocapfix.core.yamlsafe`)::
     exclude: [RASI]                  # optional: markers the whole pipeline leaves alone
     max_fill_error: 20 mm            # optional: a fill is written only when its calibrated
                                      # 90 % error bound is at most this (null: every fill)
+    memory_budget: 1 GB              # optional: a longer take is cleaned in overlapping
+                                     # windows (mocapfix.pipeline.windows; null: whole)
     unlabelled:                      # optional: unlabelled trajectories (mocapfix.pipeline.unlabelled)
       clean: false                   # true: clean them as markers (default false)
       min_seen: 10 %                 # seen on less of the take: unlabelled (0: off)
@@ -39,11 +41,12 @@ from mocapfix.pipeline.selection import Selection
 from mocapfix.pipeline.steps import (CONFIG_VERSION, DEFAULT_MAX_FILL_ERROR, Pipeline, Step,
                                      parse_max_fill_error)
 from mocapfix.pipeline.unlabelled import Unlabelled
+from mocapfix.pipeline.windows import DEFAULT_MEMORY_BUDGET, parse_memory_budget
 from mocapfix.quality.rules import validate_report_section
 
 _STEP_KEYS = {"cleaner", "formats", "name", "markers", "exclude"}
 _TOP_KEYS = {"version", "pipeline", "report", "markers", "exclude", "unlabelled",
-             "max_fill_error"}
+             "max_fill_error", "memory_budget"}
 
 
 def _line_of(obj) -> str:
@@ -108,9 +111,12 @@ def parse_config(data, source: str = "<config>") -> Pipeline:
     if isinstance(raw, (int, float)) and not isinstance(raw, bool):
         UNIT_WARNINGS.append(f"{where}: {raw} has no unit; read as '{raw} mm' — write the "
                              "unit to say so")
+    line = (data.get("__keylines__") or {}).get("memory_budget")
+    budget = parse_memory_budget(_strip_lines(data.get("memory_budget", DEFAULT_MEMORY_BUDGET)),
+                                 f"{source}{f' (line {line})' if line else ''}: memory_budget")
     return Pipeline(steps, report, source, Selection.parse(data, source),
                     Unlabelled.parse(data.get("unlabelled"), source),
-                    parse_max_fill_error(_strip_lines(raw), where))
+                    parse_max_fill_error(_strip_lines(raw), where), budget)
 
 
 def _check_step_params(name: str, raw: dict, params: dict, where: str) -> None:

@@ -37,6 +37,7 @@ from mocapfix.pipeline.selection import Selection, keep_rig_joints, moved_channe
 from mocapfix.solvers.fill_error import uncertain_reason
 from mocapfix.solvers.rigid import norms
 from mocapfix.pipeline.unlabelled import Unlabelled
+from mocapfix.pipeline.windows import DEFAULT_MEMORY_BUDGET, parse_memory_budget
 
 #: the config schema version this mocapfix reads and writes
 CONFIG_VERSION = 1
@@ -98,6 +99,10 @@ class Pipeline:
     #: the largest calibrated 90 % error bound of a fill written (None: every fill)
     max_fill_error: Quantity | None = field(
         default_factory=lambda: parse_max_fill_error(DEFAULT_MAX_FILL_ERROR, "max_fill_error"))
+    #: bytes one clean may use; a longer take is cleaned in windows
+    #: (:mod:`mocapfix.pipeline.windows`; None: every take whole)
+    memory_budget: int | None = field(
+        default_factory=lambda: parse_memory_budget(DEFAULT_MEMORY_BUDGET, "memory_budget"))
 
     def config(self) -> dict:
         """The effective config (every parameter, defaults included) as a plain dict."""
@@ -106,6 +111,7 @@ class Pipeline:
             out.update(self.select.config())
         out["unlabelled"] = self.unlabelled.config()
         out["max_fill_error"] = None if self.max_fill_error is None else str(self.max_fill_error)
+        out["memory_budget"] = None if self.memory_budget is None else f"{self.memory_budget / 1e6:g} MB"
         if self.report:
             out["report"] = dict(self.report)
         return out
@@ -124,12 +130,14 @@ class Pipeline:
         (:func:`mocapfix.pipeline.selection.not_cleaned`)."""
         return not_cleaned(motion, self.select, unlabelled=self.unlabelled)
 
-    def run(self, motion: Motion) -> tuple[Motion, list["StepRecord"]]:
+    def run(self, motion: Motion, points: np.ndarray | None = None) -> tuple[Motion, list["StepRecord"]]:
         """Run the steps in turn. Which points the pipeline cleans is decided once, on the
-        motion as given: a step that flags samples of a marker does not make it a rarely
-        seen, unlabelled trajectory for the steps after it."""
+        motion as given (or ``points``, (J,) bool, decided on a whole take of which
+        ``motion`` is a window): a step that flags samples of a marker does not make it a
+        rarely seen, unlabelled trajectory for the steps after it."""
         records = []
-        cleaned = np.array([why is None for why in self.not_cleaned(motion)], bool)
+        cleaned = (np.array([why is None for why in self.not_cleaned(motion)], bool)
+                   if points is None else points)
         gated = self.max_fill_error is not None and matches(motion.format, (*GATED_FORMATS, "markers"))
         unmatched = [s for s in self.steps if not s.applies(motion)]
         if unmatched and motion.format not in FORMATS and motion.format not in FAMILIES:

@@ -1,0 +1,194 @@
+"""Cleaning a long take in overlapping windows, so that the cleaners' working memory is
+set by a budget and not by the length of the take.
+
+A take longer than its window is cut at nominal frames ``c_k = k · frames``; window ``k``
+is cleaned on frames ``[c_k − overlap, c_{k+1} + overlap)`` and gives the output of the
+frames between its two cuts. The cut is made per point, at the frame nearest to ``c_k``
+within ``overlap / 2`` where the point is seen on both sides (:func:`point_cuts`), so a gap
+shorter than that lies whole in one window, with at least ``overlap / 2`` frames of its
+own take around it; only a gap spanning the whole search range is cut (each window fills
+its side, as it would a gap at the end of a take). Smoothers and outlier tests then see
+``overlap`` frames past every frame they give, which their supports (a fraction of a
+second) never reach; methods that estimate something from the whole take (a subspace, a
+noise level, the fill-error calibration) estimate it per window, and that difference is
+measured, not assumed away (``benchmarks/long_takes.py`` compares windowed and whole-take
+outputs).
+
+What the steps record is put together frame by frame as the output is (the per-sample
+masks of :class:`~mocapfix.pipeline.steps.StepRecord`); their ``info`` is merged
+(:func:`merge_info`): frame-numbered entries keep the window that gave the frame, counts
+are added (overlaps counted in each window that saw them: ``windows`` says how many ran).
+
+The window comes from the config's ``memory_budget`` (:func:`window_for`).
+"""
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+
+import numpy as np
+
+from mocapfix.cleaners.base import FILL_ERRORS, REJECTED_FILLS, REPLACED_FRAMES
+from mocapfix.core.errors import ConfigError
+
+#: the default memory budget of one clean
+DEFAULT_MEMORY_BUDGET = "1 GB"
+#: the cleaners' working memory per sample of a window, default pipeline (bytes; the peak
+#: of a whole 5,000-frame clean over its samples, ``benchmarks/long_takes.py``: 300–600)
+WORKING_BYTES_PER_SAMPLE = 800
+#: what the whole take costs per sample besides (bytes): the input and output positions,
+#: confidences and the steps' per-sample records
+TAKE_BYTES_PER_SAMPLE = 150
+#: context each side of a window (s), and the shortest window a budget may ask for (s)
+OVERLAP_S = 6.0
+MIN_WINDOW_S = 60.0
+
+_BYTES = {"b": 1, "kb": 1e3, "mb": 1e6, "gb": 1e9, "kib": 1024, "mib": 1024 ** 2,
+          "gib": 1024 ** 3}
+
+
+def parse_memory_budget(value, where: str) -> int | None:
+    """``memory_budget``: bytes as ``"1 GB"``, ``"512 MiB"``, a bare number of bytes, or
+    None (no windowing: a take is cleaned whole whatever its length)."""
+    if value is None:
+        return None
+    if isinstance(value, (int, float)) and not isinstance(value, bool):
+        number = float(value)
+    else:
+        m = re.fullmatch(r"\s*([0-9]+(?:\.[0-9]+)?)\s*([KMG]i?B|B)\s*", str(value), re.IGNORECASE)
+        if m is None:
+            raise ConfigError(f"{where} = {value!r}: expected a size such as '1 GB' or "
+                              "'512 MiB' (B, KB, MB, GB, KiB, MiB, GiB), or null")
+        number = float(m.group(1)) * _BYTES[m.group(2).lower()]
+    if not (64e6 <= number <= 2 ** 50):
+        raise ConfigError(f"{where} = {value!r} is out of range (allowed: 64 MB to 1 PiB, or "
+                          "null to clean every take whole)")
+    return int(number)
+
+
+@dataclass(frozen=True)
+class Windows:
+    """Windows of ``frames`` frames each, with ``overlap`` frames of context each side."""
+
+    frames: int
+    overlap: int
+
+    def __post_init__(self):
+        if self.frames < 1 or self.overlap < 2:
+            raise ValueError(f"windows of {self.frames} frames with {self.overlap} of overlap")
+
+    def cuts(self, T: int) -> list[int]:
+        """The nominal cuts ``0 = c_0 < ... < c_n = T``; a last window shorter than the
+        overlap joins the one before."""
+        cuts = list(range(0, T, self.frames)) + [T]
+        if len(cuts) > 2 and cuts[-1] - cuts[-2] < self.overlap:
+            del cuts[-2]
+        return cuts
+
+
+def window_for(budget: int | None, n_frames: int, n_joints: int, fps: float) -> Windows | None:
+    """The windows a take of ``n_frames × n_joints`` needs to keep to ``budget`` bytes
+    (None: it fits whole). What the whole take costs is taken first; the rest is for the
+    cleaners' working memory of a window, of at least :data:`MIN_WINDOW_S`."""
+    if budget is None or n_frames * n_joints == 0:
+        return None
+    if n_frames * n_joints * (WORKING_BYTES_PER_SAMPLE + TAKE_BYTES_PER_SAMPLE) <= budget:
+        return None
+    overlap = max(round(OVERLAP_S * fps), 16)
+    room = budget - n_frames * n_joints * TAKE_BYTES_PER_SAMPLE
+    frames = int(room // (n_joints * WORKING_BYTES_PER_SAMPLE)) - 2 * overlap
+    frames = max(frames, round(MIN_WINDOW_S * fps), 2 * overlap)
+    return None if frames >= n_frames else Windows(frames, overlap)
+
+
+def point_cuts(missing: np.ndarray, cuts: list[int], overlap: int) -> np.ndarray:
+    """(len(cuts), J) the frame each point's output switches window at: for each inner
+    nominal cut, the frame ``f`` nearest to it within ``overlap // 2`` with the point seen
+    on frames ``f − 1`` and ``f`` (no gap spans the switch); the nominal cut where there is
+    none. The first row is 0 and the last ``T``."""
+    T, J = missing.shape
+    out = np.empty((len(cuts), J), np.intp)
+    out[0], out[-1] = 0, T
+    half = overlap // 2
+    for k, c in enumerate(cuts[1:-1], start=1):
+        lo, hi = max(c - half, 1), min(c + half, T - 1)
+        frames = np.arange(lo, hi + 1)
+        ok = ~missing[lo - 1:hi] & ~missing[lo:hi + 1]               # (len(frames), J)
+        distance = np.where(ok, np.abs(frames - c)[:, None], T + 1)
+        best = distance.argmin(axis=0)
+        out[k] = np.where(distance[best, np.arange(J)] <= T, frames[best], c)
+    return out
+
+
+def paste(whole: np.ndarray, piece: np.ndarray, lo: int, start: np.ndarray, stop: np.ndarray) -> None:
+    """``whole[start[j]:stop[j], j] = piece[start[j] − lo:stop[j] − lo, j]`` for each point
+    ``j`` (in place; ``piece`` holds frames ``lo:`` of ``whole``)."""
+    for j, (a, b) in enumerate(zip(start.tolist(), stop.tolist())):
+        if b > a:
+            whole[a:b, j] = piece[a - lo:b - lo, j]
+
+
+def _owned(frame: int, j: int | None, start: np.ndarray, stop: np.ndarray) -> bool:
+    if j is None:
+        return bool(start.min() <= frame < stop.max())
+    return bool(start[j] <= frame < stop[j])
+
+
+def _keep_frames(info: dict, lo: int, start: np.ndarray, stop: np.ndarray, index: dict) -> dict:
+    """A window's frame-numbered ``info`` entries made whole-take frames, keeping those
+    that start in the frames the window gives (per point)."""
+    out = {}
+    if info.get(REPLACED_FRAMES):
+        out[REPLACED_FRAMES] = {name: [f + lo for f in map(int, frames)
+                                       if _owned(f + lo, index.get(name), start, stop)]
+                                for name, frames in info[REPLACED_FRAMES].items()}
+    for key in (REJECTED_FILLS, FILL_ERRORS):
+        if info.get(key):
+            out[key] = {name: [[int(e[0]) + lo, *e[1:]] for e in entries
+                               if _owned(int(e[0]) + lo, index.get(name), start, stop)]
+                        for name, entries in info[key].items()}
+    if isinstance(info.get("swaps"), list):
+        out["swaps"] = [{**s, "start": int(s["start"]) + lo, "end": int(s["end"]) + lo}
+                        for s in info["swaps"]
+                        if isinstance(s, dict) and "start" in s and "end" in s
+                        and _owned(int(s["start"]) + lo, None, start, stop)]
+    return out
+
+
+def merge_info(parts: list[dict]) -> dict:
+    """The ``info`` of one step over the windows, from each window's (its frame-numbered
+    entries already kept and shifted by :func:`_keep_frames`): lists and per-point lists
+    joined, counts (ints) and per-point counts added, anything else kept when every
+    window gave the same and listed per window (``{"per_window": [...]}``) when not."""
+    out: dict = {}
+    keys = list(dict.fromkeys(k for p in parts for k in p))
+    for key in keys:
+        values = [p[key] for p in parts if key in p]
+        first = values[0]
+        if all(isinstance(v, list) for v in values):
+            out[key] = [x for v in values for x in v]
+        elif all(isinstance(v, dict) for v in values):
+            names = list(dict.fromkeys(n for v in values for n in v))
+            out[key] = merge_info([{n: v[n] for n in names if n in v} for v in values])
+        elif all(isinstance(v, int) and not isinstance(v, bool) for v in values) \
+                and key not in _NOT_COUNTS:
+            out[key] = sum(values)
+        elif all(v == first for v in values):
+            out[key] = first
+        else:
+            out[key] = {"per_window": values}
+    return out
+
+
+#: ints in the steps' ``info`` that are not counts of what a step did (not added)
+_NOT_COUNTS = {"rank", "iterations", "points_not_cleaned", "constant_bones"}
+
+
+def shifted_info(info: dict, lo: int, start: np.ndarray, stop: np.ndarray, names) -> dict:
+    """One window's step ``info`` ready for :func:`merge_info`."""
+    index: dict = {}
+    for j, name in enumerate(names):
+        index[name] = j if name not in index else None
+    info = dict(info or {})
+    info.update(_keep_frames(info, lo, start, stop, index))
+    return info
