@@ -133,33 +133,35 @@ def build(fmt: str, n_frames: int, folder: Path, seed: int = 0) -> Path:
     return path
 
 
-def measure(path: Path, out: Path) -> tuple[float, float, str]:
-    """Wall time (s) and peak resident memory (GB) of ``mocapfix clean path -o out``."""
+def measure(path: Path, out: Path) -> tuple[float, float, float, str]:
+    """Wall time (s), peak resident memory (GB) and CPU time (s) of ``mocapfix clean path
+    -o out``, and the failure line ("" when it succeeded)."""
     code = ("import resource, subprocess, sys, time; t = time.perf_counter(); "
             "r = subprocess.run(sys.argv[1:], capture_output=True, text=True); "
-            "print(time.perf_counter() - t, "
-            "resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss * 1024, r.returncode); "
+            "u = resource.getrusage(resource.RUSAGE_CHILDREN); "
+            "print(time.perf_counter() - t, u.ru_maxrss * 1024, r.returncode, "
+            "u.ru_utime + u.ru_stime); "
             "sys.stderr.write(r.stdout[-2000:] + r.stderr[-2000:])")
     done = subprocess.run([sys.executable, "-c", code, sys.executable, "-m", "mocapfix.cli",
                            "clean", str(path), "-o", str(out)],
                           check=False, capture_output=True, text=True, env=ENV)
-    wall, peak, rc = done.stdout.split()
+    wall, peak, rc, cpu = done.stdout.split()
     line = next((s for s in done.stderr.splitlines() if path.name in s), done.stderr.strip()[-200:])
-    return float(wall), float(peak) / 1e9, line if rc != "0" else ""
+    return float(wall), float(peak) / 1e9, float(cpu), line if rc != "0" else ""
 
 
 def speed_table(formats, sizes, folder: Path) -> None:
-    print("| format | frames × joints | file (MB) | wall (s) | peak memory (GB) "
-          "| µs per sample |")
-    print("|---|---:|---:|---:|---:|---:|")
+    print("| format | frames × joints | file (MB) | wall (s) | CPU (s) | peak memory (GB) "
+          "| µs per sample (wall) |")
+    print("|---|---:|---:|---:|---:|---:|---:|")
     walls: dict = {}
     for fmt in formats:
         for n in sizes:
             path = build(fmt, n, folder)
             J = read(path).n_joints if n <= 50_000 else _joints(fmt)
-            wall, peak, failed = measure(path, folder / f"out_{fmt}_{n}")
+            wall, peak, cpu, failed = measure(path, folder / f"out_{fmt}_{n}")
             walls[fmt, n] = wall
-            print(f"| {fmt} | {n:,} × {J} | {path.stat().st_size / 1e6:.0f} | {wall:.1f} "
+            print(f"| {fmt} | {n:,} × {J} | {path.stat().st_size / 1e6:.0f} | {wall:.1f} | {cpu:.1f} "
                   f"| {peak:.2f} | {wall / (n * J) * 1e6:.2f} |"
                   + (f" FAILED: {failed}" if failed else ""), flush=True)
             for p in folder.glob(f"*{fmt}_{n}*"):
