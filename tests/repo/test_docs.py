@@ -17,7 +17,7 @@ import pytest
 from conftest import REPO
 
 README = REPO / "README.md"
-PAGES = sorted((REPO / "docs").glob("*.md"))
+PAGES = sorted((REPO / "docs").rglob("*.md"))
 LINK = re.compile(r"\[[^\]]*\]\(([^)\s]+)\)")
 FENCE = re.compile(r"^```(\w*)\n(.*?)^```", re.S | re.M)
 
@@ -48,7 +48,9 @@ def test_the_guide_has_its_pages():
                  "batches.md", "models.md", "python.md", "troubleshooting.md", "benchmarks.md"):
         assert page in names
     nav = (REPO / "mkdocs.yml").read_text(encoding="utf-8")
-    assert not [p.name for p in PAGES if p.name not in nav], "a docs page missing from mkdocs.yml's nav"
+    missing = [p.relative_to(REPO / "docs").as_posix() for p in PAGES
+               if p.relative_to(REPO / "docs").as_posix() not in nav]
+    assert not missing, f"docs pages missing from mkdocs.yml's nav: {missing}"
 
 
 @pytest.mark.parametrize("page", [README, *PAGES], ids=lambda p: p.relative_to(REPO).as_posix())
