@@ -5,8 +5,9 @@ Written for mocapfix (issue 12); each stage cites the method it uses. The stages
 kernels in :mod:`mocapfix.solvers.depth_skeleton`; this module holds the parameters and
 runs them in order:
 
-1. **Limb confusion**: left/right leg chains exchanged per frame when the continuity and
-   bone-length cues of ``swaps`` say so (``swap_threshold``; two passes).
+1. **Limb confusion**: left/right leg chains exchanged back on the frames a two-state
+   Viterbi path on their frame-to-frame travel labels exchanged (``swap_threshold`` per
+   exchanged frame; :func:`mocapfix.solvers.depth_skeleton.leg_swap_frames`).
 2. **Tracking state → weights**: NotTracked 0, Inferred σ ``inferred_noise`` (with
    ``inferred_debias`` an Inferred run's offset, read at both ends of the run by
    :mod:`mocapfix.solvers.run_offsets`, is removed first), Tracked σ_j(z).
