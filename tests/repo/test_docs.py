@@ -167,3 +167,20 @@ def test_the_readme_setup_commands_are_what_ci_runs():
     assert "pip install . && mocapfix clean sample_data -o cleaned --report json,md,html" in setup
     assert "pip install -e '.[dev]' && python -m pytest -q" in setup
     assert "pip install -q -e '.[dev]' && python -m pytest -q" in ci
+
+
+def test_troubleshooting_names_every_public_error_class():
+    """Every public exception class of mocapfix/core/errors.py has its row in
+    docs/troubleshooting.md: what it means and what to do."""
+    import inspect
+
+    from mocapfix.core import errors
+
+    classes = [name for name, obj in vars(errors).items()
+               if inspect.isclass(obj) and issubclass(obj, BaseException) and not name.startswith("_")
+               and obj.__module__ == errors.__name__]
+    assert "MocapfixError" in classes and "ConfigError" in classes
+    page = (REPO / "docs" / "troubleshooting.md").read_text(encoding="utf-8")
+    rows = {m.group(1) for m in re.finditer(r"^\| `(\w+)`", page, re.M)}
+    missing = [name for name in classes if name not in rows]
+    assert not missing, f"docs/troubleshooting.md has no row for: {missing}"
