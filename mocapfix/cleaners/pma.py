@@ -285,23 +285,13 @@ class PMA(Cleaner):
         :data:`REFILL_MIN_S` during which one of its marker's most rigid neighbours (as
         many as the largest ``neighbours`` count) is missing too, and that neighbour's
         interior gap was filled, is filled again with the other markers' current interior
-        fills counted as seen, so the lost neighbours and the frames where they were
-        missing serve the members again. The new fills join the gap's members (named
-        ``<member>+``) with their own validation errors, measured in the first round and
-        kept in the later ones (which only replace the fills: c3d.org s01 and the PhoeniX
-        dance, six seeds, within 0.3 % of re-validating them with two copies, for one
-        fit per round instead of three; reusing the first pass's errors instead: s01 3 s gaps 5.89 → 6.14 mm). The
-        marker's own gaps stay missing in its refills. The other markers' fills are their
-        members' validation-weighted averages before the soft distance constraint (s01:
-        gap RMSE 4.44 / 6.42 mm at 1.5 / 3 s gaps against 4.54 / 6.61 with the
-        constrained fills, one round). Edge gaps are neither refilled nor lent: with an
-        extrapolated neighbour passed for seen, fills on four shared files jumped by up to
-        471 mm from one frame to the next (c3d.org s09; the marker's own data moves at
-        most 61 mm a frame). A later round skips the markers none of whose refilled gaps
-        lies by a gap refilled in the round before (their fills would move by a fraction
-        of a millimetre: at most 0.23 mm on the PhoeniX dance). ``refilled_gaps`` in the
-        info counts the gaps chosen for the rounds. Returns the gaps' combined fills
-        (:func:`mocapfix.solvers.pma.combine`)."""
+        fills (validation-weighted, before the soft constraint) counted as seen. The new
+        fills join the gap's members (named ``<member>+``) with their validation errors of
+        the first round. The marker's own gaps stay missing in its refills; edge gaps are
+        neither refilled nor lent; a later round skips the markers none of whose refilled
+        gaps lies by a gap refilled in the round before. ``refilled_gaps`` in the info
+        counts the gaps chosen for the rounds. Returns the gaps' combined fills
+        (:func:`mocapfix.solvers.pma.combine`); why each choice: docs/methods/pma.md."""
         mu, sd = ctx.mu, ctx.sd
         pos = motion.positions
         T = pos.shape[0]
