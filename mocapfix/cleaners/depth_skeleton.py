@@ -5,127 +5,36 @@ Written for mocapfix (issue 12); each stage cites the method it uses. The stages
 kernels in :mod:`mocapfix.solvers.depth_skeleton`; this module holds the parameters and
 runs them in order:
 
-1. **Limb confusion** (left/right legs exchanged for a few frames when the body turns).
-   For the knee-ankle-foot chains of the two legs, per frame: ``keep`` = distance of each
-   chain to a robust reference of its own side (running median over ±``swap_window``
-   of the joints relative to the pelvis, so walking does not blur it) plus the deviation
-   of the hip-knee bones from their median lengths; ``swap`` = the same with the chains
-   exchanged. A frame is exchanged (positions and confidences of the whole chain) when
-   ``keep − swap > swap_threshold`` and ``swap < keep / 2`` — the continuity and
-   rigid-distance cues of the ``swaps`` cleaner, applied to whole limbs. Two passes.
-2. **Tracking state → weights.** NotTracked (missing) = weight 0; Inferred (confidence
-   < 0.75) = σ ``inferred_noise``; Tracked = σ_j(z) from the noise model below. With
-   ``inferred_debias`` an Inferred run is taken as the joint plus a slowly changing
-   offset: the offset is read at each end of the run as the jump of the data there
-   (linear fits to ``debias_window`` samples on each side, evaluated at the run's end
-   sample: :mod:`mocapfix.solvers.run_offsets`; an end without Tracked samples next to it
-   falls back to the Inferred samples against the smooth of the Tracked samples alone),
-   removed with linear interpolation in time in between, and the run then gets σ
-   ``debiased_factor · inferred_noise``. (Measured on the ``kinect`` protocol, whose
-   Inferred offsets glide linearly between two values, so the model fits that corruption
-   well; the jump read from both sides replaced a read against the Tracked smooth, which
-   at the edge of a gap is off by centimetres for a fast foot: 11 files x 2 seeds,
-   inferred+occlusion 0.663 → 0.642 of the best baseline. On real files it moves
-   Inferred joints more, e.g. 28 % of KinectReader_joints' samples by > 5 cm.)
-3. **Noise model from the data.** A first smooth (step 4 with even weights) gives the
-   residuals of tracked samples; per joint a scale ``s_j`` and, pooled over joints, a
-   depth exponent ``p`` (least squares of log |residual| on log depth, clamped to
-   [0, 2]): ``σ_j(z) = s_j (z / z̄)^p``. Depth is the camera z of the file when it is
-   positive everywhere (Kinect camera space), else not used (p = 0).
-   **Rigid pairs the skeleton does not list** (``rigid_pairs``). Joints two bones apart
-   (siblings such as the two hips or the two shoulders, grandparent and grandchild such
-   as elbow and hand) whose distance, averaged over 0.5 s, varies no more than
-   ``rigid_pairs`` × what their noise scales explain (:func:`mocapfix.solvers.
-   bone_projection.steady_pairs`; at least 90 frames with both tracked) are held at
-   their median distance like bones: the raw samples are projected onto the bones and
-   these pairs (position-based dynamics, each joint moving in proportion to its variance;
-   a Tracked sample the first smooth puts beyond the outlier threshold stays out and as
-   it was, so that a glitch does not drag its neighbours and step 5 still reports it)
-   and the noise model is refitted on them; step 8 holds them too, before the bones.
-   With 40 one-frame jumps of 15-40 cm on Tracked joints (6 files): 7.67 mm against 8.03
-   without the pairs, 8.10 when the jumps took part in the projection.
-   The bones alone let the two hips turn about the spine base; with the hip-hip distance
-   the three joints are one rigid triangle and their jitter averages. Measured on the
-   ``kinect`` protocol (11 files x 3 seeds): jitter 0.721 → 0.688 of the best baseline,
-   inferred+occlusion 0.589 → 0.575, mixed 0.327 → 0.323 (the pairs found there:
-   spine-shoulders, the two shoulders, the two hips, elbow-hand, hand-thumb); with 1.3
-   or 2.0 in place of 1.5, jitter 0.698 or 0.704 (measured with a full GCV refit,
-   which the refit with the first cut-offs matches within 0.003). On the shared real
-   files the test takes one pair (LabanotationSuite Ges01: hand-thumb) and no other:
-   their links vary far beyond their noise (a Kinect skeleton's bones do too), so the
-   other files' output is unchanged. Judged against the file's own bones instead of its
-   noise, the test took 9 or more pairs on real files, shoulder-wrist across a bending
-   elbow among them, and moved MSR a06 twice as much.
-4. **Smoothing set by the data.** Per joint a weighted Whittaker smoother on the true
-   time axis (``Motion.times``: dropped frames are where they happened) with the
-   strength chosen by GCV (:mod:`mocapfix.solvers.whittaker`), d = ``order``: the
-   penalty on the d-th derivative leaves accelerations alone for d = 3.
-5. **Outliers.** Samples whose residual exceeds ``max(outlier_k max(σ, σ_local),
-   min_outlier)`` (σ_local: median residual over ±3 samples / 1.5382, Hampel's local
-   scale, so a stretch the smooth cannot follow is not called an outlier) and that the
-   joint's own path contradicts (:func:`mocapfix.solvers.glitches.contradicted_by_path`:
-   a spike thrown out and back, not a fast turn the smooth cuts) get weight 0 and the
-   joint is refitted (``passes`` rounds): tracked is trusted unless the geometry says
-   otherwise. Their fitted value replaces them. A sample more than 100 m
-   from its joint's median position (a corrupt field) is taken out before step 1, as if
-   missing, and reported as an outlier.
-6. **Untrusted samples from the parent** (``limb_frame``): missing and outlier samples
-   become the parent's estimate plus the smooth of the joint's offset to it, parents
-   first (an occluded hand follows the tracked elbow). That smooth penalises the
-   ``fill_order``-th derivative: 1 (the offset interpolated linearly through the gap, a
-   forearm's direction changing steadily) measured 0.587 of the best baseline on
-   inferred+occlusion (11 files x 2 seeds) against 0.615 for 2 and 0.650 for 3. With
-   ``validate_fills`` each untrusted run is that estimate and the joint's own smooth
-   through the run averaged, weighted by their inverse squared errors on validation runs
-   of the same length cut where the joint and its parent were tracked (up to two on each
-   side of the run, both re-estimated on ±max(2n, 15) frames without them:
-   :func:`mocapfix.solvers.depth_skeleton.validated_shares`, the validation idea of ``fill_ensemble``): the parent-based
-   estimate is the better one on average (NotTracked samples 84 mm RMS against 110 for
-   the own smooth, 11 files x 3 seeds) but not on every run (short runs, and runs whose
-   parent is lost too: an acrobat's arm missing from the elbow down, CMU 90_31, 188 mm
-   against 136 for the baseline's linear interpolation, now 97). ``kinect`` protocol, 11
-   files x 3 seeds: inferred+occlusion 0.575 → 0.540 of the best baseline, worst file
-   1.08 → 0.85; mixed 0.323 → 0.309; a fixed average (3/4 from the parent) measured 0.552
-   / 0.321. Before
-   that, optimal singular-value shrinkage across joints (``spatial_shrink``,
-   :mod:`mocapfix.solvers.svshrink`) of the noise-whitened trajectories and one more
-   smooth remove some jitter the joints share. That last smooth varies its strength
-   along time (``local_steps``): each stretch of ±``local_half`` frames takes, among the
-   cut-offs 0.5-2x the joint's GCV choice, the one of least Stein risk there
-   (:func:`mocapfix.solvers.whittaker.local_sure_candidates`), so a fast swing is
-   smoothed less than a still pose (jitter 8.27 → 8.05 mm, acceleration 0.84 → 0.87x
-   the truth's, 11 files seed 0). The chosen strength's log is averaged over the same
-   ±``local_half`` and the joint smoothed once with it varying along time
-   (:func:`mocapfix.solvers.whittaker.smooth_varying`) instead of being pieced together
-   from the candidate smooths sample by sample: jitter 0.688 → 0.683 of the best
-   baseline (11 files x 3 seeds; per-joint smooths with the noise σ from the truth:
-   9.58 → 9.41 mm).
-7. **Fill.** Missing samples in interior gaps of at most ``max_gap`` take the smooth
-   (a spline through the gap); gaps at the ends of at most ``max_gap`` are filled from
-   the parent joint with the offset of the nearest observed frame (body model).
-8. **Bones.** Target lengths = median over frames of each bone (and rigid pair) in the
-   smoothed motion where both ends are tracked; positions projected toward them
-   (:func:`mocapfix.solvers.bone_projection.project_lengths`), each joint moving in
-   proportion to its variance (tracked σ_j(z)², inferred ``inferred_noise``², filled
-   (2 ``inferred_noise``)²) with ``bone_stiffness``. Bones that are exactly constant in
-   the input (MSR Action3D stores some) keep that length exactly: their child joints are
-   put back at it, parents first.
+1. **Limb confusion**: left/right leg chains exchanged back on the frames a two-state
+   Viterbi path on their frame-to-frame travel labels exchanged (``swap_threshold`` per
+   exchanged frame; :func:`mocapfix.solvers.depth_skeleton.leg_swap_frames`).
+2. **Tracking state → weights**: NotTracked 0, Inferred σ ``inferred_noise`` (with
+   ``inferred_debias`` an Inferred run's offset, read at both ends of the run by
+   :mod:`mocapfix.solvers.run_offsets`, is removed first), Tracked σ_j(z).
+3. **Noise model from the data**: ``σ_j(z) = s_j (z / z̄)^p`` from the residuals of a
+   first smooth; joint pairs two bones apart that the data shows rigid
+   (``rigid_pairs``, :func:`mocapfix.solvers.bone_projection.steady_pairs`) are held
+   like bones.
+4. **Smoothing set by the data**: per joint a weighted Whittaker smoother on the true
+   time axis, strength by GCV (:mod:`mocapfix.solvers.whittaker`), penalty order
+   ``order``.
+5. **Outliers**: residuals above ``max(outlier_k max(σ, σ_local), min_outlier)`` that the
+   joint's own path contradicts (:func:`mocapfix.solvers.glitches.contradicted_by_path`)
+   get weight 0 and the joint is refitted (``passes``).
+6. **Untrusted samples from the parent** (``limb_frame``): the parent's estimate plus the
+   smoothed offset to it, averaged with the joint's own smooth by validation
+   (``validate_fills``, :func:`mocapfix.solvers.depth_skeleton.validated_shares`); before
+   that, singular-value shrinkage across joints (``spatial_shrink``,
+   :mod:`mocapfix.solvers.svshrink`) and a smooth whose strength varies along time by
+   Stein's risk (``local_steps``, :func:`mocapfix.solvers.whittaker.smooth_varying`).
+7. **Fill**: gaps of at most ``max_gap`` from the smooth, or from the parent at the ends.
+8. **Bones**: positions projected toward the median bone (and rigid pair) lengths
+   (:func:`mocapfix.solvers.bone_projection.project_lengths`, ``bone_stiffness``); bones
+   constant in the input keep their length exactly.
 
 The output keeps the file's rows and timestamps (the writers change only samples).
-
-Not used, by measurement (``kinect`` jitter scenario, 11 files, seed 0; 0.719 of the best
-baseline before the rigid pairs of step 3): motion priors trained on ../shared/training (a
-Gaussian prior over 8-frame windows of the 25 joints, M-SSA bases, the partlet-kinect
-dictionary) measured 0.92-1.48 alone and 0.694-0.706 blended 0.2 with this cleaner's
-output; per-joint smoothing whose strength the truth picks every ±5 frames 0.751
-(``benchmarks/studies/kinect_priors.py``). Smoothing cluster centroids (hand, foot, pelvis,
-shoulders) and offsets to them separately, and shrinkage across joints in a body frame or
-in 1-8 s windows, measured 8.45-8.65 mm against 8.46 (4 files, seed 0); the ICI rule
-(Katkovnik 1999) in place of the local Stein risk 8.58-10.0. A Gaussian-mixture prior over
-8-frame windows of each body part (EPLL-style; ``benchmarks/studies/kinect_gmm_prior.py``), trained on
-the same corpus, 0.765 alone and 0.648 blended 0.3 with this cleaner's output (0.682), the
-best trained prior measured; trained on the test motions' own truth, 0.626 / 0.592: not
-shipped (a model of several MB and a blend weight for a 0.03 gain, short of 0.6)."""
+Why each stage is as it is, what was measured and what was tried and not used:
+docs/methods/kinect_skeleton.md."""
 from __future__ import annotations
 
 import numpy as np

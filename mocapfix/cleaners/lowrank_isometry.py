@@ -11,49 +11,15 @@ joint's trajectory) and is split as D = A + E, A the clean motion, by::
 eq. 5 (:mod:`mocapfix.solvers.isometry`) and an ℓ1 prior on the orthonormal Daubechies
 wavelet coefficients of every trajectory (:mod:`mocapfix.solvers.wavelet_ops`), solved by
 the ADM-ALM of Algorithm 1 with one Gauss–Newton step per iteration for N (eq. 20).
+The defaults are the paper's (λ = 1/√T, γ = 100, μ = 0.01, ρ = 0.5, η = 1.3).
 
-Beyond the paper:
-
-* **Missing samples** (C3D gaps, Kinect NotTracked, padding) are unobserved entries: no
-  ℓ1 penalty on E there and no multiplier (E = D − A − Z1/ρ1 with Z1 = 0, so the data
-  term does not act), which makes the method fill gaps as it denoises.
-* **Pad and mask**: the orthonormal periodized wavelet needs T divisible by 2^L; the time
-  axis is padded with unobserved frames — at least a filter length of them, so that the
-  periodic wrap (last frame → first) falls where the solver is free to be smooth.
-* **Start**: A⁰ = D (gaps bridged linearly) instead of the paper's A⁰ = 0; from zero, with
-  the paper's penalty growth η = 1.3, the ALM stops about 1.4 m from the data on CMU 05_01.
-* **Bones**: the skeleton's bones (ASF/AMC, BVH, Kinect topology), or a config list of
-  marker-name pairs. Lengths: the rig's rest offsets when the motion has a rig and the
-  bone is a rig link without translation channels; otherwise a robust estimate from the
-  data (:func:`estimate_lengths`).
-* **Units**: the solver works in metres whatever the file's unit, so λ, γ, μ keep the
-  paper's meaning (they are scale dependent).
-* **Bounded Gauss–Newton step**: no bone vector moves by more than its length plus its
-  current extent in one N-step (:meth:`IsometrySystem.limit_step`). Under heavy noise a
-  bone squeezed to a few centimetres linearises badly (the step along it is about
-  l²/(2|d|)), joints were thrown metres away, and with γ = 1000, η = 1.1 the ALM then
-  diverged (CMU 05_01, feng2015 snr5, seed 0: RMSE 3·10^11 cm; bounded: 60 cm from 75).
-  On ordinary data it scales 0.3–4 % of the frame steps (short bones squeezed by noise
-  or outliers) and the RMSE stays within 0.3 % on the other feng2015 and yang2019
-  levels of 05_01.
-* **Divergence guard**: an iterate that is not finite or reaches ten times farther than
-  the data from its centre stops the solve; it is redone without the isometry term (the
-  convex rest of the model), or, should that diverge too, the data is returned; ``info``
-  says so (``diverged``, ``diverged_at``, ``fallback``).
-* **Speed**: the N-step is T independent per-frame systems, solved exactly by block
-  elimination along the skeleton tree for all frames at once (never the (3TS)² matrix);
-  BLAS is held to one thread while the solver runs (when ``threadpoolctl`` is installed).
-
-The defaults are the paper's (λ = 1/√T, γ = 100, μ = 0.01, ρ = 0.5, η = 1.3, 2-level
-Daubechies, ℓ1 on every wavelet coefficient). Measured on the nine shared CMU trials with
-the ``yang2019`` protocol (lengths estimated from the corrupted data), they stay above
-the paper's Table II (AJE 0.0057 / 0.0095 / 0.0150 / 0.0216 / 0.104 m at 5 / 10 / 15 / 20 /
-80 %, paper 0.004 / 0.006 / 0.007 / 0.010 / 0.067). A slower penalty growth and a wavelet
-penalty on the detail bands only (``eta: 1.1, mu: 0.03, approx_penalty: false``) give
-0.0024 / 0.0030 / 0.0039 / 0.0051 / 0.070, and adding ``keep_inliers: 50 mm`` 0.0006 /
-0.0010 / 0.0016 / 0.0024 / 0.067, at about twice the iterations. On short Kinect clips
-γ = 100 is too weak to steady bone lengths (the variation grows on three of the four MSR
-Action3D clips); ``gamma: 1000`` with the settings above lowers it on all twelve files.
+Beyond the paper: missing samples are unobserved entries (so the method also fills
+gaps); the time axis is padded for the periodized wavelet; A⁰ = D; bones and lengths come
+from the rig or a robust estimate (:func:`estimate_lengths`); the solver works in metres;
+the Gauss–Newton step is bounded (:meth:`IsometrySystem.limit_step`) and a diverging
+solve falls back to the convex model or the data (``info``: ``diverged``,
+``diverged_at``, ``fallback``). Why, and the measurements against the paper's Table II:
+docs/methods/lowrank_isometry.md.
 """
 from __future__ import annotations
 

@@ -3,127 +3,35 @@ K-SVD poselet variant of Xiao et al. 2015 (Neurocomputing) as an option.
 
 Pipeline (Feng 2015, Algorithm 1):
 
-1. *Coordinate normalisation* (§III-B-1): every pose is moved into its torso frame — a
-   robust Kabsch fit of the torso joints (root, hips, spine) to the model's template,
-   smoothed in time (:func:`mocapfix.solvers.rigid.torso_frames`). Each joint is then
-   centred on the file's own median position in that frame, so that a subject's
-   proportions (or a sensor's joint placement) are not taken for noise.
+1. *Coordinate normalisation* (§III-B-1): every pose is moved into its torso frame
+   (:func:`mocapfix.solvers.rigid.torso_frames`) and each joint centred on the file's
+   own median position in that frame.
 2. *Partlets* (§III-B-2): torso + head, two arms, two legs; the joints at the seams
-   (the torso joint a limb hangs from) belong to several partlets and are averaged back.
-3. *Grouping* (§III-B-3): lagged windows of ``m`` samples, taken every ``dilation`` frames
-   so that a window spans the same time at any frame rate (the model's sample rate), one
-   window starting every ``stride`` frames; strided views, no copies per window.
+   belong to several partlets and are averaged back.
+3. *Grouping* (§III-B-3): lagged windows of ``m`` samples, taken every ``dilation``
+   frames (the model's sample rate), one window starting every ``stride`` frames.
 4. *Robust structured sparse coding* (§III-D, eq. 11): alternate the Ψ-step — FISTA on
-   ``||Z − DΨ||² + λ2 tr(ΨLΨᵀ) + λ3 ||Ψ||_1`` with L the Laplacian of the symmetric 5-NN
-   ℓ1 graph between windows (eq. 9, 12) — and the E-step of the ℓ2,p noise term (eq. 16–18)
-   with one group per joint sample (x, y, z of one joint at one frame: outliers and
-   occlusion errors act on samples; the paper's "rows" are not defined further). Missing
-   samples have zero weight in the data term (E takes their whole residual), so the
-   cleaner also fills gaps.
+   eq. 12 with the k-NN graph Laplacian of eq. 9 — and the E-step of the ℓ2,p noise term
+   (eq. 16–18), one group per joint sample. Missing samples have zero weight in the data
+   term, so the cleaner also fills gaps.
 5. *Reconstruction* (§III-D-3): windows averaged where they overlap, partlets merged,
    normalisation undone.
 
-What we changed, each by measurement on held-out CMU dance (benchmarks/partlet_tables.py;
-the paper tunes λ1, λ2, λ3 per noise setting from a grid, we ship one setting):
-
-- λ3 and λ1 are multiples of the noise level σ̂ estimated from the file itself (median
-  absolute second difference), so one setting serves 30 dB and 5 dB alike; λ2 is relative
-  to ||DᵀD||₂ and off by default: the graph term made every setting worse (20 % outliers
-  2.57 vs 2.12 cm on a 600-frame slice) and its k-NN search was the slowest step.
-- The windows coded are those of the input smoothed per channel with the strength GCV
-  finds (the DCT smoother of :mod:`mocapfix.solvers.dct`), and the torso frame is fitted to
-  GCV-smoothed torso joints: under heavy Gaussian noise the sparse codes of the raw windows
-  were all shrunk away and the frame fit turned noise into body rotation (10 dB: 0.84× the
-  best oracle-tuned classical filter instead of 1.13×).
-- The residual the dictionary leaves is added back after GCV smoothing per channel
-  (samples taken as outliers excepted): the learned atoms cannot represent every detail of
-  a new motion, and clean input must come back as it was (clean dance: 0.22 cm instead of
-  1.0 cm).
-- Windows are 16 frames at 120 Hz (the CMU rate): windows sampled at 30 Hz left the noise
-  between their samples alone.
-- The presmoothing's strength is chosen per sample (``local_smoothing``, 0.5 s): GCV's
-  strength × e^−1.5, 1, e^1.5, the one of least SURE risk summed over 0.5 s and over a
-  joint's x, y, z (:mod:`mocapfix.solvers.local_sure`); dance holds poses and then moves
-  fast, and one strength per channel blurred the one or left noise on the other. GCV's μ
-  per channel is at the per-channel optimum (30 dB: 0.98 vs 0.97 cm with the best μ per
-  channel from the truth) but a per-second oracle choice is 10–15 % better. The strength
-  is chosen again at each alternation, with the noise level of what is smoothed (the
-  E-step takes part of the Gaussian noise: keeping the first choice, 10 dB 5.52 cm; keeping
-  GCV's first μ, 5.05). 2 seeds: 30 dB 0.935 → 0.907, 20 dB 2.040 → 1.997, 10 dB 5.105 →
-  4.941, 20 % 0.449 → 0.427, 20 dB + 10 % 2.195 → 2.143 (0.25 s and 1 s alike; 5
-  multipliers alike); its cost: 4 transforms per call against GCV's 2.
-- A coarse scale for heavy noise (robust coding only): the model also holds dictionaries of
-  16-sample windows at 30 Hz (0.5 s; training parameter ``coarse_rate``), which code the
-  file when the torso's noise level exceeds ``coarse_noise`` (180 mm; held-out dance is
-  ~70 mm at 20 dB, ~125 mm at 15 dB, ~225 mm at 10 dB, the CMU BVH walks ~1.3× that). On
-  their own, coarse windows were worse at 30 dB (1.18 vs 0.94) and on outliers (0.73 vs
-  0.47), equal at 15 dB and better from 10 dB on (2 seeds: 5.33 → 5.11 with GCV
-  presmoothing; 5 dB −6 %, 10 dB + 20 % outliers −6 %); blending both scales' outputs
-  was no better than switching. Not for OMP codes (K-SVD model, 10 dB: ℓ2 6.23 → 6.49, ℓ1
-  5.18 → 6.04).
-- Suspect samples (:func:`mocapfix.solvers.partlet.suspect_samples`): a joint sample farther than ``despike`` (5)
-  noise σ and ``min_outlier`` from the running median of 7 frames is kept out of the
-  presmoothing and of the torso-frame fit; it stays in the data term, where the ℓ2,p term
-  decides on it. GCV presmoothing had smeared ±50 cm outliers into their neighbours
-  before the E-step could take them (2 seeds, k = 4: 20 % outliers 1.07 → 0.48 cm,
-  20 dB + 10 % 2.81 → 2.56; k = 5 flags less Gaussian noise: 10 dB 5.81 vs 5.99 with the
-  frame smoothing below, outliers alike).
-- The torso frame's smoothing (0.05 s) grows in proportion to the torso joints' noise
-  level above ``frame_noise`` (20 mm), at most 6×: a fixed 0.15 s helped at 20 and 10 dB
-  (k = 4: 6.54 → 5.99 cm) but hurt clean input (a filled 60-frame gap 5.0 → 7.5 cm).
-- The cleaned bones are projected to their median length (``bones``), for every skeleton
-  bone whose input is consistent with a rigid bone under the file's noise
-  (:func:`mocapfix.solvers.partlet.rigid_bones`; a marker pair or sensor joints that move apart are left alone):
-  10 dB 5.81 → 5.33, 30 dB 1.07 → 0.93, 20 dB + 10 % 2.41 → 2.20, that filled gap
-  5.0 → 3.7 cm (from the two steps above with a fixed 0.15 s frame smoothing to the
-  shipped defaults). Not in the paper (its Fig. 7 only shows bone lengths as a symptom).
-
-All together, held-out dance 05_02 + 05_10, whole trials, seeds 0–1 (partlet_tables.py):
-30 dB 0.91, 20 dB 2.00, 10 dB 4.94, 20 % outliers 0.43, 20 dB + 10 % 2.14 cm (before the
-local strength and the coarse scale 0.93 / 2.04 / 5.33 / 0.45 / 2.20); the paper's
-dance rows 0.86 / 2.55 / 3.73 / 1.93 / 2.42.
-
-Tried for 10 dB and not kept (held-out dance, 1–2 seeds, RMSE cm; before the bone step
-unless said): stronger sparsity (λ3 ×16: 6.00; ×150: 8.14), the graph term (λ2 0.1–10:
-7.9–24.7, FISTA's 20 iterations stall at the larger Lipschitz constant), coding the raw
-windows (presmooth off, λ3 1–8: 8.3–8.7), stride 1 (6.24), 8 E/Ψ alternations (6.28),
-GCV's μ × 3 (with bones: 5.49 vs 5.23), 64 atoms (5.13 vs 5.23, 30 dB 0.96 vs 0.93),
-longer windows (16 samples at 30 Hz or 32 at 60 Hz, with bones: 4.97 / 4.96 but 30 dB
-1.18 / 1.15, 20 % outliers 0.73 / 0.67), a Gaussian (Wiener) prior on 0.5 s windows from
-the training covariance (8.3) and a per-frame PCA projection (6.4). With the true torso
-frame the 10 dB error is 5.5 instead of 5.85: the local coding bounds it. Windows of
-0.13 s at 120 Hz can represent almost any smooth signal, so against the low-frequency
-noise GCV leaves they add little (λ3 × 0.25 … × 4 and ``detail`` off change no cell by
-more than 0.5 %: the output is in effect the presmoothed signal); the paper's 3.73 cm is
-not reached.
-
-Tried with the coarse scale and the local strength work (seed 0 unless said; 10 dB was
-5.25, 30 dB 0.94 then): non-local averaging across time (each frame's partlet replaced by
-a weighted mean over its k most similar 0.5 s windows elsewhere in the trial, weights from
-the distance over the noise's, cKDTree on principal components: k = 4 / 8 / 16 gave 10 dB
-6.03 / 6.33 / 6.67 and 20 dB 2.24–2.37; even with matches found on the clean truth the
-gain was ≤ 15–20 % on 05_02 and nil on 05_10 — trials of 7–9 s hold few repeats), a
-singular-value shrinkage of the cleaned body in the torso frame under heavy noise (soft
-at 0.25 × the noise's level: 10 dB −1.4 %, 5 dB −3.4 %; hard: ≤ 1 %; at 30 dB every rank
-cut costs 1–5 %), GCV's μ × 2 / × 4 (10 dB 5.18 / 5.70), a higher-order smoothness
-penalty (no gain at the per-channel oracle), torso frame smoothing 0.1 / 0.2 s (10 dB
-5.45 / 5.83), coarse dictionaries of 64 atoms or 32-sample windows (10 dB 5.01 / 5.09 vs
-5.01), the local strength for the torso frame fit too (2 seeds: 30 dB −0.4 %, 10 dB
-+1.1 %), 2 or 4 alternations (mixed), 10 FISTA iterations (30 dB 0.95).
-
-Outside this cleaner (``benchmarks/studies/partlet_sure_pool.py``, 2 seeds): this cleaner's output,
-the K-SVD ℓ2 one and ``tsmc``'s, each also smoothed at 8 strengths, weighted per file by
-SURE with Monte-Carlo divergences: 30 dB 0.845, 20 dB 1.95, 10 dB 4.77, at 3.7× the time;
-weighted with the truth, 10 dB no better than 4.67.
+Beyond the paper: λ1, λ3 scaled by the noise level measured on the file, λ2 off; the
+windows coded are presmoothed (GCV, then a SURE choice per sample,
+:mod:`mocapfix.solvers.local_sure`); the residual the dictionary leaves is added back
+smoothed; a coarse scale under heavy noise; suspect samples
+(:func:`mocapfix.solvers.partlet.suspect_samples`) kept out of the presmoothing and the
+frame fit; bones projected to their median length where the input is rigid
+(:func:`mocapfix.solvers.partlet.rigid_bones`). Each change, what was tried and not kept,
+and the measurements against the paper: docs/methods/partlet.md.
 
 Xiao 2015 (``coding: ksvd``): codes by OMP with ``sparsity`` atoms from a K-SVD model;
 ``loss: l2`` for Gaussian noise, ``loss: l1`` reweights samples against outliers.
 
 The report's ``unexplained`` is, per partlet, the fraction of the energy of the coded
-(smoothed, outlier-free, centred) signal the dictionary cannot explain on observed samples;
-a limb above ``out_of_sample`` (0.5 %) is reported as motion unlike the training set
-(measured, clean: held-out CMU dance 0.03–0.08 %, CMU walk 05_01 ≤ 0.12 %, the CMU BVH walks'
-arms 0.4–1.2 %).
+signal the dictionary cannot explain on observed samples; a limb above
+``out_of_sample`` is reported as motion unlike the training set.
 """
 from __future__ import annotations
 

@@ -285,23 +285,13 @@ class PMA(Cleaner):
         :data:`REFILL_MIN_S` during which one of its marker's most rigid neighbours (as
         many as the largest ``neighbours`` count) is missing too, and that neighbour's
         interior gap was filled, is filled again with the other markers' current interior
-        fills counted as seen, so the lost neighbours and the frames where they were
-        missing serve the members again. The new fills join the gap's members (named
-        ``<member>+``) with their own validation errors, measured in the first round and
-        kept in the later ones (which only replace the fills: c3d.org s01 and the PhoeniX
-        dance, six seeds, within 0.3 % of re-validating them with two copies, for one
-        fit per round instead of three; reusing the first pass's errors instead: s01 3 s gaps 5.89 → 6.14 mm). The
-        marker's own gaps stay missing in its refills. The other markers' fills are their
-        members' validation-weighted averages before the soft distance constraint (s01:
-        gap RMSE 4.44 / 6.42 mm at 1.5 / 3 s gaps against 4.54 / 6.61 with the
-        constrained fills, one round). Edge gaps are neither refilled nor lent: with an
-        extrapolated neighbour passed for seen, fills on four shared files jumped by up to
-        471 mm from one frame to the next (c3d.org s09; the marker's own data moves at
-        most 61 mm a frame). A later round skips the markers none of whose refilled gaps
-        lies by a gap refilled in the round before (their fills would move by a fraction
-        of a millimetre: at most 0.23 mm on the PhoeniX dance). ``refilled_gaps`` in the
-        info counts the gaps chosen for the rounds. Returns the gaps' combined fills
-        (:func:`mocapfix.solvers.pma.combine`)."""
+        fills (validation-weighted, before the soft constraint) counted as seen. The new
+        fills join the gap's members (named ``<member>+``) with their validation errors of
+        the first round. The marker's own gaps stay missing in its refills; edge gaps are
+        neither refilled nor lent; a later round skips the markers none of whose refilled
+        gaps lies by a gap refilled in the round before. ``refilled_gaps`` in the info
+        counts the gaps chosen for the rounds. Returns the gaps' combined fills
+        (:func:`mocapfix.solvers.pma.combine`); why each choice: docs/methods/pma.md."""
         mu, sd = ctx.mu, ctx.sd
         pos = motion.positions
         T = pos.shape[0]
@@ -465,42 +455,16 @@ def _defaults(params, **new):
 @register
 class FillEnsemble(PMA):
     """The PMA engine with what measurably beats the paper's choices: the three local
-    fillers run with 3 and with 5 rigid neighbours (seven members with the global
-    regression), two ``pose`` members (the marker in the rigid frame of its 3 most rigid
-    neighbours regressed on its next 6 / 12 neighbours in that frame:
-    :func:`mocapfix.solvers.pma.pose_fills`; with them the default's gap RMSE fell on all
-    nine captures of benchmarks/versus_peers.py at 0.1–1.5 s, geometric mean 0.67× →
-    0.61× pma), and each gap's members are weighted by their inverse squared error on
-    synthetic gaps of the same length cut where the marker was seen (``weights:
-    validation``), not by the plausibility of their neighbour distances. The soft
-    constraint keeps each distance within ±3 standard deviations, not the paper's ±2: an
-    occluded marker is often in an unusual pose, where its true distances leave the ±2
-    interval (CMU 85_02: up to 16 σ); set on HDM05, Vicon, OptiTrack, tennis and
-    wheelchair of benchmarks/versus_peers.py (no worse on any, at 1.5 s and at 3 s), it
-    then lowered 85_02 25.2 → 24.1 mm and PhoeniX dance 14.8 → 14.1 (c3d.org s01 +0.01).
-    Measured with the
-    ``occlusion`` gaps (gap RMSE, seeds 0 / 1): HDM05 (first 1,500 frames) 2.63 / 4.24 mm
-    (with ``fill_pca`` as an eighth member) against 3.98 / 7.57 for ``pma``; CMU 85_02
-    38.2 / 15.3 against 41.4 / 14.6 (37.9 / 15.3 with ``fill_pca``, at 6× the time: it
-    is left out). An interior gap of at least 0.2 s during which one of its marker's five
-    most rigid neighbours is missing too is filled again (two rounds) with the other
-    markers' interior fills counted as seen (``refill: 2``, :meth:`PMA._refill`): on
-    benchmarks/versus_peers.py (six seeds) the default's gap RMSE fell in 17 of 18
-    capture × gap-length cells, c3d.org s01 0.84 → 0.76 and 0.88 → 0.76 of ``pma``, the
-    PhoeniX dance 0.81 → 0.73 and 0.85 → 0.70 (Vicon 1.5 s 0.55 → 0.63). A gap whose
-    fill jumps from one frame to the next by more than 3× its marker's largest observed
-    step is averaged again without the members that jump so (``max_step: 3``,
-    :func:`mocapfix.solvers.pma.without_jumps`): a GRNN member far from its training poses turns into a
-    nearest-neighbour lookup and jumps when the nearest pose changes (numediart_03_rolling
-    LR_HME: 140 mm in one frame where the marker's data moves at most 11.7 mm, now 11.7;
-    filled runs stepping more than 3× their marker's largest step: 11 of 209 → 5 of 207,
-    the largest 12× → 5.2×; two gaps whose smooth members leave the capture volume are
-    left to the next step). On benchmarks/versus_peers.py (six seeds) only OptiTrack 1.5 s
-    moved by more than 2 % (0.35 → 0.28 of ``pma``; geometric means 0.56 / 0.61). Left out
-    whenever a member jumps (not only when the average does), at 1.5×, 2× or 3×: cells
-    moved both ways by up to 25 % (CMU 85_02 3 s 0.60 → 0.74 at 2×, Vicon 3 s 0.74 → 0.82
-    at 3×). benchmarks/versus_peers.py has the table over eleven captures."""
-
+    fillers run with 3 and with 5 rigid neighbours, plus two ``pose`` members
+    (:func:`mocapfix.solvers.pma.pose_fills`); each gap's members weighted by their
+    inverse squared error on synthetic gaps of the same length cut where the marker was
+    seen (``weights: validation``), not by plausibility; the soft constraint at ±3
+    standard deviations, not ±2; gaps whose rigid neighbours were missing too filled
+    again with those neighbours' fills (``refill: 2``, :meth:`PMA._refill`); a fill that
+    jumps more than ``max_step`` × its marker's largest observed step averaged again
+    without the members that jump (:func:`mocapfix.solvers.pma.without_jumps`).
+    Each choice, with its measurements on benchmarks/versus_peers.py:
+    docs/methods/pma.md."""
     name = "fill_ensemble"
     summary = ("fill gaps by averaging nine fillers weighted by their error on synthetic "
                "gaps, with soft distance constraints, refilling gaps whose neighbours were "

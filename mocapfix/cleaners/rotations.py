@@ -170,36 +170,19 @@ def _features_of(motion: Motion):
 @register
 class RotationOutliers(Cleaner):
     """Remove glitches from the rotation channels of BVH/AMC without touching real motion.
-
     Works on the continuous features of :mod:`mocapfix.solvers.rotchannels` (quaternions
     of 3-DOF joints, unwrapped angles otherwise; degrees). A sample is a spike when it is
     farther from the running median of ``width`` frames than ``threshold`` × the robust
     spread (1.4826 · MAD) of its channel's median residuals, and at least ``min_angle``
-    (Hampel identifier) and stands off the cubic through the frames around it
-    (:func:`mocapfix.solvers.glitches.glitches`; at the ends of the take, off the cubic
-    beyond it), unless the same deviation recurs at least twice more in its channel with
-    the motion around it (a toe-off in every gait cycle, two frames wide at 30 Hz, is
-    motion; glitches alike in size do not come with alike surroundings). A running
-    median follows
-    monotonic motion exactly, however fast, and only clips turning points, so fast real
-    motion (acrobatics, toes) leaves residuals far below a 10° glitch; a glitch of up to
-    (width − 1) / 2 frames is removed entirely by the median. A joint with any spiking
-    feature at a frame is marked for that frame, and its channels there are re-made by
-    PCHIP interpolation of its features from the frames around; every other channel value
-    is kept bit for bit.
-
-    A channel that jumps is a suspicion, not evidence: dance, kicks and acrobatics at
-    30 Hz turn a joint that fast. A marked run is re-made only when the world-space path
-    of the joints its rotation moves contradicts the input there — re-made, that path
-    keeps at most ``evidence`` of its summed squared acceleration over the run and two
-    frames on each side (:func:`mocapfix.solvers.rotation_glitches.contradicted_by_limbs`):
-    a glitch throws the limb's end
-    out and back, a real turn moves it along a smooth path that re-making one joint
-    breaks. On the shared takes as read this left the professionally cleaned Bandai
-    takes untouched (86 mm before) and every remaining re-make one its limb's path
-    contradicts (benchmarks/results/harm.md), while the ``rotations`` protocol's spikes fell from
-    0.19× to 0.02× the better animator's filter (the re-makes of clean motion were most
-    of the error left).
+    (Hampel identifier), and stands off the cubic through the frames around it
+    (:func:`mocapfix.solvers.glitches.glitches`), unless the same deviation recurs at
+    least twice more in its channel with the motion around it (a toe-off in every gait
+    cycle is motion). A marked joint's channels are re-made by PCHIP interpolation of its
+    features from the frames around — only when the world-space path of the joints its
+    rotation moves contradicts the input there (re-made, that path keeps at most
+    ``evidence`` of its summed squared acceleration:
+    :func:`mocapfix.solvers.rotation_glitches.contradicted_by_limbs`). Every other
+    channel value is kept bit for bit. Measurements: docs/methods/rotations.md.
     """
 
     name = "rotation_outliers"
@@ -245,45 +228,20 @@ class RotationOutliers(Cleaner):
 @register
 class RotationDenoise(Cleaner):
     """Denoise the rotation channels of BVH/AMC, each at the smoothing its motion allows.
-
     On the continuous features of :mod:`mocapfix.solvers.rotchannels`, every feature is
     smoothed by the member of least Stein's unbiased risk (:mod:`mocapfix.solvers.sure`)
     of a family of Gaussian kernels (0.7–48 frames, capped by ``max_sigma``) and, with
     ``quadratic``, Gaussian-weighted local quadratic fits (1–24 frames), one choice per
-    joint (``per_joint``: its features' risks summed) at every frame (``local``) or for
-    the whole take: slow joints (root, spine) get long kernels, fast ones (wrists, toes)
-    short ones or quadratic fits, and clean data — whose noise estimate is near zero — is barely changed. The noise is
-    modelled as isotropic rotation noise of one level for the file: a quaternion
-    component q_i carries it scaled by √(1 − q_i²)
-    (:func:`mocapfix.solvers.rotchannels.noise_shape`), an angle channel as it is. The
-    level is measured on the file (median absolute second difference, each divided by its
-    scale); ``noise`` gives it in degrees instead. A joint's discontinuities — a change from
-    one frame to the next that its neighbouring changes do not explain
-    (:func:`mocapfix.solvers.glitches.steps`; CMU 60_10 and 05_10 have 15–100° ones in their
-    own data) — are not smoothed across: the pieces between them are smoothed separately
-    (:func:`mocapfix.solvers.sure.sure_piecewise`), so a step neither smears into its
-    neighbourhood nor, by its large risk, leaves the frames around it unsmoothed (jitter on
-    the 16 shared files, 3 seeds: 0.701× → 0.692× the better animator's filter with
-    ``animation-bvh.yaml``; 60_10 0.973 → 0.913×, 05_10 0.907 → 0.842×). The step test
-    assumes at least ``step_floor`` degrees of noise: on a take with glitches but almost no
-    jitter (measured noise 0.05–0.1°) every turn of real motion would otherwise be a step,
-    and the short pieces between turns keep what the outlier step missed (spikes setting
-    0.198× without steps, 0.239× with steps and no floor, 0.200× with the 0.5° floor).
-
-    A take is smoothed only when its noise is measurable
-    (:func:`mocapfix.solvers.noise.white_noise`): the level is estimated from eighth
-    differences and must be flat against the fourth-difference estimate; on motion the
-    estimate falls with the order, and the take is returned unchanged. The 30 Hz Bandai run
-    measured 0.65° from second differences — its motion, not noise — and was moved by up
-    to 17 mm; now it is left as read, while 0.15–0.7° of jitter added to any shared take is
-    measured (0.91–1.03 flatness; the Bandai run at 0.15°, 0.78, is left). Limit: noise on
-    a few joints of an otherwise clean take (CMU 05_02's feet alternate by 20–40 mm from
-    one frame to the next) is not seen by the take-level test, and per joint it cannot be
-    told from a 30 Hz foot's real motion (the Bandai run's feet measure alike). Noise
-    measured below ``min_noise`` (0.05°) is left too: each joint smoothed alone disturbs
-    how the joints' rotations compensate each other, which at that level is all it does
-    (pymo AV_8Walk, 0.028°: joints moved by at most 1.3 mm, the left hand's RMS
-    acceleration +46 %)."""
+    joint (``per_joint``) at every frame (``local``) or for the whole take. The noise is
+    isotropic rotation noise of one level for the file
+    (:func:`mocapfix.solvers.rotchannels.noise_shape`), measured on the file or given as
+    ``noise`` in degrees. A joint's own discontinuities
+    (:func:`mocapfix.solvers.glitches.steps`, at least ``step_floor`` degrees of noise
+    assumed) are not smoothed across (:func:`mocapfix.solvers.sure.sure_piecewise`). A
+    take is smoothed only when its noise is measurable
+    (:func:`mocapfix.solvers.noise.white_noise`: flat across difference orders) and at
+    least ``min_noise``; otherwise it is returned unchanged. Why, and the measurements:
+    docs/methods/rotations.md."""
 
     name = "rotation_denoise"
     summary = "SURE-tuned smoothing (Gaussian or local quadratic, per joint) of continuous BVH/AMC rotations"

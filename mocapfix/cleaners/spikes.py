@@ -1,39 +1,24 @@
 """Spike (outlier) detection: marks implausible samples missing so a gap filler takes over.
 
 A Hampel identifier (Hampel 1974; Pearson et al. 2016, "Generalized Hampel filters") per
-marker on the 3-D residual to a robust local fit. The robust smooth is a leave-one-out
-local quadratic (robust LOESS, Cleveland 1979; :func:`mocapfix.solvers.localfit.local_polyfit`)
-rather than a running median: a median over 0.1 s lags by up to 60 mm at the turning
-points of fast movements (CMU 85_02, accelerations up to 270 m/s²), a local quadratic
-by < 1 mm, so clean data is not flagged.
+marker on the 3-D residual to a robust local fit: a leave-one-out local quadratic
+(robust LOESS, Cleveland 1979; :func:`mocapfix.solvers.localfit.local_polyfit`) rather
+than a running median, which lags at the turning points of fast movements.
 
 1. fit every sample from its neighbours within ``window`` (itself left out), weighted;
 2. ``r_t = ||x_t − fit_t||`` (3-D residual norm);
-3. global noise scale per marker ``s = 1.4826 · median |x − fit|`` over samples and
-   coordinates;
-4. ``passes`` rounds of iterative reweighting (Tukey biweight of ``r / 2·threshold``,
-   threshold ``max(k s √(1 + leverage_t), min_jump)``) so that a spike loses its say in
-   its neighbours' fits; the leverage term accounts for one-sided fits next to gaps and
-   at the ends;
+3. global noise scale per marker ``s = 1.4826 · median |x − fit|``;
+4. ``passes`` rounds of iterative reweighting (Tukey biweight) so that a spike loses its
+   say in its neighbours' fits; a leverage term accounts for one-sided fits;
 5. decision: ``r_t > max(k σ_t √(1 + leverage_t), min_jump)`` with
-   ``σ_t = max(s, local scale)``, the local scale being the median residual norm over
-   ``±window`` / 1.5382 (Hampel's local MAD for a 3-D residual): a stretch the local
-   model cannot follow (very fast or jerky movement, dropped frames) has large residuals
-   all along and is not a spike, while one spike barely moves the median. The physical
-   floor ``min_jump`` keeps clean data with a tiny MAD from being flagged;
-6. shoulders of wide spikes (2–5 frames, ramping in and out): the fit is redone without
-   the flagged samples and their neighbours are flagged too when their residual exceeds
-   ``max(k σ √(1 + leverage), min_jump / 2)`` (hysteresis, grown up to half a window).
-
+   ``σ_t = max(s, local scale)`` (Hampel's local MAD over ``±window``);
+6. shoulders of wide spikes: neighbours of flagged samples are flagged too above
+   ``max(k σ √(1 + leverage), min_jump / 2)``;
 7. evidence: a flagged run is kept only when the marker's own path contradicts it
-   (:func:`mocapfix.solvers.glitches.contradicted_by_path`: repaired by a curve through
-   its neighbours, the path loses at least three quarters of its acceleration there);
-   ``kept_by_path`` counts the samples left as measured.
+   (:func:`mocapfix.solvers.glitches.contradicted_by_path`); ``kept_by_path`` counts the
+   samples left as measured.
 
-Measured with ``corrupt.occlusion(..., "noise")`` (2 % spikes of 20–100 mm on 2 mm
-jitter, seeds 0–2): recall 0.999 on CMU 85_02 and HDM05, false positives ≤ 0.0001 of the
-clean samples; on the uncorrupted captures 0.00003 (CMU) and 0 (HDM05) of the samples, and
-≤ 0.6 % on each of the 25 shared C3D files (median 0.07 %).
+Recall and false positives on the shared captures: docs/methods/spikes.md.
 """
 from __future__ import annotations
 

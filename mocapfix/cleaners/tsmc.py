@@ -3,83 +3,28 @@
 Information Sciences 277).
 
 ``trust`` (Algorithm 1): every channel is smoothed by robust penalised least squares
-(Welsch weights, smoothing parameter by GCV; :func:`mocapfix.solvers.dct.robust_smooth`)
-and a sample is untrusted when its 3-D distance to the smooth exceeds ``θ`` (eq. 19) or
-the reader gave it a low confidence. ``θ`` is ``threshold`` robust standard deviations of
-the marker's residual, clipped to [``min_threshold``, ``max_threshold``]; the Welsch scale
-p is θ. The paper's fixed θ = 6 cm, p = 5 cm (kept as the cap) caught 284 of 664 spikes of
-2–10 cm on CMU 85_02 with 2 mm jitter (``occlusion`` noise, seed 0); the defaults catch
-all 664 with 3 false alarms (HDM05: 3511 of 3511, 15 false). Untrusted samples are made
-missing (default), replaced by the smooth (eq. 20) or only reported. Gross errors are
-untrusted before the smoothing starts: a sample further from its marker's median position
-than 20 times its marker's or the capture's extent, and than 100 m (:data:`GROSS_EXTENT`),
-or further than 1 m (and 20 median steps) from the median of its marker's samples within
-±0.1 s (:data:`LOCAL_GROSS_M`). Left in, one such value (a corrupt field) steered the first
-robust smooth: 1 km off, its whole marker came out untrusted; 5-50 m off, 28-252 samples
-around it.
+(eq. 11–12, Welsch weights, smoothing parameter by GCV, eq. 16–18;
+:func:`mocapfix.solvers.dct.robust_smooth`) and a sample is untrusted when its 3-D
+distance to the smooth exceeds ``θ`` (eq. 19) or the reader gave it a low confidence.
+``θ`` is ``threshold`` robust standard deviations of the marker's residual, clipped to
+[``min_threshold``, ``max_threshold``]. Gross errors (a corrupt field metres off) are
+untrusted before the smoothing starts. Untrusted samples are made missing (default),
+replaced by the smooth (eq. 20) or only reported.
 
-``tsmc`` (Algorithm 2): with the channels as rows and scaled to cm,
+``tsmc`` (Algorithm 2): with the channels as rows and scaled to cm, the model of eq. 8/21
 
     min ||Y||_* + α ||Ω∘E||_1 + β/2 ||M O||_F²   s.t.  Y + E = X,  Y = M,
 
 solved by the inexact augmented Lagrange multiplier method (singular value thresholding
-for Y with the shared :func:`mocapfix.solvers.lowrank.svt` (through the C×C Gram matrix),
-masked soft-thresholding for E, the DCT solve of :mod:`mocapfix.solvers.dct` for M).
-Ω is "observed and confident". What X is (``prior``):
+for Y with :func:`mocapfix.solvers.lowrank.svt`, masked soft-thresholding for E, the DCT
+solve of :mod:`mocapfix.solvers.dct` for M). Ω is "observed and confident". With
+``prior: pca`` (default) X is each marker's deviation from its PPCA prediction by the
+other markers of the same frame; ``prior: none`` is the paper's model. Fills that leave
+the capture volume or jump more than ``max_step`` × the marker's largest step are left
+missing.
 
-- ``prior: pca`` (default) — each marker's deviation from its prediction by the other
-  markers of the same frame: the untrusted/missing samples are pre-filled by
-  ``fill_pca``, every frame is rigidly aligned to the mean shape (Procrustes on all
-  markers), a probabilistic PCA (95 % of the variance) is fitted, and each marker is
-  predicted from the others by the Gaussian conditional mean
-  (:func:`mocapfix.solvers.lowrank.leave_block_out_residual`). TSMC completes the
-  residual field; the fill is prediction + completed residual. Measured on the gap-free
-  C3D captures with the ``occlusion`` protocol (seed 0; ratio to the PCA-fill pipeline
-  spikes → fill_pca → PCHIP → Butterworth): HDM05 gaps 0.73, mixed 0.73, noise 0.86;
-  85_02 (breakdance) gaps 0.98, mixed 0.96, noise 0.94. The completion does real work:
-  with the completed residual set to zero (prediction + bridging only) HDM05 gaps were
-  2.37 mm instead of 1.25. On skeleton joints with isolated missing samples it is the
-  wrong choice: ``feng2014`` on CMU AMC (benchmarks/results/tsmc.md), 40 % missing at random,
-  1.50 cm against 0.28 with ``prior: none`` (the per-frame prediction from the other
-  joints, themselves often pre-filled, is rougher in time than the joint's own
-  neighbours).
-- ``prior: none`` — the paper's model: the channels themselves, centred on the mean of
-  their gap-bridged version, in a moving body frame (``frame: body``). It beats plain SVT
-  in every ``feng2014`` setting, as the paper reports, and every interpolation pipeline
-  on optical gaps, but fills long gaps 1.7–3.6× worse than PCA fill: the
-  nuclear-norm completion of a whole-marker gap shrinks it toward the mean, where the
-  PPCA conditional mean regresses it on the other markers. Tried and measured without
-  effect: debiasing the singular values, hard rank-r refits, truncated nuclear norm
-  (top 3–20 singular values unpenalised), β from 0 to 30, γ from 1.1 to 1.5, longer
-  bridging.
-
-Other changes to the paper, each measured with the ``occlusion`` scenarios:
-
-- β = 3 instead of 100 (less smoothing: HDM05 gaps 1.9 vs 6.3 mm with ``prior: none``);
-- missing samples take the model plus its offset from the samples bounding the gap,
-  fading with ``bridge`` (0.2 s): no jump at the seams (with ``prior: none`` on 40 %
-  random missing samples of CMU 05_01: 1.39 mm against 1.67 mm without it, seeds 0/1;
-  with the PCA prior it changes the occlusion results by < 1.5 %);
-- observed samples are kept, or (``observed: auto``) smoothed per channel with a
-  GCV-chosen strength when the channel's noise estimate exceeds ``noise_floor``; when
-  every sample is trusted the completion is skipped (it would return the data);
-- both ends are padded with missing frames (to a length with no prime factor above 5,
-  where the DCT is fastest) so the repeated-border condition of O does not flatten the
-  fill at the ends of the capture;
-- γ = 1.5, tol = 1e-2: 23 iterations instead of ~95 at γ = 1.1, tol = 1e-3, within ±7 %
-  on every occlusion case with ``prior: none`` (85_02 gaps +7 %, HDM05 gaps −11 %), and
-  the same to 3 decimals as tol = 3e-3 with ``prior: pca``;
-- fills outside the capture volume are rejected (:func:`mocapfix.solvers.segments.implausible_runs`) and
-  frames with fewer than ``min_observed`` (0.2) of the markers trusted are not filled, as
-  in ``fill_pca`` (0.5 there: 0.5 left 23 % of ``feng2014`` mixed unfilled);
-- so is a filled run that, joined to the samples around it, moves further from one frame
-  to the next than ``max_step`` (3) × the marker's largest step between trusted samples
-  (:func:`mocapfix.solvers.segments.discontinuous_runs`): where a group of markers leaves
-  the volume at once the PCA prior changes its mind, and on c3d.org s04 and s09 the
-  default filled the first 11 / 33 frames of a foot marker's trailing gap 558 / 622 mm from
-  its last sample (11–12× its largest step; 29 cm under the floor on s09). Those runs are
-  now left missing and counted in ``rejected_samples``; the gaps of
-  benchmarks/versus_peers.py, which ``fill_ensemble`` fills before, are not affected.
+What we changed from the paper (the PCA prior, β = 3, gap bridging, padding, γ and tol,
+the rejected fills) and the measurements behind each: docs/methods/tsmc.md.
 """
 from __future__ import annotations
 

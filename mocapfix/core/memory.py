@@ -1,32 +1,18 @@
 """Process memory policy of the command-line tool: freed heap memory stays in the process
 while a file is cleaned, and goes back to the system between files.
 
-glibc serves a large allocation by a fresh ``mmap`` (above a threshold that adapts up to
-32 MB) and hands the top of the heap back to the system once more than a trim threshold is
-free. The solvers allocate and free arrays of a few MB in every iteration — the PCA
-imputation's EM step (300 steps on a 2,305 × 68-marker capture), the gap models' fits —
-and when two such arrays are alive at once the heap grows and is trimmed again on every
-step, so each step writes to fresh pages and pays a page fault per 4 KB. Measured on the
-2-core VM this project runs on: ``X[rows] - mean`` for a 2,305 × 204 matrix 8.5 ms, 0.56 ms
-with the freed memory kept; the default clean of ``numediart_03_rolling.c3d`` 9.7–10.7 s
-against 12.8–14.6 s (the same settings given as MALLOC_* environment variables, two
-alternating runs each), peak RSS 200 → 235 MB. docs/benchmarks.md ("Speed") has the CLI timings.
-
-An earlier ``mocapfix/allocator.py`` (32 MB mmap, 128 MB trim threshold, set where a batch
-ran its tasks) was removed in commit 12cd8a4: on the 4,500-frame case of
-``benchmarks/clean_speed.py`` it gave a wall ratio of 0.97 in nine alternating runs. Re-measured
-with this module (whole ``mocapfix clean`` runs, with and without the policy in turn):
-4,500 frames paired wall ratio 0.80–0.95 (median 0.90, six pairs), 18,000 frames 0.84–1.02
-(median 0.99), and the capture where it matters, numediart (215 gaps, 300 EM steps),
-12.3–13.1 s against 14.5–17.7 s, system time 1.0–1.1 s against 2.9–4.0 s (three pairs).
-
+glibc serves a large allocation by a fresh ``mmap`` and hands the top of the heap back to
+the system once more than a trim threshold is free; solvers that allocate and free arrays
+of a few MB in every iteration then pay a page fault per 4 KB on every step.
 :func:`retain_freed_memory` sets ``M_MMAP_THRESHOLD`` (256 MB) and ``M_TRIM_THRESHOLD``
-(1 GB; 32 MB where an older glibc refuses more) with glibc's ``mallopt``; :func:`release_freed_memory` (``malloc_trim``) returns
-what is free after each file of a batch. Both do nothing on other C libraries (macOS,
-Windows, musl) and in processes that did not ask: the CLI and the process-pool workers
-mocapfix starts call :func:`retain_freed_memory`; importing mocapfix changes nothing in
-the calling process, and Dask workers (not ours) are left as they are.
-Written here because no maintained package exposes ``mallopt``; ``ctypes`` reaches it.
+(1 GB; 32 MB where an older glibc refuses more) with glibc's ``mallopt``;
+:func:`release_freed_memory` (``malloc_trim``) returns what is free after each file of a
+batch. Both do nothing on other C libraries (macOS, Windows, musl) and in processes that
+did not ask: the CLI and the process-pool workers mocapfix starts call
+:func:`retain_freed_memory`; importing mocapfix changes nothing in the calling process,
+and Dask workers (not ours) are left as they are. Written here because no maintained
+package exposes ``mallopt``; ``ctypes`` reaches it. The measurements behind the policy:
+docs/architecture.md, "Threads and memory".
 """
 from __future__ import annotations
 

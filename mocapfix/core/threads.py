@@ -5,14 +5,9 @@
   on N cores only adds contention (issue 13 measured 16 OpenBLAS threads per worker on a
   16-core machine).
 - For a single file (or ``-j 1``, which cleans in the calling process) the limit is
-  :data:`SINGLE_FILE_THREADS`, measured with the default pipeline, 1 against 2 OpenBLAS
-  threads, three alternating runs each on a loaded 2-core machine: the 2.8 MB HDM05 C3D
-  (``shared/data/c3d/hdm05_HDM_mm_01-02_03_120.c3d``) 5.0/6.2/7.2 s against 6.3/4.4/5.8 s,
-  the bundled ``sample_data/walk_markers.c3d`` 0.94/0.98/1.00 s against 0.95/1.41/0.99 s:
-  no gain beyond the run-to-run spread (the decompositions are of C x C matrices with
-  C = 3 x markers, and the solvers that matter hold BLAS to one thread themselves,
-  :func:`mocapfix.solvers.lowrank.blas_single_thread`), so one. ``MOCAPFIX_BLAS_THREADS``
-  overrides it for a single-process run (capped at the cores available).
+  :data:`SINGLE_FILE_THREADS` (one: two measured no faster, see docs/architecture.md,
+  "Threads and memory"); ``MOCAPFIX_BLAS_THREADS`` overrides it for a single-process run
+  (capped at the cores available).
 - Never more threads than cores available to the process.
 
 The limits are set with ``threadpoolctl`` (a runtime dependency) for the whole process,

@@ -57,10 +57,10 @@ is the source's).
 Why hand-written instead of bvhio
 ---------------------------------
 bvhio (a dependency, used by the tests as an independent reference) loops forever on a
-file whose ``Frames:`` count exceeds the lines present, works in float32 (glm), and its
-hierarchy API takes seconds for thousands of frames. Here the hierarchy is parsed by a
-small tokenizer (an explicit stack, no recursion) and the motion block by one numpy
-conversion of all tokens, then reshaped; FK is the vectorised :class:`kinematics.Rig`.
+truncated file and is slow on long takes (docs/formats.md, "Why the readers are
+hand-written"). Here the hierarchy is parsed by a small tokenizer (an explicit stack, no
+recursion) and the motion block by one numpy conversion of all tokens, then reshaped; FK
+is the vectorised :class:`kinematics.Rig`.
 """
 from __future__ import annotations
 

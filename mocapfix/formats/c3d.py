@@ -27,20 +27,9 @@ What is handled
 
 Why hand-written instead of py-c3d (``c3d`` package)
 -----------------------------------------------------
-py-c3d 0.6 was measured against the shared files: its Reader asserts on a header scale
-that disagrees with POINT:SCALE (MACsample.c3d), crashes on OptiTrack's label record
-without description byte (mocap36.c3d), fails in ``read_frames`` on a scalar ANALOG:SCALE
-(kineticstoolkit racing file: "SCALE: cannot get value as float32 array"; POINT:SCALE
-itself is a normal float there), reads only POINT:LABELS (the LABELS2 patch,
-EmbodiedCognition/py-c3d PR #47, was closed unmerged), and ``read_frames`` is a Python
-loop per frame (it does stop at end of file, so it cannot hang). Its Writer re-lays out
-the parameter section (rewrites DATA_START, adds TRIAL and ANALOG parameters), re-encodes
-analog data through float scales, truncates int16 coordinates instead of rounding,
-writes stale coordinates for invalid points and refuses to copy DEC/MIPS metadata
-(``to_writer`` raises ValueError); ``to_writer('copy_metadata')`` + ``add_frames`` on
-pc_real.c3d gives a 5 KiB larger, not byte-identical file. The C3D layout is
-small (512-byte header, a linked list of parameter records, fixed-size frame records), so
-this module parses it directly with bounded loops and reads the data block with one
+py-c3d fails on several shared files and cannot write back changed samples only
+(measured: docs/formats.md, "Why the readers are hand-written"); the C3D layout is small,
+so this module parses it directly with bounded loops and reads the data block with one
 ``numpy.frombuffer`` per file. py-c3d is still used by the tests as an independent reader
 of the files written here.
 

@@ -58,14 +58,10 @@ Writing:
     source holds: unlabelled columns) feed :func:`mocapfix.formats.losses`, which
     ``mocapfix convert`` prints.
 
-Why hand-written: TRC is a small tab-separated text layout. Of the PyPI packages that
-read it, ``trc-data-reader`` (one maintainer) parses token by token into a dict of
-per-frame lists and saves files anew: it keeps nothing of the text, so it cannot give the
-byte-identical, change-only write-back above; ``pyomeca`` and ``kineticstoolkit`` are whole analysis
-toolkits (xarray/pandas stacks) for one text layout; ``opensim`` is a 72 MB wheel of C++
-bindings (~280 MB installed) that refuses files real exporters write (rows longer than
-the labels, as in ``btk_Gait.trc``). None is a runtime dependency; OpenSim's reader is
-the tests' independent check of the files we write (dev extra).
+Why hand-written: TRC is a small tab-separated text layout, and no package that reads it
+keeps the text for a change-only write-back (docs/formats.md, "Why the readers are
+hand-written"). OpenSim's reader is the tests' independent check of the files we write
+(dev extra).
 """
 from __future__ import annotations
 

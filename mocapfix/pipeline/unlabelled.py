@@ -3,66 +3,30 @@ set, which the pipeline passes through instead of rebuilding.
 
 An optical system reconstructs every reflection it sees. The trajectories its labelling
 assigns to the marker set take the set's names; the others, when the export keeps them,
-take a placeholder name and come and go as the tracker picks them up (a stray reflection,
-a marker seen for a few frames). Filled like markers they became invented paths over the
-whole take: a Vicon trial's five ``*N`` trajectories, each seen on one frame, were filled
-over its 2.85 s (confidence 0.00), written with residual 0 so that every other tool reads
-them as measured, and failed the file's grading although its 61 named markers were
-complete. They are also no donors: a filler rebuilding a named marker from them rebuilds
-it from noise.
+take a placeholder name and come and go as the tracker picks them up. Filled like markers
+they became invented paths over the whole take, written as if measured; and they are no
+donors: a filler rebuilding a named marker from them rebuilds it from noise.
 
 Recognised (:meth:`Unlabelled.reasons`):
 
-- **by name** (:data:`NAME_CONVENTIONS`, whole label, a subject prefix ``Subject:`` allowed):
-
-  - Vicon ``*N`` (``*3``, ``Matt:*12``): Vicon names the trajectories its labelling left
-    unlabelled ``*`` and a number. The HDM05 C3D files carry three (``*0``, ``*1``,
-    ``*2`` in ``c3d/hdm05_HDM_mm_01-02_03_120.c3d`` of the shared data: exact copies of
-    LFHD, CLAV and LFWT), which a public HDM05 loading script removes
-    (``removeMarkers012``: "Remove markers *0, *1, *2 from the C3D struct");
-    haripen/rmC3DPoints removes "all labels (with their data) labeled with prefix *" from
-    C3D files with ezc3d for the same reason.
-  - Qualisys QTM ``Unidentified N``: QTM's trajectory windows label what AIM did not
-    identify "always Unidentified and Discarded followed by a sequential number"
-    (docs.qualisys.com, QTM manual, *Data in Trajectory info windows*); its C3D export
-    keeps them unless "exclude unidentified trajectories" is ticked (the export steps in
-    Aza-Spearal/Automatic_3D-Trajectory_labeling, Builder/README.md). Discarded
-    trajectories are not exported and are not matched.
-  - OptiTrack Motive ``Unlabeled N``: Motive lists the markers no asset labelled as
-    unlabeled (docs.optitrack.com, *Labels pane*) and gives each an id: public readers of
-    Motive exports find them as ``Unlabeled:10081`` (take files), ``Unlabeled:140``
-    (CSV columns, read by ``name.startswith('Unlabeled')``); Motive assigns a new id
-    each time a stray marker reappears (ha5dzs/optitrack-motive-file-converter issue 4:
-    "1000+ reported markers from a 6-marker set-up"). ``Unlabeled 1001``,
-    ``Unlabeled:1001``, ``Unlabeled_1001`` and ``Unlabeled1001`` are matched (the
-    separator differs between Motive's exports), as is the British ``Unlabelled``.
-
-  The words are matched in any case; the number is required (a marker named
-  ``Unlabeled`` alone is left to the seen-share rule).
-
+- **by name** (:data:`NAME_CONVENTIONS`, whole label, a subject prefix ``Subject:``
+  allowed, the words in any case, the number required): Vicon ``*N`` (``*3``,
+  ``Matt:*12``), Qualisys QTM ``Unidentified N``, OptiTrack Motive ``Unlabeled N``
+  (``Unlabeled 1001``, ``Unlabeled:1001``, ``Unlabeled_1001``, ``Unlabeled1001``, and the
+  British ``Unlabelled``);
 - **by how little it is seen**: a point seen on at least one frame but on fewer than
   ``min_seen`` (default :data:`MIN_SEEN`, 10 %) of the frames of the take (the frames
-  from the first to the last on which a marker is seen, as the report counts them).
-  Rebuilt from so little, a trajectory is more model than measurement (the report's
-  ``uncertain`` figure of such a fill is above 90 %). A point never seen is not caught: it
-  is a marker of the set with no data at all (a marker that fell off, a probe point of
-  another trial), which the ``never_seen`` rule of ``check`` and the clean report's
-  grading are there to report.
+  from the first to the last on which a marker is seen, as the report counts them). A
+  point never seen is not caught: the ``never_seen`` rule of ``check`` and the clean
+  report's grading report it.
 
-  Measured on the 25 C3D files of the shared data (take frames, markers only): the rule
-  catches one marker, ``Sternum`` of ``c3d/ktk_racing_full.c3d`` (seen on 21 of 700
-  frames, 3.0 %). The next-least-seen markers that are seen at all are far above the
-  threshold: ``LR_FME`` (17.8 %) and ``LR_FM5`` (17.9 %) of
-  ``c3d/numediart_03_rolling.c3d``, then 34-46 % (numediart, ``c3d/ezc3d_BTS.c3d``'s
-  ``r heel``, ``c3d/c3dorg_s28_dynamic.C3D``'s pelvis markers, ktk racing's ``NAR``).
-  By name, only HDM05's ``*0``, ``*1``, ``*2`` match (each seen on every frame).
+The vendors' documentation for each naming convention, and what the rules catch on the
+shared data: docs/configs.md, "Unlabelled trajectories are not markers".
 
 Only for trajectory data: a motion whose points are the joints of a skeleton (a BVH/AMC
 rig, a Kinect body: ``Motion.rig`` or ``Motion.skeleton`` set) has no unlabelled
-trajectories. Its tracker or solver reports every joint of its model by name, and a
-joint missing most of the take is still a joint of the body, rebuilt from its bones. The
-decision is made here, on the Motion, not in a reader, so any reader of marker data
-(C3D now, TRC or vendor CSV later) gets it.
+trajectories. The decision is made here, on the Motion, not in a reader, so any reader
+of marker data gets it.
 
 Policy (:class:`Unlabelled`): by default such trajectories are not cleaned (not filled,
 smoothed or flagged), are no donors for the fillers (the cleaners never see them, see

@@ -1,6 +1,6 @@
 """The stages of the depth-sensor skeleton cleaner, as kernels on arrays (positions in
-metres, (T, J, 3), NaN = missing). The method, with the measurements behind each choice,
-is described stage by stage in :mod:`mocapfix.cleaners.depth_skeleton`, which runs them:
+metres, (T, J, 3), NaN = missing), run in order by :mod:`mocapfix.cleaners.depth_skeleton`;
+the method, with the measurements behind each choice: docs/methods/kinect_skeleton.md.
 
 1. :func:`repair_leg_swaps` (:func:`leg_swap_frames`: two-state Viterbi on the leg chains'
    path lengths);

@@ -151,28 +151,10 @@ def recurring(X: np.ndarray, mask: np.ndarray, *, side: int = 4, ratio: float = 
       a straight line through those samples removed — lies within ``context`` times its
       own size of the shape around the run.
 
-    The last test keeps glitches alike in amplitude from clearing each other: on a still
-    or unrelated background they find no such match (the rotations protocol with spikes
-    on 15 % of the frames, 16 files, 2 seeds: what rotation_outliers leaves 0.040 of the
-    spikes' error without the recurrence test, 0.086 with the first two tests alone,
-    0.041 with the third comparing mean-removed surroundings, 0.040 with the line
-    removed as here — a smooth drift made glitches on alike slopes match). Measured
-    (threshold 16, the 16 shared BVH/AMC files): joint-frames re-made on the clean files
-    510 → 440 (the 30 Hz Bandai walk, one toe re-made at every toe-off: 27 → 8, the rest
-    within a cycle of the ends), and what the protocol's spikes (2 % of the frames, 3
-    seeds) leave the same or lower on every file (90_31 0.159 → 0.105). Not
-    covered: glitches dense in a channel whose motion is strictly periodic — alike in
-    size, at the same phase of alike cycles, they pass all three tests (a synthetic
-    0.5 Hz sine under a slow drift, 18,000 samples × 120 channels with spikes on 1 % of
-    the samples: four in five cleared).
-
-    Only windows within ``reach`` frames of the run are compared (:data:`REACH`: a
-    recurrence a minute away says little more than one within 50 s, and comparing every
-    run with the whole channel made the test quadratic in the take's length: a 0.5 Hz
-    sine at 120 Hz, 40 channels, spikes on 1 % of the samples, 18,000 → 54,000 frames took
-    1.3 → 24 s; now 54,000 → 108,000 frames take 6.2 → 11.4 s). The deviations of every
-    window are computed once per channel and run length, and each run compares the
-    windows within its reach, so the cost grows linearly with the take."""
+    The last test keeps glitches alike in amplitude from clearing each other. Only
+    windows within ``reach`` frames of the run are compared (:data:`REACH`), so the cost
+    grows linearly with the take. Measurements and the known limit (dense glitches on
+    strictly periodic motion): docs/methods/rotations.md."""
     X = linear_bridge(np.asarray(X, dtype=np.float64))
     T = X.shape[0]
     out = mask.copy()
