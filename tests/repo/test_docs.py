@@ -167,6 +167,8 @@ def test_the_readme_setup_commands_are_what_ci_runs():
     assert "pip install . && mocapfix clean sample_data -o cleaned --report json,md,html" in setup
     assert "pip install -e '.[dev]' && python -m pytest -q" in setup
     assert "pip install -q -e '.[dev]' && python -m pytest -q" in ci
+    assert "pip install -q . && " in ci
+    assert "mocapfix clean sample_data -o cleaned --report json,md,html" in ci
 
 
 def test_troubleshooting_names_every_public_error_class():
