@@ -15,7 +15,8 @@ from mocapfix.core.errors import UnreadableFileError
 from mocapfix.core.fileio import NAME_MAX, atomic_write_text, is_stream, refuse_stream
 from mocapfix.core.motion import Motion
 from mocapfix.pipeline.steps import Pipeline, StepRecord, written_fill_errors
-from mocapfix.pipeline.windows import Windows, merge_info, paste, point_cuts, shifted_info, window_for
+from mocapfix.pipeline.windows import (Windows, merge_info, over_budget, paste, point_cuts,
+                                       shifted_info, window_for)
 from mocapfix.quality.render import ranked
 from mocapfix.quality.report import CleanResult, build_report, to_html, to_json, to_markdown
 from mocapfix.pipeline.selection import own_channels
@@ -126,11 +127,15 @@ def _clean_windowed(motion: Motion, pipeline: Pipeline, why: list, windows: Wind
                                   mask["filled"], mask["flagged"], mask["moved"],
                                   merged if skipped is None else head.info, skipped,
                                   mask["replaced"]))
-    note = (f"cleaned in {len(cuts) - 1} windows of {windows.frames} frames with "
-            f"{windows.overlap} frames of overlap (memory_budget)")
+    notes.append(f"cleaned in {len(cuts) - 1} windows of {windows.frames} frames with "
+                 f"{windows.overlap} frames of overlap (memory_budget)")
+    heavy = over_budget(pipeline.memory_budget, T, J)
+    if heavy:
+        notes.append(heavy)
     cleaned = motion.replace(positions=positions, confidence=confidence, channels=channels,
-                             notes=[*notes, note])
-    return cleaned.replace(fill_errors=written_fill_errors(cleaned, records)), records, residual
+                             times=motion.times, notes=notes)
+    cleaned.fill_errors = written_fill_errors(cleaned, records)   # in place: no copy of the take
+    return cleaned, records, residual
 
 
 def report_paths(output: Path, kinds) -> dict[str, Path]:

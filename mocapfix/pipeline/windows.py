@@ -41,7 +41,7 @@ WORKING_BYTES_PER_SAMPLE = 800
 TAKE_BYTES_PER_SAMPLE = 150
 #: context each side of a window (s), and the shortest window a budget may ask for (s)
 OVERLAP_S = 6.0
-MIN_WINDOW_S = 60.0
+MIN_WINDOW_S = 30.0
 
 _BYTES = {"b": 1, "kb": 1e3, "mb": 1e6, "gb": 1e9, "kib": 1024, "mib": 1024 ** 2,
           "gib": 1024 ** 3}
@@ -87,18 +87,30 @@ class Windows:
 
 
 def window_for(budget: int | None, n_frames: int, n_joints: int, fps: float) -> Windows | None:
-    """The windows a take of ``n_frames × n_joints`` needs to keep to ``budget`` bytes
-    (None: it fits whole). What the whole take costs is taken first; the rest is for the
-    cleaners' working memory of a window, of at least :data:`MIN_WINDOW_S`."""
+    """The windows a take of ``n_frames × n_joints`` is cleaned in under ``budget`` bytes
+    (None: it fits whole): half the budget for the cleaners' working memory of one window
+    (with its overlap), at least :data:`MIN_WINDOW_S`; the other half for what the whole
+    take costs (the budget cannot bound that: :func:`over_budget` says when it is more).
+    The windows do not depend on the take's length, so time grows linearly with it."""
     if budget is None or n_frames * n_joints == 0:
         return None
     if n_frames * n_joints * (WORKING_BYTES_PER_SAMPLE + TAKE_BYTES_PER_SAMPLE) <= budget:
         return None
     overlap = max(round(OVERLAP_S * fps), 16)
-    room = budget - n_frames * n_joints * TAKE_BYTES_PER_SAMPLE
-    frames = int(room // (n_joints * WORKING_BYTES_PER_SAMPLE)) - 2 * overlap
+    frames = int(budget / 2 // (n_joints * WORKING_BYTES_PER_SAMPLE)) - 2 * overlap
     frames = max(frames, round(MIN_WINDOW_S * fps), 2 * overlap)
     return None if frames >= n_frames else Windows(frames, overlap)
+
+
+def over_budget(budget: int | None, n_frames: int, n_joints: int) -> str | None:
+    """A note when the whole take's arrays alone (:data:`TAKE_BYTES_PER_SAMPLE`) need more
+    than half of ``budget``: windows bound the cleaners, not those."""
+    need = n_frames * n_joints * TAKE_BYTES_PER_SAMPLE
+    if budget is None or need <= budget / 2:
+        return None
+    return (f"the take's own arrays need about {need / 1e9:.1f} GB, more than half the "
+            f"memory_budget ({budget / 1e9:g} GB): the windows bound the cleaners' memory, "
+            "not the take's")
 
 
 def point_cuts(missing: np.ndarray, cuts: list[int], overlap: int) -> np.ndarray:

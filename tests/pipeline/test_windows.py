@@ -10,8 +10,8 @@ from mocapfix.cleaning import clean_motion
 from mocapfix.config import load_config, loads_config
 from mocapfix.core.errors import ConfigError
 from mocapfix.core.presets import resolve_config
-from mocapfix.pipeline.windows import (MIN_WINDOW_S, Windows, merge_info, parse_memory_budget,
-                                       point_cuts, window_for)
+from mocapfix.pipeline.windows import (MIN_WINDOW_S, Windows, merge_info, over_budget,
+                                       parse_memory_budget, point_cuts, window_for)
 from mocapfix.quality.report import build_report
 from tests.conftest import shared
 
@@ -50,6 +50,9 @@ def test_window_for_budget():
     bigger = window_for(3 * 10 ** 9, 100_000, 41, 120.0)
     smaller = window_for(15 * 10 ** 8, 100_000, 41, 120.0)
     assert bigger.frames > smaller.frames                          # more budget, longer windows
+    assert window_for(10 ** 9, 50_000, 41, 120.0) == window_for(10 ** 9, 500_000, 41, 120.0)
+    assert over_budget(10 ** 9, 4500, 41) is None
+    assert "need about 3.1 GB" in over_budget(10 ** 9, 500_000, 41)
 
 
 def test_cuts_join_a_short_last_window():
