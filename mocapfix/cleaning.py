@@ -102,17 +102,19 @@ def _clean_windowed(motion: Motion, pipeline: Pipeline, why: list, windows: Wind
         notes += [n for n in part.notes if n not in notes]
         if not masks:
             heads = records
-            # float32 distances: the report gives their mean to 6 digits; half the memory
+            # of the distances moved only their sum is kept (the report gives the mean)
             masks = [{"filled": np.zeros((T, J), bool), "flagged": np.zeros((T, J), bool),
-                      "moved": np.zeros((T, J), np.float32), "replaced": None} for _ in records]
+                      "moved": 0.0, "replaced": None} for _ in records]
             infos = [[] for _ in records]
         for rec, mask, info in zip(records, masks, infos):
             info.append((shifted_info(rec.info, lo, start, stop, motion.names), rec.seconds,
                          rec.skipped))
             if rec.skipped:
                 continue            # nothing to paste: its masks stay zero pages, never touched
-            for key in ("filled", "flagged", "moved"):
+            for key in ("filled", "flagged"):
                 paste(mask[key], getattr(rec, key), lo, start, stop)
+            mask["moved"] += sum(float(rec.moved[a - lo:b - lo, j].sum())
+                                 for j, (a, b) in enumerate(zip(start.tolist(), stop.tolist())))
             if rec.replaced is not None:
                 if mask["replaced"] is None:
                     mask["replaced"] = np.zeros((T, J), bool)
@@ -124,9 +126,9 @@ def _clean_windowed(motion: Motion, pipeline: Pipeline, why: list, windows: Wind
         merged["windows"] = len(info)
         skipped = skipped.pop() if len(skipped) == 1 else None
         records.append(StepRecord(head.step, head.cleaner, sum(s for _, s, _ in info),
-                                  mask["filled"], mask["flagged"], mask["moved"],
+                                  mask["filled"], mask["flagged"], np.zeros((0, J)),
                                   merged if skipped is None else head.info, skipped,
-                                  mask["replaced"]))
+                                  mask["replaced"], moved_mean=mask["moved"] / (T * J)))
     notes.append(f"cleaned in {len(cuts) - 1} windows of {windows.frames} frames with "
                  f"{windows.overlap} frames of overlap (memory_budget)")
     heavy = over_budget(pipeline.memory_budget, T, J)

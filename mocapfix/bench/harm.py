@@ -79,11 +79,13 @@ METRICS = [("max_mm", "max mm", 1), ("p999_mm", "99.9th pct mm", 2), ("rms_mm", 
 
 def clean(method, motion: Motion):
     """The :class:`~mocapfix.quality.measure.CleanResult` of ``method`` (a
-    :class:`mocapfix.bench.Method`) on ``motion`` as ``mocapfix clean`` makes it."""
+    :class:`mocapfix.bench.Method`) on ``motion`` as ``mocapfix clean`` makes it, whole (the
+    per-sample displacements each step made are kept only then)."""
     from mocapfix.cleaning import clean_motion
     from mocapfix.pipeline.steps import Pipeline
 
-    return clean_motion(motion, method.pipeline if method.pipeline is not None else Pipeline([]))
+    return clean_motion(motion, method.pipeline if method.pipeline is not None else Pipeline([]),
+                        windows=None)
 
 
 def _moved_by(motion: Motion) -> list[np.ndarray]:

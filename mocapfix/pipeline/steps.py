@@ -346,6 +346,15 @@ class StepRecord:
     info: dict
     skipped: str | None = None
     replaced: np.ndarray | None = None
+    #: the mean of ``moved`` over every sample, where ``moved`` is not kept (a take
+    #: cleaned in windows: :mod:`mocapfix.pipeline.windows`; ``moved`` is then empty)
+    moved_mean: float | None = None
+
+    def mean_moved(self) -> float:
+        """The mean displacement over every sample of the take (file units)."""
+        if self.moved_mean is not None:
+            return self.moved_mean
+        return float(np.mean(self.moved)) if self.moved.size else 0.0
 
     @property
     def outliers(self) -> np.ndarray:

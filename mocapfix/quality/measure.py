@@ -510,7 +510,7 @@ def measure_cleaning(result: CleanResult) -> dict:
     _mark_outside_take(file, span, T)
     steps = [{"step": r.step, "cleaner": r.cleaner, "seconds": finite(r.seconds),
               "filled": int(r.filled.sum()), "flagged": int(r.outliers.sum()),
-              "moved_mean_mm": finite(np.mean(r.moved) * mm) if r.moved.size else 0.0,
+              "moved_mean_mm": finite(r.mean_moved() * mm),
               **({"skipped": r.skipped} if r.skipped else {}), "info": r.info,
               **_judged_wrong(r, before.names)}
              for r in records]
