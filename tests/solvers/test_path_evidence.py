@@ -47,3 +47,4 @@ def test_runs_judged_together_get_the_answers_of_runs_judged_alone():
         kept += int(got.sum())
         dropped += int((mask & ~got).sum())
     assert kept and dropped          # both answers occur
+
