@@ -28,8 +28,7 @@ import numpy as np
 
 from mocapfix import api
 from mocapfix.batch.discovery import discover_inputs
-from mocapfix.core.threads import (blas_threads, limit_blas, set_task_threads,
-                                   single_process_task_threads)
+from mocapfix.core import threads
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 #: most a file may cost per sample, in medians of the set
@@ -82,9 +81,9 @@ def main() -> int:
     ap.add_argument("--data", type=Path, default=DATA)
     ap.add_argument("--repeat", type=int, default=1)
     args = ap.parse_args()
-    blas = blas_threads(1)
-    limit_blas(blas)
-    set_task_threads(single_process_task_threads(blas))
+    blas = threads.blas_threads(1)
+    threads.limit_blas(blas)
+    threads.set_task_threads(threads.single_process_task_threads(blas))
     files = captures(args.data)
     clean_seconds(list({p.suffix.lower(): p for p in reversed(files)}.values()))   # warm-up
     runs = [clean_seconds(files) for _ in range(max(1, args.repeat))]
