@@ -92,6 +92,14 @@ class _OneLineErrors(click.Group):
             click.echo(printable(f"mocapfix: error: {message}"), err=True)
             sys.exit(EXIT_SOME_FAILED)
 
+    def get_command(self, ctx, name):
+        if name == "bench" and name not in self.commands:
+            _register_bench()
+        return super().get_command(ctx, name)
+
+    def list_commands(self, ctx):
+        return sorted({*super().list_commands(ctx), "bench"})
+
 
 @click.group(cls=_OneLineErrors, context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(__version__, prog_name="mocapfix")
@@ -738,12 +746,11 @@ _TRAIN_OPTIONS = {False: (("--bases", "bases"), ("--energy", "energy")),
 
 
 def _register_bench():
+    """Add ``bench`` to ``main``: done when it is asked for (:class:`_OneLineErrors`), as
+    its import loads the benchmark package (~30 ms of every other command's start-up)."""
     from mocapfix.bench.cli import bench
 
     main.add_command(bench)
-
-
-_register_bench()
 
 if __name__ == "__main__":  # pragma: no cover
     main()

@@ -60,13 +60,17 @@ def glitches(X: np.ndarray, *, width: int = 7, k: float = 6.0, floor: float = 0.
     return recurring(X, found, side=side)
 
 
+@lru_cache(maxsize=256)
 def _cubic_weights(run: int, side: int) -> np.ndarray:
     """(run, 2·side) weights predicting the ``run`` samples of a gap from a cubic
-    least-squares fit to ``side`` samples on each side of it."""
+    least-squares fit to ``side`` samples on each side of it (read-only, computed once per
+    ``run`` and ``side``: :func:`contradicted_by_path` asks for them once per run)."""
     t_fit = np.r_[np.arange(-side, 0), np.arange(run, run + side)].astype(float)
     t_gap = np.arange(run, dtype=float)
     V = np.vander(t_fit, 4)
-    return np.vander(t_gap, 4) @ np.linalg.pinv(V)
+    weights = np.vander(t_gap, 4) @ np.linalg.pinv(V)
+    weights.flags.writeable = False
+    return weights
 
 
 def confirm(X: np.ndarray, mask: np.ndarray, *, threshold: np.ndarray, side: int = 4,
@@ -255,7 +259,14 @@ def contradicted_by_path(P: np.ndarray, mask: np.ndarray, *, ratio: float = EVID
     # would otherwise stay in both paths and hide what this run's repair does
     context_path = np.where(keep[..., None], repaired, P)
     col, start, length = runs(keep)
-    for j, s, n in zip(col, start, length):
+    cubic = _cubic_runs(context_path, seen, col, start, length, context)
+    for L in np.unique(length[cubic]):
+        sel = cubic & (length == L)
+        contradicted = _cubic_runs_contradicted(P, context_path, col[sel], start[sel], int(L),
+                                                ratio)
+        for j, s in zip(col[sel][~contradicted], start[sel][~contradicted]):
+            keep[s:s + L, j] = False
+    for j, s, n in zip(col[~cubic], start[~cubic], length[~cubic]):
         a, b = max(s - context, 0), min(s + n + context, T)
         before = context_path[a:b, j].copy()
         before[s - a:s - a + n] = P[s:s + n, j]
@@ -271,6 +282,49 @@ def contradicted_by_path(P: np.ndarray, mask: np.ndarray, *, ratio: float = EVID
         if not limb_contradicts(before[:, None], after[:, None], ratio=ratio):
             keep[s:s + n, j] = False
     return keep
+
+
+def _cubic_runs(path: np.ndarray, seen: np.ndarray, col: np.ndarray, start: np.ndarray,
+                length: np.ndarray, context: int) -> np.ndarray:
+    """Which runs :func:`contradicted_by_path` repairs by the cubic through two samples on
+    each side (all four inside the take and present in ``path`` (T, J, 3)) with a window
+    of ``context`` = 2 frames on each side inside the take: the runs
+    :func:`_cubic_runs_contradicted` judges together."""
+    T = len(path)
+    ok = (start - 2 >= 0) & (start + length + 1 < T) & (context == 2)
+    seen_before = np.cumsum(seen, axis=0)                        # samples seen in [0, t]
+    interior = np.zeros_like(ok)
+    interior[ok] = (seen_before[start[ok] - 1, col[ok]] > 0) & \
+        (seen_before[-1, col[ok]] > seen_before[start[ok] + length[ok] - 1, col[ok]])
+    ok &= interior
+    for offset in (-2, -1):
+        ok[ok] &= ~np.isnan(path[start[ok] + offset, col[ok]]).any(axis=1)
+    for offset in (0, 1):
+        ok[ok] &= ~np.isnan(path[start[ok] + length[ok] + offset, col[ok]]).any(axis=1)
+    return ok
+
+
+def _cubic_runs_contradicted(P: np.ndarray, path: np.ndarray, col: np.ndarray,
+                             start: np.ndarray, length: int, ratio: float) -> np.ndarray:
+    """For runs of one ``length`` (points ``col``, first frames ``start``) that
+    :func:`_cubic_runs` selects: whether each one's repair by the cubic through the two
+    samples of ``path`` on each side leaves at most ``ratio`` of the summed squared
+    acceleration of ``P`` over the run and two frames on each side (:func:`limb_contradicts`,
+    the arithmetic of the one-run test done for all runs at once: the same products,
+    differences and row sums, so the same answers bit for bit)."""
+    window = start[:, None] + np.arange(-2, length + 2)
+    before = path[window, col[:, None]]                                  # (R, L + 4, 3)
+    inside = start[:, None] + np.arange(length)
+    before[:, 2:2 + length] = P[inside, col[:, None]]
+    ends = start[:, None] + np.array([-2, -1, length, length + 1])
+    after = before.copy()
+    after[:, 2:2 + length] = np.matmul(_cubic_weights(length, 2), path[ends, col[:, None]])
+    R = len(start)
+    rough_before = np.nansum((np.diff(before, n=2, axis=1) ** 2).reshape(R, -1), axis=1)
+    rough_after = np.nansum((np.diff(after, n=2, axis=1) ** 2).reshape(R, -1), axis=1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        share = np.where(rough_before > 0, rough_after / rough_before, np.inf)
+    return share <= ratio
 
 
 def _cubic_across(x: np.ndarray, start: int, length: int) -> np.ndarray:
