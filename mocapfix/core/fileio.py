@@ -205,6 +205,18 @@ def write_output_text(path, text: str) -> list:
     return [Path(path)]
 
 
+def write_output_pieces(path, pieces) -> list:
+    """:func:`write_output_text` of text given as UTF-8 ``bytes`` pieces, each written as
+    it comes (a long take's output is never held whole)."""
+    try:
+        with atomic_open(path, "wb") as fh:
+            for piece in pieces:
+                fh.write(piece)
+    except OSError as exc:
+        raise _write_error(Path(path), exc) from None
+    return [Path(path)]
+
+
 def read_input_bytes(path) -> bytes:
     """The bytes of an input file; any OS failure or an empty (or whitespace-only) file is
     an :class:`~mocapfix.core.errors.UnreadableFileError` naming the file."""
