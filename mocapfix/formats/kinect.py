@@ -136,6 +136,7 @@ class KinectSource:
     text: TextLines              # the file's bytes and the offsets of its lines
     sep: str | None              # field separator; None = runs of whitespace
     names: list[str]
+    # (read-only broadcast views where a layout's lines all look alike)
     line_of: np.ndarray          # (T, J) line index of each sample; -1: no row (long layout)
     coord_field: np.ndarray      # (T, J, 3) field index of X, Y, Z in its line
     state_field: np.ndarray      # (T, J) field index of the state / confidence; -1: none
@@ -235,7 +236,7 @@ CHUNK = 4096
 
 
 def _parse_rows(path, text: TextLines, idx: np.ndarray, split, n_fields: int, groups,
-                clean: bool = False, label: int | None = None):
+                clean: bool = False, label: int | None = None, plain: bytes | None = None):
     """Split the lines ``idx`` into fields, CHUNK lines at a time, and convert the fields
     of each group of columns (None: every field) into a float array (rows, columns); a
     row without ``n_fields`` fields is left NaN (:func:`_check_counts` then refuses it or
@@ -244,7 +245,12 @@ def _parse_rows(path, text: TextLines, idx: np.ndarray, split, n_fields: int, gr
 
     Returns the field counts, per group (values, the UnreadableFileError of its first
     non-numeric field, or None: raised where the reader used to convert that group), and
-    the label numbers and names."""
+    the label numbers and names.
+
+    ``plain`` (every field wanted, one group): the separator, "," or " " (runs of blanks),
+    of a layout whose blocks of consecutive lines made of digits, signs, points,
+    exponents and separators only are converted by :func:`_plain_block` without
+    splitting them into strings; a block it cannot vouch for is split as above."""
     n = len(idx)
     counts = np.zeros(n, np.intp)
     values = [np.full((n, n_fields if g is None else len(g)), np.nan) for g in groups]
@@ -253,6 +259,12 @@ def _parse_rows(path, text: TextLines, idx: np.ndarray, split, n_fields: int, gr
     labels = np.full(n, -1, np.intp)
     for a in range(0, n, CHUNK):
         at = idx[a:a + CHUNK]
+        if plain and at[-1] - at[0] == len(at) - 1:
+            got = _plain_block(text, at, n_fields, plain)
+            if got is not None:
+                values[0][a:a + len(at)] = got
+                counts[a:a + len(at)] = n_fields
+                continue
         rows = [split(line) for line in text.lines_at(at)]
         c = np.fromiter(map(len, rows), np.intp, len(rows))
         counts[a:a + len(rows)] = c
@@ -285,6 +297,48 @@ def _parse_rows(path, text: TextLines, idx: np.ndarray, split, n_fields: int, gr
                 continue
             values[g][a + good] = got.reshape(len(rows), width)
     return counts, list(zip(values, errors)), (labels, list(numbers))
+
+
+#: the bytes of a plain block (:func:`_plain_block`) besides its separator
+_PLAIN_BYTES = b"0123456789.eE+-\n"
+
+
+def _plain_block(text: TextLines, at: np.ndarray, n_fields: int, sep: str) -> np.ndarray | None:
+    """The (lines, n_fields) values of the consecutive lines ``at`` when every byte of them
+    is one of ``_PLAIN_BYTES``, the separator (``" "``: blanks and tabs) or a CR of a CRLF,
+    every line holds ``n_fields`` fields (a trailing empty one dropped, as
+    :func:`_strip_trailing_empty` does) and ``np.fromstring`` reads each field as one
+    number (the count tells); else None. ``np.fromstring`` parses with Python's own
+    ``PyOS_string_to_double``, so the values are those ``float`` gives."""
+    block = text.raw[int(text.starts[at[0]]):int(text.stops[at[-1]])]
+    keep = _PLAIN_BYTES + (b"," if sep == "," else b" \t")
+    if block.translate(None, keep + b"\r") or block.count(b"\r") != block.count(b"\r\n"):
+        return None
+    if b"\r" in block:
+        block = block.replace(b"\r\n", b"\n")
+    raw = np.frombuffer(block, np.uint8)
+    ends = np.flatnonzero(raw == 10)
+    if len(ends) != len(at) - 1:
+        return None
+    bounds = np.concatenate([ends, [len(raw)]])
+    if sep == ",":
+        commas = np.searchsorted(np.flatnonzero(raw == 44), bounds)
+        trailing = raw[bounds - 1] == 44
+        fields = np.diff(commas, prepend=0) + 1 - trailing
+        if trailing.any():
+            block = block.replace(b",\n", b"\n").removesuffix(b",")
+        block = block.replace(b"\n", b",")
+    else:
+        gap = (raw == 32) | (raw == 9) | (raw == 10)
+        first = np.flatnonzero(~gap & np.concatenate([[True], gap[:-1]]))
+        fields = np.diff(np.searchsorted(first, bounds), prepend=0)
+    if (fields != n_fields).any():
+        return None
+    try:
+        values = np.fromstring(block, sep=sep)
+    except ValueError:
+        return None
+    return values.reshape(len(at), n_fields) if values.size == len(at) * n_fields else None
 
 
 def _kept(parsed, n: int) -> np.ndarray:
@@ -565,7 +619,8 @@ def _state_confidence(states: np.ndarray, missing: np.ndarray) -> np.ndarray:
 def _read_kinect_csv(path, text, idx, notes, layout, fps, units) -> _Parsed:
     names = kl.KINECT_V2 if layout == "kinect_v2_csv" else kl.KINECT_V1
     n = len(names)
-    counts, (parsed,), _ = _parse_rows(path, text, idx, _csv_fields, 1 + 4 * n, [None])
+    counts, (parsed,), _ = _parse_rows(path, text, idx, _csv_fields, 1 + 4 * n, [None],
+                                       plain=",")
     idx, skipped = _check_counts(counts, idx, 1 + 4 * n, path, notes, "values")
     if not len(idx):
         raise UnreadableFileError(path, "no complete data line")
@@ -588,9 +643,9 @@ def _read_kinect_csv(path, text, idx, notes, layout, fps, units) -> _Parsed:
     return _Parsed(
         names=list(names), coords=coords, missing=missing,
         confidence=_state_confidence(states.astype(int), missing),
-        line_of=np.repeat(np.asarray(idx)[:, None], n, axis=1),
-        coord_field=np.broadcast_to(1 + 4 * j[:, None] + np.arange(3), (T, n, 3)).copy(),
-        state_field=np.broadcast_to(4 + 4 * j, (T, n)).copy(), state_kind="tracking",
+        line_of=np.broadcast_to(idx[:, None], (T, n)),
+        coord_field=np.broadcast_to(1 + 4 * j[:, None] + np.arange(3), (T, n, 3)),
+        state_field=np.broadcast_to(4 + 4 * j, (T, n)), state_kind="tracking",
         sep=",", times=times, file_fps=_or_default(file_fps, DEFAULT_FPS, notes),
         skeleton=kl.skeleton_for("kinect_v2" if n == 25 else "kinect_v1"), skip_lines=skipped,
         extra={"ticks0": float(ticks[0])})
@@ -607,7 +662,8 @@ def _or_default(value: float, default: float, notes: list[str]) -> float:
 def _read_utkinect(path, text, idx, notes, layout, fps, units) -> _Parsed:
     names = kl.KINECT_V1
     n = len(names)
-    counts, (parsed,), _ = _parse_rows(path, text, idx, str.split, 1 + 3 * n, [None])
+    counts, (parsed,), _ = _parse_rows(path, text, idx, str.split, 1 + 3 * n, [None],
+                                       plain=" ")
     idx, skipped = _check_counts(counts, idx, 1 + 3 * n, path, notes, "values")
     if not len(idx):
         raise UnreadableFileError(path, "no complete data line")
@@ -630,9 +686,9 @@ def _read_utkinect(path, text, idx, notes, layout, fps, units) -> _Parsed:
     j = np.arange(n)
     return _Parsed(
         names=list(names), coords=coords, missing=missing, confidence=None,
-        line_of=np.repeat(np.asarray(idx)[:, None], n, axis=1),
-        coord_field=np.broadcast_to(1 + 3 * j[:, None] + np.arange(3), (T, n, 3)).copy(),
-        state_field=np.full((T, n), -1), state_kind=None, sep=None, times=times,
+        line_of=np.broadcast_to(idx[:, None], (T, n)),
+        coord_field=np.broadcast_to(1 + 3 * j[:, None] + np.arange(3), (T, n, 3)),
+        state_field=np.broadcast_to(-1, (T, n)), state_kind=None, sep=None, times=times,
         file_fps=_or_default(file_fps, UTKINECT_FPS, notes),
         skeleton=kl.skeleton_for("kinect_v1"), skip_lines=skipped,
         extra={"index0": float(index[0])})
@@ -642,7 +698,7 @@ def _read_utkinect(path, text, idx, notes, layout, fps, units) -> _Parsed:
 def _read_msr(path, text, idx, notes, layout, fps, units) -> _Parsed:
     names = kl.MSR_ACTION3D
     n = len(names)
-    counts, (parsed,), _ = _parse_rows(path, text, idx, str.split, 4, [None])
+    counts, (parsed,), _ = _parse_rows(path, text, idx, str.split, 4, [None], plain=" ")
     idx, skipped = _check_counts(counts, idx, 4, path, notes, "values")
     partial = len(idx) % n
     if partial:
@@ -679,8 +735,8 @@ def _read_msr(path, text, idx, notes, layout, fps, units) -> _Parsed:
     line_of = np.asarray(idx).reshape(T, n)
     return _Parsed(
         names=list(names), coords=coords, missing=missing, confidence=confidence,
-        line_of=line_of, coord_field=np.broadcast_to(np.arange(3), (T, n, 3)).copy(),
-        state_field=np.full((T, n), 3), state_kind="confidence", sep=None, times=None,
+        line_of=line_of, coord_field=np.broadcast_to(np.arange(3), (T, n, 3)),
+        state_field=np.broadcast_to(3, (T, n)), state_kind="confidence", sep=None, times=None,
         file_fps=MSR_FPS, skeleton=kl.skeleton_for("msr_action3d"), skip_lines=skipped)
 
 
@@ -848,8 +904,8 @@ def _read_wide(path, text, idx, notes, layout, fps, units) -> _Parsed:
         notes.append(f"{extra_cols} other columns kept as they are")
     return _Parsed(
         names=names, coords=coords, missing=missing, confidence=confidence,
-        line_of=np.repeat(np.asarray(data_idx)[:, None], J, axis=1),
-        coord_field=np.broadcast_to(coord_cols, (T, J, 3)).copy(), state_field=state_field,
+        line_of=np.broadcast_to(data_idx[:, None], (T, J)),
+        coord_field=np.broadcast_to(coord_cols, (T, J, 3)), state_field=state_field,
         state_kind=state_kind, sep=None if sep == " " else sep, times=times, file_fps=file_fps,
         units=unit, skeleton=skeleton, skip_lines=skipped)
 
@@ -862,8 +918,9 @@ def _wide_states(parsed, state, have, cols, idx, names, path, missing):
     if state is not None:
         kind = state[0]
         values = _kept(parsed, T).reshape(T, len(have))
-        field_index = np.full((T, J), -1, dtype=np.intp)
-        field_index[:, have] = cols
+        field_index = np.full(J, -1, dtype=np.intp)
+        field_index[have] = cols
+        field_index = np.broadcast_to(field_index, (T, J))
         confidence = np.ones((T, J))
         if kind == "tracking":
             bad = ~np.isin(values, (0.0, 1.0, 2.0)) & ~missing[:, have]
@@ -879,7 +936,7 @@ def _wide_states(parsed, state, have, cols, idx, names, path, missing):
             confidence[:, have] = np.clip(np.nan_to_num(values, nan=0.0), 0.0, 1.0)
         confidence[missing] = 0.0
         return kind, field_index, confidence
-    return None, np.full((T, J), -1), None
+    return None, np.broadcast_to(-1, (T, J)), None
 
 
 def _wide_times(parsed, idx, time_col, fps, path, notes):
@@ -994,9 +1051,8 @@ def _read_long(path, text, idx, notes, layout, fps, units) -> _Parsed:
     return _Parsed(
         names=names, coords=coords,
         missing=missing, confidence=confidence, line_of=line_of,
-        coord_field=np.broadcast_to(np.array([roles["x"], roles["y"], roles["z"]]),
-                                    (T, J, 3)).copy(),
-        state_field=np.full((T, J), state_col), state_kind=state_kind,
+        coord_field=np.broadcast_to(np.array([roles["x"], roles["y"], roles["z"]]), (T, J, 3)),
+        state_field=np.broadcast_to(state_col, (T, J)), state_kind=state_kind,
         sep=None if sep == " " else sep, times=times, file_fps=file_fps, units=unit,
         skeleton=skeleton, skip_lines=skipped,
         extra={"frame_last_line": last_line, "frame_tokens": frame_tokens,
