@@ -85,11 +85,11 @@ from pathlib import Path
 
 import numpy as np
 
+from mocapfix.core import kinect_joints as kl
 from mocapfix.core.errors import UnreadableFileError, UnsupportedFeatureError, excerpt
 from mocapfix.core.fileio import read_input_bytes, write_output_pieces
-from mocapfix.core.quantity import MAX_FRAME_RATE_HZ, MIN_FRAME_RATE_HZ
-from mocapfix.core import kinect_joints as kl
 from mocapfix.core.motion import Motion, Skeleton
+from mocapfix.core.quantity import MAX_FRAME_RATE_HZ, MIN_FRAME_RATE_HZ
 from mocapfix.core.units import METRES_PER_UNIT, normalise_unit_name
 from mocapfix.formats.textlines import TextLines
 
