@@ -81,6 +81,7 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass, field
+from itertools import repeat
 from pathlib import Path
 
 import numpy as np
@@ -1127,6 +1128,12 @@ def _changed(source: KinectSource, motion: Motion) -> tuple[np.ndarray, np.ndarr
 _NOT_PLAIN = re.compile(r"[^0-9.,+\n-]")
 
 
+def _all_bare(tokens: list[str]) -> bool:
+    """True when no token has an exponent or a blank (``str.isspace``) in it: ASCII text
+    searched for each such character (a scan in C each), anything else not vouched for."""
+    joined = "".join(tokens)
+    return joined.isascii() and not any(c in joined for c in "eE \t\r\x0b\x0c\x1c\x1d\x1e\x1f")
+
 #: a number with more than 6 decimals: its rewrite keeps its own count (the others get 6)
 _LONG_DECIMALS = re.compile(r"\.[0-9]{7}")
 
@@ -1218,7 +1225,7 @@ def _fast_csv_lines(lines, rows, source, new, changed, new_missing, J) -> list[s
 def _formatted(old: list[str], values: np.ndarray) -> list[str]:
     """``values`` as :func:`_format_like` writes them in place of the plain number tokens
     ``old`` (no exponent, no blanks): one ``%`` format per number of decimals."""
-    dot = np.fromiter((t.find(".") for t in old), np.int64, len(old))
+    dot = np.fromiter(map(str.find, old, repeat(".")), np.int64, len(old))
     size = np.fromiter(map(len, old), np.int64, len(old))
     decimals = np.maximum(np.where(dot < 0, 0, size - dot - 1), 6)
     out = np.empty(len(old), object)
@@ -1323,8 +1330,11 @@ def _edited_lines(source, motion, t, j, lines, new_missing) -> list[tuple[int, s
     at = ((offsets + lead)[k[put]][:, None] + 2 * source.coord_field[t[put], j[put]]).ravel()
     values = motion.positions[t[put], j[put]].ravel()
     old = parts[at].tolist()
-    plain = np.fromiter(("e" not in s and "E" not in s and s == s.strip() for s in old),
-                        bool, len(old))
+    if not _all_bare(old):
+        plain = np.fromiter(("e" not in s and "E" not in s and s == s.strip() for s in old),
+                            bool, len(old))
+    else:
+        plain = np.ones(len(old), bool)
     out = np.empty(len(old), object)
     if plain.any():
         out[plain] = _formatted([s for s, p in zip(old, plain) if p], values[plain])
@@ -1356,11 +1366,9 @@ class _Line:
             self.parts = re.split(r"(\s+)", line)
             self.slots = [k for k in range(0, len(self.parts), 2) if self.parts[k] != ""]
         else:
-            self.parts = []
-            for k, part in enumerate(line.split(sep)):
-                if k:
-                    self.parts.append(sep)
-                self.parts.append(part)
+            fields = line.split(sep)
+            self.parts = [sep] * (2 * len(fields) - 1)
+            self.parts[::2] = fields
             self.slots = list(range(0, len(self.parts), 2))
 
     def __getitem__(self, field_index: int) -> str:
