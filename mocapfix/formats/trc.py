@@ -478,7 +478,9 @@ def _lines_text(source: TRCSource, start: int, stop: int, new: dict):
     skip = set(source.skip_lines)
     for a in range(start, stop, CHUNK):
         b = min(stop, a + CHUNK)
-        lines = [new.get(i, line) for i, line in enumerate(source.lines[a:b], a)]
+        lines = source.lines[a:b]
+        if new:
+            lines = [new.get(i, line) for i, line in enumerate(lines, a)]
         text = "".join(map(str.__add__, lines, source.endings[a:b]))
         if skip & set(range(a, b)):
             text = "".join(line + end for i, (line, end) in
