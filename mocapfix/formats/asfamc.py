@@ -53,7 +53,10 @@ Writing
 Why hand-written
     No maintained Python ASF/AMC library exists; the PyPI ones fail on CMU files (CRLF,
     multi-line limits, bones without DOFs) and none keeps the original tokens, which
-    byte-identical round trips need.
+    byte-identical round trips need. An AMC is held as its bytes with the offsets of its
+    lines; its frames are tokenised and converted _CHUNK at a time, and written back as
+    slices of the source between the rewritten bone lines, so that a long take costs its
+    arrays and the file's bytes, not a Python object per line or value.
 """
 from __future__ import annotations
 

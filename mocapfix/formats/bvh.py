@@ -59,8 +59,10 @@ Why hand-written instead of bvhio
 bvhio (a dependency, used by the tests as an independent reference) loops forever on a
 file whose ``Frames:`` count exceeds the lines present, works in float32 (glm), and its
 hierarchy API takes seconds for thousands of frames. Here the hierarchy is parsed by a
-small tokenizer (an explicit stack, no recursion) and the motion block by one numpy
-conversion of all tokens, then reshaped; FK is the vectorised :class:`kinematics.Rig`.
+small tokenizer (an explicit stack, no recursion) and the motion block scanned as byte
+offsets (line ends, blank lines, token counts: numpy over blocks of the file) and converted
+CHUNK frames at a time into one array, so that a long take costs its arrays and the file's
+bytes, not a Python object per line or value; FK is the vectorised :class:`kinematics.Rig`.
 """
 from __future__ import annotations
 

@@ -75,7 +75,12 @@ If the motion has no Kinect source (built in Python) or its frame count/joints d
 from the source, a headed wide CSV is written (``time`` + ``<Joint>_X/_Y/_Z`` [+ ``_State``]).
 
 Why hand-written: these are ad-hoc research/export layouts with no library that reads
-them; the parsing is one ``split`` per line plus one vectorised numpy conversion.
+them. The file is held once, as its bytes with the offsets of its lines
+(:class:`~mocapfix.formats.textlines.TextLines`); data lines are parsed CHUNK at a time
+straight into the float arrays (blocks of plain numbers by ``np.fromstring``, others by one
+``split`` per line and one numpy conversion), and written back as slices of the source
+between the rewritten lines: besides the whole-take arrays, memory does not grow with the
+take by more than a few bytes a sample.
 """
 from __future__ import annotations
 

@@ -65,7 +65,9 @@ byte-identical, change-only write-back above; ``pyomeca`` and ``kineticstoolkit`
 toolkits (xarray/pandas stacks) for one text layout; ``opensim`` is a 72 MB wheel of C++
 bindings (~280 MB installed) that refuses files real exporters write (rows longer than
 the labels, as in ``btk_Gait.trc``). None is a runtime dependency; OpenSim's reader is
-the tests' independent check of the files we write (dev extra).
+the tests' independent check of the files we write (dev extra). Data rows are converted
+CHUNK at a time and files written in pieces of CHUNK rows, so that no whole-file join or
+token list is built (the lines themselves are still one str each).
 """
 from __future__ import annotations
 
