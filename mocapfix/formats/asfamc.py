@@ -71,7 +71,7 @@ import numpy as np
 from mocapfix.core.errors import MAX_FIELD, UnreadableFileError, UnsupportedFeatureError, WriteError
 from mocapfix.core.fileio import atomic_write_bytes, atomic_write_pieces, read_input_bytes, refuse_stream
 from mocapfix.formats.textenc import UTF8_BOM, refuse_long_fields, refuse_wide_text
-from mocapfix.core.kinematics import Rig, euler_to_matrix
+from mocapfix.core.kinematics import Rig, euler_to_matrix, positions_in_chunks
 from mocapfix.core.motion import Motion, Skeleton
 from mocapfix.core.units import asf_length_unit
 
@@ -837,7 +837,7 @@ def _read_rest_pose(path: Path, fps) -> Motion:
 def _motion(source: AsfAmcSource, channels: np.ndarray, fps, notes: list[str]) -> Motion:
     asf = source.asf
     rig, rig_notes = build_rig(asf, source.layout, source.degrees)
-    positions = rig.positions(channels)
+    positions = positions_in_chunks(rig, channels)
     if fps is None:
         fps = DEFAULT_FPS
         if source.values is not None:

@@ -77,7 +77,7 @@ import numpy as np
 from mocapfix.core.errors import MAX_FIELD, UnreadableFileError, WriteError, excerpt
 from mocapfix.core.fileio import atomic_write_pieces, read_input_bytes
 from mocapfix.formats.textenc import refuse_wide_text
-from mocapfix.core.kinematics import Rig
+from mocapfix.core.kinematics import Rig, positions_in_chunks
 from mocapfix.core.motion import Motion, Skeleton
 from mocapfix.core.quantity import MAX_FRAME_RATE_HZ, MIN_FRAME_RATE_HZ
 
@@ -705,7 +705,7 @@ def read(path, fps: float | None = None, allow_truncated: bool = False, **option
     if unknown:
         notes.append(f"channels of unknown type kept but not used for positions: "
                      f"{', '.join(unknown[:10])}{' ...' if len(unknown) > 10 else ''}")
-    positions = rig.positions(values)
+    positions = positions_in_chunks(rig, values)
     units, metres_per_unit = _guess_units(_skeleton_size(_rest_positions(rig), positions),
                                           notes)
     file_fps = 1.0 / frame_time
