@@ -1039,7 +1039,7 @@ def _amc_pieces(source: AsfAmcSource, channels: np.ndarray):
 
 def _patched_pieces(source: AsfAmcSource, channels: np.ndarray):
     """The source's bytes, with only the bone lines holding changed values re-written."""
-    body, data = source.body, source.body.data
+    body, data = source.body, memoryview(source.body.data)   # slices of it are not copies
     done = 0                                       # offset of the source written so far
     for a in range(0, len(channels), _CHUNK):
         for i, line in _patched_lines(source, channels[a:a + _CHUNK], a):

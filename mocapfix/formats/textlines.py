@@ -128,7 +128,7 @@ class TextLines:
         (the line keeps its own); ``deleted``: lines left out with their endings;
         ``inserted``: line -> texts written after it, each with the file's first ending
         (and one before them when what was written last has none)."""
-        raw, starts, stops = self.raw, self.starts, self.stops
+        raw, starts, stops = memoryview(self.raw), self.starts, self.stops   # slices: no copies
         inserted = inserted or {}
         dropped = set(deleted)
         marks = sorted(dropped | set(inserted))
