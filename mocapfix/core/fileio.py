@@ -187,6 +187,15 @@ def atomic_write_bytes(path, data: bytes) -> Path:
     return Path(path)
 
 
+def atomic_write_pieces(path, pieces) -> Path:
+    """:func:`atomic_write_bytes` of the ``bytes`` pieces, each written as it comes (a long
+    take's output is never held whole)."""
+    with atomic_open(path, "wb") as fh:
+        for piece in pieces:
+            fh.write(piece)
+    return Path(path)
+
+
 def atomic_write_text(path, text: str) -> Path:
     """Write ``text`` as UTF-8. A file name that is not UTF-8 (bytes on Linux, decoded by
     Python to lone surrogates such as ``\\udcff``) is written as that escape, so reports
@@ -200,6 +209,16 @@ def write_output_text(path, text: str) -> list:
     format's writer does."""
     try:
         atomic_write_bytes(path, text.encode("utf-8"))
+    except OSError as exc:
+        raise _write_error(Path(path), exc) from None
+    return [Path(path)]
+
+
+def write_output_pieces(path, pieces) -> list:
+    """:func:`write_output_text` of text given as UTF-8 ``bytes`` pieces, each written as
+    it comes (a long take's output is never held whole)."""
+    try:
+        atomic_write_pieces(path, pieces)
     except OSError as exc:
         raise _write_error(Path(path), exc) from None
     return [Path(path)]

@@ -244,3 +244,18 @@ class Rig:
 
     def positions(self, channels: np.ndarray) -> np.ndarray:
         return self.forward(channels, with_frames=False)[0]
+
+
+def positions_in_chunks(rig: Rig, channels: np.ndarray, chunk: int = 4096) -> np.ndarray:
+    """``rig.positions(channels)`` computed ``chunk`` frames at a time into one array:
+    the same values (every frame's product is computed alone), without the orientation
+    of every joint in every frame held at once (72 bytes a joint-frame)."""
+    channels = np.asarray(channels, dtype=np.float64)
+    if channels.ndim != 2 or len(channels) <= chunk:
+        return rig.positions(channels)
+    first = rig.positions(channels[:chunk])
+    out = np.empty((len(channels), *first.shape[1:]))
+    out[:chunk] = first
+    for a in range(chunk, len(channels), chunk):
+        out[a:a + chunk] = rig.positions(channels[a:a + chunk])
+    return out

@@ -53,7 +53,10 @@ Writing
 Why hand-written
     No maintained Python ASF/AMC library exists; the PyPI ones fail on CMU files (CRLF,
     multi-line limits, bones without DOFs) and none keeps the original tokens, which
-    byte-identical round trips need.
+    byte-identical round trips need. An AMC is held as its bytes with the offsets of its
+    lines; its frames are tokenised and converted _CHUNK at a time, and written back as
+    slices of the source between the rewritten bone lines, so that a long take costs its
+    arrays and the file's bytes, not a Python object per line or value.
 """
 from __future__ import annotations
 
@@ -65,10 +68,10 @@ from pathlib import Path
 
 import numpy as np
 
-from mocapfix.core.errors import UnreadableFileError, UnsupportedFeatureError, WriteError
-from mocapfix.core.fileio import atomic_write_bytes, read_input_bytes, refuse_stream
+from mocapfix.core.errors import MAX_FIELD, UnreadableFileError, UnsupportedFeatureError, WriteError
+from mocapfix.core.fileio import atomic_write_bytes, atomic_write_pieces, read_input_bytes, refuse_stream
 from mocapfix.formats.textenc import UTF8_BOM, refuse_long_fields, refuse_wide_text
-from mocapfix.core.kinematics import Rig, euler_to_matrix
+from mocapfix.core.kinematics import Rig, euler_to_matrix, positions_in_chunks
 from mocapfix.core.motion import Motion, Skeleton
 from mocapfix.core.units import asf_length_unit
 
@@ -84,6 +87,12 @@ _AXES = "XYZ"
 _ROOT_CHANNELS = ("TX", "TY", "TZ", "RX", "RY", "RZ")
 _BONE_DOFS = ("rx", "ry", "rz", "tx", "ty", "tz")
 _INT_RE = re.compile(r"^\d{1,18}$")
+#: bytes scanned at a time for line ends; frames converted at a time
+_BLOCK = 1 << 22
+_CHUNK = 4096
+_LONG_LINE = re.compile(rb"[^\n]{%d,}" % (MAX_FIELD + 1))
+#: a blank or comment line inside an AMC body (then the body is not one run of frame lines)
+_GAP = re.compile(rb"(^|\n)[ \t\r]*(#|\n)")
 
 
 # --------------------------------------------------------------------------- data
@@ -135,7 +144,7 @@ class AsfAmcSource:
     degrees: bool
     eol: str
     header_lines: list[str]                # raw AMC lines before the first frame ('\r' kept)
-    body_lines: list[str] | None = None    # raw AMC lines from the first frame on
+    body: _AmcLines | None = None        # the AMC lines from the first frame on
     content_index: np.ndarray | None = None  # body line of each frame/bone line (T*lpf,)
     frame_numbers: np.ndarray | None = None
     values: np.ndarray | None = None         # (T, C) the values as read
@@ -145,6 +154,47 @@ class AsfAmcSource:
     @property
     def asf_name(self) -> str:
         return Path(self.asf_path).name
+
+    @property
+    def body_lines(self) -> list[str] | None:
+        """Every body line as a str (for tests and small files: one object per line)."""
+        return None if self.body is None else [self.body[i] for i in range(len(self.body))]
+
+
+class _AmcLines:
+    """The lines of an AMC file from line ``first`` on, as ``text.split("\\n")`` gives them
+    ('\\r' kept), held as the file's bytes and the offset of each line (latin-1: one
+    character per byte), decoded one at a time: no Python object per line."""
+
+    def __init__(self, data: bytes, starts: np.ndarray, first: int = 0):
+        self.data, self.starts, self.first = data, starts, first
+
+    @classmethod
+    def of(cls, data: bytes) -> _AmcLines:
+        view = np.frombuffer(data, np.uint8)
+        newlines = [a + np.flatnonzero(view[a:a + _BLOCK] == 10)
+                    for a in range(0, len(data), _BLOCK)]
+        return cls(data, np.concatenate([[0], *[n + 1 for n in newlines]]).astype(np.int64))
+
+    def __len__(self) -> int:
+        return len(self.starts) - self.first
+
+    def span(self, i: int) -> tuple[int, int]:
+        """Offsets of line ``i``'s text (without its newline)."""
+        k = self.first + i
+        end = int(self.starts[k + 1]) - 1 if k + 1 < len(self.starts) else len(self.data)
+        return int(self.starts[k]), end
+
+    def __getitem__(self, i: int) -> str:
+        if i < 0:
+            i += len(self)
+        if not 0 <= i < len(self):
+            raise IndexError(i)
+        a, b = self.span(i)
+        return self.data[a:b].decode("latin-1")
+
+    def tail(self, first: int) -> _AmcLines:
+        return _AmcLines(self.data, self.starts, self.first + first)
 
 
 # --------------------------------------------------------------------------- sniff
@@ -159,14 +209,23 @@ def sniff(head: bytes) -> bool:
 
 # --------------------------------------------------------------------------- helpers
 def _decode(path: Path, data: bytes) -> str:
+    _check_text(path, data)
+    return data.decode("latin-1")    # byte-exact round trip, never fails
+
+
+def _check_text(path: Path, data: bytes) -> None:
+    """Refuse an empty, UTF-16/32, binary file or one with a field over MAX_FIELD
+    characters (latin-1: one per byte; only the lines longer than that are split)."""
     if not data.strip():
         raise UnreadableFileError(path, "file is empty")
     refuse_wide_text(path, data, Path(path).suffix.lstrip(".").upper() or "ASF/AMC")
     if b"\x00" in data[:4096]:
         raise UnreadableFileError(path, "binary data where ASF/AMC text was expected")
-    text = data.decode("latin-1")    # byte-exact round trip, never fails
-    refuse_long_fields(path, text.split("\n"))
-    return text
+    line, counted = 0, 0
+    for match in _LONG_LINE.finditer(data):
+        line += data.count(b"\n", counted, match.start())
+        counted = match.start()
+        refuse_long_fields(path, [match.group().decode("latin-1")], first_line=line)
 
 
 def _floats(path, tokens: list[str], count: int, what: str, line: int) -> np.ndarray:
@@ -595,12 +654,14 @@ def _first_layout_break(path, body, content, layout, first_line: int) -> Unreada
     return UnreadableFileError(path, "frame blocks do not share one layout")
 
 
-def parse_amc(path, text: str, asf: AsfSkeleton) -> AsfAmcSource:
+def parse_amc(path, data: bytes, asf: AsfSkeleton) -> AsfAmcSource:
+    """The AMC ``data`` (checked by :func:`_check_text`) read against ``asf``: the frames
+    converted _CHUNK at a time into one array, the file kept as its bytes."""
     path = Path(path)
-    lines = text.split("\n")
+    lines = _AmcLines.of(data)
     first, flags = _amc_header(path, lines)
-    header, body = lines[:first], lines[first:]
-    content, contiguous = _content_lines(text[sum(len(line) + 1 for line in header):], body)
+    header, body = [lines[i] for i in range(first)], lines.tail(first)
+    content, contiguous = _content_lines(data, body)
     try:
         layout = _frame_layout(path, body, content, first, asf)
     except UnreadableFileError as error:
@@ -610,32 +671,38 @@ def parse_amc(path, text: str, asf: AsfSkeleton) -> AsfAmcSource:
     n_frames = len(content) // per_frame
     if len(content) % per_frame:
         raise _locate_error(path, body, content, layout, first)
-    if contiguous:
-        tokens = "\n".join(body).split()         # no blank or comment lines in between
-    else:
-        tokens = " ".join([body[i] for i in content]).split()
-    if len(tokens) != n_frames * tokens_per_frame:
-        raise _locate_error(path, body, content, layout, first)
-    table = np.array(tokens).reshape(n_frames, tokens_per_frame)
     name_columns, value_columns = _token_columns(layout)
-    expected_names = np.array([name for name, _ in layout])
-    frame_tokens = table[:, 0]
-    if not (np.all(table[:, name_columns] == expected_names) and np.all(np.char.isdigit(frame_tokens))
-            and np.all(np.char.str_len(frame_tokens) < 19)):
-        raise _locate_error(path, body, content, layout, first)
-    try:
-        values = table[:, value_columns].astype(np.float64)
-    except ValueError:
-        raise _locate_error(path, body, content, layout, first) from None
-    if not np.all(np.isfinite(values)):
-        raise _locate_error(path, body, content, layout, first)
+    expected_names = np.array([name for name, _ in layout], dtype=object)
+    values = np.empty((n_frames, len(value_columns)))
+    frame_numbers = np.empty(n_frames, np.int64)
+    for a in range(0, n_frames, _CHUNK):
+        n = min(n_frames - a, _CHUNK)
+        tokens = _frame_tokens(data, body, content[a * per_frame:(a + n) * per_frame], contiguous)
+        if len(tokens) != n * tokens_per_frame:
+            # frames whose tokens are not on their own lines: the whole file decides
+            values, frame_numbers = _whole_table(path, data, body, content, contiguous, layout,
+                                                 first, n_frames, tokens_per_frame)
+            break
+        table = np.array(tokens, dtype=object).reshape(n, tokens_per_frame)
+        frame_tokens = table[:, 0].tolist()
+        if not (np.all(table[:, name_columns] == expected_names)
+                and all(t.isdigit() and len(t) < 19 for t in frame_tokens)):
+            raise _locate_error(path, body, content, layout, first)
+        try:
+            chunk = np.array(table[:, value_columns].ravel().tolist(), dtype=np.float64)
+        except ValueError:
+            raise _locate_error(path, body, content, layout, first) from None
+        if not np.all(np.isfinite(chunk)):
+            raise _locate_error(path, body, content, layout, first)
+        values[a:a + n] = chunk.reshape(n, -1)
+        frame_numbers[a:a + n] = np.array(frame_tokens).astype(np.int64)
     degrees = flags["degrees"]
     source = AsfAmcSource(
         asf_path="", asf_bytes=b"", asf=asf, layout=layout,
         degrees=(asf.angle_unit == "deg") if degrees is None else degrees,
-        eol="\r\n" if lines[0].endswith("\r") else "\n", header_lines=header, body_lines=body,
+        eol="\r\n" if lines[0].endswith("\r") else "\n", header_lines=header, body=body,
         content_index=np.asarray(content, dtype=np.intp),
-        frame_numbers=frame_tokens.astype(np.int64), values=values,
+        frame_numbers=frame_numbers, values=values,
         flags=flags)
     if body[-1].strip():
         source.notes.append("AMC does not end with a line break: if the file was cut, the last "
@@ -643,15 +710,57 @@ def parse_amc(path, text: str, asf: AsfSkeleton) -> AsfAmcSource:
     return source
 
 
-def _content_lines(body_text: str, body: list[str]) -> tuple[list[int], bool]:
+def _frame_tokens(data: bytes, body: _AmcLines, rows, contiguous: bool) -> list[str]:
+    """The whitespace-separated tokens of the body lines ``rows``, trailing NUL characters
+    dropped (as the numpy string table these were once read through did)."""
+    if not len(rows):
+        return []
+    if contiguous:                               # consecutive lines: one slice of the file
+        text = data[body.span(rows[0])[0]:body.span(rows[-1])[1]].decode("latin-1")
+    else:
+        text = " ".join([body[i] for i in rows])
+    tokens = text.split()
+    return [t.rstrip("\x00") for t in tokens] if "\x00" in text else tokens
+
+
+def _whole_table(path, data, body, content, contiguous, layout, first, n_frames,
+                 tokens_per_frame):
+    """(values, frame numbers) from all the tokens at once: a file whose frames do not
+    each hold their own tokens (a value on the next frame's lines) is read as the
+    token stream allows, or refused by :func:`_locate_error`."""
+    tokens = _frame_tokens(data, body, content, contiguous)
+    if len(tokens) != n_frames * tokens_per_frame:
+        raise _locate_error(path, body, content, layout, first)
+    table = np.array(tokens, dtype=object).reshape(n_frames, tokens_per_frame)
+    name_columns, value_columns = _token_columns(layout)
+    frame_tokens = table[:, 0].tolist()
+    if not (np.all(table[:, name_columns] == np.array([n for n, _ in layout], dtype=object))
+            and all(t.isdigit() and len(t) < 19 for t in frame_tokens)):
+        raise _locate_error(path, body, content, layout, first)
+    try:
+        values = np.array(table[:, value_columns].ravel().tolist(), dtype=np.float64)
+    except ValueError:
+        raise _locate_error(path, body, content, layout, first) from None
+    if not np.all(np.isfinite(values)):
+        raise _locate_error(path, body, content, layout, first)
+    return values.reshape(n_frames, -1), np.array(frame_tokens).astype(np.int64)
+
+
+def _content_lines(data: bytes, body: _AmcLines):
     """Indices of the body lines that are neither blank nor comments, and whether they are
-    simply all lines up to trailing blank ones (the usual case, checked with one regex)."""
-    if not re.search(r"(^|\n)[ \t\r]*(#|\n)", body_text.rstrip()):
+    simply all lines up to trailing blank ones (the usual case, checked with one regex
+    over the body's bytes, trailing whitespace left out)."""
+    start = body.span(0)[0]
+    end = len(data)
+    while end > start and chr(data[end - 1]).isspace():
+        end -= 1
+    if not _GAP.search(data, max(start - 1, 0), end):
         last = len(body)
         while last and not body[last - 1].strip():
             last -= 1
-        return list(range(last)), True
-    return [i for i, line in enumerate(body) if line.strip() and not line.lstrip().startswith("#")], False
+        return range(last), True
+    return [i for i in range(len(body)) if (line := body[i]).strip()
+            and not line.lstrip().startswith("#")], False
 
 
 def _token_columns(layout) -> tuple[np.ndarray, np.ndarray]:
@@ -694,11 +803,11 @@ def read(path, fps: float | None = None, **options) -> Motion:
     if path.suffix.lower() == ".asf":
         return _read_rest_pose(path, fps)
     amc_bytes = read_input_bytes(path)
-    amc_text = _decode(path, amc_bytes)
+    _check_text(path, amc_bytes)
     asf_path = find_asf(path, options.get("asf"))
     asf_bytes = read_input_bytes(asf_path)
     asf = parse_asf(asf_path, asf_bytes)
-    source = parse_amc(path, amc_text, asf)
+    source = parse_amc(path, amc_bytes, asf)
     source.asf_path, source.asf_bytes = str(asf_path), asf_bytes
     notes = list(asf.notes) + source.notes
     if source.flags["degrees"] is None:
@@ -728,7 +837,7 @@ def _read_rest_pose(path: Path, fps) -> Motion:
 def _motion(source: AsfAmcSource, channels: np.ndarray, fps, notes: list[str]) -> Motion:
     asf = source.asf
     rig, rig_notes = build_rig(asf, source.layout, source.degrees)
-    positions = rig.positions(channels)
+    positions = positions_in_chunks(rig, channels)
     if fps is None:
         fps = DEFAULT_FPS
         if source.values is not None:
@@ -782,13 +891,12 @@ def write(motion: Motion, path, skeleton_checked: bool = False, **options) -> li
         return [_write_asf(path, source)]
     if asf_target.resolve() == path.resolve():
         raise WriteError(path, f"the AMC would overwrite its skeleton {source.asf_name}")
-    text = _amc_text(source, channels)
     if not skeleton_checked:
         conflict = skeleton_conflict(path, Path(source.asf_path), source.asf_bytes)
         if conflict:
             raise WriteError(path, f"its skeleton cannot be written: {conflict}")
     copy = _write_asf(asf_target, source)
-    atomic_write_bytes(path, text.encode("latin-1"))
+    atomic_write_pieces(path, _amc_pieces(source, channels))
     return [path, copy]
 
 
@@ -921,50 +1029,71 @@ def _write_asf(target: Path, source: AsfAmcSource) -> Path:
     return atomic_write_bytes(target, source.asf_bytes)
 
 
-def _amc_text(source: AsfAmcSource, channels: np.ndarray) -> str:
-    same_shape = source.values is not None and source.values.shape == channels.shape
-    if same_shape:
-        body = _patched_body(source, channels)
-    else:
-        body = _generated_body(source, channels)
-    return "\n".join(source.header_lines + body)
+def _amc_pieces(source: AsfAmcSource, channels: np.ndarray):
+    """The AMC's bytes (latin-1) in pieces: the source with the changed bone lines
+    rewritten, or frame blocks written from scratch; _CHUNK frames at a time."""
+    if source.values is not None and source.values.shape == channels.shape:
+        return _patched_pieces(source, channels)
+    return _generated_pieces(source, channels)
 
 
-def _patched_body(source: AsfAmcSource, channels: np.ndarray) -> list[str]:
-    """The source's lines, with only the bone lines holding changed values re-written."""
-    body = list(source.body_lines)
-    old = source.values
+def _patched_pieces(source: AsfAmcSource, channels: np.ndarray):
+    """The source's bytes, with only the bone lines holding changed values re-written."""
+    body, data = source.body, memoryview(source.body.data)   # slices of it are not copies
+    done = 0                                       # offset of the source written so far
+    for a in range(0, len(channels), _CHUNK):
+        for i, line in _patched_lines(source, channels[a:a + _CHUNK], a):
+            start, end = body.span(i)
+            yield data[done:start]
+            yield line.encode("latin-1")
+            done = end
+    yield data[done:]
+
+
+def _patched_lines(source: AsfAmcSource, channels: np.ndarray, first: int):
+    """(body line, new text) of the bone lines of frames ``first`` on (``channels``) whose
+    values changed, in line order."""
+    old = source.values[first:first + len(channels)]
     changed = ~np.isclose(channels, old, rtol=1e-10, atol=1e-10)
     if not changed.any():
-        return body
+        return []
     text = np.empty(channels.shape, dtype=object)
     text[changed] = [format_value(v) for v in channels[changed].tolist()]
     per_frame = 1 + len(source.layout)
     starts = np.cumsum([0] + [count for _, count in source.layout])
+    out = []
     for k, (name, _) in enumerate(source.layout):
         line_changed = changed[:, starts[k]:starts[k + 1]]
         frames = np.flatnonzero(line_changed.any(axis=1))
         rows = line_changed[frames].tolist()
         new_text = text[frames, starts[k]:starts[k + 1]].tolist()
-        lines = source.content_index[frames * per_frame + 1 + k].tolist()
+        lines = source.content_index[(first + frames) * per_frame + 1 + k].tolist()
         for i, row, new in zip(lines, rows, new_text):
-            old_tokens = body[i].split()[1:]
-            tokens = [n if c else o for o, n, c in zip(old_tokens, new, row)]
-            ending = "\r" if body[i].endswith("\r") else ""
-            body[i] = " ".join([name, *tokens]) + ending
-    return body
+            line = source.body[i]
+            tokens = [n if c else o for o, n, c in zip(line.split()[1:], new, row)]
+            ending = "\r" if line.endswith("\r") else ""
+            out.append((i, " ".join([name, *tokens]) + ending))
+    return sorted(out)
 
 
-def _generated_body(source: AsfAmcSource, channels: np.ndarray) -> list[str]:
-    """Frame blocks written from scratch (frame count differs from the source, or ASF only)."""
+def _generated_pieces(source: AsfAmcSource, channels: np.ndarray):
+    """Frame blocks written from scratch (frame count differs from the source, or ASF
+    only), after the source's header lines."""
     eol_cr = "\r" if source.eol == "\r\n" else ""
     first = int(source.frame_numbers[0]) if source.frame_numbers is not None else 1
     starts = np.cumsum([0] + [count for _, count in source.layout])
-    text = np.vectorize(format_value, otypes=[object])(channels) if channels.size else channels
-    lines = []
-    for f in range(channels.shape[0]):
-        lines.append(f"{first + f}{eol_cr}")
-        for k, (name, _) in enumerate(source.layout):
-            lines.append(" ".join([name, *text[f, starts[k]:starts[k + 1]]]) + eol_cr)
-    lines.append("")        # final line ending
-    return lines
+    head = "\n".join(source.header_lines)
+    yield head.encode("latin-1")
+    joined = bool(source.header_lines)             # a "\n" goes before the next line
+    for a in range(0, channels.shape[0], _CHUNK):
+        block = channels[a:a + _CHUNK]
+        text = np.vectorize(format_value, otypes=[object])(block) if block.size else block
+        lines = []
+        for f in range(block.shape[0]):
+            lines.append(f"{first + a + f}{eol_cr}")
+            for k, (name, _) in enumerate(source.layout):
+                lines.append(" ".join([name, *text[f, starts[k]:starts[k + 1]]]) + eol_cr)
+        if lines:
+            yield (("\n" if joined else "") + "\n".join(lines)).encode("latin-1")
+            joined = True
+    yield b"\n" if joined else b""               # the final line ending

@@ -59,8 +59,10 @@ Why hand-written instead of bvhio
 bvhio (a dependency, used by the tests as an independent reference) loops forever on a
 truncated file and is slow on long takes (docs/formats.md, "Why the readers are
 hand-written"). Here the hierarchy is parsed by a small tokenizer (an explicit stack, no
-recursion) and the motion block by one numpy conversion of all tokens, then reshaped; FK
-is the vectorised :class:`kinematics.Rig`.
+recursion) and the motion block scanned as byte offsets (line ends, blank lines, token
+counts: numpy over blocks of the file) and converted CHUNK frames at a time into one array,
+so that a long take costs its arrays and the file's bytes, not a Python object per line or
+value; FK is the vectorised :class:`kinematics.Rig`.
 """
 from __future__ import annotations
 
@@ -73,9 +75,9 @@ from pathlib import Path
 import numpy as np
 
 from mocapfix.core.errors import MAX_FIELD, UnreadableFileError, WriteError, excerpt
-from mocapfix.core.fileio import atomic_write_bytes, read_input_bytes
+from mocapfix.core.fileio import atomic_write_pieces, read_input_bytes
 from mocapfix.formats.textenc import refuse_wide_text
-from mocapfix.core.kinematics import Rig
+from mocapfix.core.kinematics import Rig, positions_in_chunks
 from mocapfix.core.motion import Motion, Skeleton
 from mocapfix.core.quantity import MAX_FRAME_RATE_HZ, MIN_FRAME_RATE_HZ
 
@@ -122,15 +124,18 @@ class BvhSource:
     """Everything :func:`write` needs to reproduce the file (never touched by cleaners).
 
     ``head`` is the file from its first byte to the end of the line before ``Frames:``
-    (hierarchy, ``MOTION`` line, any blank lines). ``frame_lines[i]`` is the raw text of
-    frame ``i`` including blank lines before it and its line ending; ``values`` the numbers
-    read from them. ``tail`` is the whitespace after the last frame.
+    (hierarchy, ``MOTION`` line, any blank lines). Frame ``i``'s raw text, including blank
+    lines before it and its line ending, is ``data[frame_ends[i - 1]:frame_ends[i]]``
+    (frame 0 from ``frames_start``): the file is held once, not a bytes object per line;
+    ``values`` the numbers read from them. ``tail`` is the whitespace after the last frame.
     """
 
     head: bytes
     frames_line: bytes
     frame_time_line: bytes
-    frame_lines: list[bytes]
+    data: bytes
+    frames_start: int
+    frame_ends: np.ndarray
     values: np.ndarray
     tail: bytes
     newline: bytes
@@ -138,6 +143,17 @@ class BvhSource:
     n_channels: int
     channel_names: list[str] = field(default_factory=list)
     end_sites: list[bool] = field(default_factory=list)  # per joint: is it an End Site
+
+    def frame_start(self, i: int) -> int:
+        return int(self.frame_ends[i - 1]) if i else self.frames_start
+
+    def frame_line(self, i: int) -> bytes:
+        return self.data[self.frame_start(i):int(self.frame_ends[i])]
+
+    @property
+    def frame_lines(self) -> list[bytes]:
+        """Every frame's raw text (one bytes object each: for tests and small files)."""
+        return [self.frame_line(i) for i in range(len(self.frame_ends))]
 
 
 @dataclass
@@ -378,13 +394,64 @@ def _build_rig(joints: list[_Joint], names: list[str], n_channels: int) -> tuple
 # ---------------------------------------------------------------------------------------
 # motion block
 # ---------------------------------------------------------------------------------------
-def _split_lines(data: bytes, start: int) -> list[bytes]:
-    return data[start:].splitlines(keepends=True)
+#: bytes that ``bytes.split()`` and ``bytes.strip()`` take for whitespace
+_BLANK = np.zeros(256, bool)
+_BLANK[list(b" \t\n\r\x0b\x0c")] = True
+#: bytes of the file scanned at a time (line ends, blank lines, token counts)
+BLOCK = 1 << 22
+#: frame lines converted at a time
+CHUNK = 4096
 
 
-def _header_line(path, lines: list[bytes], index: int, pattern, what: str, first_line: int):
+class _Lines:
+    """The lines of ``data[start:]`` as ``bytes.splitlines(keepends=True)`` cuts them (LF,
+    CRLF and a lone CR end a line), as offsets: ``ends[k]`` is past line k's ending; with
+    per line the count of non-blank bytes (0: a blank line) and of whitespace-separated
+    tokens. Scanned BLOCK bytes at a time, without a Python object per line."""
+
+    def __init__(self, data: bytes, start: int):
+        self.data, self.start = data, start
+        view = np.frombuffer(data, np.uint8)
+        ends, solid, tokens = [], [], []
+        solid_before = tokens_before = 0
+        previous_blank = True
+        for a in range(start, len(data), BLOCK):
+            b = min(a + BLOCK, len(data))
+            blk = view[a:b]
+            cr = np.flatnonzero(blk == 13)
+            lone = cr[(a + cr + 1 >= len(data)) | (view[np.minimum(a + cr + 1, len(data) - 1)] != 10)]
+            end = np.union1d(np.flatnonzero(blk == 10), lone) + 1
+            blank = _BLANK[blk]
+            hard = np.flatnonzero(~blank)
+            first = np.flatnonzero(~blank & np.concatenate([[previous_blank], blank[:-1]]))
+            solid.append(solid_before + np.searchsorted(hard, end))
+            tokens.append(tokens_before + np.searchsorted(first, end))
+            ends.append(a + end)
+            solid_before += len(hard)
+            tokens_before += len(first)
+            previous_blank = bool(blank[-1])
+        last = [e[-1] for e in ends if e.size]
+        if len(data) > start and (not last or last[-1] != len(data)):   # no line end at the end
+            ends.append(np.array([len(data)]))
+            solid.append(np.array([solid_before]))
+            tokens.append(np.array([tokens_before]))
+        self.ends = np.concatenate([[0], *ends])[1:].astype(np.int64)
+        self.solid = np.diff(np.concatenate([[0], *solid]))
+        self.tokens = np.diff(np.concatenate([[0], *tokens]))
+
+    def __len__(self) -> int:
+        return len(self.ends)
+
+    def begin(self, k: int) -> int:
+        return int(self.ends[k - 1]) if k else self.start
+
+    def __getitem__(self, k: int) -> bytes:
+        return self.data[self.begin(k):int(self.ends[k])]
+
+
+def _header_line(path, lines: _Lines, index: int, pattern, what: str, first_line: int):
     """Skip blank lines; the next line must match ``pattern``. Returns (match, next index)."""
-    while index < len(lines) and not lines[index].strip():
+    while index < len(lines) and not lines.solid[index]:
         index += 1
     if index >= len(lines):
         raise UnreadableFileError(path, f"file ends before the {what} line (truncated?)",
@@ -401,7 +468,7 @@ def _parse_motion(path, data: bytes, motion_start: int, n_channels: int,
                   allow_truncated: bool, notes: list[str]):
     """Parse ``MOTION`` .. end of file. Returns (values (T, C), frame_time, source parts)."""
     first_line = 1 + _count_lines(data, 0, motion_start)
-    lines = _split_lines(data, motion_start)  # lines[0] is the MOTION line
+    lines = _Lines(data, motion_start)  # lines[0] is the MOTION line
     frames_match, index = _header_line(path, lines, 1, _FRAMES_LINE, "'Frames: N'", first_line)
     frames_at = index - 1
     time_match, index = _header_line(path, lines, index, _FRAME_TIME_LINE,
@@ -410,67 +477,60 @@ def _parse_motion(path, data: bytes, motion_start: int, n_channels: int,
     declared = _declared_frames(path, frames_match.group(2), first_line + frames_at)
     frame_time = _frame_time(path, time_match.group(2), first_line + frame_time_at)
 
-    # group each non-blank line with the blank lines before it; the loop is over lines present
-    frame_lines: list[bytes] = []
-    frame_line_numbers: list[int] = []
-    pending: list[bytes] = []  # blank lines waiting for the next frame line
-    for k in range(index, len(lines)):
-        raw = lines[k]
-        if not raw.strip():
-            pending.append(raw)
-            continue
-        frame_lines.append(b"".join(pending) + raw if pending else raw)
-        frame_line_numbers.append(first_line + k)
-        pending = []
-    tail = b"".join(pending)
+    # each non-blank line with the blank lines before it is a frame
+    at = index + np.flatnonzero(lines.solid[index:])     # the frame lines
+    frames_start = lines.begin(index)
+    ends = lines.ends[at]
+    counts = lines.tokens[at]
+    numbers = first_line + at                             # their line numbers
+    tail_start = int(ends[-1]) if len(at) else frames_start
     ignored = False
-    if len(frame_lines) > declared:
-        over = frame_lines[declared:]
-        if _all_frames(over, n_channels):
+    if len(at) > declared:
+        if (counts[declared:] == n_channels).all() and _finite(data, lines, at[declared:],
+                                                              n_channels):
             # an exporter that under-counts: the frames are in the file, so none is dropped
-            notes.append(f"'Frames: {declared}' but the file holds {len(frame_lines)} frame "
-                         f"lines: all {len(frame_lines)} read (the cleaned file declares "
-                         f"{len(frame_lines)})")
+            notes.append(f"'Frames: {declared}' but the file holds {len(at)} frame "
+                         f"lines: all {len(at)} read (the cleaned file declares "
+                         f"{len(at)})")
         else:
-            notes.append(f"{len(over)} line(s) after the {declared} declared frames (from line "
-                         f"{frame_line_numbers[declared]}) are not frames of this hierarchy "
+            notes.append(f"{len(at) - declared} line(s) after the {declared} declared frames "
+                         f"(from line {numbers[declared]}) are not frames of this hierarchy "
                          f"({n_channels} numbers): ignored, and not written back")
-            frame_lines = frame_lines[:declared]
-            frame_line_numbers = frame_line_numbers[:declared]
-            tail = b""
+            at, ends, counts, numbers = at[:declared], ends[:declared], counts[:declared], \
+                numbers[:declared]
+            tail_start = len(data)
             ignored = True
 
-    token_lists = [line.split() for line in frame_lines]
-    bad = next((i for i, toks in enumerate(token_lists) if len(toks) != n_channels), None)
-    complete = len(frame_lines) if bad is None else bad
-    cut_short = (bad is not None and bad == len(frame_lines) - 1 and not ignored
-                 and len(token_lists[bad]) < n_channels)  # the file ends inside a frame
+    wrong = np.flatnonzero(counts != n_channels)
+    bad = int(wrong[0]) if len(wrong) else None
+    complete = len(at) if bad is None else bad
+    cut_short = (bad is not None and bad == len(at) - 1 and not ignored
+                 and counts[bad] < n_channels)  # the file ends inside a frame
     if bad is not None and not cut_short:
         raise UnreadableFileError(
-            path, f"frame {bad + 1} has {len(token_lists[bad])} values, expected "
-                  f"{n_channels} (one per channel)", line=frame_line_numbers[bad])
+            path, f"frame {bad + 1} has {counts[bad]} values, expected "
+                  f"{n_channels} (one per channel)", line=int(numbers[bad]))
     if complete < declared:
         missing = declared - complete
-        partial = (f"; the last line holds {len(token_lists[bad])} of {n_channels} values"
+        partial = (f"; the last line holds {counts[bad]} of {n_channels} values"
                    if cut_short else "")
         if not allow_truncated:
             raise UnreadableFileError(
                 path, f"truncated: 'Frames: {declared}' but only {complete} complete frame "
                       f"lines{partial} (the file was cut short, or its Frames: count is wrong)",
-                line=first_line + len(lines) - 1 if lines else None)
+                line=first_line + len(lines) - 1 if len(lines) else None)
         notes.append(f"file truncated: read {complete} of {declared} declared frames "
                      f"({missing} missing{partial})")
-        frame_lines = frame_lines[:complete]
-        token_lists = token_lists[:complete]
-        tail = b""
+        at, ends, numbers = at[:complete], ends[:complete], numbers[:complete]
+        tail_start = len(data)
 
-    values = _to_float(path, token_lists, frame_line_numbers, n_channels)
+    values = _to_float(path, data, lines, at, numbers, n_channels)
     source_parts = dict(
-        head=data[:motion_start] + b"".join(lines[:frames_at]),
+        head=data[:lines.begin(frames_at)],
         frames_line=lines[frames_at],
-        frame_time_line=b"".join(lines[frames_at + 1:frame_time_at + 1]),
-        frame_lines=frame_lines,
-        tail=tail,
+        frame_time_line=data[lines.begin(frames_at + 1):lines.begin(frame_time_at + 1)],
+        data=data, frames_start=frames_start, frame_ends=ends,
+        tail=data[tail_start:],
     )
     return values, frame_time, source_parts
 
@@ -508,27 +568,64 @@ def _frame_time(path, word: bytes, line: int) -> float:
     return value
 
 
-def _all_frames(lines: list[bytes], n_channels: int) -> bool:
-    """Whether every line holds ``n_channels`` finite numbers (a frame of this hierarchy)."""
-    tokens = [line.split() for line in lines]
-    if any(len(t) != n_channels for t in tokens):
-        return False
-    try:
-        values = np.array(list(itertools.chain.from_iterable(tokens)), dtype=np.float64)
-    except ValueError:
-        return False
-    return bool(np.isfinite(values).all())
+def _finite(data: bytes, lines: _Lines, at: np.ndarray, n_channels: int) -> bool:
+    """Whether the lines ``at`` (``n_channels`` tokens each) hold finite numbers only."""
+    for a in range(0, len(at), CHUNK):
+        rows = at[a:a + CHUNK]
+        values = _plain_block(data, lines, rows, n_channels)
+        if values is None:
+            try:
+                values = np.array([t for k in rows.tolist() for t in lines[k].split()],
+                                  dtype=np.float64)
+            except ValueError:
+                return False
+        if not np.isfinite(values).all():
+            return False
+    return True
 
 
-def _to_float(path, token_lists, line_numbers, n_channels: int) -> np.ndarray:
-    """One numpy conversion of every token; on failure, find the bad token for the message."""
-    n_frames = len(token_lists)
+#: the bytes of a plain block (:func:`_plain_block`)
+_PLAIN_BYTES = b"0123456789.eE+- \t\r\n\x0b\x0c"
+
+
+def _plain_block(data: bytes, lines: _Lines, rows: np.ndarray, n_channels: int):
+    """The (rows, n_channels) values of the frame lines ``rows`` (``n_channels`` tokens
+    each, blank lines between them included) when every byte between the first and the
+    last is one of ``_PLAIN_BYTES`` and ``np.fromstring`` reads each token as one number
+    (the count tells; it parses with Python's own ``PyOS_string_to_double``); else None."""
+    block = data[lines.begin(int(rows[0])):int(lines.ends[rows[-1]])]
+    if block.translate(None, _PLAIN_BYTES):
+        return None
     try:
-        flat = np.array(list(itertools.chain.from_iterable(token_lists)), dtype=np.float64)
+        values = np.fromstring(block, sep=" ")
     except ValueError:
-        flat = None
-    if flat is not None and np.isfinite(flat).all():
-        return flat.reshape(n_frames, n_channels)
+        return None
+    return values.reshape(len(rows), n_channels) if values.size == len(rows) * n_channels else None
+
+
+def _to_float(path, data, lines: _Lines, at, line_numbers, n_channels: int) -> np.ndarray:
+    """The frame lines ``at`` as a (frames, channels) array, CHUNK lines at a time; an
+    UnreadableFileError at the first token that is not a finite number."""
+    out = np.empty((len(at), n_channels))
+    for a in range(0, len(at), CHUNK):
+        rows = at[a:a + CHUNK]
+        values = _plain_block(data, lines, rows, n_channels)
+        if values is None:
+            token_lists = [lines[k].split() for k in rows.tolist()]
+            try:
+                values = np.array(list(itertools.chain.from_iterable(token_lists)),
+                                  dtype=np.float64).reshape(len(rows), n_channels)
+            except ValueError:
+                values = None
+        if values is None or not np.isfinite(values).all():
+            _refuse_value(path, [lines[k].split() for k in rows.tolist()],
+                          line_numbers[a:a + CHUNK].tolist())
+        out[a:a + len(rows)] = values
+    return out
+
+
+def _refuse_value(path, token_lists, line_numbers):
+    """The UnreadableFileError of the first token that is not a finite number."""
     for toks, line in zip(token_lists, line_numbers):
         for column, word in enumerate(toks):
             try:
@@ -608,7 +705,7 @@ def read(path, fps: float | None = None, allow_truncated: bool = False, **option
     if unknown:
         notes.append(f"channels of unknown type kept but not used for positions: "
                      f"{', '.join(unknown[:10])}{' ...' if len(unknown) > 10 else ''}")
-    positions = rig.positions(values)
+    positions = positions_in_chunks(rig, values)
     units, metres_per_unit = _guess_units(_skeleton_size(_rest_positions(rig), positions),
                                           notes)
     file_fps = 1.0 / frame_time
@@ -622,10 +719,12 @@ def read(path, fps: float | None = None, allow_truncated: bool = False, **option
         head=parts["head"],
         frames_line=parts["frames_line"],
         frame_time_line=parts["frame_time_line"],
-        frame_lines=parts["frame_lines"],
+        data=parts["data"],
+        frames_start=parts["frames_start"],
+        frame_ends=parts["frame_ends"],
         values=values.copy(),
         tail=parts["tail"],
-        newline=_dominant_newline(parts["frame_lines"]),
+        newline=_dominant_newline(data, parts["frame_ends"]),
         frame_time=frame_time,
         n_channels=n_channels,
         channel_names=[f"{j.name}.{c}" for j in joints for c in j.channels],
@@ -647,10 +746,12 @@ def read(path, fps: float | None = None, allow_truncated: bool = False, **option
     )
 
 
-def _dominant_newline(lines: list[bytes]) -> bytes:
-    crlf = sum(1 for line in lines if line.endswith(b"\r\n"))
-    lf = sum(1 for line in lines if line.endswith(b"\n")) - crlf
-    return b"\r\n" if crlf > lf else b"\n"
+def _dominant_newline(data: bytes, ends: np.ndarray) -> bytes:
+    """CRLF when more frame lines end with it than with a bare LF."""
+    view = np.frombuffer(data, np.uint8)
+    lf = view[ends - 1] == 10 if len(ends) else np.zeros(0, bool)
+    crlf = int(np.count_nonzero(lf & (ends >= 2) & (view[np.maximum(ends - 2, 0)] == 13)))
+    return b"\r\n" if crlf > int(np.count_nonzero(lf)) - crlf else b"\n"
 
 
 # ---------------------------------------------------------------------------------------
@@ -713,10 +814,10 @@ def write(motion: Motion, path, **options) -> list[Path]:
         bad = np.argwhere(~np.isfinite(channels))[0]
         raise WriteError(path, f"channel {source.channel_names[bad[1]]!r} is not finite at "
                                f"frame {bad[0] + 1}; BVH cannot store missing values")
-    out = [source.head, _frames_line(source, len(channels)), _frame_time_line(source, motion)]
-    out.extend(_frame_lines(source, channels))
-    out.append(source.tail)
-    return [atomic_write_bytes(path, b"".join(out))]
+    out = itertools.chain(
+        [source.head, _frames_line(source, len(channels)), _frame_time_line(source, motion)],
+        _frame_pieces(source, channels), [source.tail])
+    return [atomic_write_pieces(path, out)]
 
 
 def _frames_line(source: BvhSource, n_frames: int) -> bytes:
@@ -733,27 +834,41 @@ def _frame_time_line(source: BvhSource, motion: Motion) -> bytes:
                            ("%.10g" % (1.0 / motion.fps)).encode())
 
 
-def _frame_lines(source: BvhSource, channels: np.ndarray) -> list[bytes]:
-    n_old = len(source.values)
-    lines = []
-    for i, row in enumerate(channels):
-        if i < n_old:
-            old = source.values[i]
-            line = (source.frame_lines[i] if np.array_equal(row, old)
-                    else _rewrite_line(source.frame_lines[i], row, old))
-        elif n_old:
-            line = _rewrite_line(source.frame_lines[-1], row, None)
-        else:
-            line = _fresh_line(row, source.newline)
-        lines.append(line)
-    # every line but the last needs a line ending (the source's last line may have none)
-    for i in range(len(lines) - 1):
-        if not lines[i].endswith((b"\n", b"\r")):
-            lines[i] += source.newline
-    if lines and len(channels) != n_old and n_old:
-        ends_with_newline = source.frame_lines[-1].endswith((b"\n", b"\r"))
-        if not ends_with_newline:
-            lines[-1] = lines[-1].rstrip(b"\r\n")
-        elif not lines[-1].endswith((b"\n", b"\r")):
-            lines[-1] += source.newline
-    return lines
+def _frame_pieces(source: BvhSource, channels: np.ndarray):
+    """The frame lines of ``channels`` in pieces: runs of unchanged lines as one slice of
+    the source, each other line rewritten (or made from the last one, for frames past
+    the source's), every line but the last with a line ending."""
+    n_old, T = len(source.values), len(channels)
+    common = min(T, n_old)
+    changed = np.flatnonzero((channels[:common] != source.values[:common]).any(axis=1))
+    special = np.union1d(changed, np.array([k for k in (n_old - 1, T - 1) if 0 <= k < common],
+                                           dtype=np.intp))
+    ends_with_newline = n_old and source.frame_line(n_old - 1).endswith((b"\n", b"\r"))
+
+    def finished(i: int, line: bytes) -> bytes:
+        if i < T - 1:
+            if not line.endswith((b"\n", b"\r")):
+                line += source.newline
+        elif T != n_old and n_old:
+            if not ends_with_newline:
+                line = line.rstrip(b"\r\n")
+            elif not line.endswith((b"\n", b"\r")):
+                line += source.newline
+        return line
+
+    data = memoryview(source.data)                # slices of it are not copies
+    done = 0                                      # frames written so far
+    for i in special.tolist():
+        if i > done:
+            yield data[source.frame_start(done):int(source.frame_ends[i - 1])]
+        line = source.frame_line(i)
+        if not np.array_equal(channels[i], source.values[i]):
+            line = _rewrite_line(line, channels[i], source.values[i])
+        yield finished(i, line)
+        done = i + 1
+    if done < common:
+        yield data[source.frame_start(done):int(source.frame_ends[common - 1])]
+    for i in range(n_old, T):
+        line = (_rewrite_line(source.frame_line(n_old - 1), channels[i], None) if n_old
+                else _fresh_line(channels[i], source.newline))
+        yield finished(i, line)

@@ -58,6 +58,7 @@ from __future__ import annotations
 import logging
 import struct
 from dataclasses import dataclass, field
+from itertools import chain
 from pathlib import Path
 
 import numpy as np
@@ -813,14 +814,15 @@ def write(motion: Motion, path, mark_missing: bool = True, **options) -> list[Pa
     source = motion.source
     if (isinstance(source, C3DSource) and motion.positions.shape == source.positions.shape
             and list(motion.names) == list(source.names)):
-        payload = _splice(motion, source, path, mark_missing)
+        pieces = _splice(motion, source, path, mark_missing)
     else:
         if isinstance(source, C3DSource):
             log.warning("%s: frames or markers changed since reading; writing a fresh C3D "
                         "without the original analog data and parameters", path)
-        payload = _fresh_file(motion, path)
+        pieces = _fresh_file(motion, path)
     with atomic_open(path, "wb") as handle:
-        handle.write(payload)
+        for piece in pieces:
+            handle.write(piece)
     return [path]
 
 
@@ -886,7 +888,8 @@ def storable(motion: Motion) -> Motion:
                           notes=[*motion.notes, note])
 
 
-def _splice(motion: Motion, source: C3DSource, path, mark_missing: bool) -> bytes:
+def _splice(motion: Motion, source: C3DSource, path, mark_missing: bool):
+    """The file's pieces (bytes) with the changed samples re-encoded."""
     new = _positions_in_source_units(motion, source)
     old = source.positions
     new_missing = ~np.isfinite(new).all(axis=2)
@@ -925,16 +928,27 @@ def _splice(motion: Motion, source: C3DSource, path, mark_missing: bool) -> byte
             nan_word = still_missing & ~np.isfinite(source.points[..., 3])
             points[..., 3][nan_word] = -1
 
-    record = np.dtype([("p", points.dtype, points.shape[1:]),
-                       ("a", source.analog.dtype, source.analog.shape[1:])])
-    frames = np.empty(points.shape[0], dtype=record)
-    frames["p"] = points
-    frames["a"] = source.analog
     header, prefix = source.header, source.prefix
     left = _left_runs(motion, new_missing)
     if filled.any() or left:
         header, prefix = _with_fill_group(source, _fill_params(motion, source, filled, left), path)
-    return header + prefix + frames.tobytes() + source.tail
+    return chain([header, prefix], _frame_records(points, source.analog), [source.tail])
+
+
+#: frames interleaved and written at a time
+CHUNK = 4096
+
+
+def _frame_records(points: np.ndarray, analog: np.ndarray):
+    """The data section: each frame's points then its analog samples, CHUNK frames a
+    piece (never the whole section as one more copy)."""
+    record = np.dtype([("p", points.dtype, points.shape[1:]),
+                       ("a", analog.dtype, analog.shape[1:])])
+    for a in range(0, points.shape[0], CHUNK):
+        frames = np.empty(len(points[a:a + CHUNK]), dtype=record)
+        frames["p"] = points[a:a + CHUNK]
+        frames["a"] = analog[a:a + CHUNK]
+        yield frames.tobytes()
 
 
 #: the parameter group listing mocapfix's fills (see :func:`_fill_params`)
@@ -1119,7 +1133,7 @@ def _encode_xyz(values: np.ndarray, source: C3DSource, path) -> np.ndarray:
 
 
 # -- fresh file (no C3D source, or frames/markers changed) -------------------------------
-def _fresh_file(motion: Motion, path) -> bytes:
+def _fresh_file(motion: Motion, path) -> list:
     positions = np.asarray(motion.positions, dtype=np.float64)
     n_frames, n_points = positions.shape[:2]
     if n_frames == 0 or n_points == 0:
@@ -1165,6 +1179,4 @@ def _fresh_file(motion: Motion, path) -> bytes:
     points = np.zeros((n_frames, n_points, 4), dtype="<f4")
     points[..., :3] = np.where(missing[..., None], 0.0, positions)
     points[..., 3] = np.where(missing, -1.0, 0.0)
-    data = points.tobytes()
-    data += b"\0" * (-len(data) % BLOCK)
-    return bytes(header) + section + data
+    return [bytes(header), section, points.data, b"\0" * (-points.nbytes % BLOCK)]

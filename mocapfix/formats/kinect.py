@@ -75,23 +75,29 @@ If the motion has no Kinect source (built in Python) or its frame count/joints d
 from the source, a headed wide CSV is written (``time`` + ``<Joint>_X/_Y/_Z`` [+ ``_State``]).
 
 Why hand-written: these are ad-hoc research/export layouts with no library that reads
-them; the parsing is one ``split`` per line plus one vectorised numpy conversion.
+them. The file is held once, as its bytes with the offsets of its lines
+(:class:`~mocapfix.formats.textlines.TextLines`); data lines are parsed CHUNK at a time
+straight into the float arrays (blocks of plain numbers by ``np.fromstring``, others by one
+``split`` per line and one numpy conversion), and written back as slices of the source
+between the rewritten lines: besides the whole-take arrays, memory does not grow with the
+take by more than a few bytes a sample.
 """
 from __future__ import annotations
 
 import re
 from dataclasses import dataclass, field
+from itertools import repeat
 from pathlib import Path
 
 import numpy as np
 
-from mocapfix.core.errors import UnreadableFileError, UnsupportedFeatureError, excerpt
-from mocapfix.formats.textenc import refuse_long_fields
-from mocapfix.core.fileio import read_input_bytes, write_output_text
-from mocapfix.core.quantity import MAX_FRAME_RATE_HZ, MIN_FRAME_RATE_HZ
 from mocapfix.core import kinect_joints as kl
+from mocapfix.core.errors import UnreadableFileError, UnsupportedFeatureError, excerpt
+from mocapfix.core.fileio import read_input_bytes, write_output_pieces
 from mocapfix.core.motion import Motion, Skeleton
+from mocapfix.core.quantity import MAX_FRAME_RATE_HZ, MIN_FRAME_RATE_HZ
 from mocapfix.core.units import METRES_PER_UNIT, normalise_unit_name
+from mocapfix.formats.textlines import TextLines
 
 NAME = "kinect"
 SUFFIXES = (".csv", ".txt", ".tsv")
@@ -133,11 +139,10 @@ class KinectSource:
     """Everything the writer needs to reproduce the file (see the module docstring)."""
 
     layout: str
-    bom: str
-    lines: list[str]             # every line of the file, without its line ending
-    endings: list[str]           # the ending of each line ("\n", "\r\n" or "" for the last)
+    text: TextLines              # the file's bytes and the offsets of its lines
     sep: str | None              # field separator; None = runs of whitespace
     names: list[str]
+    # (read-only broadcast views where a layout's lines all look alike)
     line_of: np.ndarray          # (T, J) line index of each sample; -1: no row (long layout)
     coord_field: np.ndarray      # (T, J, 3) field index of X, Y, Z in its line
     state_field: np.ndarray      # (T, J) field index of the state / confidence; -1: none
@@ -146,6 +151,19 @@ class KinectSource:
     missing: np.ndarray          # (T, J) samples the reader made missing
     skip_lines: list[int] = field(default_factory=list)   # truncated fragments, not written
     extra: dict = field(default_factory=dict)              # layout-specific (long layout rows)
+
+    @property
+    def bom(self) -> str:
+        return self.text.bom
+
+    @property
+    def lines(self) -> list[str]:
+        """Every line, without its ending (one str each: for tests and small files)."""
+        return self.text.lines
+
+    @property
+    def endings(self) -> list[str]:
+        return self.text.endings
 
 
 # ---------------------------------------------------------------------------------------
@@ -201,22 +219,145 @@ def _numbers(tokens: list[str], token_lines: np.ndarray, path, empty_is_nan=Fals
         raise UnreadableFileError(path, "non-numeric value") from None
 
 
-def _check_counts(rows: list[list[str]], idx: list[int], expected: int, path, notes,
-                  what: str) -> tuple[list[list[str]], list[int], list[int]]:
-    """Rows must hold ``expected`` fields; a short LAST row is a truncation: dropped, noted."""
-    counts = np.fromiter(map(len, rows), dtype=np.intp, count=len(rows))
+def _check_counts(counts: np.ndarray, idx: np.ndarray, expected: int, path, notes,
+                  what: str) -> tuple[np.ndarray, list[int]]:
+    """Rows (``counts`` fields each, on lines ``idx``) must hold ``expected`` fields; a
+    short LAST row is a truncation: dropped, noted. Returns the lines kept and dropped."""
     bad = np.nonzero(counts != expected)[0]
     skipped: list[int] = []
-    if len(bad) and bad[0] == len(rows) - 1 and counts[-1] < expected:
+    if len(bad) and bad[0] == len(counts) - 1 and counts[-1] < expected:
         notes.append(f"last line (line {idx[-1] + 1}) is incomplete ({counts[-1]} of "
                      f"{expected} {what}): the file looks truncated; that line was dropped")
-        skipped = [idx[-1]]
-        rows, idx = rows[:-1], idx[:-1]
+        skipped = [int(idx[-1])]
+        idx = idx[:-1]
     elif len(bad):
         k = int(bad[0])
         raise UnreadableFileError(path, f"{counts[k]} {what} where {expected} were expected",
-                                  line=idx[k] + 1)
-    return rows, idx, skipped
+                                  line=int(idx[k]) + 1)
+    return idx, skipped
+
+
+#: data lines split at a time: their fields are Python strings only while they are parsed
+CHUNK = 4096
+
+
+def _parse_rows(path, text: TextLines, idx: np.ndarray, split, n_fields: int, groups,
+                clean: bool = False, label: int | None = None, plain: bytes | None = None):
+    """Split the lines ``idx`` into fields, CHUNK lines at a time, and convert the fields
+    of each group of columns (None: every field) into a float array (rows, columns); a
+    row without ``n_fields`` fields is left NaN (:func:`_check_counts` then refuses it or
+    drops it as a truncated last line). ``clean``: fields stripped of blanks and quotes,
+    empty ones NaN. ``label``: the column of a name, numbered in order of appearance.
+
+    Returns the field counts, per group (values, the UnreadableFileError of its first
+    non-numeric field, or None: raised where the reader used to convert that group), and
+    the label numbers and names.
+
+    ``plain`` (every field wanted, one group): the separator, "," or " " (runs of blanks),
+    of a layout whose blocks of consecutive lines made of digits, signs, points,
+    exponents and separators only are converted by :func:`_plain_block` without
+    splitting them into strings; a block it cannot vouch for is split as above."""
+    n = len(idx)
+    counts = np.zeros(n, np.intp)
+    values = [np.full((n, n_fields if g is None else len(g)), np.nan) for g in groups]
+    errors: list = [None] * len(groups)
+    numbers: dict[str, int] = {}
+    labels = np.full(n, -1, np.intp)
+    for a in range(0, n, CHUNK):
+        at = idx[a:a + CHUNK]
+        if plain and at[-1] - at[0] == len(at) - 1:
+            got = _plain_block(text, at, n_fields, plain)
+            if got is not None:
+                values[0][a:a + len(at)] = got
+                counts[a:a + len(at)] = n_fields
+                continue
+        rows = [split(line) for line in text.lines_at(at)]
+        c = np.fromiter(map(len, rows), np.intp, len(rows))
+        counts[a:a + len(rows)] = c
+        good = np.flatnonzero(c == n_fields)
+        if len(good) < len(rows):
+            rows = [rows[k] for k in good.tolist()]
+        if label is not None:
+            labels[a + good] = [numbers.setdefault(row[label].strip().strip('"'), len(numbers))
+                                for row in rows]
+        for g, cols in enumerate(groups):
+            if errors[g] is not None or not rows:
+                continue
+            width = values[g].shape[1]
+            if cols is None:
+                tokens = [t for row in rows for t in row]
+            elif clean:
+                tokens = [row[c].strip().strip('"') for row in rows for c in cols]
+            else:
+                tokens = [row[c] for row in rows for c in cols]
+            lines = at[good]
+            try:
+                got = _numbers(tokens, np.repeat(lines, width), path, empty_is_nan=clean)
+            except UnreadableFileError as exc:
+                # the rows before the bad one are read (a dropped truncated end may hold it)
+                r = 0 if exc.line is None else int(np.searchsorted(lines, exc.line - 1))
+                if r:
+                    values[g][a + good[:r]] = _numbers(tokens[:r * width], np.repeat(lines[:r], width),
+                                                       path, clean).reshape(r, width)
+                errors[g] = (exc, a + int(good[min(r, len(good) - 1)]))
+                continue
+            values[g][a + good] = got.reshape(len(rows), width)
+    return counts, list(zip(values, errors)), (labels, list(numbers))
+
+
+#: the bytes of a plain block (:func:`_plain_block`) besides its separator
+_PLAIN_BYTES = b"0123456789.eE+-\n"
+
+
+def _plain_block(text: TextLines, at: np.ndarray, n_fields: int, sep: str) -> np.ndarray | None:
+    """The (lines, n_fields) values of the consecutive lines ``at`` when every byte of them
+    is one of ``_PLAIN_BYTES``, the separator (``" "``: blanks and tabs) or a CR of a CRLF,
+    every line holds ``n_fields`` fields (a trailing empty one dropped, as
+    :func:`_strip_trailing_empty` does) and ``np.fromstring`` reads each field as one
+    number (the count tells); else None. ``np.fromstring`` parses with Python's own
+    ``PyOS_string_to_double``, so the values are those ``float`` gives."""
+    block = text.raw[int(text.starts[at[0]]):int(text.stops[at[-1]])]
+    keep = _PLAIN_BYTES + (b"," if sep == "," else b" \t")
+    if block.translate(None, keep + b"\r") or block.count(b"\r") != block.count(b"\r\n"):
+        return None
+    if b"\r" in block:
+        block = block.replace(b"\r\n", b"\n")
+    raw = np.frombuffer(block, np.uint8)
+    ends = np.flatnonzero(raw == 10)
+    if len(ends) != len(at) - 1:
+        return None
+    bounds = np.concatenate([ends, [len(raw)]])
+    if sep == ",":
+        commas = np.searchsorted(np.flatnonzero(raw == 44), bounds)
+        trailing = raw[bounds - 1] == 44
+        fields = np.diff(commas, prepend=0) + 1 - trailing
+        if trailing.any():
+            block = block.replace(b",\n", b"\n").removesuffix(b",")
+        block = block.replace(b"\n", b",")
+    else:
+        gap = (raw == 32) | (raw == 9) | (raw == 10)
+        first = np.flatnonzero(~gap & np.concatenate([[True], gap[:-1]]))
+        fields = np.diff(np.searchsorted(first, bounds), prepend=0)
+    if (fields != n_fields).any():
+        return None
+    try:
+        values = np.fromstring(block, sep=sep)
+    except ValueError:
+        return None
+    return values.reshape(len(at), n_fields) if values.size == len(at) * n_fields else None
+
+
+def _kept(parsed, n: int) -> np.ndarray:
+    """The values of one group of :func:`_parse_rows` for the first ``n`` rows, or the
+    error of a non-numeric field among them."""
+    values, error = parsed
+    if error is not None and error[1] < n:
+        raise error[0]
+    return values[:n]
+
+
+def _csv_fields(line: str) -> list[str]:
+    return _strip_trailing_empty(line.split(","))
 
 
 # ---------------------------------------------------------------------------------------
@@ -309,26 +450,25 @@ def read(path, fps: float | None = None, units: str | None = None,
     rate alone. Each layout uses the rate it is given only where it would assume one, so
     one parse serves both cases."""
     path = Path(path)
-    raw = read_input_bytes(path)
-    bom, text = _decode(raw, path)
-    lines, endings = _split_lines(text)
-    idx = _content_indices(lines)
-    if not idx:
+    text = TextLines.scan(path, read_input_bytes(path))
+    idx = np.flatnonzero(text.content)
+    if not len(idx):
         raise UnreadableFileError(path, "file holds no data lines")
-    refuse_long_fields(path, lines)
-    layout = options.get("layout") or _classify([lines[i] for i in idx[:40]])
+    if text.long_field is not None:
+        raise text.long_field
+    layout = options.get("layout") or _classify(text.lines_at(idx[:40]))
     if layout not in _READERS and layout is not None:
         raise UnreadableFileError(path, f"unknown Kinect layout {layout!r}; known: "
                                         f"{', '.join(sorted(_READERS))}")
     if layout is None:
-        raise UnreadableFileError(path, _why_unknown(lines[idx[0]]), line=idx[0] + 1)
+        raise UnreadableFileError(path, _why_unknown(text.line(idx[0])), line=int(idx[0]) + 1)
     reader = _READERS[layout]
     for rate in (fps, default_fps):
         if rate is not None and not (np.isfinite(float(rate)) and float(rate) > 0):
             raise UnreadableFileError(path, f"fps must be a positive number, got {rate}")
     given = fps if fps is not None else default_fps
     notes: list[str] = []
-    parts = reader(path, lines, idx, notes, layout=layout, fps=given, units=units)
+    parts = reader(path, text, idx, notes, layout=layout, fps=given, units=units)
     if not MIN_FRAME_RATE_HZ <= parts.file_fps <= MAX_FRAME_RATE_HZ:
         # time stamps 1e300 apart gave "90 frames at 0 fps", and cleaning overflowed
         # (internal error OverflowError); the BVH reader refuses such rates too
@@ -339,7 +479,7 @@ def read(path, fps: float | None = None, units: str | None = None,
     if given is not None and parts.extra["rate_assumed"]:
         notes[:] = [n for n in notes if not isinstance(n, RateAssumed)]
         fps = given
-    motion = _assemble(parts, layout, bom, lines, endings, notes, fps)
+    motion = _assemble(parts, layout, text, notes, fps)
     motion.path = str(path)
     return motion
 
@@ -381,7 +521,7 @@ class _Parsed:
     extra: dict = field(default_factory=dict)
 
 
-def _assemble(p: _Parsed, layout, bom, lines, endings, notes, fps) -> Motion:
+def _assemble(p: _Parsed, layout, text: TextLines, notes, fps) -> Motion:
     positions = p.coords.copy()
     positions[p.missing] = np.nan
     motion_fps = p.file_fps
@@ -393,7 +533,7 @@ def _assemble(p: _Parsed, layout, bom, lines, endings, notes, fps) -> Motion:
             notes.append(f"fps {fps:g} given by the user overrides the file's {p.file_fps:.4g} fps")
         motion_fps = fps
     source = KinectSource(
-        layout=layout, bom=bom, lines=lines, endings=endings, sep=p.sep, names=list(p.names),
+        layout=layout, text=text, sep=p.sep, names=list(p.names),
         line_of=p.line_of, coord_field=p.coord_field, state_field=p.state_field,
         state_kind=p.state_kind, original=p.coords, missing=p.missing,
         skip_lines=p.skip_lines, extra=p.extra)
@@ -482,37 +622,36 @@ def _state_confidence(states: np.ndarray, missing: np.ndarray) -> np.ndarray:
 
 
 # -- headerless Kinect v2 / v1 CSV --------------------------------------------------------
-def _read_kinect_csv(path, lines, idx, notes, layout, fps, units) -> _Parsed:
+def _read_kinect_csv(path, text, idx, notes, layout, fps, units) -> _Parsed:
     names = kl.KINECT_V2 if layout == "kinect_v2_csv" else kl.KINECT_V1
     n = len(names)
-    rows = [_strip_trailing_empty(lines[i].split(",")) for i in idx]
-    rows, idx, skipped = _check_counts(rows, idx, 1 + 4 * n, path, notes, "values")
-    if not rows:
+    counts, (parsed,), _ = _parse_rows(path, text, idx, _csv_fields, 1 + 4 * n, [None],
+                                       plain=",")
+    idx, skipped = _check_counts(counts, idx, 1 + 4 * n, path, notes, "values")
+    if not len(idx):
         raise UnreadableFileError(path, "no complete data line")
-    token_lines = np.repeat(np.asarray(idx), 1 + 4 * n)
-    values = _numbers([t for row in rows for t in row], token_lines, path)
-    values = values.reshape(len(rows), 1 + 4 * n)
-    ticks, block = values[:, 0], values[:, 1:].reshape(len(rows), n, 4)
+    values = _kept(parsed, len(idx))
+    ticks, block = values[:, 0], values[:, 1:].reshape(len(idx), n, 4)
     states = block[..., 3]
     bad_state = ~np.isin(states, (0.0, 1.0, 2.0))
     if bad_state.any():
         t, j = np.argwhere(bad_state)[0]
         raise UnreadableFileError(path, f"tracking state {states[t, j]:g} of {names[j]} is not "
-                                        f"0, 1 or 2", line=idx[t] + 1)
+                                        f"0, 1 or 2", line=int(idx[t]) + 1)
     if not np.isfinite(ticks).all():
         t = int(np.nonzero(~np.isfinite(ticks))[0][0])
-        raise UnreadableFileError(path, "timestamp is not a number", line=idx[t] + 1)
+        raise UnreadableFileError(path, "timestamp is not a number", line=int(idx[t]) + 1)
     coords = block[..., :3]
     missing = (states == 0) | _nonfinite_missing(coords, notes)
     times, file_fps = _timing((ticks - np.median(ticks)) * 1e-7, notes)
-    T = len(rows)
+    T = len(idx)
     j = np.arange(n)
     return _Parsed(
         names=list(names), coords=coords, missing=missing,
         confidence=_state_confidence(states.astype(int), missing),
-        line_of=np.repeat(np.asarray(idx)[:, None], n, axis=1),
-        coord_field=np.broadcast_to(1 + 4 * j[:, None] + np.arange(3), (T, n, 3)).copy(),
-        state_field=np.broadcast_to(4 + 4 * j, (T, n)).copy(), state_kind="tracking",
+        line_of=np.broadcast_to(idx[:, None], (T, n)),
+        coord_field=np.broadcast_to(1 + 4 * j[:, None] + np.arange(3), (T, n, 3)),
+        state_field=np.broadcast_to(4 + 4 * j, (T, n)), state_kind="tracking",
         sep=",", times=times, file_fps=_or_default(file_fps, DEFAULT_FPS, notes),
         skeleton=kl.skeleton_for("kinect_v2" if n == 25 else "kinect_v1"), skip_lines=skipped,
         extra={"ticks0": float(ticks[0])})
@@ -526,21 +665,21 @@ def _or_default(value: float, default: float, notes: list[str]) -> float:
 
 
 # -- UTKinect -------------------------------------------------------------------------------
-def _read_utkinect(path, lines, idx, notes, layout, fps, units) -> _Parsed:
+def _read_utkinect(path, text, idx, notes, layout, fps, units) -> _Parsed:
     names = kl.KINECT_V1
     n = len(names)
-    rows = [lines[i].split() for i in idx]
-    rows, idx, skipped = _check_counts(rows, idx, 1 + 3 * n, path, notes, "values")
-    if not rows:
+    counts, (parsed,), _ = _parse_rows(path, text, idx, str.split, 1 + 3 * n, [None],
+                                       plain=" ")
+    idx, skipped = _check_counts(counts, idx, 1 + 3 * n, path, notes, "values")
+    if not len(idx):
         raise UnreadableFileError(path, "no complete data line")
-    values = _numbers([t for row in rows for t in row],
-                      np.repeat(np.asarray(idx), 1 + 3 * n), path).reshape(len(rows), 1 + 3 * n)
+    values = _kept(parsed, len(idx))
     index = values[:, 0]
     bad = ~(np.isfinite(index) & (index == np.round(index)))
     if bad.any():
         k = int(np.nonzero(bad)[0][0])
-        raise UnreadableFileError(path, "frame index is not an integer", line=idx[k] + 1)
-    coords = values[:, 1:].reshape(len(rows), n, 3)
+        raise UnreadableFileError(path, "frame index is not an integer", line=int(idx[k]) + 1)
+    coords = values[:, 1:].reshape(len(idx), n, 3)
     missing = _nonfinite_missing(coords, notes)
     jumps = np.diff(index)
     if len(jumps):
@@ -549,34 +688,33 @@ def _read_utkinect(path, lines, idx, notes, layout, fps, units) -> _Parsed:
                      f"{int(np.sum(jumps == 0))} repeated indices")
     times, file_fps = _timing((index - np.median(index)) / UTKINECT_FPS, notes,
                               unit_label="frame index")
-    T = len(rows)
+    T = len(idx)
     j = np.arange(n)
     return _Parsed(
         names=list(names), coords=coords, missing=missing, confidence=None,
-        line_of=np.repeat(np.asarray(idx)[:, None], n, axis=1),
-        coord_field=np.broadcast_to(1 + 3 * j[:, None] + np.arange(3), (T, n, 3)).copy(),
-        state_field=np.full((T, n), -1), state_kind=None, sep=None, times=times,
+        line_of=np.broadcast_to(idx[:, None], (T, n)),
+        coord_field=np.broadcast_to(1 + 3 * j[:, None] + np.arange(3), (T, n, 3)),
+        state_field=np.broadcast_to(-1, (T, n)), state_kind=None, sep=None, times=times,
         file_fps=_or_default(file_fps, UTKINECT_FPS, notes),
         skeleton=kl.skeleton_for("kinect_v1"), skip_lines=skipped,
         extra={"index0": float(index[0])})
 
 
 # -- MSR Action3D -----------------------------------------------------------------------
-def _read_msr(path, lines, idx, notes, layout, fps, units) -> _Parsed:
+def _read_msr(path, text, idx, notes, layout, fps, units) -> _Parsed:
     names = kl.MSR_ACTION3D
     n = len(names)
-    rows = [lines[i].split() for i in idx]
-    rows, idx, skipped = _check_counts(rows, idx, 4, path, notes, "values")
-    partial = len(rows) % n
+    counts, (parsed,), _ = _parse_rows(path, text, idx, str.split, 4, [None], plain=" ")
+    idx, skipped = _check_counts(counts, idx, 4, path, notes, "values")
+    partial = len(idx) % n
     if partial:
         notes.append(f"last frame is incomplete ({partial} of {n} rows): the file looks "
                      "truncated; that frame was dropped")
-        skipped += idx[len(idx) - partial:]
-        rows, idx = rows[:len(rows) - partial], idx[:len(idx) - partial]
-    if not rows:
+        skipped += idx[len(idx) - partial:].tolist()
+        idx = idx[:len(idx) - partial]
+    if not len(idx):
         raise UnreadableFileError(path, f"no complete frame of {n} rows")
-    values = _numbers([t for row in rows for t in row], np.repeat(np.asarray(idx), 4), path)
-    block = values.reshape(-1, n, 4)
+    block = _kept(parsed, len(idx)).reshape(-1, n, 4)
     coords, conf = block[..., :3], block[..., 3]
     finite = np.isfinite(coords).all(axis=2)
     if finite.any() and np.median(np.abs(coords[finite][:, :2])) > 20:
@@ -585,7 +723,8 @@ def _read_msr(path, lines, idx, notes, layout, fps, units) -> _Parsed:
     bad_conf = ~((conf >= 0) & (conf <= 1))
     if bad_conf.any():
         k = int(np.argwhere(bad_conf)[0][0] * n + np.argwhere(bad_conf)[0][1])
-        raise UnreadableFileError(path, "confidence (4th value) is not in [0, 1]", line=idx[k] + 1)
+        raise UnreadableFileError(path, "confidence (4th value) is not in [0, 1]",
+                                  line=int(idx[k]) + 1)
     zero = finite & (coords == 0).all(axis=2)
     missing = ~finite | zero
     if (~finite).any():
@@ -602,8 +741,8 @@ def _read_msr(path, lines, idx, notes, layout, fps, units) -> _Parsed:
     line_of = np.asarray(idx).reshape(T, n)
     return _Parsed(
         names=list(names), coords=coords, missing=missing, confidence=confidence,
-        line_of=line_of, coord_field=np.broadcast_to(np.arange(3), (T, n, 3)).copy(),
-        state_field=np.full((T, n), 3), state_kind="confidence", sep=None, times=None,
+        line_of=line_of, coord_field=np.broadcast_to(np.arange(3), (T, n, 3)),
+        state_field=np.broadcast_to(3, (T, n)), state_kind="confidence", sep=None, times=None,
         file_fps=MSR_FPS, skeleton=kl.skeleton_for("msr_action3d"), skip_lines=skipped)
 
 
@@ -711,18 +850,25 @@ def _guess_units(coords, missing, skeleton, tags, units, notes, path) -> str:
     return unit
 
 
-def _data_rows(path, lines, idx, sep, n_columns, notes):
-    rows = [lines[i].split(sep) if sep != " " else lines[i].split() for i in idx]
-    rows = [r[:-1] if len(r) == n_columns + 1 and not r[-1].strip() else r for r in rows]
-    return _check_counts(rows, idx, n_columns, path, notes, "columns")
+def _data_rows(path, text, idx, sep, n_columns, notes, groups, label=None):
+    """:func:`_parse_rows` of a headed layout's data lines (a trailing empty field past
+    the header's columns dropped), then :func:`_check_counts`."""
+    def split(line):
+        r = line.split(sep) if sep != " " else line.split()
+        return r[:-1] if len(r) == n_columns + 1 and not r[-1].strip() else r
+
+    counts, parsed, labels = _parse_rows(path, text, idx, split, n_columns, groups,
+                                         clean=True, label=label)
+    idx, skipped = _check_counts(counts, idx, n_columns, path, notes, "columns")
+    return idx, skipped, parsed, labels
 
 
 # -- headed wide CSV ------------------------------------------------------------------------
-def _read_wide(path, lines, idx, notes, layout, fps, units) -> _Parsed:
-    header_i, data_idx = idx[0], idx[1:]
-    sep = _header_sep(lines[header_i])
-    columns = [_clean_header(c) for c in (lines[header_i].split(sep) if sep != " "
-                                          else lines[header_i].split())]
+def _read_wide(path, text, idx, notes, layout, fps, units) -> _Parsed:
+    header_i, data_idx = int(idx[0]), idx[1:]
+    header = text.line(header_i)
+    sep = _header_sep(header)
+    columns = [_clean_header(c) for c in (header.split(sep) if sep != " " else header.split())]
     joints, time_col, tags = _wide_columns(columns)
     for joint, roles in joints.items():
         lacking = {"x", "y", "z"} - set(roles)
@@ -731,17 +877,25 @@ def _read_wide(path, lines, idx, notes, layout, fps, units) -> _Parsed:
                                             f"{', '.join(sorted(lacking)).upper()}",
                                       line=header_i + 1)
     names = [j for j, r in joints.items() if "x" in r]
-    if not data_idx:
+    if not len(data_idx):
         raise UnreadableFileError(path, "header but no data rows")
-    rows, data_idx, skipped = _data_rows(path, lines, data_idx, sep, len(columns), notes)
-    if not rows:
+    coord_cols = np.array([[joints[n][a] for a in "xyz"] for n in names]).reshape(-1, 3)
+    state = next(((kind, role) for kind, role in (("tracking", "state"),
+                                                  ("confidence", "confidence"))
+                  if any(role in joints[n] for n in names)), None)
+    have = [j for j, n in enumerate(names) if state and state[1] in joints[n]]
+    state_cols = [joints[names[j]][state[1]] for j in have]
+    groups = [coord_cols.ravel(), state_cols, [] if time_col is None else [time_col[0]]]
+    data_idx, skipped, (coord_values, state_values, time_values), _ = _data_rows(
+        path, text, data_idx, sep, len(columns), notes, groups)
+    if not len(data_idx):
         raise UnreadableFileError(path, "no complete data row")
-    T, J = len(rows), len(names)
-    coord_cols = np.array([[joints[n][a] for a in "xyz"] for n in names])
-    coords = _column_values(rows, data_idx, coord_cols.ravel(), path).reshape(T, J, 3)
+    T, J = len(data_idx), len(names)
+    coords = _kept(coord_values, T).reshape(T, J, 3)
     missing = ~np.isfinite(coords).all(axis=2)
     empty_or_nan = int(missing.sum())
-    state_kind, state_field, confidence = _wide_states(rows, data_idx, joints, names, path,
+    state_kind, state_field, confidence = _wide_states(state_values, state, have, state_cols,
+                                                        data_idx, names, path,
                                                         missing)  # NotTracked -> missing
     if empty_or_nan:
         notes.append(f"{empty_or_nan} samples with empty/nan/inf cells read as missing")
@@ -750,35 +904,29 @@ def _read_wide(path, lines, idx, notes, layout, fps, units) -> _Parsed:
     if match:
         notes.append(f"joint names match the {match[0]} set: its bone topology is used")
     unit = _guess_units(coords, missing, skeleton, tags, units, notes, path)
-    times, file_fps = _wide_times(rows, data_idx, time_col, fps, path, notes)
+    times, file_fps = _wide_times(time_values, data_idx, time_col, fps, path, notes)
     extra_cols = len(columns) - 3 * J - (time_col is not None) - int(np.sum(state_field[0] >= 0))
     if extra_cols > 0:
         notes.append(f"{extra_cols} other columns kept as they are")
     return _Parsed(
         names=names, coords=coords, missing=missing, confidence=confidence,
-        line_of=np.repeat(np.asarray(data_idx)[:, None], J, axis=1),
-        coord_field=np.broadcast_to(coord_cols, (T, J, 3)).copy(), state_field=state_field,
+        line_of=np.broadcast_to(data_idx[:, None], (T, J)),
+        coord_field=np.broadcast_to(coord_cols, (T, J, 3)), state_field=state_field,
         state_kind=state_kind, sep=None if sep == " " else sep, times=times, file_fps=file_fps,
         units=unit, skeleton=skeleton, skip_lines=skipped)
 
 
-def _column_values(rows, idx, cols, path) -> np.ndarray:
-    cols = np.asarray(cols, dtype=np.intp)
-    tokens = [row[c].strip().strip('"') for row in rows for c in cols]
-    return _numbers(tokens, np.repeat(np.asarray(idx), len(cols)), path, empty_is_nan=True)
-
-
-def _wide_states(rows, idx, joints, names, path, missing):
-    """Per-joint state (0/1/2) or confidence columns; joints without one count as tracked."""
+def _wide_states(parsed, state, have, cols, idx, names, path, missing):
+    """Per-joint state (0/1/2) or confidence columns (``state``: (kind, role) of the
+    first role any joint has; ``have``: the joints with one, at columns ``cols``); joints
+    without one count as tracked."""
     T, J = missing.shape
-    for kind, role in (("tracking", "state"), ("confidence", "confidence")):
-        have = [j for j, n in enumerate(names) if role in joints[n]]
-        if not have:
-            continue
-        cols = np.array([joints[names[j]][role] for j in have])
-        values = _column_values(rows, idx, cols, path).reshape(T, len(have))
-        field_index = np.full((T, J), -1, dtype=np.intp)
-        field_index[:, have] = cols
+    if state is not None:
+        kind = state[0]
+        values = _kept(parsed, T).reshape(T, len(have))
+        field_index = np.full(J, -1, dtype=np.intp)
+        field_index[have] = cols
+        field_index = np.broadcast_to(field_index, (T, J))
         confidence = np.ones((T, J))
         if kind == "tracking":
             bad = ~np.isin(values, (0.0, 1.0, 2.0)) & ~missing[:, have]
@@ -786,7 +934,7 @@ def _wide_states(rows, idx, joints, names, path, missing):
                 t, k = np.argwhere(bad)[0]
                 raise UnreadableFileError(path, f"tracking state {values[t, k]:g} of "
                                                 f"{names[have[k]]} is not 0, 1 or 2",
-                                          line=idx[t] + 1)
+                                          line=int(idx[t]) + 1)
             states = np.nan_to_num(values, nan=0.0).astype(int)
             missing[:, have] |= states == 0
             confidence[:, have] = _state_confidence(states, missing[:, have])
@@ -794,19 +942,20 @@ def _wide_states(rows, idx, joints, names, path, missing):
             confidence[:, have] = np.clip(np.nan_to_num(values, nan=0.0), 0.0, 1.0)
         confidence[missing] = 0.0
         return kind, field_index, confidence
-    return None, np.full((T, J), -1), None
+    return None, np.broadcast_to(-1, (T, J)), None
 
 
-def _wide_times(rows, idx, time_col, fps, path, notes):
+def _wide_times(parsed, idx, time_col, fps, path, notes):
     if time_col is None:
         rate = fps or DEFAULT_FPS
         notes.append(RateAssumed(f"no time column: {DEFAULT_FPS:g} fps assumed"))
         return None, rate
-    col, kind = time_col
-    values = _column_values(rows, idx, [col], path)
+    kind = time_col[1]
+    values = _kept(parsed, len(idx))[:, 0]
     if not np.isfinite(values).all():
         k = int(np.nonzero(~np.isfinite(values))[0][0])
-        raise UnreadableFileError(path, "empty or non-numeric time/frame value", line=idx[k] + 1)
+        raise UnreadableFileError(path, "empty or non-numeric time/frame value",
+                                  line=int(idx[k]) + 1)
     times, file_fps = _timing(_times_from_column(values, kind, fps, notes), notes)
     return times, _or_default(file_fps, fps or DEFAULT_FPS, notes)
 
@@ -833,49 +982,51 @@ def _long_columns(columns: list[str]) -> dict | None:
     return roles
 
 
-def _read_long(path, lines, idx, notes, layout, fps, units) -> _Parsed:
-    header_i, data_idx = idx[0], idx[1:]
-    sep = _header_sep(lines[header_i])
-    columns = [_clean_header(c) for c in (lines[header_i].split(sep) if sep != " "
-                                          else lines[header_i].split())]
+def _read_long(path, text, idx, notes, layout, fps, units) -> _Parsed:
+    header_i, data_idx = int(idx[0]), idx[1:]
+    header = text.line(header_i)
+    sep = _header_sep(header)
+    columns = [_clean_header(c) for c in (header.split(sep) if sep != " " else header.split())]
     roles = _long_columns(columns)
-    if not data_idx:
+    if not len(data_idx):
         raise UnreadableFileError(path, "header but no data rows")
-    rows, data_idx, skipped = _data_rows(path, lines, data_idx, sep, len(columns), notes)
-    if not rows:
-        raise UnreadableFileError(path, "no complete data row")
     key_col = roles.get("frame", roles.get("time"))
-    keys = _column_values(rows, data_idx, [key_col], path)
+    state_col = roles.get("state", roles.get("confidence", -1))
+    groups = [[key_col], [roles["x"], roles["y"], roles["z"]], [state_col] if state_col >= 0 else []]
+    data_idx, skipped, (key_values, xyz_values, state_values), (joint_of_row, names) = \
+        _data_rows(path, text, data_idx, sep, len(columns), notes, groups, label=roles["joint"])
+    if not len(data_idx):
+        raise UnreadableFileError(path, "no complete data row")
+    n_rows = len(data_idx)
+    keys = _kept(key_values, n_rows)[:, 0]
     if not np.isfinite(keys).all():
         k = int(np.nonzero(~np.isfinite(keys))[0][0])
-        raise UnreadableFileError(path, "empty or non-numeric frame value", line=data_idx[k] + 1)
+        raise UnreadableFileError(path, "empty or non-numeric frame value",
+                                  line=int(data_idx[k]) + 1)
     frame_keys, frame_of_row = np.unique(keys, return_inverse=True)
-    joint_tokens = [row[roles["joint"]].strip().strip('"') for row in rows]
-    names = list(dict.fromkeys(joint_tokens))
-    joint_number = {n: i for i, n in enumerate(names)}
-    joint_of_row = np.array([joint_number[n] for n in joint_tokens], dtype=np.intp)
+    joint_of_row = joint_of_row[:n_rows]
+    names = names[:int(joint_of_row.max()) + 1]
     T, J = len(frame_keys), len(names)
     line_of = np.full((T, J), -1, dtype=np.intp)
     flat = frame_of_row * J + joint_of_row
     dup = np.nonzero(np.bincount(flat, minlength=T * J) > 1)[0]
     if len(dup):
         row = int(np.nonzero(flat == dup[0])[0][1])
-        raise UnreadableFileError(path, f"second row for joint {joint_tokens[row]!r} in the "
-                                        "same frame", line=data_idx[row] + 1)
+        raise UnreadableFileError(path, f"second row for joint {names[joint_of_row[row]]!r} in "
+                                        "the same frame", line=int(data_idx[row]) + 1)
     line_of.ravel()[flat] = np.asarray(data_idx)
-    values = _column_values(rows, data_idx, [roles["x"], roles["y"], roles["z"]], path)
+    values = _kept(xyz_values, n_rows)
     coords = np.full((T, J, 3), np.nan)
     coords.reshape(T * J, 3)[flat] = values.reshape(-1, 3)
     absent = line_of < 0
     missing = ~np.isfinite(coords).all(axis=2)
     if absent.any():
         notes.append(f"{int(absent.sum())} joint samples have no row (missing)")
-    state_kind, confidence, state_col = None, None, -1
-    if "state" in roles or "confidence" in roles:
+    state_kind, confidence = None, None
+    if state_col >= 0:
         state_kind = "tracking" if "state" in roles else "confidence"
-        state_col = roles["state" if state_kind == "tracking" else "confidence"]
         raw = np.full(T * J, np.nan)
-        raw[flat] = _column_values(rows, data_idx, [state_col], path)
+        raw[flat] = _kept(state_values, n_rows)[:, 0]
         raw = raw.reshape(T, J)
         if state_kind == "tracking":
             bad = ~np.isin(raw, (0.0, 1.0, 2.0)) & ~absent & ~np.isnan(raw)
@@ -901,13 +1052,13 @@ def _read_long(path, lines, idx, notes, layout, fps, units) -> _Parsed:
     last_line = np.full(T, -1, dtype=np.intp)
     np.maximum.at(last_line, frame_of_row, np.asarray(data_idx))
     _, first_row = np.unique(keys, return_index=True)
-    frame_tokens = [rows[int(r)][key_col].strip() for r in first_row]
+    split = (lambda line: line.split(sep)) if sep != " " else str.split
+    frame_tokens = [split(line)[key_col].strip() for line in text.lines_at(data_idx[first_row])]
     return _Parsed(
         names=names, coords=coords,
         missing=missing, confidence=confidence, line_of=line_of,
-        coord_field=np.broadcast_to(np.array([roles["x"], roles["y"], roles["z"]]),
-                                    (T, J, 3)).copy(),
-        state_field=np.full((T, J), state_col), state_kind=state_kind,
+        coord_field=np.broadcast_to(np.array([roles["x"], roles["y"], roles["z"]]), (T, J, 3)),
+        state_field=np.broadcast_to(state_col, (T, J)), state_kind=state_kind,
         sep=None if sep == " " else sep, times=times, file_fps=file_fps, units=unit,
         skeleton=skeleton, skip_lines=skipped,
         extra={"frame_last_line": last_line, "frame_tokens": frame_tokens,
@@ -949,10 +1100,8 @@ def write(motion: Motion, path, **options) -> list[Path]:
     path = Path(path)
     source = motion.source
     if isinstance(source, KinectSource) and _fits(source, motion):
-        text = _patched_text(source, motion)
-    else:
-        text = _wide_csv_text(motion)
-    return write_output_text(path, text)
+        return write_output_pieces(path, _patched_pieces(source, motion))
+    return write_output_pieces(path, _wide_csv_pieces(motion))
 
 
 def _fits(source: KinectSource, motion: Motion) -> bool:
@@ -976,16 +1125,6 @@ def _changed(source: KinectSource, motion: Motion) -> tuple[np.ndarray, np.ndarr
     return ~np.where(source.missing, new_missing, same & ~new_missing), new_missing
 
 
-def _sample_edits(source: KinectSource, motion: Motion):
-    """(t, j, action) for every sample whose stored tokens must change."""
-    changed, new_missing = _changed(source, motion)
-    for t, j in np.argwhere(changed):
-        if new_missing[t, j]:
-            yield int(t), int(j), "remove"
-        else:
-            yield int(t), int(j), "fill" if source.missing[t, j] else "move"
-
-
 #: what keeps a line of a headerless Kinect CSV out of :func:`_fast_csv_text`'s bulk
 #: rewrite: a character other than digits, signs, points and commas (an exponent, a blank
 #: around a cell, "nan"). On the other lines each rewritten coordinate is exactly
@@ -993,6 +1132,12 @@ def _sample_edits(source: KinectSource, motion: Motion):
 #: and each state cell a bare digit.
 _NOT_PLAIN = re.compile(r"[^0-9.,+\n-]")
 
+
+def _all_bare(tokens: list[str]) -> bool:
+    """True when no token has an exponent or a blank (``str.isspace``) in it: ASCII text
+    searched for each such character (a scan in C each), anything else not vouched for."""
+    joined = "".join(tokens)
+    return joined.isascii() and not any(c in joined for c in "eE \t\r\x0b\x0c\x1c\x1d\x1e\x1f")
 
 #: a number with more than 6 decimals: its rewrite keeps its own count (the others get 6)
 _LONG_DECIMALS = re.compile(r"\.[0-9]{7}")
@@ -1026,32 +1171,43 @@ def _rewrite_whole_rows(fields: list[list[str]], values: np.ndarray, J: int) -> 
     return out
 
 
-def _fast_csv_text(source: KinectSource, motion: Motion) -> str:
-    """:func:`_edited_text` for the headerless Kinect CSVs (one line per frame, fields at
-    fixed places): the same bytes, without a Python object per sample. Lines whose tokens
-    are plain numbers (see ``_NOT_PLAIN``) are rewritten in bulk -- one ``%`` format per
-    number of decimals for all their new coordinates, cells placed by numpy indexing; the
-    others token by token (:func:`_patch_csv_line`)."""
+def _fast_csv_edits(source: KinectSource, motion: Motion):
+    """(line, new text) of :func:`_edited_pieces` for the headerless Kinect CSVs (one line
+    per frame, fields at fixed places), CHUNK changed lines at a time, without a Python
+    object per sample. Lines whose tokens are plain numbers (see ``_NOT_PLAIN``) are
+    rewritten in bulk -- one ``%`` format per number of decimals for all their new
+    coordinates, cells placed by numpy indexing; the others token by token
+    (:func:`_patch_csv_line`)."""
     new = motion.positions
     changed, new_missing = _changed(source, motion)
-    lines = list(source.lines)
     J = new.shape[1]
-    rows = np.flatnonzero(changed.any(axis=1))
-    line_of = source.line_of[rows, 0].tolist()
-    fields = [lines[li].split(",") for li in line_of]
-    bulk = _plain_lines([lines[li] for li in line_of])
+    for a in range(0, len(changed), CHUNK):
+        rows = a + np.flatnonzero(changed[a:a + CHUNK].any(axis=1))
+        if not len(rows):
+            continue
+        line_of = source.line_of[rows, 0]
+        lines = source.text.lines_at(line_of)
+        yield from zip(line_of.tolist(), _fast_csv_lines(lines, rows, source, new, changed,
+                                                          new_missing, J))
+
+
+def _fast_csv_lines(lines, rows, source, new, changed, new_missing, J) -> list[str]:
+    """The new text of ``lines``, the lines of frames ``rows``."""
+    fields = [line.split(",") for line in lines]
+    lines = list(lines)
+    bulk = _plain_lines(lines)
     bulk &= np.array([len(f) >= 1 + 4 * J for f in fields], bool)
     for r in np.flatnonzero(~bulk):
-        lines[line_of[r]] = _patch_csv_line(fields[r], new[rows[r]], new_missing[rows[r]],
-                                            source.missing[rows[r]], changed[rows[r]])
+        lines[r] = _patch_csv_line(fields[r], new[rows[r]], new_missing[rows[r]],
+                                   source.missing[rows[r]], changed[rows[r]])
     # lines where every sample moved and no state changes: rewritten whole
     whole = bulk & changed[rows].all(axis=1) & ~new_missing[rows].any(axis=1)
     whole &= ~source.missing[rows].any(axis=1)
     if whole.any():
         w = np.flatnonzero(whole)
-        w = w[_plain_lines([lines[line_of[i]] for i in w], _LONG_DECIMALS)]
+        w = w[_plain_lines([lines[i] for i in w], _LONG_DECIMALS)]
         for i, line in zip(w, _rewrite_whole_rows([fields[i] for i in w], new[rows[w]], J)):
-            lines[line_of[i]] = line
+            lines[i] = line
         bulk[w] = False
     if bulk.any():
         b = np.flatnonzero(bulk)
@@ -1061,29 +1217,28 @@ def _fast_csv_text(source: KinectSource, motion: Motion) -> str:
         moved = edit & ~removed
         r, j = np.nonzero(moved)
         r, coords = np.repeat(r, 3), ((1 + 4 * j)[:, None] + np.arange(3)).ravel()
-        values = new[rows[b]][moved].ravel()
-        # (as a fixed-width string array, one long token sized every cell like itself)
-        old = cells[r, coords].tolist()
-        dot = np.fromiter((t.find(".") for t in old), np.int64, len(old))
-        size = np.fromiter(map(len, old), np.int64, len(old))
-        decimals = np.maximum(np.where(dot < 0, 0, size - dot - 1), 6)
-        for d in np.unique(decimals):
-            at = np.flatnonzero(decimals == d)
-            text = (f"%.{d}f," * len(at)) % tuple(values[at].tolist())
-            cells[r[at], coords[at]] = text.split(",")[:-1]
+        cells[r, coords] = _formatted(cells[r, coords].tolist(), new[rows[b]][moved].ravel())
         r, j = np.nonzero(removed)
         cells[r, 4 + 4 * j] = "0"
         r, j = np.nonzero(moved & source.missing[rows[b]])
         cells[r, 4 + 4 * j] = "1"
         for k, i in enumerate(b):
-            tail = fields[i][1 + 4 * J:]
-            lines[line_of[i]] = ",".join(cells[k].tolist() + tail)
-    deleted = set(source.skip_lines)
-    out = [source.bom]
-    for i, line in enumerate(lines):
-        if i not in deleted:
-            out.append(line + source.endings[i])
-    return "".join(out)
+            lines[i] = ",".join(cells[k].tolist() + fields[i][1 + 4 * J:])
+    return lines
+
+
+def _formatted(old: list[str], values: np.ndarray) -> list[str]:
+    """``values`` as :func:`_format_like` writes them in place of the plain number tokens
+    ``old`` (no exponent, no blanks): one ``%`` format per number of decimals."""
+    dot = np.fromiter(map(str.find, old, repeat(".")), np.int64, len(old))
+    size = np.fromiter(map(len, old), np.int64, len(old))
+    decimals = np.maximum(np.where(dot < 0, 0, size - dot - 1), 6)
+    out = np.empty(len(old), object)
+    for d in np.unique(decimals):
+        at = np.flatnonzero(decimals == d)
+        text = (f"%.{d}f," * len(at)) % tuple(values[at].tolist())
+        out[at] = text.split(",")[:-1]
+    return out.tolist()
 
 
 def _patch_csv_line(fields: list[str], values, removed, filled, edit) -> str:
@@ -1108,43 +1263,102 @@ def _patch_csv_line(fields: list[str], values, removed, filled, edit) -> str:
     return ",".join(fields)
 
 
-def _patched_text(source: KinectSource, motion: Motion) -> str:
+def _patched_pieces(source: KinectSource, motion: Motion):
     if source.layout in ("kinect_v2_csv", "kinect_v1_csv") and source.sep == ",":
-        return _fast_csv_text(source, motion)
-    return _edited_text(source, motion)
+        return source.text.pieces(_fast_csv_edits(source, motion), source.skip_lines)
+    return _edited_pieces(source, motion)
+
+
+def _patched_text(source: KinectSource, motion: Motion) -> str:
+    """What :func:`write` writes for a motion that fits its source, as one string."""
+    return b"".join(_patched_pieces(source, motion)).decode("utf-8")
+
+
+def _fast_csv_text(source: KinectSource, motion: Motion) -> str:
+    return b"".join(source.text.pieces(_fast_csv_edits(source, motion),
+                                       source.skip_lines)).decode("utf-8")
 
 
 def _edited_text(source: KinectSource, motion: Motion) -> str:
-    """The source's lines with every changed sample's tokens rewritten, one sample at a
-    time (any layout; rows of the long layout inserted or deleted)."""
-    lines = list(source.lines)
-    edited: dict[int, _Line] = {}
-    deleted: set[int] = set(source.skip_lines)
+    return b"".join(_edited_pieces(source, motion)).decode("utf-8")
+
+
+def _edited_pieces(source: KinectSource, motion: Motion):
+    """The source's bytes with every changed sample's tokens rewritten (any layout; rows
+    of the long layout inserted or deleted): the lines CHUNK at a time, the moved
+    coordinates of all of them formatted together (:func:`_formatted`)."""
+    changed, new_missing = _changed(source, motion)
+    removed = changed & new_missing
+    line_of = source.line_of
+    deleted = set(source.skip_lines)
     inserted: dict[int, list[str]] = {}
-    for t, j, action in _sample_edits(source, motion):
-        line = int(source.line_of[t, j])
-        if line < 0:  # long layout, no row for this sample in the file
-            if action == "fill":
-                inserted.setdefault(int(source.extra["frame_last_line"][t]), []).append(
-                    _new_long_row(source, motion, t, j))
-            continue
-        if line not in edited:
-            edited[line] = _Line(lines[line], source.sep)
-        if not _edit_sample(source, edited[line], t, j, action, motion.positions[t, j]):
-            deleted.add(line)
-    for line, fields in edited.items():
-        lines[line] = fields.text()
-    out = [source.bom]
-    for i, line in enumerate(lines):
-        if i not in deleted:
-            out.append(line + source.endings[i])
-        for extra in inserted.get(i, []):
-            if not out[-1].endswith(("\n", "\r")):
-                out.append(_eol(source))
-            out.append(extra + _eol(source))
-    return "".join(out)
+    if source.layout == "long_csv":
+        gone = removed & (line_of >= 0)
+        if source.state_kind == "tracking":
+            gone &= source.state_field < 0
+        deleted.update(line_of[gone].tolist())
+        for t, j in np.argwhere(changed & ~new_missing & (line_of < 0)):
+            inserted.setdefault(int(source.extra["frame_last_line"][t]), []).append(
+                _new_long_row(source, motion, int(t), int(j)))
+        changed = changed & ~gone
+    t, j = np.nonzero(changed & (line_of >= 0))
+    lines = line_of[t, j]
+    order = np.argsort(lines, kind="stable")
+    t, j, lines = t[order], j[order], lines[order]
+    cuts = np.flatnonzero(np.diff(lines)) + 1
+    starts = np.concatenate([[0], cuts]) if len(lines) else cuts   # each edited line's first
+    edits = (_edited_lines(source, motion, t[a:b], j[a:b], lines[a:b], new_missing)
+             for a, b in _spans(starts, len(lines)))
+    return source.text.pieces((e for chunk in edits for e in chunk), deleted, inserted)
 
 
+def _spans(starts: np.ndarray, n: int):
+    """(first, stop) sample ranges covering CHUNK edited lines each."""
+    for k in range(0, len(starts), CHUNK):
+        yield int(starts[k]), int(starts[k + CHUNK]) if k + CHUNK < len(starts) else n
+
+
+def _edited_lines(source, motion, t, j, lines, new_missing) -> list[tuple[int, str]]:
+    """(line, new text) for the lines holding the samples (t, j) (sorted by line)."""
+    numbers = np.unique(lines)
+    k = np.searchsorted(numbers, lines)
+    order = [_Line(text, source.sep) for text in source.text.lines_at(numbers)]
+    # the parts of all the lines in one object array; field f of a line is its part
+    # slots[0] + 2 f (separators, or runs of blanks, alternate with the fields)
+    sizes = np.array([len(c.parts) for c in order])
+    offsets = np.cumsum(sizes) - sizes
+    parts = np.empty(int(sizes.sum()), object)
+    parts[:] = [p for c in order for p in c.parts]
+    lead = np.array([c.slots[0] if c.slots else 0 for c in order])
+    gone = new_missing[t, j]
+    put = ~gone
+    at = ((offsets + lead)[k[put]][:, None] + 2 * source.coord_field[t[put], j[put]]).ravel()
+    values = motion.positions[t[put], j[put]].ravel()
+    old = parts[at].tolist()
+    if not _all_bare(old):
+        plain = np.fromiter(("e" not in s and "E" not in s and s == s.strip() for s in old),
+                            bool, len(old))
+    else:
+        plain = np.ones(len(old), bool)
+    out = np.empty(len(old), object)
+    if plain.any():
+        out[plain] = _formatted([s for s, p in zip(old, plain) if p], values[plain])
+    for i in np.flatnonzero(~plain).tolist():
+        out[i] = _pad(old[i], _format_like(float(values[i]), old[i]))
+    parts[at] = out
+    for n, c in enumerate(order):
+        c.parts = parts[offsets[n]:offsets[n] + sizes[n]].tolist()
+    filled = put & source.missing[t, j] & (source.state_field[t, j] >= 0)
+    for s in np.flatnonzero(filled | gone).tolist():
+        line = order[k[s]]
+        state = int(source.state_field[t[s], j[s]])
+        if gone[s]:
+            _remove_sample(source, line, [int(f) for f in source.coord_field[t[s], j[s]]],
+                           state if state >= 0 else None)
+        else:
+            line[state] = _pad(line[state], "1" if source.state_kind == "tracking"
+                               else _format_like(0.5, line[state]))
+    return [(int(n), c.text()) for n, c in zip(numbers, order)]
 def _eol(source: KinectSource) -> str:
     return next((e for e in source.endings if e), "\n")
 
@@ -1157,11 +1371,9 @@ class _Line:
             self.parts = re.split(r"(\s+)", line)
             self.slots = [k for k in range(0, len(self.parts), 2) if self.parts[k] != ""]
         else:
-            self.parts = []
-            for k, part in enumerate(line.split(sep)):
-                if k:
-                    self.parts.append(sep)
-                self.parts.append(part)
+            fields = line.split(sep)
+            self.parts = [sep] * (2 * len(fields) - 1)
+            self.parts[::2] = fields
             self.slots = list(range(0, len(self.parts), 2))
 
     def __getitem__(self, field_index: int) -> str:
@@ -1225,8 +1437,9 @@ def _new_long_row(source: KinectSource, motion: Motion, t: int, j: int) -> str:
     return (source.sep or " ").join(fields)
 
 
-def _wide_csv_text(motion: Motion) -> str:
-    """Headed wide CSV: time, <Joint>_X, _Y, _Z [, _State] per joint."""
+def _wide_csv_pieces(motion: Motion):
+    """Headed wide CSV: time, <Joint>_X, _Y, _Z [, _State] per joint; CHUNK frames at a
+    time."""
     T = motion.n_frames
     tag = "" if motion.units == "m" else f" ({motion.units})"
     with_state = motion.confidence is not None
@@ -1235,18 +1448,26 @@ def _wide_csv_text(motion: Motion) -> str:
         header += [f"{name}_X{tag}", f"{name}_Y{tag}", f"{name}_Z{tag}"]
         if with_state:
             header.append(f"{name}_State")
+    yield (",".join(header) + "\n").encode("utf-8")
     times = motion.times if motion.times is not None else np.arange(T) / motion.fps
+    times = np.asarray(times, dtype=np.float64)
     missing = motion.missing
-    cells = np.char.mod("%.6f", motion.positions)
-    cells[missing] = ""
-    blocks = [cells]
-    if with_state:
-        conf = motion.confidence
-        state = np.select([conf >= 0.75, conf > 0], ["2", "1"], "0")
-        state = np.where(missing, "0", state)
-        blocks.append(state[..., None])
-    body = np.concatenate(blocks, axis=2).reshape(T, -1)
-    time_cells = np.char.mod("%.9f", np.asarray(times, dtype=np.float64))
-    lines = [",".join(header)]
-    lines += [",".join([time_cells[t], *body[t]]) for t in range(T)]
-    return "\n".join(lines) + "\n"
+    J = motion.n_joints
+    for a in range(0, T, CHUNK):
+        P = motion.positions[a:a + CHUNK]
+        n = len(P)
+        cells = np.empty((n, J, 4 if with_state else 3), object)
+        cells[..., :3] = np.array(("%.6f," * P.size % tuple(P.ravel().tolist())).split(",")[:-1],
+                                  object).reshape(n, J, 3)
+        cells[missing[a:a + n], :3] = ""
+        if with_state:
+            conf = motion.confidence[a:a + n]
+            state = np.select([conf >= 0.75, conf > 0], ["2", "1"], "0")
+            cells[..., 3] = np.where(missing[a:a + n], "0", state)
+        stamps = ("%.9f," * n % tuple(times[a:a + n].tolist())).split(",")
+        yield "".join(f"{stamps[r]},{','.join(cells[r].ravel().tolist())}\n"
+                      for r in range(n)).encode("utf-8")
+
+
+def _wide_csv_text(motion: Motion) -> str:
+    return b"".join(_wide_csv_pieces(motion)).decode("utf-8")

@@ -47,17 +47,17 @@ def refuse_wide_text(path, data: bytes, what: str) -> None:
                                         f"{what}: save it as UTF-8 (e.g. iconv -f UTF-16 -t UTF-8)")
 
 
-def refuse_long_fields(path, lines) -> None:
+def refuse_long_fields(path, lines, first_line: int = 0) -> None:
     """An UnreadableFileError naming the line of a field (a number, a name) longer than
     :data:`~mocapfix.core.errors.MAX_FIELD` characters, quoting an excerpt: no text format
     has one, and a 5 MB "number" made the Kinect writer ask for a 211 GiB array. Only
-    lines longer than that are split."""
+    lines longer than that are split. ``first_line``: the index of ``lines[0]`` in the file."""
     for i, line in enumerate(lines):
         if len(line) > MAX_FIELD:
             long = next((t for t in _FIELD_SEP.split(line) if len(t) > MAX_FIELD), None)
             if long is not None:
                 raise UnreadableFileError(path, f"a field longer than {MAX_FIELD:,} characters: "
-                                                f"{excerpt(long)}", line=i + 1)
+                                                f"{excerpt(long)}", line=first_line + i + 1)
 
 
 _FIELD_SEP = re.compile(r"[,;\t ]")

@@ -61,7 +61,9 @@ Writing:
 Why hand-written: TRC is a small tab-separated text layout, and no package that reads it
 keeps the text for a change-only write-back (docs/formats.md, "Why the readers are
 hand-written"). OpenSim's reader is the tests' independent check of the files we write
-(dev extra).
+(dev extra). Data rows are converted CHUNK at a time and files written in pieces of CHUNK
+rows, so that no whole-file join or token list is built (the lines themselves are still
+one str each).
 """
 from __future__ import annotations
 
@@ -78,7 +80,7 @@ from mocapfix.core.errors import (
     UnsupportedFeatureError,
     WriteError,
 )
-from mocapfix.core.fileio import read_input_bytes, write_output_text
+from mocapfix.core.fileio import read_input_bytes, write_output_pieces
 from mocapfix.core.motion import Motion, missing_samples
 from mocapfix.core.quantity import MAX_FRAME_RATE_HZ, MIN_FRAME_RATE_HZ
 from mocapfix.core.units import METRES_PER_UNIT, normalise_unit_name
@@ -242,7 +244,7 @@ def _floats(block: str, count: int) -> np.ndarray | None:
     return out if out.size == count else None
 
 
-def _bad_token(rows: list[str], line_numbers: list[int], path) -> UnreadableFileError:
+def _bad_token(rows, line_numbers, path) -> UnreadableFileError:
     for row, line_no in zip(rows, line_numbers):
         for token in row.split("\t"):
             try:
@@ -254,29 +256,46 @@ def _bad_token(rows: list[str], line_numbers: list[int], path) -> UnreadableFile
     return UnreadableFileError(path, "malformed data rows")
 
 
+#: data rows converted at a time
+CHUNK = 4096
+
+
 def _table(data: list[str], J: int, line_numbers: list[int], path) -> tuple[np.ndarray, int]:
     """(T, 2 + 3J) floats of the data rows (NaN where empty), and how many values lie beyond
-    the labelled columns. Rows of one length (most files) are converted as one block; ragged
-    rows are first cut or padded to the labelled columns."""
+    the labelled columns, CHUNK rows at a time. Rows of one length (most files) are
+    converted as they are; ragged rows are first cut or padded to the labelled columns."""
     T, width = len(data), 2 + 3 * J
+    out = np.empty((T, width))
     tabs = {row.count("\t") for row in data}
     if len(tabs) == 1 and (columns := tabs.pop() + 1) >= width:
-        values = _floats("\t".join(data), T * columns)
-        if values is not None:
-            values = values.reshape(T, columns)
-            return values[:, :width], int(np.count_nonzero(~np.isnan(values[:, width:])))
-    rows, extra = [], 0
-    for row in data:
-        f = row.split("\t")
-        if len(f) < width:
-            f += [""] * (width - len(f))
-        elif len(f) > width:
-            extra += sum(1 for v in f[width:] if v.strip())
-        rows.append("\t".join(f[:width]))
-    values = _floats("\t".join(rows), T * width)
-    if values is None:
-        raise _bad_token(rows, line_numbers, path)
-    return values.reshape(T, width), extra
+        extra = 0
+        for a in range(0, T, CHUNK):
+            rows = data[a:a + CHUNK]
+            values = _floats("\t".join(rows), len(rows) * columns)
+            if values is None:
+                break
+            values = values.reshape(len(rows), columns)
+            out[a:a + len(rows)] = values[:, :width]
+            extra += int(np.count_nonzero(~np.isnan(values[:, width:])))
+        else:
+            return out, extra
+    extra = 0
+    for a in range(0, T, CHUNK):
+        rows = []
+        for row in data[a:a + CHUNK]:
+            f = row.split("\t")
+            if len(f) < width:
+                f += [""] * (width - len(f))
+            elif len(f) > width:
+                extra += sum(1 for v in f[width:] if v.strip())
+            rows.append("\t".join(f[:width]))
+        values = _floats("\t".join(rows), len(rows) * width)
+        if values is None:
+            rest = (r for row in data[a + len(rows):]
+                    for r in ["\t".join((row.split("\t") + [""] * width)[:width])])
+            raise _bad_token(chain(rows, rest), line_numbers[a:], path)
+        out[a:a + len(rows)] = values.reshape(len(rows), width)
+    return out, extra
 
 
 def read(path, fps: float | None = None, **options) -> Motion:
@@ -290,6 +309,7 @@ def read(path, fps: float | None = None, **options) -> Motion:
         text = raw.decode("latin-1")
     bom = "\ufeff" if text.startswith("\ufeff") else ""
     lines, endings = _split_lines(text[len(bom):])
+    del raw, text                               # the lines are the one copy kept
     refuse_long_fields(path, lines)
     notes: list[str] = []
     header = _header(lines, path, notes)
@@ -419,10 +439,8 @@ def write(motion: Motion, path, **options) -> list[Path]:
     path = Path(path)
     source = motion.source
     if isinstance(source, TRCSource) and _fits(source, motion):
-        text = _patched_text(source, motion)
-    else:
-        text = _fresh_text(motion, path)
-    return write_output_text(path, text)
+        return write_output_pieces(path, _patched_pieces(source, motion))
+    return write_output_pieces(path, _fresh_pieces(motion, path))
 
 
 def _fits(source: TRCSource, motion: Motion) -> bool:
@@ -436,41 +454,66 @@ def _changed(source: TRCSource, motion: Motion) -> tuple[np.ndarray, np.ndarray]
     return np.where(source.missing, ~now_missing, ~same | now_missing), now_missing
 
 
-def _patched_text(source: TRCSource, motion: Motion) -> str:
-    lines = list(source.lines)
+def _patched_pieces(source: TRCSource, motion: Motion):
+    """The source's lines (UTF-8) with the rows holding changed samples rewritten, CHUNK
+    rows at a time."""
     changed, now_missing = _changed(source, motion)
     rows = np.flatnonzero(changed.any(axis=1))
-    R, J = len(rows), motion.n_joints
-    if R:
-        width = 2 + 3 * J
-        at = source.data_lines[rows].tolist()
-        fields = [lines[i].split("\t") for i in at]
-        short = {}                              # trimmed rows: index -> their field count
-        for k, f in enumerate(fields):
-            if len(f) < width:
-                short[k] = len(f)
-                f += [""] * (width - len(f))
-        cells = np.array(list(chain.from_iterable(f[2:width] for f in fields)),
-                         dtype=object).reshape(R, J, 3)
-        edit = changed[rows]
-        gone = edit & now_missing[rows]
-        moved = edit & ~gone
-        if moved.any():
-            new = _format_like(motion.positions[rows][moved].ravel(),
-                               cells[moved].ravel().tolist(), source.decimals)
-            cells[moved] = np.array(new, dtype=object).reshape(-1, 3)
-        cells[gone] = ""
-        for k, (i, f) in enumerate(zip(at, fields)):
-            values = cells[k].ravel().tolist()
-            if k in short:                      # stays trimmed after its last value
-                while len(values) > short[k] - 2 and values[-1] == "":
-                    values.pop()
-            lines[i] = "\t".join(f[:2] + values + f[width:])
+    yield source.bom.encode("utf-8")
+    done = 0                                    # lines written so far
+    for a in range(0, len(rows), CHUNK):
+        at = source.data_lines[rows[a:a + CHUNK]].tolist()
+        new = dict(zip(at, _patched_rows(source, motion, rows[a:a + CHUNK], at, changed,
+                                         now_missing)))
+        yield from _lines_text(source, done, at[-1] + 1, new)
+        done = at[-1] + 1
+    yield from _lines_text(source, done, len(source.lines), {})
+
+
+def _lines_text(source: TRCSource, start: int, stop: int, new: dict):
+    """Lines ``start``..``stop`` with their endings (``new``: line -> text in its place;
+    the skipped fragment left out), CHUNK lines a piece."""
     skip = set(source.skip_lines)
-    if not skip:
-        return source.bom + "".join(map(str.__add__, lines, source.endings))
-    return source.bom + "".join(line + end for i, (line, end) in
-                                enumerate(zip(lines, source.endings)) if i not in skip)
+    for a in range(start, stop, CHUNK):
+        b = min(stop, a + CHUNK)
+        lines = source.lines[a:b]
+        if new:
+            lines = [new.get(i, line) for i, line in enumerate(lines, a)]
+        text = "".join(map(str.__add__, lines, source.endings[a:b]))
+        if skip & set(range(a, b)):
+            text = "".join(line + end for i, (line, end) in
+                           enumerate(zip(lines, source.endings[a:b]), a) if i not in skip)
+        yield text.encode("utf-8")
+
+
+def _patched_rows(source: TRCSource, motion: Motion, rows, at, changed, now_missing):
+    """The new text of lines ``at``, the data rows of frames ``rows``."""
+    J = motion.n_joints
+    R, width = len(rows), 2 + 3 * J
+    fields = [source.lines[i].split("\t") for i in at]
+    short = {}                              # trimmed rows: index -> their field count
+    for k, f in enumerate(fields):
+        if len(f) < width:
+            short[k] = len(f)
+            f += [""] * (width - len(f))
+    cells = np.array(list(chain.from_iterable(f[2:width] for f in fields)),
+                     dtype=object).reshape(R, J, 3)
+    edit = changed[rows]
+    gone = edit & now_missing[rows]
+    moved = edit & ~gone
+    if moved.any():
+        new = _format_like(motion.positions[rows][moved].ravel(),
+                           cells[moved].ravel().tolist(), source.decimals)
+        cells[moved] = np.array(new, dtype=object).reshape(-1, 3)
+    cells[gone] = ""
+    out = []
+    for k, f in enumerate(fields):
+        values = cells[k].ravel().tolist()
+        if k in short:                      # stays trimmed after its last value
+            while len(values) > short[k] - 2 and values[-1] == "":
+                values.pop()
+        out.append("\t".join(f[:2] + values + f[width:]))
+    return out
 
 
 #: a character that no plain decimal number nor the tab between two has
@@ -527,7 +570,9 @@ def _rate_text(fps: float) -> str:
     return f"{fps:.2f}" if float(f"{fps:.2f}") == fps else repr(float(fps))
 
 
-def _fresh_text(motion: Motion, path: Path) -> str:
+def _fresh_pieces(motion: Motion, path: Path):
+    """A fresh OpenSim 4 TRC of ``motion`` (UTF-8), CHUNK rows a piece; its checks run
+    before the first piece."""
     keep = _markers(motion)
     if len(keep) == 0:
         raise WriteError(path, "no markers to write: a TRC file holds marker positions")
@@ -535,8 +580,7 @@ def _fresh_text(motion: Motion, path: Path) -> str:
         raise WriteError(path, f"frame rate {motion.fps} is not positive")
     names = [_clean_name(motion.names[j], int(j)) for j in keep]
     units, scale = _written_units(motion, path)
-    pos = motion.positions[:, keep] * scale if scale != 1.0 else motion.positions[:, keep]
-    T, J = pos.shape[:2]
+    T, J = motion.n_frames, len(keep)
     if motion.times is not None and len(motion.times) == T:
         times = np.asarray(motion.times, dtype=np.float64) - float(motion.times[0])
     else:
@@ -548,13 +592,24 @@ def _fresh_text(motion: Motion, path: Path) -> str:
             "Frame#\tTime\t" + "".join(f"{n}\t\t\t" for n in names),
             "\t\t" + "".join(f"X{k}\tY{k}\tZ{k}\t" for k in range(1, J + 1)),
             ""]
-    values = pos.reshape(T, 3 * J)
-    gaps = ~np.isfinite(values)
-    cells = (f"%.{DECIMALS}f\t" * values.size) % tuple(np.where(gaps, 0.0, values).ravel().tolist())
-    cells = np.array(cells.split("\t")[:-1], dtype=object).reshape(T, 3 * J)
-    cells[np.repeat(missing_samples(pos), 3, axis=1)] = ""
-    stamps = (("%d\t%.6f\n" * T) % tuple(x for t in range(T) for x in (t + 1, times[t]))).split("\n")
-    # every row ends with a tab, as Motion Analysis writes them: OpenSim's reader drops
-    # one trailing empty field, so a row ending in a missing sample would lose a column
-    body = ["\t".join([stamps[t]] + cells[t].tolist()) + "\t" for t in range(T)]
-    return "\n".join(head + body) + "\n"
+    return _fresh_rows(motion, keep, scale, times, "\n".join(head) + "\n")
+
+
+def _fresh_rows(motion, keep, scale, times, head: str):
+    yield head.encode("utf-8")
+    J = len(keep)
+    for a in range(0, motion.n_frames, CHUNK):
+        pos = motion.positions[a:a + CHUNK, keep]
+        pos = pos * scale if scale != 1.0 else pos
+        T = len(pos)
+        values = pos.reshape(T, 3 * J)
+        gaps = ~np.isfinite(values)
+        cells = (f"%.{DECIMALS}f\t" * values.size) % tuple(np.where(gaps, 0.0, values).ravel().tolist())
+        cells = np.array(cells.split("\t")[:-1], dtype=object).reshape(T, 3 * J)
+        cells[np.repeat(missing_samples(pos), 3, axis=1)] = ""
+        stamps = (("%d\t%.6f\n" * T) % tuple(x for t in range(T)
+                                             for x in (a + t + 1, times[a + t]))).split("\n")
+        # every row ends with a tab, as Motion Analysis writes them: OpenSim's reader drops
+        # one trailing empty field, so a row ending in a missing sample would lose a column
+        yield "".join("\t".join([stamps[t]] + cells[t].tolist()) + "\t\n"
+                      for t in range(T)).encode("utf-8")

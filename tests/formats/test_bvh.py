@@ -501,3 +501,15 @@ def test_registry_reads_bvh(tmp_path):
     path = _write(tmp_path, TINY)
     assert formats.detect(path) == "bvh"
     np.testing.assert_allclose(formats.read(path).positions, TINY_POSITIONS, atol=1e-12)
+
+
+def test_positions_in_chunks_are_bit_identical_to_one_forward_pass():
+    from conftest import SAMPLE_DATA
+
+    from mocapfix.core.kinematics import positions_in_chunks
+
+    motion = bvh.read(SAMPLE_DATA / "walk.bvh")
+    whole = motion.rig.positions(motion.channels)
+    chunked = positions_in_chunks(motion.rig, motion.channels, chunk=7)
+    assert chunked.tobytes() == whole.tobytes()
+    assert motion.positions.tobytes() == whole.tobytes()
