@@ -35,7 +35,10 @@ def mean_joint_error(estimate, truth) -> float:
 def bone_lengths(positions: np.ndarray, bones: np.ndarray) -> np.ndarray:
     """(T, B) lengths of the bones (pairs of joint indices)."""
     bones = np.asarray(bones, dtype=np.intp).reshape(-1, 2)
-    return np.linalg.norm(positions[:, bones[:, 0]] - positions[:, bones[:, 1]], axis=-1)
+    out = np.empty((positions.shape[0], len(bones)))
+    for b, (parent, child) in enumerate(bones.tolist()):     # no (T, B, 3) temporaries
+        out[:, b] = np.linalg.norm(positions[:, parent] - positions[:, child], axis=-1)
+    return out
 
 
 def mean_bone_error(estimate, truth, bones) -> float:
@@ -52,8 +55,10 @@ def bone_length_variation(positions, bones) -> np.ndarray:
 
 def rms_acceleration(positions: np.ndarray, fps: float) -> np.ndarray:
     """RMS of the second difference per joint (J,), in units/s² — a jitter measure."""
-    acc = np.diff(positions, n=2, axis=0) * fps * fps
-    power = np.sum(acc ** 2, axis=-1)
+    power = None
+    for c in range(positions.shape[-1]):         # per coordinate: no (T, J, 3) temporaries
+        square = (np.diff(positions[..., c], n=2, axis=0) * fps * fps) ** 2
+        power = square if power is None else power + square
     counted = np.isfinite(power).sum(axis=0)
     total = np.nansum(power, axis=0)
     with np.errstate(invalid="ignore", divide="ignore"):

@@ -256,7 +256,7 @@ def measure_input(motion: Motion, *, swaps: bool = True, outliers: bool = True,
 
 def who_filled(records, T: int, J: int) -> np.ndarray:
     """(T, J) index into ``records`` of the step that filled each sample (-1: none)."""
-    who = np.full((T, J), -1, dtype=np.intp)
+    who = np.full((T, J), -1, dtype=np.int16 if len(records) < 2 ** 15 else np.intp)
     for n, rec in enumerate(records):
         who[rec.filled & (who < 0)] = n
         who[rec.flagged] = -1          # flagged later → a later filler takes over
@@ -395,8 +395,6 @@ def measure_cleaning(result: CleanResult) -> dict:
     own = flagged if rig is None else made_missing | (flagged & np.asarray(rig.offset_in_own_frame, bool)[None, :J])
     who = who_filled(records, T, J)
     who[miss_a] = -1                   # filled by a step, dropped by the writer (storable)
-    moved = np.linalg.norm(after.positions - before.positions, axis=-1) * mm
-    moved[miss_b | miss_a] = np.nan
     jitter_b, jitter_a = jitter(before), jitter(after)
     bones = bones_of(before)
     # the kinematic chain (a marker set's rigid pairs in ``bones`` are not one)
@@ -442,7 +440,8 @@ def measure_cleaning(result: CleanResult) -> dict:
                     "removed_by": ", ".join(dict.fromkeys(
                         r.step for r in records if r.flagged[s:s + n, j].any()))}
                    for s, n in zip(*runs((~miss_b & miss_a)[:, j:j + 1])[1:])]
-        mv = moved[:, j]
+        mv = np.linalg.norm(after.positions[:, j] - before.positions[:, j], axis=-1) * mm
+        mv[miss_b[:, j] | miss_a[:, j]] = np.nan
         has_mv = np.isfinite(mv).any()
         correction = {"mean": finite(np.nanmean(mv)) if has_mv else 0.0,
                       "max": finite(np.nanmax(mv)) if has_mv else 0.0}
