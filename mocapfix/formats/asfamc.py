@@ -671,9 +671,8 @@ def parse_amc(path, data: bytes, asf: AsfSkeleton) -> AsfAmcSource:
     n_frames = len(content) // per_frame
     if len(content) % per_frame:
         raise _locate_error(path, body, content, layout, first)
-    name_columns, value_columns = _token_columns(layout)
-    expected_names = np.array([name for name, _ in layout], dtype=object)
-    values = np.empty((n_frames, len(value_columns)))
+    columns = _token_columns(layout)
+    values = np.empty((n_frames, len(columns[2])))
     frame_numbers = np.empty(n_frames, np.int64)
     for a in range(0, n_frames, _CHUNK):
         n = min(n_frames - a, _CHUNK)
@@ -683,19 +682,9 @@ def parse_amc(path, data: bytes, asf: AsfSkeleton) -> AsfAmcSource:
             values, frame_numbers = _whole_table(path, data, body, content, contiguous, layout,
                                                  first, n_frames, tokens_per_frame)
             break
-        table = np.array(tokens, dtype=object).reshape(n, tokens_per_frame)
-        frame_tokens = table[:, 0].tolist()
-        if not (np.all(table[:, name_columns] == expected_names)
-                and all(t.isdigit() and len(t) < 19 for t in frame_tokens)):
-            raise _locate_error(path, body, content, layout, first)
-        try:
-            chunk = np.array(table[:, value_columns].ravel().tolist(), dtype=np.float64)
-        except ValueError:
-            raise _locate_error(path, body, content, layout, first) from None
-        if not np.all(np.isfinite(chunk)):
-            raise _locate_error(path, body, content, layout, first)
-        values[a:a + n] = chunk.reshape(n, -1)
-        frame_numbers[a:a + n] = np.array(frame_tokens).astype(np.int64)
+        values[a:a + n], frame_numbers[a:a + n] = _frames_table(
+            tokens, n, tokens_per_frame, columns,
+            lambda: _locate_error(path, body, content, layout, first))
     degrees = flags["degrees"]
     source = AsfAmcSource(
         asf_path="", asf_bytes=b"", asf=asf, layout=layout,
@@ -731,19 +720,28 @@ def _whole_table(path, data, body, content, contiguous, layout, first, n_frames,
     tokens = _frame_tokens(data, body, content, contiguous)
     if len(tokens) != n_frames * tokens_per_frame:
         raise _locate_error(path, body, content, layout, first)
-    table = np.array(tokens, dtype=object).reshape(n_frames, tokens_per_frame)
-    name_columns, value_columns = _token_columns(layout)
+    return _frames_table(tokens, n_frames, tokens_per_frame, _token_columns(layout),
+                         lambda: _locate_error(path, body, content, layout, first))
+
+
+def _frames_table(tokens: list[str], n: int, tokens_per_frame: int, columns, error):
+    """(values (n, channels), frame numbers (n,)) of ``n`` frames' ``tokens``: each frame's
+    number, then per bone its name (``columns``: :func:`_token_columns`) and values; a
+    name out of place, a frame number that is not one, or a value that is not a finite
+    number raises ``error()``."""
+    expected_names, name_columns, value_columns = columns
+    table = np.array(tokens, dtype=object).reshape(n, tokens_per_frame)
     frame_tokens = table[:, 0].tolist()
-    if not (np.all(table[:, name_columns] == np.array([n for n, _ in layout], dtype=object))
+    if not (np.all(table[:, name_columns] == expected_names)
             and all(t.isdigit() and len(t) < 19 for t in frame_tokens)):
-        raise _locate_error(path, body, content, layout, first)
+        raise error()
     try:
         values = np.array(table[:, value_columns].ravel().tolist(), dtype=np.float64)
     except ValueError:
-        raise _locate_error(path, body, content, layout, first) from None
+        raise error() from None
     if not np.all(np.isfinite(values)):
-        raise _locate_error(path, body, content, layout, first)
-    return values.reshape(n_frames, -1), np.array(frame_tokens).astype(np.int64)
+        raise error()
+    return values.reshape(n, -1), np.array(frame_tokens).astype(np.int64)
 
 
 def _content_lines(data: bytes, body: _AmcLines):
@@ -763,14 +761,16 @@ def _content_lines(data: bytes, body: _AmcLines):
             and not line.lstrip().startswith("#")], False
 
 
-def _token_columns(layout) -> tuple[np.ndarray, np.ndarray]:
+def _token_columns(layout) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The bone names a frame's tokens hold, and the columns of the names and the values."""
     names, values = [], []
     column = 1
     for _, count in layout:
         names.append(column)
         values.extend(range(column + 1, column + 1 + count))
         column += 1 + count
-    return np.array(names, dtype=np.intp), np.array(values, dtype=np.intp)
+    return (np.array([name for name, _ in layout], dtype=object), np.array(names, dtype=np.intp),
+            np.array(values, dtype=np.intp))
 
 
 # --------------------------------------------------------------------------- read
