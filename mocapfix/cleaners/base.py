@@ -42,6 +42,21 @@ REJECTED_FILLS = "rejected_fills"
 #: gap, :func:`mocapfix.solvers.fill_error.extrapolated_bounds`)
 FILL_ERRORS = "fill_errors"
 
+def shift_frames(info: dict, offset: int) -> dict:
+    """A step's ``info`` run on frames ``offset:`` with its frame numbers
+    (:data:`REPLACED_FRAMES`, :data:`REJECTED_FILLS`, :data:`FILL_ERRORS`) made whole-file
+    frame numbers."""
+    info = dict(info or {})
+    if info.get(REPLACED_FRAMES):
+        info[REPLACED_FRAMES] = {name: [int(f) + offset for f in frames]
+                                 for name, frames in info[REPLACED_FRAMES].items()}
+    for key in (REJECTED_FILLS, FILL_ERRORS):
+        if info.get(key):
+            info[key] = {name: [[int(entry[0]) + offset, *entry[1:]] for entry in fills]
+                         for name, fills in info[key].items()}
+    return info
+
+
 #: what a step that cannot estimate its fills' error says when it fills nothing under the
 #: gate (``info["skipped_fills"]``)
 NOT_ESTIMATED = ("no fills: it gives no error estimate, so under max_fill_error none "

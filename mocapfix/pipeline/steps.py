@@ -28,7 +28,7 @@ import yaml
 
 from mocapfix.formats import FAMILIES, FORMATS, MARKER_FORMATS, matches
 from mocapfix.cleaners.base import (FILL_ERRORS, REJECTED_FILLS, REPLACED_FRAMES, Cleaner,
-                                    FillGate, FittedCleaner)
+                                    FillGate, FittedCleaner, shift_frames)
 from mocapfix.core.errors import ConfigError
 from mocapfix.core.gaps import runs, take_frames
 from mocapfix.core.motion import Motion
@@ -225,7 +225,7 @@ class Pipeline:
             return self._apply_on_points(step, motion, cols, gate(slice(None)))
         part, info = self._apply_on_points(step, motion.slice_frames(span.start, span.stop), cols,
                                            gate(span))
-        return motion.with_frames(span.start, part), _shift_frames(info, span.start)
+        return motion.with_frames(span.start, part), shift_frames(info, span.start)
 
     @staticmethod
     def _apply_on_points(step: Step, motion: Motion, cols: np.ndarray,
@@ -265,20 +265,6 @@ def _without_points(info: dict, names: list[str]) -> dict:
             info["joint_frames_replaced"] = sum(len(v) for v in replaced.values())
         if "spike_frames" in info:
             info["spike_frames"] = len({int(f) for v in replaced.values() for f in v})
-    return info
-
-
-def _shift_frames(info: dict, offset: int) -> dict:
-    """A step's ``info`` run on frames ``offset:`` with its frame numbers
-    (:data:`REPLACED_FRAMES`, :data:`REJECTED_FILLS`) made whole-file frame numbers."""
-    info = dict(info or {})
-    if info.get(REPLACED_FRAMES):
-        info[REPLACED_FRAMES] = {name: [int(f) + offset for f in frames]
-                                 for name, frames in info[REPLACED_FRAMES].items()}
-    for key in (REJECTED_FILLS, FILL_ERRORS):
-        if info.get(key):
-            info[key] = {name: [[int(entry[0]) + offset, *entry[1:]] for entry in fills]
-                         for name, fills in info[key].items()}
     return info
 
 

@@ -28,7 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from mocapfix.cleaners.base import FILL_ERRORS, REJECTED_FILLS, REPLACED_FRAMES
+from mocapfix.cleaners.base import FILL_ERRORS, REJECTED_FILLS, REPLACED_FRAMES, shift_frames
 from mocapfix.core.errors import ConfigError
 
 #: the default memory budget of one clean
@@ -147,18 +147,19 @@ def _owned(frame: int, j: int | None, start: np.ndarray, stop: np.ndarray) -> bo
 
 
 def _keep_frames(info: dict, lo: int, start: np.ndarray, stop: np.ndarray, index: dict) -> dict:
-    """A window's frame-numbered ``info`` entries made whole-take frames, keeping those
-    that start in the frames the window gives (per point)."""
+    """A window's frame-numbered ``info`` entries made whole-take frames
+    (:func:`~mocapfix.cleaners.base.shift_frames`, and its swaps), keeping those that
+    start in the frames the window gives (per point)."""
+    shifted = shift_frames(info, lo)
     out = {}
-    if info.get(REPLACED_FRAMES):
-        out[REPLACED_FRAMES] = {name: [f + lo for f in map(int, frames)
-                                       if _owned(f + lo, index.get(name), start, stop)]
-                                for name, frames in info[REPLACED_FRAMES].items()}
+    if shifted.get(REPLACED_FRAMES):
+        out[REPLACED_FRAMES] = {name: [f for f in frames
+                                       if _owned(f, index.get(name), start, stop)]
+                                for name, frames in shifted[REPLACED_FRAMES].items()}
     for key in (REJECTED_FILLS, FILL_ERRORS):
-        if info.get(key):
-            out[key] = {name: [[int(e[0]) + lo, *e[1:]] for e in entries
-                               if _owned(int(e[0]) + lo, index.get(name), start, stop)]
-                        for name, entries in info[key].items()}
+        if shifted.get(key):
+            out[key] = {name: [e for e in entries if _owned(e[0], index.get(name), start, stop)]
+                        for name, entries in shifted[key].items()}
     if isinstance(info.get("swaps"), list):
         out["swaps"] = [{**s, "start": int(s["start"]) + lo, "end": int(s["end"]) + lo}
                         for s in info["swaps"]
