@@ -44,9 +44,13 @@ FILL_ERRORS = "fill_errors"
 
 def shift_frames(info: dict, offset: int) -> dict:
     """A step's ``info`` run on frames ``offset:`` with its frame numbers
-    (:data:`REPLACED_FRAMES`, :data:`REJECTED_FILLS`, :data:`FILL_ERRORS`) made whole-file
-    frame numbers."""
+    (:data:`REPLACED_FRAMES`, :data:`REJECTED_FILLS`, :data:`FILL_ERRORS`, the ``start``
+    and ``end`` of the ``swaps`` step's swaps) made whole-file frame numbers."""
     info = dict(info or {})
+    if isinstance(info.get("swaps"), list):
+        info["swaps"] = [{**s, "start": int(s["start"]) + offset, "end": int(s["end"]) + offset}
+                         if isinstance(s, dict) and "start" in s and "end" in s else s
+                         for s in info["swaps"]]
     if info.get(REPLACED_FRAMES):
         info[REPLACED_FRAMES] = {name: [int(f) + offset for f in frames]
                                  for name, frames in info[REPLACED_FRAMES].items()}

@@ -148,7 +148,7 @@ def _owned(frame: int, j: int | None, start: np.ndarray, stop: np.ndarray) -> bo
 
 def _keep_frames(info: dict, lo: int, start: np.ndarray, stop: np.ndarray, index: dict) -> dict:
     """A window's frame-numbered ``info`` entries made whole-take frames
-    (:func:`~mocapfix.cleaners.base.shift_frames`, and its swaps), keeping those that
+    (:func:`~mocapfix.cleaners.base.shift_frames`), keeping those that
     start in the frames the window gives (per point)."""
     shifted = shift_frames(info, lo)
     out = {}
@@ -160,11 +160,10 @@ def _keep_frames(info: dict, lo: int, start: np.ndarray, stop: np.ndarray, index
         if shifted.get(key):
             out[key] = {name: [e for e in entries if _owned(e[0], index.get(name), start, stop)]
                         for name, entries in shifted[key].items()}
-    if isinstance(info.get("swaps"), list):
-        out["swaps"] = [{**s, "start": int(s["start"]) + lo, "end": int(s["end"]) + lo}
-                        for s in info["swaps"]
+    if isinstance(shifted.get("swaps"), list):
+        out["swaps"] = [s for s in shifted["swaps"]
                         if isinstance(s, dict) and "start" in s and "end" in s
-                        and _owned(int(s["start"]) + lo, None, start, stop)]
+                        and _owned(s["start"], None, start, stop)]
     return out
 
 

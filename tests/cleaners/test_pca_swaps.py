@@ -284,6 +284,28 @@ def test_swaps_unit_invariant():
     assert build("swaps").apply(mm)[1] == build("swaps").apply(m)[1]
 
 
+def test_a_pipeline_reports_swaps_in_the_files_frames_when_its_first_frames_are_empty():
+    """A take with empty frames before it (an export's lead-in) is cleaned on the frames it
+    holds; the swap the step finds there is reported at its frames in the file, in the
+    whole-take run and in a windowed one."""
+    from mocapfix.cleaning import clean_motion
+    from mocapfix.config import loads_config
+    from mocapfix.pipeline.windows import Windows
+
+    clean = _two_bodies()
+    pos = clean.positions.copy()
+    pos[120:190, [1, 3]] = clean.positions[120:190, [3, 1]]
+    lead = np.full((40, *pos.shape[1:]), np.nan)
+    padded = clean.replace(positions=np.concatenate([lead, pos]), confidence=None)
+    pipeline = loads_config("version: 1\npipeline:\n  - cleaner: swaps\n")
+    for windows in (None, Windows(150, 20)):
+        result = clean_motion(padded, pipeline, windows=windows)
+        swaps = result.records[0].info["swaps"]
+        assert [(sorted(s["markers"]), s["start"], s["end"]) for s in swaps] == \
+            [(["M1", "M3"], 160, 230)], windows
+        np.testing.assert_allclose(result.cleaned.positions[40:], clean.positions, atol=1e-9)
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("rel", [CMU, HDM])
 def test_swaps_none_on_clean_captures(rel):
