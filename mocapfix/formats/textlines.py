@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 
 from mocapfix.core.errors import MAX_FIELD, UnreadableFileError
-from mocapfix.formats.textenc import UTF8_BOM, refuse_long_fields
+from mocapfix.formats.textenc import UTF8_BOM, longest_field_bytes, refuse_long_fields
 
 #: bytes of the file decoded at a time (cut at a line end, so never inside a character)
 BLOCK = 1 << 22
@@ -56,7 +56,7 @@ class TextLines:
                 pieces.pop()                        # what follows the block's last newline
             content.append(np.fromiter((bool(p.strip()) and not p.lstrip().startswith("#")
                                         for p in pieces), bool, len(pieces)))
-            if long_line is None and len(text) > MAX_FIELD:
+            if long_line is None and len(text) > MAX_FIELD and longest_field_bytes(view[a:b]) > MAX_FIELD:
                 long_line = cls._long_field(path, pieces, n_lines,
                                              b == len(raw) and raw[-1:] != b"\n")
             newlines.append(a + np.flatnonzero(view[a:b] == 10))

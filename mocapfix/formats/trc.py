@@ -76,6 +76,7 @@ from pathlib import Path
 import numpy as np
 
 from mocapfix.core.errors import (
+    MAX_FIELD,
     UnreadableFileError,
     UnsupportedFeatureError,
     WriteError,
@@ -84,7 +85,7 @@ from mocapfix.core.fileio import read_input_bytes, write_output_pieces
 from mocapfix.core.motion import Motion, missing_samples
 from mocapfix.core.quantity import MAX_FRAME_RATE_HZ, MIN_FRAME_RATE_HZ
 from mocapfix.core.units import METRES_PER_UNIT, normalise_unit_name
-from mocapfix.formats.textenc import refuse_long_fields, refuse_wide_text
+from mocapfix.formats.textenc import longest_field_bytes, refuse_long_fields, refuse_wide_text
 
 NAME = "trc"
 SUFFIXES = (".trc",)
@@ -309,8 +310,9 @@ def read(path, fps: float | None = None, **options) -> Motion:
         text = raw.decode("latin-1")
     bom = "\ufeff" if text.startswith("\ufeff") else ""
     lines, endings = _split_lines(text[len(bom):])
+    if longest_field_bytes(raw) > MAX_FIELD:
+        refuse_long_fields(path, lines)
     del raw, text                               # the lines are the one copy kept
-    refuse_long_fields(path, lines)
     notes: list[str] = []
     header = _header(lines, path, notes)
     rate = _rate(header, path)

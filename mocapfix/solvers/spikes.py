@@ -26,11 +26,31 @@ def _local_scale(r, usable, half):
     return np.nan_to_num(moving_median(np.where(usable, r, np.nan), 2 * half) / 1.5382)
 
 
+#: samples (frames × markers) judged at once: every marker is fitted on its own, so a long
+#: take is judged a few markers at a time, and the fits' temporaries (~400 bytes a sample)
+#: stay under ~100 MB instead of growing with the take's markers too
+GROUP_SAMPLES = 1 << 18
+
+
 def hampel_flags(pos: np.ndarray, half: int, k: float, floor: float,
                  passes: int = 3) -> tuple[np.ndarray, np.ndarray]:
     """Spike mask (T, J) of marker positions ``pos`` (T, J, 3) and the median threshold
     per marker (J,), in the units of ``pos``. See :mod:`mocapfix.cleaners.spikes` for the
-    steps."""
+    steps. Markers are judged in groups of at most :data:`GROUP_SAMPLES` samples (the
+    same flags as all at once: nothing is shared between markers)."""
+    T, J, _ = pos.shape
+    group = max(1, GROUP_SAMPLES // max(T, 1))
+    if J <= group:
+        return _hampel_group(pos, half, k, floor, passes)
+    parts = [_hampel_group(pos[:, a:a + group], half, k, floor, passes)
+             for a in range(0, J, group)]
+    return (np.concatenate([f for f, _ in parts], axis=1),
+            np.concatenate([t for _, t in parts]))
+
+
+def _hampel_group(pos: np.ndarray, half: int, k: float, floor: float,
+                  passes: int) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`hampel_flags` of the markers of ``pos`` all at once."""
     T, J, _ = pos.shape
     observed = ~np.isnan(pos).any(axis=2)
     w = observed.astype(np.float64)
