@@ -14,6 +14,7 @@ from mocapfix import formats
 from mocapfix.core.errors import UnreadableFileError
 from mocapfix.core.fileio import NAME_MAX, atomic_write_text, is_stream, refuse_stream
 from mocapfix.core.motion import Motion
+from mocapfix.pipeline.held import HeldFrames
 from mocapfix.pipeline.steps import Pipeline, StepRecord, written_fill_errors
 from mocapfix.pipeline.windows import (Windows, merge_info, over_budget, paste, point_cuts,
                                        shifted_info, window_for)
@@ -36,15 +37,22 @@ def clean_motion(motion: Motion, pipeline: Pipeline, to: str | None = None,
 
     ``windows``: a take longer than the pipeline's ``memory_budget`` allows is cleaned in
     overlapping windows (:mod:`mocapfix.pipeline.windows`; ``"budget"``, the default);
-    :class:`~mocapfix.pipeline.windows.Windows` to choose them, None to clean it whole."""
+    :class:`~mocapfix.pipeline.windows.Windows` to choose them, None to clean it whole.
+    A take whose frames repeat the frame before them is cleaned on its distinct frames
+    (:mod:`mocapfix.pipeline.held`)."""
     started = time.perf_counter()
     why = pipeline.not_cleaned(motion)
+    held = HeldFrames.find(motion)
+    distinct = motion if held is None else held.take(motion)
     if windows == "budget":
-        windows = window_for(pipeline.memory_budget, motion.n_frames, motion.n_joints, motion.fps)
-    if windows is None or len(windows.cuts(motion.n_frames)) <= 2:
-        cleaned, records, residual = _clean_span(motion, pipeline, why)
+        windows = window_for(pipeline.memory_budget, distinct.n_frames, motion.n_joints, motion.fps)
+    if windows is None or len(windows.cuts(distinct.n_frames)) <= 2:
+        cleaned, records, residual = _clean_span(distinct, pipeline, why)
     else:
-        cleaned, records, residual = _clean_windowed(motion, pipeline, why, windows)
+        cleaned, records, residual = _clean_windowed(distinct, pipeline, why, windows)
+    if held is not None:
+        cleaned, records, residual = held.expand(motion, cleaned, records, residual)
+        cleaned.fill_errors = written_fill_errors(cleaned, records)
     if to is not None and to != motion.format:
         cleaned = cleaned.replace(notes=[*cleaned.notes, *formats.losses(cleaned, to)])
     cleaned = formats.storable(cleaned, to)

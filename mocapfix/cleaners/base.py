@@ -46,19 +46,41 @@ def shift_frames(info: dict, offset: int) -> dict:
     """A step's ``info`` run on frames ``offset:`` with its frame numbers
     (:data:`REPLACED_FRAMES`, :data:`REJECTED_FILLS`, :data:`FILL_ERRORS`, the ``start``
     and ``end`` of the ``swaps`` step's swaps) made whole-file frame numbers."""
+    return _renumber(info, lambda f: (f + offset,), lambda s, n: (s + offset, n))
+
+
+def map_frames(info: dict, first, stop) -> dict:
+    """A step's ``info`` run on frames picked from a take, frame ``k`` of the run standing
+    for the take's frames ``first[k]:stop[k]``, with its frame numbers (as
+    :func:`shift_frames`) made the take's: a listed frame becomes every frame it stands
+    for, a run ``[start, length]`` the frames ``first[start]:stop[start + length − 1]``."""
+    def run(s, n):
+        return (int(first[s]), int(stop[s + n - 1]) - int(first[s])) if n > 0 else (int(first[s]), 0)
+    return _renumber(info, lambda f: range(int(first[f]), int(stop[f])), run)
+
+
+def _renumber(info: dict, frames_of, run_of) -> dict:
+    """``info`` with each listed frame ``f`` made the frames ``frames_of(f)`` and each run
+    ``(start, length)`` made ``run_of(start, length)``."""
     info = dict(info or {})
-    if isinstance(info.get("swaps"), list):
-        info["swaps"] = [{**s, "start": int(s["start"]) + offset, "end": int(s["end"]) + offset}
-                         if isinstance(s, dict) and "start" in s and "end" in s else s
-                         for s in info["swaps"]]
     if info.get(REPLACED_FRAMES):
-        info[REPLACED_FRAMES] = {name: [int(f) + offset for f in frames]
+        info[REPLACED_FRAMES] = {name: [g for f in frames for g in frames_of(int(f))]
                                  for name, frames in info[REPLACED_FRAMES].items()}
     for key in (REJECTED_FILLS, FILL_ERRORS):
         if info.get(key):
-            info[key] = {name: [[int(entry[0]) + offset, *entry[1:]] for entry in fills]
+            info[key] = {name: [[*run_of(int(entry[0]), int(entry[1])), *entry[2:]]
+                                for entry in fills]
                          for name, fills in info[key].items()}
+    if isinstance(info.get("swaps"), list):
+        info["swaps"] = [_swap_run(s, run_of) if isinstance(s, dict) and "start" in s
+                         and "end" in s else s for s in info["swaps"]]
     return info
+
+
+def _swap_run(swap: dict, run_of) -> dict:
+    start, n = run_of(int(swap["start"]), int(swap["end"]) - int(swap["start"]))
+    return {**swap, "start": start, "end": start + n,
+            **({"frames": n} if "frames" in swap else {})}
 
 
 #: what a step that cannot estimate its fills' error says when it fills nothing under the
