@@ -21,8 +21,10 @@ the peak resident memory of the child (``getrusage``) are printed with the time 
 sample and the 500k / 50k ratio.
 
 ``--seams``: on the 5,000-frame files, the default cleaned whole against the same cleaned
-in windows of 1,000 frames (6 s of overlap: four seams where the default would make
-none), through :func:`mocapfix.cleaning.clean_motion`: the distance between the two
+in windows of 2,500 and of 1,000 frames (6 s of overlap: one and four seams where the
+default would make none), and on the 50,000-frame files whole against the windows the
+default ``memory_budget`` picks (what a user gets), through
+:func:`mocapfix.cleaning.clean_motion`: the distance between the two
 outputs (mm; max and percentiles) over the samples within one overlap of a seam and over
 the rest, and whether the report's file summary (status, samples filled and flagged,
 gaps left) is the same.
@@ -177,21 +179,28 @@ def _joints(fmt: str) -> int:
     return read(SOURCES[fmt][0]).n_joints
 
 
-def seams(formats, folder: Path, frames: int) -> None:
+def seams(formats, folder: Path, frames: int | None, take: int = 5000) -> None:
+    """The windowed-vs-whole table: takes of ``take`` frames cleaned whole and in windows
+    of ``frames`` frames (None: the windows the default ``memory_budget`` picks)."""
     from mocapfix.cleaning import clean_motion
     from mocapfix.config import load_config
     from mocapfix.core.presets import resolve_config
-    from mocapfix.pipeline.windows import OVERLAP_S, Windows, point_cuts
+    from mocapfix.pipeline.windows import OVERLAP_S, Windows, point_cuts, window_for
     from mocapfix.quality.report import build_report
 
     pipeline = load_config(resolve_config("default"))
-    print(f"\n| format | 5,000 frames: whole vs windows of {frames} | near a seam: max / p99 / "
+    what = "the memory_budget's windows" if frames is None else f"windows of {frames}"
+    print(f"\n| format | {take:,} frames: whole vs {what} | near a seam: max / p99 / "
           "median (mm) | elsewhere: max / p99 / median (mm) | summary the same |")
     print("|---|---|---:|---:|---|")
     keys = ("status", "samples_filled", "samples_flagged", "gaps_unfilled", "missing_after")
     for fmt in formats:
-        motion = read(build(fmt, 5000, folder))
-        windows = Windows(frames, round(OVERLAP_S * motion.fps))
+        motion = read(build(fmt, take, folder))
+        windows = (Windows(frames, round(OVERLAP_S * motion.fps)) if frames is not None else
+                   window_for(pipeline.memory_budget, motion.n_frames, motion.n_joints, motion.fps))
+        if windows is None:
+            print(f"| {fmt} | fits the budget whole: no seams | | | |")
+            continue
         t0 = time.perf_counter()
         whole = clean_motion(motion, pipeline, windows=None)
         t1 = time.perf_counter()
@@ -210,7 +219,9 @@ def seams(formats, folder: Path, frames: int) -> None:
         def stats(mask, d=d):
             x = d[mask & np.isfinite(d)]
             return "–" if not x.size else f"{x.max():.3f} / {np.percentile(x, 99):.3f} / {np.median(x):.4f}"
-        print(f"| {fmt} | {motion.n_joints} points, whole {t1 - t0:.1f} s, windowed {t2 - t1:.1f} s "
+        n_windows = len(windows.cuts(motion.n_frames)) - 1
+        print(f"| {fmt} | {motion.n_joints} points, whole {t1 - t0:.1f} s, {n_windows} windows "
+              f"of {windows.frames} {t2 - t1:.1f} s "
               f"| {stats(near)} | {stats(~near)} | {'yes' if not differ else '; '.join(differ)} |",
               flush=True)
 
@@ -229,6 +240,7 @@ def main():
         if args.seams:
             for frames in (2500, 1000):
                 seams(formats, folder, frames)
+            seams(formats, folder, None, take=50_000)
         else:
             speed_table(formats, [int(s) for s in args.sizes.split(",")], folder)
 

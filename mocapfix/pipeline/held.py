@@ -6,7 +6,8 @@ new measurement, but the cleaners take it for one — a motion that stops dead b
 every two frames, twice as fast in between — and judge the real samples wrong: with
 every frame of CMU 85_02 written twice the default judged 2,998 samples wrong, left
 1,078 of them missing and wrote a toe marker 1.1 m from where it was
-(``benchmarks/degenerate_takes.py``; benchmarks/RESULTS.md, "Held frames").
+(``benchmarks/degenerate_takes.py``; benchmarks/RESULTS.md, "Degenerate takes and
+held frames").
 
 So a take with held frames is cleaned on its distinct frames (:meth:`HeldFrames.take`),
 and every held frame comes out as the frame it repeats (:meth:`HeldFrames.expand`), with
