@@ -79,6 +79,7 @@ def summarise(motion: Motion) -> dict:
         "never_observed": f["never_seen"],
         "empty_frames": f["empty_frames"],
         "frames_outside_take": f.get("frames_outside_take", []),
+        "held_frames": f["held_frames"],
         "notes": list(motion.notes),
     }
     if motion.format == "kinect":
@@ -157,6 +158,9 @@ def format_text(summary: dict, verbose: bool = False) -> str:
     if s.get("dropped_frames"):
         lines.append(f"  timing      {s['dropped_frames']} dropped frames, "
                      f"{s['timestamp_jumps']} irregular time steps")
+    if s.get("held_frames"):
+        lines.append(f"  held        {s['held_frames']} frames repeat the frame before them "
+                     "exactly (no new measurement; clean cleans each once)")
     for note in s["notes"]:
         lines.append(f"  note        {note}")
     return "\n".join(lines)

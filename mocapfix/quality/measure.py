@@ -34,6 +34,7 @@ from mocapfix.core.metrics import bone_lengths, rms_acceleration
 from mocapfix.core.motion import Motion
 from mocapfix.pipeline.selection import DEFAULT_POLICY, not_cleaned, take
 from mocapfix.pipeline.unlabelled import Unlabelled, is_unlabelled
+from mocapfix.pipeline.held import held_frames
 
 #: an interval longer than this many times the median is a dropped-frame gap
 GAP_FACTOR = 1.5
@@ -236,6 +237,7 @@ def measure_input(motion: Motion, *, swaps: bool = True, outliers: bool = True,
         "bone_variation": finite(np.nanmax(bvar)) if np.isfinite(bvar).any() else None,
         "swaps": swap_list,
         **timing(motion),
+        "held_frames": int(held_frames(motion).sum()),
         "notes": notes,
     }
     if not marker.all():

@@ -112,6 +112,8 @@ METRICS = {m.name: m for m in (
            "frames missing between time stamps (Kinect time stamps)", None),
     Metric("timestamp_jumps", "input", "count", "{v} irregular time steps",
            "intervals longer than 1.5x the median, repeated or backward", None),
+    Metric("held_frames", "input", "count", "{v} held frames",
+           "frames that repeat the frame before them exactly (no new measurement)", None),
     Metric("swaps", "input", "count", "{v} suspected marker swaps",
            "label swaps the swaps cleaner finds (C3D)", None),
     Metric("fps", "input", "frequency", "frame rate {v}", "frame rate (judged from below)",
@@ -138,7 +140,7 @@ METRICS = {m.name: m for m in (
 )}
 
 _FILE_ONLY_KEYS = {"dropped_frames": "dropped_frames", "timestamp_jumps": "timestamp_jumps",
-                   "fps": "fps"}
+                   "held_frames": "held_frames", "fps": "fps"}
 
 
 def show(kind: str, value) -> str:

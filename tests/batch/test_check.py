@@ -225,3 +225,24 @@ def test_check_names_an_unreadable_file_once(tmp_path):
     assert r.exit_code == 3
     line = next(x for x in r.output.splitlines() if x.startswith("ERROR"))
     assert line.count(str(bad)) == 1 and line.startswith(f"ERROR {bad}:1: "), line
+
+
+def test_check_counts_held_frames_and_a_rule_can_fail_on_them(tmp_path):
+    """A take with every frame written twice: ``check`` says how many frames repeat the
+    one before (``held_frames``), and a rule on it fails that file and not the original."""
+    from mocapfix import read
+    base = read(shared("c3d/cmu_85_02.c3d"))
+    doubled = base.replace(positions=base.positions.repeat(2, axis=0), source=None,
+                           confidence=None)
+    folder = tmp_path / "in"
+    folder.mkdir()
+    write(base.replace(source=None, confidence=None), folder / "once.c3d")
+    write(doubled, folder / "twice.c3d")
+    rules = tmp_path / "rules.yaml"
+    rules.write_text("version: 1\nrules:\n  - metric: held_frames\n    fail: 0\n")
+    result = CliRunner().invoke(main, ["check", str(folder), "-r", str(rules), "--json"])
+    assert result.exit_code == 1, result.output
+    files = {f["path"].split("/")[-1]: f for f in json.loads(result.stdout)["files"]}
+    assert files["twice.c3d"]["file"]["held_frames"] == base.n_frames
+    assert files["twice.c3d"]["status"] == "FAIL"
+    assert files["once.c3d"]["file"]["held_frames"] == 0 and files["once.c3d"]["status"] == "OK"
