@@ -13,9 +13,10 @@ and 50,000 frames, built from one shared capture:
 - ``repeated``: every frame of the capture written twice in a row (a 60 Hz container
   fed at 30 Hz), played forwards and backwards to length.
 
-Markers (C3D) then get the ``occlusion`` protocol's ``mixed`` corruption on every 4,500
+Markers (C3D) get the ``occlusion`` protocol's ``mixed`` corruption on every 4,500
 frames, as in :mod:`long_takes`, so the fills and the outlier tests have work on these
-shapes too; BVH and Kinect are cleaned as built. Each clean is ``mocapfix clean FILE -o
+shapes too (``repeated``: the capture is corrupted first and its frames then written
+twice, as a recorder repeats what it measured); BVH and Kinect are cleaned as built. Each clean is ``mocapfix clean FILE -o
 OUT`` (default config) in its own process: the CPU time, the 50k / 5k ratio (linear: about
 10×) and whether it succeeded.
 
@@ -72,17 +73,25 @@ def build(fmt: str, shape: str, n_frames: int, folder: Path) -> Path:
     elif fmt == "kinect":
         motion = base.replace(positions=base.positions[pick], confidence=base.confidence[pick],
                               source=None, times=np.arange(n_frames) / base.fps)
+    elif shape == "repeated":
+        # the capture corrupted, then every frame held: a recorder repeats what it measured
+        motion = _corrupted(base.replace(source=None, confidence=None))
+        motion = motion.replace(positions=motion.positions[pick])
     else:
-        positions = base.positions[pick]
-        motion = base.replace(positions=positions, source=None, confidence=None)
-        out = positions.copy()
-        for k, a in enumerate(range(0, n_frames, long_takes.STRETCH)):
-            part = motion.slice_frames(a, min(a + long_takes.STRETCH, n_frames))
-            if part.n_frames >= 4:
-                out[a:a + part.n_frames] = occlusion(part, "mixed", k)[0].positions
-        motion = motion.replace(positions=out)
+        motion = _corrupted(base.replace(positions=base.positions[pick], source=None,
+                                         confidence=None))
     write(motion, path)
     return path
+
+
+def _corrupted(motion):
+    """``motion`` with the ``mixed`` corruption on every stretch of STRETCH frames."""
+    out = motion.positions.copy()
+    for k, a in enumerate(range(0, motion.n_frames, long_takes.STRETCH)):
+        part = motion.slice_frames(a, min(a + long_takes.STRETCH, motion.n_frames))
+        if part.n_frames >= 4:
+            out[a:a + part.n_frames] = occlusion(part, "mixed", k)[0].positions
+    return motion.replace(positions=out)
 
 
 HELD = ("c3d/cmu_85_02.c3d", "c3d/hdm05_HDM_mm_01-02_03_120.c3d",
