@@ -118,3 +118,22 @@ def test_a_few_held_frames_stay_held_in_the_output():
     np.testing.assert_array_equal(result.cleaned.positions[t], result.cleaned.positions[t - 1])
     notes = build_report(result, pipeline.report)["file"]["notes"]
     assert any(n.startswith(f"{len(t)} of {base.n_frames} frames repeat") for n in notes)
+
+
+def test_held_frames_in_a_take_cleaned_in_windows():
+    """The windows are cut in the distinct frames: a doubled take cleaned in windows gives
+    the distinct take's windowed output with every frame twice, and its report the file's
+    frames."""
+    from mocapfix.pipeline.windows import Windows
+
+    base = read(shared("c3d/cmu_85_02.c3d"))
+    corrupted, _ = occlusion(base, "mixed", 4)
+    corrupted = corrupted.replace(source=None, confidence=None)
+    pipeline = load_config(resolve_config("default"))
+    windows = Windows(300, 40)
+    once = clean_motion(corrupted, pipeline, windows=windows)
+    twice = clean_motion(_doubled(corrupted), pipeline, windows=windows)
+    np.testing.assert_array_equal(twice.cleaned.positions, once.cleaned.positions.repeat(2, axis=0))
+    a, b = build_report(once, pipeline.report), build_report(twice, pipeline.report)
+    assert b["file"]["samples_filled"] == 2 * a["file"]["samples_filled"] > 0
+    assert any("cleaned in 3 windows" in n for n in b["file"]["notes"])
