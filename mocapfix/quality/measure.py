@@ -31,7 +31,7 @@ from mocapfix.solvers.spikes import hampel_flags
 from mocapfix.solvers.fill_error import FillIndex
 from mocapfix.core.gaps import LONG_FILL_S, runs, take_frames
 from mocapfix.core.metrics import bone_lengths, rms_acceleration
-from mocapfix.core.motion import Motion
+from mocapfix.core.motion import Motion, missing_samples
 from mocapfix.pipeline.selection import DEFAULT_POLICY, not_cleaned, take
 from mocapfix.pipeline.unlabelled import Unlabelled, is_unlabelled
 
@@ -88,8 +88,10 @@ def bone_variation(positions: np.ndarray, bones: np.ndarray) -> np.ndarray:
     out = np.full(len(bones), np.nan)
     ok = seen > 1
     if ok.any():
+        # every bone seen (the usual case): the lengths as they are, not a copy of them
+        seen_lengths = lengths if ok.all() else lengths[:, ok]
         with np.errstate(invalid="ignore", divide="ignore"):
-            out[ok] = np.nanstd(lengths[:, ok], axis=0) / np.nanmean(lengths[:, ok], axis=0)
+            out[ok] = np.nanstd(seen_lengths, axis=0) / np.nanmean(seen_lengths, axis=0)
     return out
 
 
@@ -318,13 +320,29 @@ def uncertainty(before: Motion, after: Motion, frames: slice = slice(None)) -> n
     motion where it carries a per-sample fill confidence, else as 1. A marker rebuilt from
     3 % of its data is 97 % uncertain, however complete it looks after cleaning."""
     miss_b = before.missing
-    weight = np.ones_like(miss_b, dtype=np.float64)
+    rows = range(*frames.indices(miss_b.shape[0]))
     conf = after.confidence
-    if conf is not None and conf.shape == miss_b.shape:
-        c = np.clip(np.nan_to_num(conf, nan=0.0), 0.0, 1.0)
-        weight = np.where(after.missing, 1.0, 1.0 - c)
-    part = (miss_b * weight)[frames]
+    if conf is None or conf.shape != miss_b.shape:
+        part = miss_b[frames].astype(np.float64)
+    else:
+        part = np.empty((len(rows), miss_b.shape[1]))
+        for a in range(0, len(rows), MEASURE_CHUNK):
+            b = min(a + MEASURE_CHUNK, len(rows))
+            taken = slice(rows[a], rows[b - 1] + 1) if rows.step == 1 else rows[a:b]
+            part[a:b] = miss_b[taken] * _uncertain_weight(after, taken)
     return part.sum(axis=0) / max(part.shape[0], 1)
+
+
+#: frames of a take weighed at a time (:func:`uncertainty`)
+MEASURE_CHUNK = 16384
+
+
+def _uncertain_weight(after: Motion, frames) -> np.ndarray:
+    """What a sample missing in the input counts for in :func:`uncertainty` on ``frames``:
+    1 where the cleaned motion has nothing, else ``1 − confidence``. Worked out a chunk of
+    frames at a time: over a long take its temporaries were four (T, J) float arrays."""
+    c = np.clip(np.nan_to_num(after.confidence[frames], nan=0.0), 0.0, 1.0)
+    return np.where(missing_samples(after.positions[frames]), 1.0, 1.0 - c)
 
 
 def _correction_cause(outliers: np.ndarray, own: np.ndarray, parents: np.ndarray, names,
