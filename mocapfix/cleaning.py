@@ -194,6 +194,7 @@ def clean_file(source: Path, output: Path, pipeline: Pipeline, reports=("json",)
     or report path that is a device or a pipe, or a link to one, is a WriteError before
     anything is written (it would swallow the output)."""
     motion = formats.read(source, **(read_options or {}))
+    formats.share_values_read(motion)       # cleaning never writes into the motion read
     if motion.n_frames == 0:
         raise UnreadableFileError(source, "holds no frames; nothing to clean")
     result = clean_motion(motion, pipeline, to)
