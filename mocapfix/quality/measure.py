@@ -401,6 +401,13 @@ def measure_cleaning(result: CleanResult) -> dict:
     why = not_cleaned(before) if result.not_cleaned is None else result.not_cleaned
     graded = np.array([w is None for w in why], bool)
     mm = before.metres_per_unit * 1000.0
+    # the measures with whole-take temporaries of their own first, before the per-sample
+    # masks below are held: the report's peak is then theirs alone
+    jitter_b, jitter_a = jitter(before), jitter(after)
+    bones = bones_of(before)
+    # the kinematic chain (a marker set's rigid pairs in ``bones`` are not one)
+    parents = before.skeleton.parents if before.skeleton is not None else np.full(J, -1, np.intp)
+    var_b, var_a = bone_variation(before.positions, bones), bone_variation(after.positions, bones)
     miss_b, miss_a = before.missing, after.missing
     flagged = np.zeros((T, J), bool)
     made_missing = np.zeros((T, J), bool)
@@ -413,11 +420,6 @@ def measure_cleaning(result: CleanResult) -> dict:
     own = flagged if rig is None else made_missing | (flagged & np.asarray(rig.offset_in_own_frame, bool)[None, :J])
     who = who_filled(records, T, J)
     who[miss_a] = -1                   # filled by a step, dropped by the writer (storable)
-    jitter_b, jitter_a = jitter(before), jitter(after)
-    bones = bones_of(before)
-    # the kinematic chain (a marker set's rigid pairs in ``bones`` are not one)
-    parents = before.skeleton.parents if before.skeleton is not None else np.full(J, -1, np.intp)
-    var_b, var_a = bone_variation(before.positions, bones), bone_variation(after.positions, bones)
     span = take_frames(miss_b, graded)
     T_take = span.stop - span.start
     unc = uncertainty(before, after, span)
