@@ -109,7 +109,8 @@ def _clean_windowed(motion: Motion, pipeline: Pipeline, why: list, windows: Wind
             paste(residual, res, lo, start, stop)
         notes += [n for n in part.notes if n not in notes]
         if not masks:
-            heads = records
+            # what the merged records take from the first window's (not its arrays)
+            heads = [(rec.step, rec.cleaner, rec.info) for rec in records]
             # of the distances moved only their sum is kept (the report gives the mean)
             masks = [{"filled": np.zeros((T, J), bool), "flagged": np.zeros((T, J), bool),
                       "moved": 0.0, "replaced": None} for _ in records]
@@ -127,15 +128,18 @@ def _clean_windowed(motion: Motion, pipeline: Pipeline, why: list, windows: Wind
                 if mask["replaced"] is None:
                     mask["replaced"] = np.zeros((T, J), bool)
                 paste(mask["replaced"], rec.replaced, lo, start, stop)
+        # pasted: the window's output and records go before the next window is cleaned
+        # (held, they were one more window's arrays beside its working memory)
+        del part, records, res
     records = []
-    for head, mask, info in zip(heads, masks, infos):
+    for (step, cleaner, first_info), mask, info in zip(heads, masks, infos):
         skipped = {s for _, _, s in info}
         merged = merge_info([i for i, _, _ in info])
         merged["windows"] = len(info)
         skipped = skipped.pop() if len(skipped) == 1 else None
-        records.append(StepRecord(head.step, head.cleaner, sum(s for _, s, _ in info),
+        records.append(StepRecord(step, cleaner, sum(s for _, s, _ in info),
                                   mask["filled"], mask["flagged"], np.zeros((0, J)),
-                                  merged if skipped is None else head.info, skipped,
+                                  merged if skipped is None else first_info, skipped,
                                   mask["replaced"], moved_mean=mask["moved"] / (T * J)))
     notes.append(f"cleaned in {len(cuts) - 1} windows of {windows.frames} frames with "
                  f"{windows.overlap} frames of overlap (memory_budget)")
@@ -198,6 +202,7 @@ def clean_file(source: Path, output: Path, pipeline: Pipeline, reports=("json",)
     or report path that is a device or a pipe, or a link to one, is a WriteError before
     anything is written (it would swallow the output)."""
     motion = formats.read(source, **(read_options or {}))
+    formats.share_values_read(motion)       # cleaning never writes into the motion read
     if motion.n_frames == 0:
         raise UnreadableFileError(source, "holds no frames; nothing to clean")
     result = clean_motion(motion, pipeline, to)

@@ -53,14 +53,32 @@ def bone_length_variation(positions, bones) -> np.ndarray:
         return np.nanstd(lengths, axis=0) / np.nanmean(lengths, axis=0)
 
 
+#: frames of a take whose accelerations are worked out at a time (:func:`rms_acceleration`)
+ACCELERATION_CHUNK = 16384
+
+
 def rms_acceleration(positions: np.ndarray, fps: float) -> np.ndarray:
-    """RMS of the second difference per joint (J,), in units/s² — a jitter measure."""
-    power = None
-    for c in range(positions.shape[-1]):         # per coordinate: no (T, J, 3) temporaries
-        square = (np.diff(positions[..., c], n=2, axis=0) * fps * fps) ** 2
-        power = square if power is None else power + square
+    """RMS of the second difference per joint (J,), in units/s² — a jitter measure.
+
+    The squared accelerations are summed per coordinate a chunk of frames at a time into
+    one (T − 2, J) array, and NaN made 0 there in place: on a long take the whole-take
+    temporaries of each coordinate's differences and of ``np.nansum``'s copy were four
+    times that array. Every value, and the sum over frames (one reduction of that array,
+    as ``np.nansum`` makes), is the same bit for bit."""
+    T = positions.shape[0]
+    power = np.empty((max(T - 2, 0), *positions.shape[1:-1]))
+    for a in range(0, len(power), ACCELERATION_CHUNK):
+        b = min(a + ACCELERATION_CHUNK, len(power))
+        part = positions[a:b + 2]
+        for c in range(positions.shape[-1]):
+            square = (np.diff(part[..., c], n=2, axis=0) * fps * fps) ** 2
+            if c == 0:
+                power[a:b] = square
+            else:
+                power[a:b] += square
     counted = np.isfinite(power).sum(axis=0)
-    total = np.nansum(power, axis=0)
+    np.copyto(power, 0.0, where=np.isnan(power))
+    total = np.sum(power, axis=0)
     with np.errstate(invalid="ignore", divide="ignore"):
         return np.sqrt(np.where(counted > 0, total / np.maximum(counted, 1), np.nan))
 

@@ -31,6 +31,8 @@ import pkgutil
 import re
 from pathlib import Path
 
+import numpy as np
+
 from mocapfix.core.errors import MocapfixError, UnreadableFileError, WriteError
 from mocapfix.core.motion import Motion
 
@@ -192,6 +194,23 @@ def _read_as(path: Path, name: str, options: dict) -> Motion:
     motion.path = str(path)
     motion.format = name
     return motion
+
+
+def share_values_read(motion: Motion) -> None:
+    """For a caller that never changes the motion it read in place (``clean``): the
+    channel values a BVH or AMC source keeps to tell the writer which lines changed (a
+    copy of ``motion.channels`` as read, so that an edit of the motion's own array in
+    place is written) become ``motion.channels`` itself, made read-only: one whole-take
+    array fewer (20 bytes a sample for a CMU BVH). Any other motion, or one whose
+    channels are no longer the values read, is left as it is."""
+    values = getattr(motion.source, "values", None)
+    channels = motion.channels
+    if (not isinstance(values, np.ndarray) or channels is None or values is channels
+            or values.shape != channels.shape or values.dtype != channels.dtype
+            or not np.array_equal(values, channels)):
+        return
+    values.flags.writeable = False
+    motion.channels = values
 
 
 def storable(motion: Motion, name: str | None = None) -> Motion:

@@ -306,8 +306,10 @@ class C3DSource:
 
     ``points`` (T, P, 4) float32 or int16 records as stored (x, y, z, residual word);
     ``analog`` (T, A) raw analog words per point frame (channels interleaved per sample,
-    ``analog_per_frame`` samples); ``residual`` (T, P) in length units, -1 if flagged
-    invalid; ``camera_mask`` (T, P) uint8; ``positions``/``missing`` as read.
+    ``analog_per_frame`` samples); ``missing`` (T, P) as read. The positions as read
+    (:meth:`positions_of`), ``residual`` (T, P, in length units, -1 if flagged invalid)
+    and ``camera_mask`` (T, P, uint8) are decoded from ``points`` when asked for, not
+    held: on a long take they were 33 bytes a sample beside the motion's own positions.
     """
 
     processor: int
@@ -321,9 +323,6 @@ class C3DSource:
     analog: np.ndarray
     analog_per_frame: int
     analog_dtype: str
-    residual: np.ndarray
-    camera_mask: np.ndarray
-    positions: np.ndarray
     missing: np.ndarray
     names: list
     units: str
@@ -333,6 +332,28 @@ class C3DSource:
     prefix: bytes                 # file bytes from 512 up to data_offset, Intel-encoded
     tail: bytes                   # bytes after the last frame read
     conversion_note: str | None = None
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """(frames, points) of the records."""
+        return self.missing.shape
+
+    def positions_of(self, frames: slice = slice(None)) -> np.ndarray:
+        """The positions of ``frames`` as read (NaN where missing), decoded again from
+        the records: the same values as the motion read had, bit for bit."""
+        positions, _ = _positions(self.points[frames], self.storage, self.scale,
+                                  self.missing[frames])
+        return positions
+
+    @property
+    def residual(self) -> np.ndarray:
+        """(T, P) residuals as read, in length units; -1 where flagged invalid."""
+        return _residual_and_mask(self.points, self.storage, self.scale)[0]
+
+    @property
+    def camera_mask(self) -> np.ndarray:
+        """(T, P) uint8 camera masks as read (0 where flagged invalid)."""
+        return _residual_and_mask(self.points, self.storage, self.scale)[1]
 
     @property
     def groups(self) -> dict:
@@ -435,7 +456,7 @@ def _read_bytes(path, data: bytes, fps):
     with np.errstate(invalid="ignore", over="ignore"):  # garbage may hold signalling NaNs
         points, analog = _read_data(data, data_offset, n_frames, n_points, analog_words, storage,
                                     processor, unsigned)
-        positions, missing, residual, camera_mask = _decode_points(points, storage, abs(scale), notes)
+        positions, missing = _decode_points(points, storage, abs(scale), notes)
     tail = data[data_offset + n_frames * frame_bytes:]
 
     names = _labels(get, parameters, n_points, notes)
@@ -477,7 +498,7 @@ def _read_bytes(path, data: bytes, fps):
         processor=processor, header=header, original_header=data[:BLOCK], parameters=parameters,
         data_offset=data_offset, storage=storage, scale=abs(scale), points=points, analog=analog,
         analog_per_frame=analog_per_frame, analog_dtype=str(analog.dtype),
-        residual=residual, camera_mask=camera_mask, positions=positions.copy(), missing=missing,
+        missing=missing,
         names=list(names), units=units, metres_per_unit=metres, first_frame=h["first_frame"],
         events=_events(header), prefix=bytes(prefix), tail=tail, conversion_note=conversion_note)
     if kinds is not None:
@@ -664,11 +685,11 @@ def _residual_words(points: np.ndarray, storage: str) -> np.ndarray:
 
 
 def _decode_points(points, storage, scale, notes):
-    xyz = points[..., :3].astype(np.float64)
-    if storage == "int16":
-        xyz *= scale
-    word = _residual_words(points, storage)
-    flagged = word < 0
+    """Positions (NaN where missing) and the missing mask of the records ``points``: a
+    sample is missing when its residual word is negative, a coordinate is not finite, or
+    it is exactly (0, 0, 0) (a vendor's gap)."""
+    xyz = _coordinates(points, storage, scale)
+    flagged = _residual_words(points, storage) < 0
     non_finite = ~np.isfinite(xyz).all(axis=2)
     zeros = (xyz == 0).all(axis=2) & ~flagged & ~non_finite
     missing = flagged | non_finite | zeros
@@ -677,10 +698,41 @@ def _decode_points(points, storage, scale, notes):
     if zeros.any():
         notes.append(f"{int(zeros.sum())} samples at exactly (0,0,0) without the residual -1 flag "
                      "treated as missing")
+    return _positions_from(xyz, missing), missing
+
+
+def _coordinates(points, storage, scale) -> np.ndarray:
+    """(T, P, 3) float64 coordinates of the records, in length units."""
+    xyz = points[..., :3].astype(np.float64)
+    if storage == "int16":
+        xyz *= scale
+    return xyz
+
+
+def _positions_from(xyz: np.ndarray, missing: np.ndarray) -> np.ndarray:
+    """``xyz`` with NaN where ``missing`` (in place)."""
+    xyz[missing] = np.nan
+    return xyz
+
+
+def _positions(points, storage, scale, missing) -> tuple[np.ndarray, np.ndarray]:
+    """The positions the reader gave for records ``points`` whose samples are ``missing``
+    (the reader's final mask: a model output's (0, 0, 0) is a value, +0.0), and that mask."""
+    xyz = _coordinates(points, storage, scale)
+    # a sample seen at exactly (0, 0, 0) is a model output's zero (any other is missing)
+    zero = (xyz == 0).all(axis=2) & ~missing
+    xyz[zero] = 0.0
+    return _positions_from(xyz, missing), missing
+
+
+def _residual_and_mask(points, storage, scale) -> tuple[np.ndarray, np.ndarray]:
+    """(T, P) residuals (length units, -1 where flagged invalid) and uint8 camera masks
+    of the records ``points``."""
+    word = _residual_words(points, storage)
+    flagged = word < 0
     residual = np.where(flagged, -1.0, (word & 0xFF) * scale)
     camera_mask = np.where(flagged, 0, (word & 0x7F00) >> 8).astype(np.uint8)
-    positions = np.where(missing[..., None], np.nan, xyz)
-    return positions, missing, residual, camera_mask
+    return residual, camera_mask
 
 
 def _labels(get, parameters, n_points, notes) -> list[str]:
@@ -812,7 +864,7 @@ def write(motion: Motion, path, mark_missing: bool = True, **options) -> list[Pa
     """
     path = Path(path)
     source = motion.source
-    if (isinstance(source, C3DSource) and motion.positions.shape == source.positions.shape
+    if (isinstance(source, C3DSource) and motion.positions.shape[:2] == source.shape
             and list(motion.names) == list(source.names)):
         pieces = _splice(motion, source, path, mark_missing)
     else:
@@ -826,21 +878,30 @@ def write(motion: Motion, path, mark_missing: bool = True, **options) -> list[Pa
     return [path]
 
 
-def _positions_in_source_units(motion: Motion, source: C3DSource) -> np.ndarray:
-    positions = np.asarray(motion.positions, dtype=np.float64)
+def _positions_in_source_units(motion: Motion, source: C3DSource,
+                               frames: slice = slice(None)) -> np.ndarray:
+    """The motion's positions of ``frames`` in the source file's length unit."""
+    positions = np.asarray(motion.positions[frames], dtype=np.float64)
     if motion.metres_per_unit != source.metres_per_unit:
         positions = positions * (motion.metres_per_unit / source.metres_per_unit)
     return positions
 
 
-def _beyond_int16(new: np.ndarray, source: C3DSource) -> np.ndarray:
-    """(T, P) True for the fills (samples missing in the source, present in ``new``, in
-    source units) that an int16 file's grid cannot hold: beyond ±32767 × POINT:SCALE."""
+def _beyond_int16(new: np.ndarray, source: C3DSource, frames: slice = slice(None)) -> np.ndarray:
+    """(T, P) True for the fills (samples missing in the source, present in ``new``: the
+    positions of ``frames``, in source units) that an int16 file's grid cannot hold:
+    beyond ±32767 × POINT:SCALE."""
     if source.storage != "int16":
-        return np.zeros(source.missing.shape, bool)
+        return np.zeros(new.shape[:2], bool)
     with np.errstate(invalid="ignore", over="ignore"):
         out = np.abs(np.rint(new / source.scale)) > 32767
-    return source.missing & np.isfinite(new).all(axis=2) & out.any(axis=2)
+    return source.missing[frames] & np.isfinite(new).all(axis=2) & out.any(axis=2)
+
+
+def _chunks(n_frames: int):
+    """Slices of CHUNK frames covering ``n_frames``: the writer compares and encodes a
+    take a chunk at a time, never holding a whole-take temporary of it."""
+    return [slice(a, min(a + CHUNK, n_frames)) for a in range(0, n_frames, CHUNK)]
 
 
 def kept_only_here(motion: Motion) -> list[str]:
@@ -874,9 +935,13 @@ def storable(motion: Motion) -> Motion:
     note, so that the report describes the file written. Other motions come back as
     they are."""
     source = motion.source
-    if not isinstance(source, C3DSource) or motion.positions.shape != source.positions.shape:
+    if (not isinstance(source, C3DSource) or motion.positions.shape[:2] != source.shape
+            or source.storage != "int16"):
         return motion
-    lost = _beyond_int16(_positions_in_source_units(motion, source), source)
+    lost = np.zeros(source.shape, bool)
+    for frames in _chunks(source.shape[0]):
+        lost[frames] = _beyond_int16(_positions_in_source_units(motion, source, frames),
+                                     source, frames)
     if not lost.any():
         return motion
     positions = motion.positions.copy()
@@ -889,65 +954,113 @@ def storable(motion: Motion) -> Motion:
 
 
 def _splice(motion: Motion, source: C3DSource, path, mark_missing: bool):
-    """The file's pieces (bytes) with the changed samples re-encoded."""
-    new = _positions_in_source_units(motion, source)
-    old = source.positions
-    new_missing = ~np.isfinite(new).all(axis=2)
-    same = ((new == old) | (np.isnan(new) & np.isnan(old))).all(axis=2)
-    changed = ~same
-    filled = changed & ~new_missing & source.missing
-    modified = changed & ~new_missing & ~source.missing
-    deleted = new_missing & ~source.missing
-    still_missing = new_missing & source.missing
+    """The file's pieces (bytes) with the changed samples re-encoded.
 
-    if source.storage == "int16":
+    The take is compared with the source and its records edited CHUNK frames at a time,
+    twice: once here, for what the parameter section lists (the runs filled, the gaps
+    left) and what must be warned of or refused before anything is written, and again
+    as the data section is written (:func:`_edited_records`). A whole-take copy of the
+    records, the positions in source units and a dozen per-sample masks were ~60 bytes
+    a sample at the writer's peak; now two masks (2 bytes a sample) are held."""
+    T = source.shape[0]
+    filled = np.zeros(source.shape, bool)
+    new_missing = np.zeros(source.shape, bool)
+    unrepresentable, refused = 0, None
+    for frames in _chunks(T):
+        edits = _SampleEdits(motion, source, frames)
+        filled[frames], new_missing[frames] = edits.filled, edits.new_missing
+        if edits.unrepresentable is not None:
+            unrepresentable += int(edits.unrepresentable.sum())
+        if refused is None and source.storage == "int16":
+            try:        # a measured sample moved beyond the int16 grid: refused up front
+                _encode_xyz(edits.new[edits.filled | edits.modified], source, path)
+            except WriteError as exc:
+                refused = exc
+    if unrepresentable:
         # a fill the file's int16 grid cannot hold stays a gap (:func:`storable`, which
         # ``clean`` applies before the report) rather than failing the file; a *measured*
         # sample moved out of range is still an error
-        unrepresentable = filled & _beyond_int16(new, source)
-        if unrepresentable.any():
-            log.warning("%s: %d filled samples lie beyond the int16 range of the file; "
-                        "written as gaps", path, int(unrepresentable.sum()))
-            filled = filled & ~unrepresentable
-            still_missing = still_missing | unrepresentable
-            new = np.where(unrepresentable[..., None], old, new)
-
-    points = source.points.copy()
-    encode = filled | modified
-    if encode.any():
-        points[..., :3][encode] = _encode_xyz(new[encode], source, path)
-    words = _residual_words(source.points, source.storage)
-    points[..., 3][filled] = 0
-    if deleted.any():
-        points[..., :3][deleted] = 0
-        points[..., 3][deleted] = -1
-    if mark_missing:
-        unflagged = still_missing & (words >= 0)
-        points[..., 3][unflagged] = -1
-        if source.storage == "float":
-            nan_word = still_missing & ~np.isfinite(source.points[..., 3])
-            points[..., 3][nan_word] = -1
+        log.warning("%s: %d filled samples lie beyond the int16 range of the file; "
+                    "written as gaps", path, unrepresentable)
+    if refused is not None:
+        raise refused
 
     header, prefix = source.header, source.prefix
     left = _left_runs(motion, new_missing)
     if filled.any() or left:
         header, prefix = _with_fill_group(source, _fill_params(motion, source, filled, left), path)
-    return chain([header, prefix], _frame_records(points, source.analog), [source.tail])
+    return chain([header, prefix],
+                 _frame_records(_edited_records(motion, source, path, mark_missing), source.analog),
+                 [source.tail])
+
+
+class _SampleEdits:
+    """How the motion's samples of ``frames`` differ from the source's: the positions in
+    source units (``new``) and (frames, P) masks of the samples ``filled`` (missing in
+    the source, present now; less those an int16 grid cannot hold, ``unrepresentable``,
+    None for a float file), ``modified`` (present in both, moved), ``deleted`` (present
+    in the source, missing now), ``still_missing`` (missing in both, or unrepresentable)
+    and ``new_missing``."""
+
+    def __init__(self, motion: Motion, source: C3DSource, frames: slice):
+        new = _positions_in_source_units(motion, source, frames)
+        old = source.positions_of(frames)
+        was_missing = source.missing[frames]
+        self.new = new
+        self.new_missing = ~np.isfinite(new).all(axis=2)
+        changed = ~((new == old) | (np.isnan(new) & np.isnan(old))).all(axis=2)
+        self.filled = changed & ~self.new_missing & was_missing
+        self.modified = changed & ~self.new_missing & ~was_missing
+        self.deleted = self.new_missing & ~was_missing
+        self.still_missing = self.new_missing & was_missing
+        self.unrepresentable = None
+        if source.storage == "int16":
+            self.unrepresentable = self.filled & _beyond_int16(new, source, frames)
+            self.filled = self.filled & ~self.unrepresentable
+            self.still_missing = self.still_missing | self.unrepresentable
+
+
+def _edited_records(motion: Motion, source: C3DSource, path, mark_missing: bool):
+    """The point records of the motion, CHUNK frames a piece: the source's, with the
+    samples filled or moved re-encoded (residual 0 for a fill), those deleted made (0, 0,
+    0) with residual -1, and (``mark_missing``) every sample still missing flagged -1."""
+    for frames in _chunks(source.shape[0]):
+        edits = _SampleEdits(motion, source, frames)
+        original = source.points[frames]
+        points = original.copy()
+        encode = edits.filled | edits.modified
+        if encode.any():
+            points[..., :3][encode] = _encode_xyz(edits.new[encode], source, path)
+        words = _residual_words(original, source.storage)
+        points[..., 3][edits.filled] = 0
+        if edits.deleted.any():
+            points[..., :3][edits.deleted] = 0
+            points[..., 3][edits.deleted] = -1
+        if mark_missing:
+            unflagged = edits.still_missing & (words >= 0)
+            points[..., 3][unflagged] = -1
+            if source.storage == "float":
+                nan_word = edits.still_missing & ~np.isfinite(original[..., 3])
+                points[..., 3][nan_word] = -1
+        yield points
 
 
 #: frames interleaved and written at a time
 CHUNK = 4096
 
 
-def _frame_records(points: np.ndarray, analog: np.ndarray):
-    """The data section: each frame's points then its analog samples, CHUNK frames a
-    piece (never the whole section as one more copy)."""
-    record = np.dtype([("p", points.dtype, points.shape[1:]),
-                       ("a", analog.dtype, analog.shape[1:])])
-    for a in range(0, points.shape[0], CHUNK):
-        frames = np.empty(len(points[a:a + CHUNK]), dtype=record)
-        frames["p"] = points[a:a + CHUNK]
-        frames["a"] = analog[a:a + CHUNK]
+def _frame_records(pieces, analog: np.ndarray):
+    """The data section: each frame's points then its analog samples, a piece of the
+    point records (T, P, 4) at a time, in frame order (never the whole section as one
+    more copy)."""
+    at = 0
+    for points in pieces:
+        record = np.dtype([("p", points.dtype, points.shape[1:]),
+                           ("a", analog.dtype, analog.shape[1:])])
+        frames = np.empty(len(points), dtype=record)
+        frames["p"] = points
+        frames["a"] = analog[at:at + len(points)]
+        at += len(points)
         yield frames.tobytes()
 
 

@@ -821,6 +821,18 @@ def _times_from_column(values: np.ndarray, kind: str, fps: float | None, notes) 
     return rel * scale
 
 
+def _seen_bone_lengths(coords: np.ndarray, missing: np.ndarray, bones: np.ndarray) -> np.ndarray:
+    """(T, B) length of each bone, NaN where either end is missing: a bone at a time (the
+    whole-take positions with NaN, both ends' (T, B, 3) and their difference were ~100
+    bytes a sample at the reader's peak)."""
+    def seen(j):
+        return np.where(missing[:, j, None], np.nan, coords[:, j])
+    lengths = np.empty((coords.shape[0], len(bones)))
+    for b, (parent, child) in enumerate(bones.tolist()):
+        lengths[:, b] = np.linalg.norm(seen(parent) - seen(child), axis=-1)
+    return lengths
+
+
 def _guess_units(coords, missing, skeleton, tags, units, notes, path) -> str:
     """Length unit of a headed file: ``units=`` option > header tag > magnitude guess."""
     if units:
@@ -833,12 +845,11 @@ def _guess_units(coords, missing, skeleton, tags, units, notes, path) -> str:
         if unit is None or len(tags) > 1:
             raise UnreadableFileError(path, f"unknown or mixed unit tags in header: {sorted(tags)}")
         return unit
-    pts = np.where(missing[..., None], np.nan, coords)
     if skeleton is not None and len(skeleton.bones):
-        bones = skeleton.bone_array
-        lengths = np.linalg.norm(pts[:, bones[:, 0]] - pts[:, bones[:, 1]], axis=2)
+        lengths = _seen_bone_lengths(coords, missing, skeleton.bone_array)
         scale, what, limits = np.nanmedian(lengths), "median bone length", (2.0, 100.0)
     else:
+        pts = np.where(missing[..., None], np.nan, coords)
         centre = np.nanmean(pts, axis=1, keepdims=True) if pts.shape[1] > 2 else 0.0
         scale = np.nanmedian(np.linalg.norm(pts - centre, axis=2))
         what, limits = "median spread of the joints", (3.0, 150.0)
@@ -1301,15 +1312,40 @@ def _edited_pieces(source: KinectSource, motion: Motion):
             inserted.setdefault(int(source.extra["frame_last_line"][t]), []).append(
                 _new_long_row(source, motion, int(t), int(j)))
         changed = changed & ~gone
-    t, j = np.nonzero(changed & (line_of >= 0))
-    lines = line_of[t, j]
-    order = np.argsort(lines, kind="stable")
-    t, j, lines = t[order], j[order], lines[order]
-    cuts = np.flatnonzero(np.diff(lines)) + 1
-    starts = np.concatenate([[0], cuts]) if len(lines) else cuts   # each edited line's first
-    edits = (_edited_lines(source, motion, t[a:b], j[a:b], lines[a:b], new_missing)
-             for a, b in _spans(starts, len(lines)))
+    edits = (_edited_lines(source, motion, t, j, lines, new_missing)
+             for t, j, lines in _changed_samples(changed & (line_of >= 0), line_of))
     return source.text.pieces((e for chunk in edits for e in chunk), deleted, inserted)
+
+
+def _changed_samples(changed: np.ndarray, line_of: np.ndarray):
+    """The samples ``changed`` (T, J) as (t, j, line) arrays sorted by line, CHUNK lines
+    at a time. Where every frame's lines follow the previous frame's (one line a frame:
+    the wide layouts) the frames are taken CHUNK at a time: sorted for the whole take
+    at once, the indices of a take whose every sample moved were ~56 bytes a sample at
+    the writer's peak. Else (the long layout's rows) all at once."""
+    T = changed.shape[0]
+    for frames in (_frame_chunks(T) if _lines_follow_frames(line_of) else [slice(0, T)]):
+        t, j = np.nonzero(changed[frames])
+        t += frames.start
+        lines = line_of[t, j]
+        order = np.argsort(lines, kind="stable")
+        t, j, lines = t[order], j[order], lines[order]
+        cuts = np.flatnonzero(np.diff(lines)) + 1
+        starts = np.concatenate([[0], cuts]) if len(lines) else cuts   # each edited line's first
+        for a, b in _spans(starts, len(lines)):
+            yield t[a:b], j[a:b], lines[a:b]
+
+
+def _frame_chunks(T: int) -> list[slice]:
+    return [slice(a, min(a + CHUNK, T)) for a in range(0, T, CHUNK)]
+
+
+def _lines_follow_frames(line_of: np.ndarray) -> bool:
+    """Every sample has a line and each frame's lines come after the previous frame's."""
+    if not line_of.size:
+        return False
+    first, last = line_of.min(axis=1), line_of.max(axis=1)
+    return bool(first.min() >= 0 and (first[1:] > last[:-1]).all())
 
 
 def _spans(starts: np.ndarray, n: int):

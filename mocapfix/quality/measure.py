@@ -31,7 +31,7 @@ from mocapfix.solvers.spikes import hampel_flags
 from mocapfix.solvers.fill_error import FillIndex
 from mocapfix.core.gaps import LONG_FILL_S, runs, take_frames
 from mocapfix.core.metrics import bone_lengths, rms_acceleration
-from mocapfix.core.motion import Motion
+from mocapfix.core.motion import Motion, missing_samples
 from mocapfix.pipeline.selection import DEFAULT_POLICY, not_cleaned, take
 from mocapfix.pipeline.unlabelled import Unlabelled, is_unlabelled
 from mocapfix.pipeline.held import held_frames
@@ -89,8 +89,10 @@ def bone_variation(positions: np.ndarray, bones: np.ndarray) -> np.ndarray:
     out = np.full(len(bones), np.nan)
     ok = seen > 1
     if ok.any():
+        # every bone seen (the usual case): the lengths as they are, not a copy of them
+        seen_lengths = lengths if ok.all() else lengths[:, ok]
         with np.errstate(invalid="ignore", divide="ignore"):
-            out[ok] = np.nanstd(lengths[:, ok], axis=0) / np.nanmean(lengths[:, ok], axis=0)
+            out[ok] = np.nanstd(seen_lengths, axis=0) / np.nanmean(seen_lengths, axis=0)
     return out
 
 
@@ -320,13 +322,29 @@ def uncertainty(before: Motion, after: Motion, frames: slice = slice(None)) -> n
     motion where it carries a per-sample fill confidence, else as 1. A marker rebuilt from
     3 % of its data is 97 % uncertain, however complete it looks after cleaning."""
     miss_b = before.missing
-    weight = np.ones_like(miss_b, dtype=np.float64)
+    rows = range(*frames.indices(miss_b.shape[0]))
     conf = after.confidence
-    if conf is not None and conf.shape == miss_b.shape:
-        c = np.clip(np.nan_to_num(conf, nan=0.0), 0.0, 1.0)
-        weight = np.where(after.missing, 1.0, 1.0 - c)
-    part = (miss_b * weight)[frames]
+    if conf is None or conf.shape != miss_b.shape:
+        part = miss_b[frames].astype(np.float64)
+    else:
+        part = np.empty((len(rows), miss_b.shape[1]))
+        for a in range(0, len(rows), MEASURE_CHUNK):
+            b = min(a + MEASURE_CHUNK, len(rows))
+            taken = slice(rows[a], rows[b - 1] + 1) if rows.step == 1 else rows[a:b]
+            part[a:b] = miss_b[taken] * _uncertain_weight(after, taken)
     return part.sum(axis=0) / max(part.shape[0], 1)
+
+
+#: frames of a take weighed at a time (:func:`uncertainty`)
+MEASURE_CHUNK = 16384
+
+
+def _uncertain_weight(after: Motion, frames) -> np.ndarray:
+    """What a sample missing in the input counts for in :func:`uncertainty` on ``frames``:
+    1 where the cleaned motion has nothing, else ``1 − confidence``. Worked out a chunk of
+    frames at a time: over a long take its temporaries were four (T, J) float arrays."""
+    c = np.clip(np.nan_to_num(after.confidence[frames], nan=0.0), 0.0, 1.0)
+    return np.where(missing_samples(after.positions[frames]), 1.0, 1.0 - c)
 
 
 def _correction_cause(outliers: np.ndarray, own: np.ndarray, parents: np.ndarray, names,
@@ -385,6 +403,13 @@ def measure_cleaning(result: CleanResult) -> dict:
     why = not_cleaned(before) if result.not_cleaned is None else result.not_cleaned
     graded = np.array([w is None for w in why], bool)
     mm = before.metres_per_unit * 1000.0
+    # the measures with whole-take temporaries of their own first, before the per-sample
+    # masks below are held: the report's peak is then theirs alone
+    jitter_b, jitter_a = jitter(before), jitter(after)
+    bones = bones_of(before)
+    # the kinematic chain (a marker set's rigid pairs in ``bones`` are not one)
+    parents = before.skeleton.parents if before.skeleton is not None else np.full(J, -1, np.intp)
+    var_b, var_a = bone_variation(before.positions, bones), bone_variation(after.positions, bones)
     miss_b, miss_a = before.missing, after.missing
     flagged = np.zeros((T, J), bool)
     made_missing = np.zeros((T, J), bool)
@@ -397,11 +422,6 @@ def measure_cleaning(result: CleanResult) -> dict:
     own = flagged if rig is None else made_missing | (flagged & np.asarray(rig.offset_in_own_frame, bool)[None, :J])
     who = who_filled(records, T, J)
     who[miss_a] = -1                   # filled by a step, dropped by the writer (storable)
-    jitter_b, jitter_a = jitter(before), jitter(after)
-    bones = bones_of(before)
-    # the kinematic chain (a marker set's rigid pairs in ``bones`` are not one)
-    parents = before.skeleton.parents if before.skeleton is not None else np.full(J, -1, np.intp)
-    var_b, var_a = bone_variation(before.positions, bones), bone_variation(after.positions, bones)
     span = take_frames(miss_b, graded)
     T_take = span.stop - span.start
     unc = uncertainty(before, after, span)

@@ -513,3 +513,22 @@ def test_positions_in_chunks_are_bit_identical_to_one_forward_pass():
     chunked = positions_in_chunks(motion.rig, motion.channels, chunk=7)
     assert chunked.tobytes() == whole.tobytes()
     assert motion.positions.tobytes() == whole.tobytes()
+
+
+def test_values_shared_with_the_motion_read_are_read_only_and_write_the_same_bytes(tmp_path):
+    """``formats.share_values_read`` (what ``clean`` does after reading): the source's
+    copy of the values read becomes the motion's channels, read-only, and the motion
+    still writes back byte for byte; an edited copy is written with its edits."""
+    from mocapfix import formats
+
+    path = shared("bvh/cmu_cgspeed_131_01.bvh")
+    motion = bvh.read(path)
+    formats.share_values_read(motion)
+    assert motion.channels is motion.source.values and not motion.channels.flags.writeable
+    with pytest.raises(ValueError):
+        motion.channels[0, 0] = 1.0
+    assert bvh.write(motion, tmp_path / "same.bvh")[0].read_bytes() == path.read_bytes()
+    changed = motion.copy()
+    changed.channels[10, 5] += 0.25
+    back = bvh.read(bvh.write(changed, tmp_path / "changed.bvh")[0])
+    assert abs(back.channels[10, 5] - motion.channels[10, 5] - 0.25) < 1e-5

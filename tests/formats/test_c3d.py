@@ -117,6 +117,22 @@ def test_missing_and_positions_match_py_c3d(path):
     np.testing.assert_allclose(motion.positions[valid], points[..., :3][valid], atol=tolerance)
 
 
+@pytest.mark.parametrize("path", ALL_FILES)
+def test_source_decodes_the_positions_read_and_holds_no_copy(path):
+    """The writer compares against the positions as read, decoded again from the records
+    (bit for bit, model outputs' (0, 0, 0) included); the source holds no second
+    whole-take float array beside the motion's (33 bytes a sample on a long take)."""
+    motion = C.read(need(path))
+    source = motion.source
+    assert source.positions_of().tobytes() == motion.positions.tobytes()
+    T = motion.n_frames
+    assert source.positions_of(slice(T // 3, T // 2)).tobytes() == \
+        motion.positions[T // 3:T // 2].tobytes()
+    held = [k for k, v in vars(source).items() if isinstance(v, np.ndarray)
+            and v.dtype.kind == "f" and v.dtype.itemsize == 8 and v.shape[:2] == (T, motion.n_joints)]
+    assert held == []
+
+
 def test_labels_units_and_quirks_of_real_files():
     sub = C.read(shared("c3d/c3dorg_s04_sub_labels.c3d"))
     assert sub.names[0] == "Matt:C7"

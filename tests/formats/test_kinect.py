@@ -789,3 +789,18 @@ def test_a_kinect_time_column_of_absurd_steps_is_refused_by_the_reader(tmp_path)
     assert len(error) == 1 and error[0].startswith(f"ERROR {src / 'absurd.csv'}: the time column gives ")
     assert error[0].endswith("frames per second, outside 0.001-100000 Hz (a corrupt time column?)")
     assert (tmp_path / "out" / "fine.csv").is_file() and not list((tmp_path / "out").glob("absurd*"))
+
+
+@pytest.mark.parametrize("name", ["kv1_utkinect_joints_s01_e01.txt", "kv1_msr3d_a01_s01_e01_skeleton3D.txt"])
+def test_edited_lines_a_chunk_of_frames_at_a_time_give_the_whole_take_bytes(name, tmp_path, monkeypatch):
+    """The writer sorts the changed samples a chunk of frames at a time where each
+    frame's lines follow the previous frame's: the same bytes as one sort of the take."""
+    motion = kinect.read(need(shared(f"kinect/{name}")))
+    rng = np.random.default_rng(0)
+    moved = motion.positions + rng.normal(0, 0.01, motion.positions.shape)
+    moved[rng.random(moved.shape[:2]) < 0.05] = np.nan
+    edited = motion.replace(positions=moved)
+    assert kinect._lines_follow_frames(motion.source.line_of)
+    whole = kinect._edited_text(motion.source, edited)
+    monkeypatch.setattr(kinect, "CHUNK", 7)
+    assert kinect._edited_text(motion.source, edited) == whole
