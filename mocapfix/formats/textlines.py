@@ -21,6 +21,10 @@ from mocapfix.formats.textenc import UTF8_BOM, refuse_long_fields
 
 #: bytes of the file decoded at a time (cut at a line end, so never inside a character)
 BLOCK = 1 << 22
+#: the bytes :func:`~mocapfix.formats.textenc.refuse_long_fields` ends a field at, and the
+#: line break
+_FIELD_END = np.zeros(256, bool)
+_FIELD_END[list(b",;\t \n")] = True
 
 
 class TextLines:
@@ -56,7 +60,8 @@ class TextLines:
                 pieces.pop()                        # what follows the block's last newline
             content.append(np.fromiter((bool(p.strip()) and not p.lstrip().startswith("#")
                                         for p in pieces), bool, len(pieces)))
-            if long_line is None and len(text) > MAX_FIELD:
+            if (long_line is None and len(text) > MAX_FIELD
+                    and _longest_run(view[a:b]) > MAX_FIELD):
                 long_line = cls._long_field(path, pieces, n_lines,
                                              b == len(raw) and raw[-1:] != b"\n")
             newlines.append(a + np.flatnonzero(view[a:b] == 10))
@@ -171,3 +176,11 @@ class TextLines:
             yield from marked(marks[k])
             k += 1
         yield upto(len(raw))
+
+
+def _longest_run(view: np.ndarray) -> int:
+    """The most bytes between two field ends (or a line break) of ``view``: no field is
+    longer in characters, so a block whose longest run is at most MAX_FIELD needs no
+    per-line check (lines of long tables are longer than MAX_FIELD; their fields never)."""
+    ends = np.flatnonzero(_FIELD_END[view])
+    return int(np.diff(ends, prepend=-1, append=len(view)).max()) - 1
