@@ -316,7 +316,28 @@ def patched_pieces(source: TableSource, motion: Motion):
     in pieces: every other byte is a slice of the source."""
     changed, now_missing = changed_samples(source, motion.positions)
     rows = np.flatnonzero(changed.any(axis=1))
-    return source.text.pieces(_patched_rows(source, motion, rows, changed, now_missing))
+    return _gathered(source.text.pieces(_patched_rows(source, motion, rows, changed, now_missing)))
+
+
+def _gathered(pieces, size: int = 1 << 20):
+    """``pieces`` with the small ones joined into runs of about ``size`` bytes: a smoother
+    rewrites every row, and two writes a row (the slice before it, its new text) cost
+    more than the one join the whole-text writer made; a large slice passes uncopied."""
+    run, held = [], 0
+    for piece in pieces:
+        if len(piece) >= size:
+            if run:
+                yield b"".join(run)
+                run, held = [], 0
+            yield piece
+            continue
+        run.append(piece)
+        held += len(piece)
+        if held >= size:
+            yield b"".join(run)
+            run, held = [], 0
+    if run:
+        yield b"".join(run)
 
 
 def _patched_rows(source: TableSource, motion: Motion, rows, changed, now_missing):
