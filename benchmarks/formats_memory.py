@@ -6,7 +6,9 @@ For each format a long take is built from the shared files — pieces of differe
 (different files of one skeleton where the data has them), some reversed, with small
 noise — and written with :func:`mocapfix.write` (the Kinect v2 CSV, which mocapfix only
 writes back in a layout it read, is formatted here line by line as the LabanotationSuite
-files are). Then, each in a fresh process, three cases are measured:
+files are; the marker formats -- C3D, TRC and the vendor tables Vicon Nexus CSV, OptiTrack
+Motive CSV and Qualisys QTM TSV -- hold the markers of three C3D takes, in mm). Then,
+each in a fresh process, three cases are measured:
 
 ``read``   ``mocapfix.read(path)`` alone
 ``write``  read + write back unchanged
@@ -19,7 +21,8 @@ channels; the moved copy in ``move``), and what is left over per sample (frame �
 what the reader and writer cost beyond the arrays. Wall time is the operation alone
 (imports excluded). The generated files live in a temporary folder, removed per format.
 
-    python benchmarks/formats_memory.py [--frames 50000 500000] [--formats kinect bvh amc c3d trc]
+    python benchmarks/formats_memory.py [--frames 50000 500000] [--formats kinect bvh amc c3d trc
+                                         nexus_csv motive_csv qtm_tsv]
 """
 from __future__ import annotations
 
@@ -35,8 +38,9 @@ REPO = Path(__file__).resolve().parents[1]
 DATA = REPO.parent / "shared" / "data"
 if not DATA.is_dir():
     DATA = Path("/work/shared/data")
-FORMATS = ("kinect", "bvh", "amc", "c3d", "trc")
-SUFFIX = {"kinect": ".csv", "bvh": ".bvh", "amc": ".amc", "c3d": ".c3d", "trc": ".trc"}
+FORMATS = ("kinect", "bvh", "amc", "c3d", "trc", "nexus_csv", "motive_csv", "qtm_tsv")
+SUFFIX = {"kinect": ".csv", "bvh": ".bvh", "amc": ".amc", "c3d": ".c3d", "trc": ".trc",
+          "nexus_csv": ".csv", "motive_csv": ".csv", "qtm_tsv": ".tsv"}
 
 #: run in a child: build the take of one format (keeps the parent small, so that the
 #: measured children do not inherit a large address space)
@@ -100,7 +104,7 @@ BUILD = textwrap.dedent(r"""
         first = mocapfix.read(data / "c3d" / "cmu_85_02.c3d")
         m = Motion(P.reshape(frames, J, 3), list(first.names[:J]), 120.0, units="mm",
                    metres_per_unit=0.001)
-        mocapfix.write(m, out)
+        mocapfix.write(m, out, format=fmt)   # .csv: the vendor layouts are written when named
 """)
 
 #: run in a child per case: prints one JSON line

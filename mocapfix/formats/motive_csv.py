@@ -26,7 +26,9 @@ Writing: the same file with only changed marker samples re-formatted (see
 frames and markers; otherwise a fresh Motive CSV holding only Marker columns.
 
 Why hand-written: the layout is a table behind five header rows; no dependency reads it,
-and none writes it back keeping the rigid bodies; the parse is one vectorised pass.
+and none writes it back keeping the rigid bodies. The file is held once, as its bytes with
+the offsets of its lines; the rows are parsed CHUNK at a time, vectorised, and written back
+as slices of those bytes between the rewritten rows (:mod:`mocapfix.formats.texttable`).
 """
 from __future__ import annotations
 
@@ -39,7 +41,6 @@ from mocapfix.core.fileio import read_input_bytes
 from mocapfix.core.motion import Motion
 from mocapfix.core.units import METRES_PER_UNIT, normalise_unit_name
 from mocapfix.formats import texttable as tt
-from mocapfix.formats.textenc import refuse_long_fields
 
 NAME = "motive_csv"
 SUFFIXES = (".csv",)
@@ -71,10 +72,8 @@ def _settings(line: str) -> dict[str, str]:
 
 def read(path, fps: float | None = None, units: str | None = None, **options) -> Motion:
     path = Path(path)
-    bom, text = tt.decode(read_input_bytes(path), path, "Motive CSV")
-    lines, endings = tt.split_lines(text)
-    refuse_long_fields(path, lines)
-    settings = _settings(lines[0])
+    text = tt.text_lines(path, read_input_bytes(path), "Motive CSV")
+    settings = _settings(text.line(0))
     if "Format Version" not in settings:
         raise UnreadableFileError(path, "line 1 does not start with 'Format Version,'", line=1)
     key = "Export Frame Rate" if settings.get("Export Frame Rate") else "Capture Frame Rate"
@@ -88,22 +87,22 @@ def read(path, fps: float | None = None, units: str | None = None, **options) ->
         raise UnreadableFileError(path, f"unknown Length Units {tt.quote(unit_word)}", line=1)
     if not unit_word and not units:
         notes.append("line 1 names no Length Units: metres assumed")
-    axis = next((i for i in range(1, min(len(lines), 64)) if lines[i].split(",", 1)[0] == "Frame"),
-                None)
+    head = text.lines_at(np.arange(min(len(text), 64)))
+    axis = next((i for i in range(1, len(head)) if head[i].split(",", 1)[0] == "Frame"), None)
     if axis is None:
         raise UnreadableFileError(path, "no 'Frame,Time (Seconds),X,Y,Z,...' row in the header "
                                         "(expected within the first lines after line 1)")
     rows = {}
     for i in range(1, axis):
-        fields = lines[i].split(",")
-        if len(fields) > 1 and lines[i].strip(","):
+        fields = head[i].split(",")
+        if len(fields) > 1 and head[i].strip(","):
             rows.setdefault(fields[1].strip(), (i, fields))
     for label in ("Type", "Name", ""):
         if label not in rows:
             what = f"',{label},...'" if label else "',,Position,...' (component)"
             raise UnreadableFileError(path, f"header row {what} is missing before the "
                                             "Frame row", line=axis + 1)
-    axes = lines[axis].split(",")
+    axes = head[axis].split(",")
     n_fields = len(axes)
     for label, (i, fields) in rows.items():
         if len(fields) != n_fields:
@@ -118,43 +117,43 @@ def read(path, fps: float | None = None, units: str | None = None, **options) ->
         raise UnreadableFileError(path, "no Marker Position X/Y/Z columns (rigid bodies alone "
                                         "are not read)", line=rows["Type"][0] + 1)
     first = axis + 1
-    stop = tt.block_end(lines, first, ",")
+    stop = tt.block_end(text, first, ",")
     if stop == first:
         raise UnreadableFileError(path, "no data rows after the Frame row", line=first + 1)
-    if any(ln.strip(",") for ln in lines[stop:]):
-        k = next(k for k in range(stop, len(lines)) if lines[k].strip(","))
-        raise UnreadableFileError(path, "data rows resume after a blank line", line=k + 1)
+    resumed = tt.first_line(text, stop, lambda line: line.strip(","))
+    if resumed < len(text):
+        raise UnreadableFileError(path, "data rows resume after a blank line", line=resumed + 1)
     x = np.array(x_fields)
     cols = np.concatenate([[0, 1], (x[:, None] + np.arange(3)).ravel()])
-    values = tt.parse_block(path, lines[first:stop], first, ",", n_fields, cols,
-                            f"a data row of {n_fields} fields")
-    positions = tt.markers(values, 2, notes)
-    tt.key_column(path, values[:, 0], first, "Frame number")
-    tt.key_column(path, values[:, 1], first, "Time")
+    keys, flat = tt.parse_rows(path, text, first, stop, ",", n_fields, cols, 2,
+                               f"a data row of {n_fields} fields")
+    positions = tt.markers(flat, notes)
+    tt.key_column(path, keys[:, 0], first, "Frame number")
+    tt.key_column(path, keys[:, 1], first, "Time")
     others = sorted({kinds[c] for c in range(2, n_fields) if kinds[c] and kinds[c] != "Marker"})
     if others:
         notes.append(f"columns kept as read (not cleaned): {', '.join(others)}")
     rate = float(fps) if fps is not None else rate
     marker_names = [names[c] for c in x_fields]
     source = tt.TableSource(
-        layout=LAYOUT, bom=bom, lines=lines, endings=endings, sep=",", names=marker_names,
+        layout=LAYOUT, text=text, sep=",", names=marker_names,
         row_line=np.arange(first, stop), x_field=x, original=positions.copy(),
-        missing_token="", decimals=tt.max_decimals(lines[first].split(",")[2:], 6),
+        missing_token="", decimals=tt.max_decimals(text.line(first).split(",")[2:], 6),
         extra={"other_kinds": others, "settings": settings})
     return Motion(positions, marker_names, rate, units=unit, metres_per_unit=METRES_PER_UNIT[unit],
-                  times=values[:, 1] - values[0, 1], source=source, notes=notes,
+                  times=keys[:, 1] - keys[0, 1], source=source, notes=notes,
                   kinds=["marker"] * J)
 
 
 def write(motion: Motion, path, **options) -> list[Path]:
     """Write back the file ``motion`` came from (changed samples only), or a fresh one."""
-    return tt.write_table(motion, path, LAYOUT, fresh_text)
+    return tt.write_table(motion, path, LAYOUT, fresh_pieces)
 
 
-def fresh_text(motion: Motion, path: Path | None = None) -> str:
-    """A Motive CSV (format version 1.23) holding ``motion`` as Marker columns."""
+def fresh_pieces(motion: Motion, path: Path | None = None):
+    """A Motive CSV (format version 1.23) holding ``motion`` as Marker columns, in pieces."""
     T, J = motion.n_frames, motion.n_joints
-    unit, values = tt.flat_positions(motion, ("mm", *_UNIT_WORDS))
+    unit, factor = tt.written_unit(motion, ("mm", *_UNIT_WORDS))
     names = [n.replace(",", ";") for n in motion.names]
     take = (path.stem if path is not None else "mocapfix").replace(",", ";")
     head = [(f"Format Version,1.23,Take Name,{take},Capture Frame Rate,{motion.fps:.6f},"
@@ -167,7 +166,7 @@ def fresh_text(motion: Motion, path: Path | None = None) -> str:
             "," + ",Position" * (3 * J),
             "Frame,Time (Seconds)" + ",X,Y,Z" * J]
     keys = [f"{t},{t / motion.fps:.6f}" for t in range(T)]
-    return tt.table_text(head, keys, values, ",", "%.6f")
+    return tt.table_pieces(head, keys, motion, factor, ",", "%.6f")
 
 
 def kept_only_here(motion: Motion) -> list[str]:

@@ -30,7 +30,9 @@ from a Nexus CSV and still has its frames and markers; otherwise a fresh file ho
 Trajectories section.
 
 Why hand-written: no maintained Python library reads these exports without pandas, and
-none writes them back keeping the other sections; the parse is one vectorised pass.
+none writes them back keeping the other sections. The file is held once, as its bytes with
+the offsets of its lines; the rows are parsed CHUNK at a time, vectorised, and written back
+as slices of those bytes between the rewritten rows (:mod:`mocapfix.formats.texttable`).
 """
 from __future__ import annotations
 
@@ -43,7 +45,6 @@ from mocapfix.core.fileio import read_input_bytes
 from mocapfix.core.motion import Motion
 from mocapfix.core.units import METRES_PER_UNIT, normalise_unit_name
 from mocapfix.formats import texttable as tt
-from mocapfix.formats.textenc import refuse_long_fields
 
 NAME = "nexus_csv"
 SUFFIXES = (".csv",)
@@ -73,27 +74,26 @@ def sniff(head: bytes) -> bool:
 
 def read(path, fps: float | None = None, units: str | None = None, **options) -> Motion:
     path = Path(path)
-    bom, text = tt.decode(read_input_bytes(path), path, "Nexus CSV")
-    lines, endings = tt.split_lines(text)
-    refuse_long_fields(path, lines)
-    starts = [i for i, ln in enumerate(lines)
-              if ln.strip(", \t") in SECTIONS and (i == 0 or not lines[i - 1].strip(", \t"))]
-    traj = next((i for i in starts if lines[i].strip(", \t") == "Trajectories"), None)
+    text = tt.text_lines(path, read_input_bytes(path), "Nexus CSV")
+    starts = _section_starts(text)
+    sections = [text.line(i).strip(", \t") for i in starts]
+    traj = next((i for i, name in zip(starts, sections) if name == "Trajectories"), None)
     if traj is None:
-        found = ", ".join(lines[i].strip(", \t") for i in starts) or "none"
+        found = ", ".join(sections) or "none"
         raise UnreadableFileError(path, f"Nexus CSV has no Trajectories section (sections "
                                         f"found: {found})")
-    if traj + 4 >= len(lines):
+    if traj + 4 >= len(text):
         raise UnreadableFileError(path, "Trajectories section ends before its units row "
                                         "(expected rate, names, Frame/Sub Frame and units rows)",
-                                  line=len(lines))
+                                  line=len(text))
     notes: list[str] = []
-    rate = tt.positive_rate(path, lines[traj + 1].strip(", \t"), traj + 2, "Trajectories rate")
-    names_row = lines[traj + 2].split(",")
-    columns = tt.fields_of(lines[traj + 3], ",")
+    rate = tt.positive_rate(path, text.line(traj + 1).strip(", \t"), traj + 2, "Trajectories rate")
+    names_row = text.line(traj + 2).split(",")
+    column_row = text.line(traj + 3)
+    columns = tt.fields_of(column_row, ",")
     if columns[:2] != ["Frame", "Sub Frame"] or (len(columns) - 2) % 3:
         raise UnreadableFileError(path, f"expected 'Frame,Sub Frame,X,Y,Z,...' after the names "
-                                        f"row, found {tt.quote(lines[traj + 3][:60])}",
+                                        f"row, found {tt.quote(column_row[:60])}",
                                   line=traj + 4)
     J = (len(columns) - 2) // 3
     if columns[2:] != ["X", "Y", "Z"] * J:
@@ -104,7 +104,7 @@ def read(path, fps: float | None = None, units: str | None = None, **options) ->
         j = names.index("")
         raise UnreadableFileError(path, f"no marker name above column {3 + 3 * j} (expected "
                                         "Subject:Marker in every third column)", line=traj + 3)
-    unit_row = lines[traj + 4].split(",")
+    unit_row = text.line(traj + 4).split(",")
     unit_tag = unit_row[2].strip() if len(unit_row) > 2 else ""
     if _is_number(unit_tag):
         raise UnreadableFileError(path, "expected the units row (',,mm,mm,mm,...') after the "
@@ -116,33 +116,49 @@ def read(path, fps: float | None = None, units: str | None = None, **options) ->
     if not unit_tag:
         notes.append("the units row names no unit: millimetres assumed")
     first = traj + 5
-    stop = tt.block_end(lines, first, ",")
+    stop = tt.block_end(text, first, ",")
     if stop == first:
         raise UnreadableFileError(path, "Trajectories section holds no data rows", line=first + 1)
-    n_fields = len(lines[traj + 3].split(","))
-    cols = np.arange(2 + 3 * J)
-    try:
-        values = tt.parse_block(path, lines[first:stop], first, ",", n_fields, cols,
-                                f"a Trajectories row of {2 + 3 * J} columns")
-    except UnreadableFileError:
-        if n_fields == 2 + 3 * J:
-            raise
-        values = tt.parse_block(path, lines[first:stop], first, ",", 2 + 3 * J, cols,
-                                f"a Trajectories row of {2 + 3 * J} columns")
-    positions = tt.markers(values, 2, notes)
-    frames = tt.key_column(path, values[:, 0], first, "Frame number")
+    frames, flat = _trajectories(path, text, first, stop, len(column_row.split(",")), J)
+    positions = tt.markers(flat, notes)
+    frames = tt.key_column(path, frames, first, "Frame number")
     rate = float(fps) if fps is not None else rate
     source = tt.TableSource(
-        layout=LAYOUT, bom=bom, lines=lines, endings=endings, sep=",", names=names,
+        layout=LAYOUT, text=text, sep=",", names=names,
         row_line=np.arange(first, stop), x_field=2 + 3 * np.arange(J),
-        original=positions.copy(), missing_token="", decimals=tt.max_decimals(lines[first].split(",")[2:]),
-        extra={"sections": [lines[i].strip(", \t") for i in starts]})
-    others = [s for s in source.extra["sections"] if s != "Trajectories"]
+        original=positions.copy(), missing_token="",
+        decimals=tt.max_decimals(text.line(first).split(",")[2:]),
+        extra={"sections": sections})
+    others = [s for s in sections if s != "Trajectories"]
     if others:
         notes.append(f"sections kept as read (not cleaned): {', '.join(others)}")
     return Motion(positions, names, rate, units=unit, metres_per_unit=METRES_PER_UNIT[unit],
                   times=tt.frame_times(frames, rate, notes), source=source, notes=notes,
                   kinds=["marker"] * J)
+
+
+def _section_starts(text) -> list[int]:
+    """The lines that open a section: a section name alone (separators around it allowed),
+    first in the file or after a blank line. The names are looked for in the bytes -- no
+    data row holds one -- so that only the lines holding them are decoded."""
+    found = sorted(set().union(*(tt.lines_holding(text, name) for name in SECTIONS)))
+    return [i for i in found if text.line(i).strip(", \t") in SECTIONS
+            and (i == 0 or not text.line(i - 1).strip(", \t"))]
+
+
+def _trajectories(path, text, first: int, stop: int, n_fields: int, J: int):
+    """(frame numbers, (T, 3J) marker columns) of the Trajectories rows: ``n_fields``
+    fields each, as the column row has (spreadsheet padding), else exactly the
+    ``2 + 3J`` the markers need."""
+    cols = np.arange(2 + 3 * J)
+    what = f"a Trajectories row of {2 + 3 * J} columns"
+    try:
+        keys, flat = tt.parse_rows(path, text, first, stop, ",", n_fields, cols, 2, what)
+    except UnreadableFileError:
+        if n_fields == 2 + 3 * J:
+            raise
+        keys, flat = tt.parse_rows(path, text, first, stop, ",", 2 + 3 * J, cols, 2, what)
+    return keys[:, 0], flat
 
 
 def _is_number(token: str) -> bool:
@@ -155,18 +171,18 @@ def _is_number(token: str) -> bool:
 
 def write(motion: Motion, path, **options) -> list[Path]:
     """Write back the file ``motion`` came from (changed samples only), or a fresh one."""
-    return tt.write_table(motion, path, LAYOUT, fresh_text)
+    return tt.write_table(motion, path, LAYOUT, fresh_pieces)
 
 
-def fresh_text(motion: Motion, path: Path | None = None) -> str:
-    """One Trajectories section holding ``motion`` (numbers with 6 decimals)."""
+def fresh_pieces(motion: Motion, path: Path | None = None):
+    """One Trajectories section holding ``motion`` (numbers with 6 decimals), in pieces."""
     T, J = motion.n_frames, motion.n_joints
-    unit, values = tt.flat_positions(motion, ("mm", *METRES_PER_UNIT))
+    unit, factor = tt.written_unit(motion, ("mm", *METRES_PER_UNIT))
     head = ["Trajectories", f"{motion.fps:g}",
             ",," + ",".join(f"{name},," for name in motion.names)[:-1],
             "Frame,Sub Frame" + ",X,Y,Z" * J, ",," + ",".join([unit] * (3 * J))]
     keys = [f"{t + 1},0" for t in range(T)]
-    return tt.table_text(head, keys, values, ",", "%.6f")
+    return tt.table_pieces(head, keys, motion, factor, ",", "%.6f")
 
 
 def kept_only_here(motion: Motion) -> list[str]:

@@ -26,7 +26,9 @@ rows present is noted. Every other header line is kept verbatim for writing back
 Malformations are one UnreadableFileError naming the line.
 
 Why hand-written: the layout is a plain table behind a key/value header; no dependency
-reads it and writes it back unchanged, and the parse is one vectorised pass.
+reads it and writes it back unchanged. The file is held once, as its bytes with the offsets
+of its lines; the rows are parsed CHUNK at a time, vectorised, and written back as slices
+of those bytes between the rewritten rows (:mod:`mocapfix.formats.texttable`).
 """
 from __future__ import annotations
 
@@ -39,7 +41,6 @@ from mocapfix.core.errors import UnreadableFileError
 from mocapfix.core.fileio import read_input_bytes
 from mocapfix.core.motion import Motion
 from mocapfix.formats import texttable as tt
-from mocapfix.formats.textenc import refuse_long_fields
 
 NAME = "qtm_tsv"
 SUFFIXES = (".tsv",)
@@ -68,20 +69,8 @@ def sniff(head: bytes) -> bool:
 def read(path, fps: float | None = None, units: str | None = None,
          zero_missing: bool | None = None, **options) -> Motion:
     path = Path(path)
-    bom, text = tt.decode(read_input_bytes(path), path, "QTM TSV")
-    lines, endings = tt.split_lines(text)
-    refuse_long_fields(path, lines)
-    header: dict[str, tuple[int, list[str]]] = {}
-    i = 0
-    while i < len(lines):
-        key = lines[i].split("\t", 1)[0]
-        if not lines[i].strip():
-            i += 1
-            continue
-        if key in ("Frame", "Time") or not _KEY.match(key):
-            break
-        header.setdefault(key, (i, lines[i].split("\t")[1:]))
-        i += 1
+    text = tt.text_lines(path, read_input_bytes(path), "QTM TSV")
+    header, i = _header(text)
     for key in _REQUIRED:
         if key not in header:
             raise UnreadableFileError(path, f"QTM TSV header has no {key} line (expected "
@@ -105,20 +94,19 @@ def read(path, fps: float | None = None, units: str | None = None,
     if included and included[0].strip() != "3D":
         raise UnreadableFileError(path, f"DATA_INCLUDED is {tt.quote(included[0])}: only 3D "
                                         "marker exports are read", line=header["DATA_INCLUDED"][0] + 1)
-    headed = i < len(lines) and lines[i].split("\t", 1)[0] == "Frame"
+    headed = i < len(text) and text.line(i).split("\t", 1)[0] == "Frame"
     column_line = i if headed else None
-    first = i + 1 if headed else i
-    while first < len(lines) and not lines[first].strip():
-        first += 1
-    stop = tt.block_end(lines, first, "\t")
+    first = tt.first_line(text, i + 1 if headed else i, str.strip)
+    stop = tt.block_end(text, first, "\t")
     if stop == first:
         raise UnreadableFileError(path, "QTM TSV holds no data rows", line=first + 1)
-    if stop < len(lines) and any(ln.strip() for ln in lines[stop:]):
-        k = next(k for k in range(stop, len(lines)) if lines[k].strip())
+    resumed = tt.first_line(text, stop, str.strip)
+    if resumed < len(text):
         raise UnreadableFileError(path, "data rows resume after a blank line (expected one "
-                                        "block of rows)", line=k + 1)
+                                        "block of rows)", line=resumed + 1)
+    first_row = text.line(first)
     if headed:
-        columns = tt.fields_of(lines[column_line], "\t")
+        columns = tt.fields_of(text.line(column_line), "\t")
         expected = ["Frame", "Time"] + [f"{n} {a}" for n in names for a in "XYZ"]
         if columns[:2 + 3 * J] != expected:
             bad = next(k for k, (a, b) in enumerate(zip(columns + [""] * len(expected), expected))
@@ -128,20 +116,19 @@ def read(path, fps: float | None = None, units: str | None = None,
                                             f", expected {expected[bad]!r}", line=column_line + 1)
         lead, n_fields = 2, len(columns)
     else:
-        width = lines[first].rstrip("\t").count("\t") + 1
+        width = first_row.rstrip("\t").count("\t") + 1
         lead = 2 if width == 2 + 3 * J else 0
         n_fields = lead + 3 * J
     cols = np.arange(n_fields) if lead else np.arange(3 * J)
     missing_tokens = ("", "NaN", "nan")
-    values = tt.parse_block(path, lines[first:stop], first, "\t", n_fields, cols,
-                            f"a data row of {n_fields} fields", missing_tokens)
-    T = len(values)
-    positions = tt.markers(values, lead, notes)
+    keys, flat = tt.parse_rows(path, text, first, stop, "\t", n_fields, cols,
+                               lead, f"a data row of {n_fields} fields", missing_tokens)
+    T = len(flat)
+    positions = tt.markers(flat, notes)
     zeros = np.all(positions == 0.0, axis=2)
     as_missing = (not headed) if zero_missing is None else bool(zero_missing)
-    data = lines[first:stop]
-    decimals = tt.max_decimals(data[0].split("\t")[lead:])
-    token = _missing_token(data, as_missing, decimals)
+    decimals = tt.max_decimals(first_row.split("\t")[lead:])
+    token = _missing_token(text, first, stop, as_missing, decimals)
     if zeros.any():
         if as_missing:
             positions[zeros] = np.nan
@@ -155,16 +142,34 @@ def read(path, fps: float | None = None, units: str | None = None,
         notes.append(f"NO_OF_FRAMES says {declared} but the file holds {T} rows")
     rate = float(fps) if fps is not None else rate
     if lead:
-        times = tt.key_column(path, values[:, 1], first, "Time") - values[0, 1]
+        times = tt.key_column(path, keys[:, 1], first, "Time") - keys[0, 1]
     else:
         times = np.arange(T) / rate
     source = tt.TableSource(
-        layout=LAYOUT, bom=bom, lines=lines, endings=endings, sep="\t", names=names,
+        layout=LAYOUT, text=text, sep="\t", names=names,
         row_line=np.arange(first, stop), x_field=lead + 3 * np.arange(J),
         original=positions.copy(), missing_token=token,
         decimals=decimals, extra={"headed": headed, "zero_missing": as_missing})
     return Motion(positions, names, rate, units="mm", metres_per_unit=0.001, times=times,
                   source=source, notes=notes, kinds=["marker"] * J)
+
+
+def _header(text) -> tuple[dict[str, tuple[int, list[str]]], int]:
+    """The ``KEY<TAB>value...`` lines before the data (key -> (line, values); the first of
+    a repeated key), and the index of the line after them."""
+    header: dict[str, tuple[int, list[str]]] = {}
+    i = 0
+    while i < len(text):
+        line = text.line(i)
+        key = line.split("\t", 1)[0]
+        if not line.strip():
+            i += 1
+            continue
+        if key in ("Frame", "Time") or not _KEY.match(key):
+            break
+        header.setdefault(key, (i, line.split("\t")[1:]))
+        i += 1
+    return header, i
 
 
 def _count(path, header: dict, key: str) -> int:
@@ -175,25 +180,26 @@ def _count(path, header: dict, key: str) -> int:
     return int(token)
 
 
-def _missing_token(data: list[str], zeros: bool, decimals: int) -> str:
-    """What this file writes for a missing coordinate."""
+def _missing_token(text, first: int, stop: int, zeros: bool, decimals: int) -> str:
+    """What this file writes for a missing coordinate (``NaN`` when a data row, lines
+    ``first`` .. ``stop - 1``, holds one: looked for in the bytes)."""
     if zeros:
         return f"{0:.{decimals}f}"
-    for line in data:
-        if "NaN" in line:
-            return "NaN"
+    if text.raw.find(b"NaN", int(text.starts[first]), int(text.stops[stop - 1])) >= 0:
+        return "NaN"
     return ""
 
 
 def write(motion: Motion, path, **options) -> list[Path]:
     """Write back the file ``motion`` came from (changed samples only), or a fresh one."""
-    return tt.write_table(motion, path, LAYOUT, fresh_text)
+    return tt.write_table(motion, path, LAYOUT, fresh_pieces)
 
 
-def fresh_text(motion: Motion, path: Path | None = None) -> str:
-    """A headed (newer) QTM TSV of ``motion`` in mm, 3 decimals, missing as empty fields."""
+def fresh_pieces(motion: Motion, path: Path | None = None):
+    """A headed (newer) QTM TSV of ``motion`` in mm, 3 decimals, missing as empty fields,
+    in pieces."""
     T, J = motion.n_frames, motion.n_joints
-    _, values = tt.flat_positions(motion, ("mm",))
+    _, factor = tt.written_unit(motion, ("mm",))
     names = [n.replace("\t", " ") for n in motion.names]
     head = [f"NO_OF_FRAMES\t{T}", "NO_OF_CAMERAS\t0", f"NO_OF_MARKERS\t{J}",
             f"FREQUENCY\t{motion.fps:g}", "NO_OF_ANALOG\t0", "ANALOG_FREQUENCY\t0",
@@ -201,7 +207,7 @@ def fresh_text(motion: Motion, path: Path | None = None) -> str:
             "MARKER_NAMES\t" + "\t".join(names),
             "Frame\tTime\t" + "\t".join(f"{n} {a}" for n in names for a in "XYZ")]
     keys = [f"{t + 1}\t{t / motion.fps:.5f}" for t in range(T)]
-    return tt.table_text(head, keys, values, "\t", "%.3f")
+    return tt.table_pieces(head, keys, motion, factor, "\t", "%.3f")
 
 
 def kept_only_here(motion: Motion) -> list[str]:

@@ -56,7 +56,8 @@ class TextLines:
                 pieces.pop()                        # what follows the block's last newline
             content.append(np.fromiter((bool(p.strip()) and not p.lstrip().startswith("#")
                                         for p in pieces), bool, len(pieces)))
-            if long_line is None and len(text) > MAX_FIELD and longest_field_bytes(view[a:b]) > MAX_FIELD:
+            if (long_line is None and len(text) > MAX_FIELD
+                    and longest_field_bytes(view[a:b]) > MAX_FIELD):
                 long_line = cls._long_field(path, pieces, n_lines,
                                              b == len(raw) and raw[-1:] != b"\n")
             newlines.append(a + np.flatnonzero(view[a:b] == 10))
@@ -171,3 +172,4 @@ class TextLines:
             yield from marked(marks[k])
             k += 1
         yield upto(len(raw))
+

@@ -2,14 +2,23 @@
 QTM TSV, OptiTrack Motive CSV): one row of text per frame, one separator character, the X, Y,
 Z of each marker in three fixed columns.
 
-What is shared: decoding (UTF-8 with an optional byte-order mark; UTF-16/32 named and
-refused), the vectorised parse of a block of rows (one ``split`` of the joined block and
-one numpy conversion; a row with the wrong number of fields, a non-numeric value or a huge
-field is one :class:`UnreadableFileError` naming its line), the source kept for writing
-back (:class:`TableSource`), the write-back that re-formats only the changed samples
-(:func:`patched_text`: with the decimals of the token they replace; an unchanged motion
-writes back byte-identical), fresh-table formatting and the notes of what a layout cannot
-carry (:func:`common_losses`).
+What is shared: the file held once, as its bytes with the offsets of its lines
+(:func:`text_lines`, a :class:`~mocapfix.formats.textlines.TextLines`: UTF-8 with an
+optional byte-order mark; UTF-16/32, undecodable bytes and fields over MAX_FIELD named and
+refused), the vectorised parse of the data rows (:func:`parse_rows`: CHUNK rows at a time,
+one ``split`` of the joined chunk and one numpy conversion, straight into the marker array;
+a row with the wrong number of fields, a non-numeric value or a huge field is one
+:class:`UnreadableFileError` naming its line), the source kept for writing back
+(:class:`TableSource`), the write-back that re-formats only the changed samples
+(:func:`patched_pieces`: with the decimals of the token they replace, the other bytes
+copied from the source as slices; an unchanged motion writes back byte-identical),
+fresh-table formatting (:func:`table_pieces`, CHUNK rows a piece) and the notes of what a
+layout cannot carry (:func:`common_losses`).
+
+Why lines are not ``str`` objects: one Python string per line, the joined block and one
+string per field made a 50,000-frame take cost about 340 bytes a sample beyond its arrays
+(issue 39); now only CHUNK rows are ever decoded at a time, and the write-back streams the
+source's bytes to the output file.
 
 Not a format module (no ``NAME``): the registry does not list it.
 """
@@ -22,12 +31,15 @@ from pathlib import Path
 import numpy as np
 
 from mocapfix.core.errors import UnreadableFileError
-from mocapfix.core.fileio import write_output_text
+from mocapfix.core.fileio import write_output_pieces
 from mocapfix.core.motion import Motion
 from mocapfix.core.quantity import MAX_FRAME_RATE_HZ, MIN_FRAME_RATE_HZ
-from mocapfix.formats.kinect import _decode
-from mocapfix.formats.kinect import _split_lines as split_lines  # noqa: F401  (re-exported)
 from mocapfix.formats.textenc import refuse_wide_text, wide_encoding
+from mocapfix.formats.textlines import TextLines
+
+#: data rows decoded and converted at a time: their fields are Python strings only while
+#: they are parsed or rewritten
+CHUNK = 4096
 
 #: the longest field quoted in a message
 _QUOTE = 40
@@ -41,10 +53,37 @@ def quote(token: str) -> str:
     return repr(token if len(token) <= _QUOTE else token[:_QUOTE] + "...")
 
 
-def decode(raw: bytes, path, what: str) -> tuple[str, str]:
-    """(byte-order mark, text) of a file's bytes; UTF-16/32 and undecodable bytes refused."""
+def text_lines(path, raw: bytes, what: str) -> TextLines:
+    """The lines of a file's bytes, held as those bytes; UTF-16/32, undecodable bytes and
+    a field over MAX_FIELD characters refused (in that order, as each was found first when
+    the file was decoded whole)."""
     refuse_wide_text(path, raw, what)
-    return _decode(raw, path)
+    text = TextLines.scan(path, raw)
+    if text.long_field is not None:
+        raise text.long_field
+    return text
+
+
+def first_line(text: TextLines, start: int, test) -> int:
+    """Index of the first line at or after ``start`` for which ``test(line)`` is true, or
+    ``len(text)``; lines are decoded CHUNK at a time, never all at once."""
+    for a in range(start, len(text), CHUNK):
+        for i, line in enumerate(text.lines_at(np.arange(a, min(a + CHUNK, len(text)))), a):
+            if test(line):
+                return i
+    return len(text)
+
+
+def lines_holding(text: TextLines, word: str) -> list[int]:
+    """Indices of the lines in which ``word`` (ASCII, no line break) occurs: a search of
+    the bytes, so that looking for a rare word (a section name) decodes no line."""
+    needle, raw, found = word.encode("ascii"), text.raw, []
+    at = raw.find(needle)
+    while at >= 0:
+        found.append(at)
+        at = raw.find(needle, at + 1)
+    lines = np.searchsorted(text.starts, np.asarray(found, np.int64), side="right") - 1
+    return sorted(set(lines[lines >= 0].tolist()))
 
 
 def head_lines(head: bytes, n: int = 12) -> list[str]:
@@ -105,29 +144,63 @@ def positive_rate(path, token: str, line: int, what: str) -> float:
 
 
 # ---------------------------------------------------------------------------------------
-# the vectorised block parse
+# the vectorised row parse
 # ---------------------------------------------------------------------------------------
-def parse_block(path, lines: list[str], first: int, sep: str, n_fields: int, cols: np.ndarray,
-                what: str, missing_tokens=("",)) -> np.ndarray:
-    """(n, len(cols)) float64 of the fields ``cols`` of ``lines`` (the file's lines
-    ``first``, ``first + 1``, ...), each of which must hold ``n_fields`` fields (one more,
-    empty, is taken as a trailing separator). ``missing_tokens`` read as NaN."""
-    n = len(lines)
-    if n == 0:
-        return np.empty((0, len(cols)))
-    counts = np.fromiter((ln.count(sep) for ln in lines), np.int64, n) + 1
+def parse_rows(path, text: TextLines, first: int, stop: int, sep: str, n_fields: int,
+               cols: np.ndarray, lead: int, what: str,
+               missing_tokens=("",)) -> tuple[np.ndarray, np.ndarray]:
+    """The fields ``cols`` of lines ``first`` .. ``stop - 1``, each of which must hold
+    ``n_fields`` fields (one more, empty, is taken as a trailing separator), as float64:
+    (n, lead) of the first ``lead`` columns and (n, len(cols) - lead) of the rest, each
+    contiguous (the marker columns become the positions without a copy).
+    ``missing_tokens`` read as NaN.
+
+    Every row's field count is checked before any value is converted, so a file with both
+    faults is refused for the same one as when the rows were parsed in one block."""
+    n = stop - first
+    trim = _trailing_separators(path, text, first, stop, sep, n_fields, what)
+    keys, values = np.empty((n, lead)), np.empty((n, len(cols) - lead))
+    for a in range(first, stop, CHUNK):
+        b = min(stop, a + CHUNK)
+        lines = text.lines_at(np.arange(a, b))
+        for k in np.flatnonzero(trim[a - first:b - first]).tolist():
+            lines[k] = lines[k][:-1]
+        got = _parse_chunk(path, lines, a, first, sep, n_fields, cols, what, missing_tokens)
+        keys[a - first:b - first], values[a - first:b - first] = got[:, :lead], got[:, lead:]
+    return keys, values
+
+
+def _trailing_separators(path, text: TextLines, first: int, stop: int, sep: str,
+                         n_fields: int, what: str) -> np.ndarray:
+    """(n,) True for the rows of lines ``first`` .. ``stop - 1`` that hold one field too
+    many, the last empty (a trailing separator, dropped); an UnreadableFileError for the
+    first row holding another count. Counted in the bytes: no line is decoded."""
+    n, mark = stop - first, sep.encode("ascii")
+    bounds = zip(text.starts[first:stop].tolist(), text.stops[first:stop].tolist())
+    counts = np.fromiter((text.raw.count(mark, s, e) for s, e in bounds), np.int64, n) + 1
+    trim = np.zeros(n, bool)
     if (counts != n_fields).any():
-        lines = list(lines)
-        for k in np.flatnonzero(counts == n_fields + 1).tolist():
-            if lines[k].endswith(sep):
-                lines[k] = lines[k][:-1]
-                counts[k] -= 1
+        extra = np.flatnonzero(counts == n_fields + 1)
+        ends = text.stops[first + extra]
+        view = np.frombuffer(text.raw, np.uint8)
+        trim[extra] = (ends > text.starts[first + extra]) & (view[np.maximum(ends - 1, 0)] == mark[0])
+        counts[trim] -= 1
         bad = np.flatnonzero(counts != n_fields)
         if len(bad):
             k = int(bad[0])
             tail = " (the file looks truncated)" if k == n - 1 and counts[k] < n_fields else ""
             raise UnreadableFileError(path, f"{counts[k]} fields where {n_fields} were expected "
                                             f"({what}){tail}", line=first + k + 1)
+    return trim
+
+
+def _parse_chunk(path, lines: list[str], first: int, block_first: int, sep: str, n_fields: int,
+                 cols: np.ndarray, what: str, missing_tokens) -> np.ndarray:
+    """(n, len(cols)) float64 of the fields ``cols`` of ``lines`` (the file's lines
+    ``first``, ``first + 1``, ...; each holds ``n_fields`` fields) -- one ``split`` and one
+    conversion when every field is a number; else the columns wanted, and an error naming
+    the first that is not (``block_first``: the first line of the rows being read)."""
+    n = len(lines)
     joined = sep.join(lines)   # rows of equal width: one split gives the (n, n_fields) grid
     if "" in missing_tokens:   # empty fields -> "nan" by two passes of a C-level replace
         double, filled = sep + sep, sep + "nan" + sep
@@ -149,13 +222,15 @@ def parse_block(path, lines: list[str], first: int, sep: str, n_fields: int, col
                 raise UnreadableFileError(path, f"{quote(token)} is not a number (column "
                                                 f"{int(cols[c]) + 1} of {what})",
                                           line=first + r + 1) from None
-        raise UnreadableFileError(path, f"non-numeric value in {what}", line=first + 1) from None
+        raise UnreadableFileError(path, f"non-numeric value in {what}",
+                                  line=block_first + 1) from None
 
 
-def markers(values: np.ndarray, lead: int, notes: list[str]) -> np.ndarray:
-    """(T, J, 3) positions from the parsed block's columns after ``lead``; a sample with any
-    coordinate empty, nan or inf is missing (all three NaN; the odd ones noted)."""
-    positions = values[:, lead:].reshape(len(values), -1, 3).copy()
+def markers(values: np.ndarray, notes: list[str]) -> np.ndarray:
+    """(T, J, 3) positions from the parsed marker columns (reshaped in place: no copy); a
+    sample with any coordinate empty, nan or inf is missing (all three NaN; the odd ones
+    noted)."""
+    positions = values.reshape(len(values), -1, 3)
     bad = ~np.isfinite(positions).all(axis=2)
     odd = bad & ~np.isnan(positions).all(axis=2)
     if odd.any():
@@ -174,14 +249,11 @@ def key_column(path, column: np.ndarray, first: int, what: str) -> np.ndarray:
     return column
 
 
-def block_end(lines: list[str], start: int, sep: str) -> int:
+def block_end(text: TextLines, start: int, sep: str) -> int:
     """Index of the first blank line (nothing but separators and spaces) at or after
-    ``start``, or ``len(lines)``."""
+    ``start``, or ``len(text)``."""
     strip = sep + " \t"
-    for i in range(start, len(lines)):
-        if not lines[i].strip(strip):
-            return i
-    return len(lines)
+    return first_line(text, start, lambda line: not line.strip(strip))
 
 
 def frame_times(frames: np.ndarray, fps: float, notes: list[str]) -> np.ndarray:
@@ -201,9 +273,7 @@ class TableSource:
     """What a vendor-table writer needs to reproduce the file it was read from."""
 
     layout: str                  # "nexus_csv", "qtm_tsv", "motive_csv"
-    bom: str
-    lines: list[str]             # every line of the file, without its ending
-    endings: list[str]           # each line's ending ("\n", "\r\n", "" for a last line without)
+    text: TextLines              # the file's bytes and the offsets of its lines
     sep: str
     names: list[str]
     row_line: np.ndarray         # (T,) line index of each frame's row
@@ -240,36 +310,62 @@ def changed_samples(source: TableSource, positions: np.ndarray) -> tuple[np.ndar
     return np.where(was_missing, ~now_missing, ~same | now_missing), now_missing
 
 
-def patched_text(source: TableSource, motion: Motion) -> str:
-    """The source's text with the changed samples' tokens rewritten (moved and filled:
-    numbers with the replaced tokens' decimals; removed: the layout's missing token);
-    every other byte as read."""
+def patched_pieces(source: TableSource, motion: Motion):
+    """The source's bytes with the changed samples' tokens rewritten (moved and filled:
+    numbers with the replaced tokens' decimals; removed: the layout's missing token),
+    in pieces: every other byte is a slice of the source."""
     changed, now_missing = changed_samples(source, motion.positions)
-    lines = list(source.lines)
+    rows = np.flatnonzero(changed.any(axis=1))
+    return _gathered(source.text.pieces(_patched_rows(source, motion, rows, changed, now_missing)))
+
+
+def _gathered(pieces, size: int = 1 << 20):
+    """``pieces`` with the small ones joined into runs of about ``size`` bytes: a smoother
+    rewrites every row, and two writes a row (the slice before it, its new text) cost
+    more than the one join the whole-text writer made; a large slice passes uncopied."""
+    run, held = [], 0
+    for piece in pieces:
+        if len(piece) >= size:
+            if run:
+                yield b"".join(run)
+                run, held = [], 0
+            yield piece
+            continue
+        run.append(piece)
+        held += len(piece)
+        if held >= size:
+            yield b"".join(run)
+            run, held = [], 0
+    if run:
+        yield b"".join(run)
+
+
+def _patched_rows(source: TableSource, motion: Motion, rows, changed, now_missing):
+    """(line, new text) of the rows of frames ``rows``, decoded CHUNK rows at a time."""
     sep = source.sep
-    for t in np.flatnonzero(changed.any(axis=1)).tolist():
-        li = int(source.row_line[t])
-        fields = lines[li].split(sep)
-        for j in np.flatnonzero(changed[t]).tolist():
-            f0 = int(source.x_field[j])
-            if now_missing[t, j]:
-                fields[f0:f0 + 3] = [source.missing_token] * 3
-            else:
-                for k, v in enumerate(motion.positions[t, j].tolist()):
-                    fields[f0 + k] = format_like(v, fields[f0 + k], source.decimals)
-        lines[li] = sep.join(fields)
-    return source.bom + "".join(line + end for line, end in zip(lines, source.endings))
+    for a in range(0, len(rows), CHUNK):
+        frames = rows[a:a + CHUNK]
+        at = source.row_line[frames]
+        for t, li, line in zip(frames.tolist(), at.tolist(), source.text.lines_at(at)):
+            fields = line.split(sep)
+            for j in np.flatnonzero(changed[t]).tolist():
+                f0 = int(source.x_field[j])
+                if now_missing[t, j]:
+                    fields[f0:f0 + 3] = [source.missing_token] * 3
+                else:
+                    for k, v in enumerate(motion.positions[t, j].tolist()):
+                        fields[f0 + k] = format_like(v, fields[f0 + k], source.decimals)
+            yield li, sep.join(fields)
 
 
-def flat_positions(motion: Motion, units) -> tuple[str, np.ndarray]:
-    """(unit, (T, 3J) positions in it) for a fresh file whose layout names one of ``units``
-    (length-unit names, first the fallback): the motion's own unit when the layout can
-    name it, else converted to ``units[0]`` -- never the numbers relabelled."""
+def written_unit(motion: Motion, units) -> tuple[str, float]:
+    """(unit, factor from the motion's unit to it) for a fresh file whose layout names one
+    of ``units`` (length-unit names, first the fallback): the motion's own unit when the
+    layout can name it, else ``units[0]`` -- the numbers converted, never relabelled."""
     from mocapfix.core.units import METRES_PER_UNIT
 
     unit = motion.units if motion.units in units else units[0]
-    T, J = motion.n_frames, motion.n_joints
-    return unit, motion.positions.reshape(T, 3 * J) * (motion.metres_per_unit / METRES_PER_UNIT[unit])
+    return unit, motion.metres_per_unit / METRES_PER_UNIT[unit]
 
 
 def number_cells(values: np.ndarray, fmt: str, missing: str) -> np.ndarray:
@@ -279,21 +375,28 @@ def number_cells(values: np.ndarray, fmt: str, missing: str) -> np.ndarray:
     return cells
 
 
-def table_text(head: list[str], keys: list[str], values: np.ndarray, sep: str, fmt: str) -> str:
-    """A fresh table: the ``head`` lines, then one row per frame -- its key fields
-    (``keys[t]``: frame and time, already joined by ``sep``) and ``values[t]`` formatted
-    with ``fmt``, empty where NaN -- each line ending in ``\n``."""
-    cells = number_cells(values, fmt, "")
-    rows = [keys[t] + sep + sep.join(cells[t]) for t in range(len(values))]
-    return "\n".join(head + rows) + "\n"
+def table_pieces(head: list[str], keys: list[str], motion: Motion, factor: float, sep: str,
+                 fmt: str):
+    """A fresh table, UTF-8, CHUNK rows a piece: the ``head`` lines, then one row per
+    frame -- its key fields (``keys[t]``: frame and time, already joined by ``sep``) and
+    the motion's positions times ``factor`` formatted with ``fmt``, empty where NaN --
+    each line ending in ``\n``."""
+    yield ("\n".join(head) + "\n").encode("utf-8")
+    T, J = motion.n_frames, motion.n_joints
+    for a in range(0, T, CHUNK):
+        chunk = motion.positions[a:a + CHUNK]
+        values = chunk.reshape(len(chunk), 3 * J) * factor
+        cells = number_cells(values, fmt, "")
+        yield "".join(keys[t] + sep + sep.join(row) + "\n"
+                      for t, row in enumerate(cells.tolist(), a)).encode("utf-8")
 
 
 def write_table(motion: Motion, path, layout: str, fresh) -> list[Path]:
     """Write ``motion``: its source patched when it came from ``layout`` and fits, else
-    ``fresh(motion, path)``."""
+    the pieces of ``fresh(motion, path)``."""
     if fits(motion.source, motion, layout):
-        return write_output_text(path, patched_text(motion.source, motion))
-    return write_output_text(path, fresh(motion, Path(path)))
+        return write_output_pieces(path, patched_pieces(motion.source, motion))
+    return write_output_pieces(path, fresh(motion, Path(path)))
 
 
 def common_losses(motion: Motion, layout: str) -> list[str]:

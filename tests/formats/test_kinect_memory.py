@@ -1,6 +1,7 @@
-"""Bounded memory on one huge field (issue 39): a text reader given a file with a 5 MB
-field reads it or refuses it with an UnreadableFileError, and its peak memory grows by
-less than 200 MB (a 5 MB number once made the Kinect reader ask numpy for 211 GiB).
+"""Bounded memory on one huge field (issue 39): a text reader (Kinect, BVH, TRC and the
+vendor tables: Nexus CSV, Motive CSV, QTM TSV) given a file with a 5 MB field reads it or
+refuses it with an UnreadableFileError, and its peak memory grows by less than 200 MB (a
+5 MB number once made the Kinect reader ask numpy for 211 GiB).
 
 Each read runs in a fresh process; its peak RSS (``ru_maxrss``) is compared with that of a
 process that only imports mocapfix."""
@@ -9,9 +10,12 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 from conftest import SAMPLE_DATA
+
+VENDOR = Path(__file__).resolve().parents[1] / "data" / "vendor"
 
 LIMIT_MB = 200
 #: the Kinect reader refuses a field over MAX_FIELD characters; BVH reads the digits as a
@@ -86,3 +90,24 @@ def test_a_5mb_field_in_a_trc_is_read_or_refused_in_under_200_mb(tmp_path):
     assert got["outcome"] == "read" or got["outcome"].startswith("refused: "), got
     assert len(got["outcome"]) < 500
     assert (got["kb"] - base["kb"]) / 1024 < LIMIT_MB
+
+
+@pytest.mark.parametrize("name, sep", [
+    ("nexus_pyomeca_markers.csv", ","),
+    ("motive_doc.csv", ","),
+    ("qtm_hand_embodiment_recording.tsv", "\t"),
+])
+def test_a_5mb_field_in_a_vendor_table_is_read_or_refused_in_under_200_mb(tmp_path, name, sep):
+    """An X coordinate of the last data row made 5 MB (the vendor fixtures end with one)."""
+    lines = (VENDOR / name).read_text().split("\n")
+    row = max(i for i, line in enumerate(lines) if line.strip(sep + " "))
+    cells = lines[row].split(sep)
+    cells[3] = FIELD
+    lines[row] = sep.join(cells)
+    path = tmp_path / f"huge_{name}"
+    path.write_text("\n".join(lines))
+    base = _child()
+    got = _child(path)
+    assert got["outcome"] == "read" or got["outcome"].startswith("refused: "), got
+    assert len(got["outcome"]) < 500, "the message quotes an excerpt, not the field"
+    assert (got["kb"] - base["kb"]) / 1024 < LIMIT_MB, f"{name}: peak RSS grew too much"
