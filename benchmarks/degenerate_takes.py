@@ -41,7 +41,6 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import long_takes  # noqa: E402  (a sibling script)
 from mocapfix import read, write  # noqa: E402
-from mocapfix.bench.corrupt import occlusion  # noqa: E402
 
 SHAPES = ("real", "periodic", "constant", "repeated")
 
@@ -75,23 +74,14 @@ def build(fmt: str, shape: str, n_frames: int, folder: Path) -> Path:
                               source=None, times=np.arange(n_frames) / base.fps)
     elif shape == "repeated":
         # the capture corrupted, then every frame held: a recorder repeats what it measured
-        motion = _corrupted(base.replace(source=None, confidence=None))
+        motion = long_takes.corrupted(base.replace(source=None, confidence=None))
         motion = motion.replace(positions=motion.positions[pick])
     else:
-        motion = _corrupted(base.replace(positions=base.positions[pick], source=None,
+        motion = long_takes.corrupted(base.replace(positions=base.positions[pick], source=None,
                                          confidence=None))
     write(motion, path)
     return path
 
-
-def _corrupted(motion):
-    """``motion`` with the ``mixed`` corruption on every stretch of STRETCH frames."""
-    out = motion.positions.copy()
-    for k, a in enumerate(range(0, motion.n_frames, long_takes.STRETCH)):
-        part = motion.slice_frames(a, min(a + long_takes.STRETCH, motion.n_frames))
-        if part.n_frames >= 4:
-            out[a:a + part.n_frames] = occlusion(part, "mixed", k)[0].positions
-    return motion.replace(positions=out)
 
 
 HELD = ("c3d/cmu_85_02.c3d", "c3d/hdm05_HDM_mm_01-02_03_120.c3d",

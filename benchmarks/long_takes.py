@@ -124,15 +124,20 @@ def build(fmt: str, n_frames: int, folder: Path, seed: int = 0) -> Path:
         motion = base.replace(positions=positions, confidence=confidence, source=None,
                               times=np.arange(n_frames) / base.fps)
     else:
-        motion = base.replace(positions=positions, source=None, confidence=None)
-        out = positions.copy()
-        for k, a in enumerate(range(0, n_frames, STRETCH)):
-            part = motion.slice_frames(a, min(a + STRETCH, n_frames))
-            if part.n_frames >= 4:
-                out[a:a + part.n_frames] = occlusion(part, "mixed", seed + k)[0].positions
-        motion = motion.replace(positions=out)
+        motion = corrupted(base.replace(positions=positions, source=None, confidence=None), seed)
     write(motion, path)
     return path
+
+
+def corrupted(motion, seed: int = 0):
+    """``motion`` with the ``occlusion`` protocol's ``mixed`` corruption on every stretch
+    of :data:`STRETCH` frames (seeds ``seed``, ``seed + 1``, ...)."""
+    out = motion.positions.copy()
+    for k, a in enumerate(range(0, motion.n_frames, STRETCH)):
+        part = motion.slice_frames(a, min(a + STRETCH, motion.n_frames))
+        if part.n_frames >= 4:
+            out[a:a + part.n_frames] = occlusion(part, "mixed", seed + k)[0].positions
+    return motion.replace(positions=out)
 
 
 def measure(path: Path, out: Path) -> tuple[float, float, float, str]:

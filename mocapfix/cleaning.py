@@ -52,7 +52,6 @@ def clean_motion(motion: Motion, pipeline: Pipeline, to: str | None = None,
         cleaned, records, residual = _clean_windowed(distinct, pipeline, why, windows)
     if held is not None:
         cleaned, records, residual = held.expand(motion, cleaned, records, residual)
-        cleaned.fill_errors = written_fill_errors(cleaned, records)
     if to is not None and to != motion.format:
         cleaned = cleaned.replace(notes=[*cleaned.notes, *formats.losses(cleaned, to)])
     cleaned = formats.storable(cleaned, to)

@@ -172,4 +172,3 @@ class TextLines:
             yield from marked(marks[k])
             k += 1
         yield upto(len(raw))
-

@@ -25,6 +25,7 @@ import numpy as np
 
 from mocapfix.cleaners.base import map_frames
 from mocapfix.core.motion import Motion
+from mocapfix.pipeline.steps import written_fill_errors
 
 #: frames compared at a time (the comparison's temporaries stay a few MB)
 BLOCK = 4096
@@ -86,7 +87,8 @@ class HeldFrames:
     def expand(self, motion: Motion, cleaned: Motion, records: list, residual):
         """``(cleaned, records, residual)`` of the distinct frames made the whole take's:
         every frame as the distinct frame it repeats came out, on ``motion``'s times and
-        writer's source; the records' per-sample masks and their ``info`` frames likewise."""
+        writer's source, with the fill errors of its fills; the records' per-sample masks
+        and their ``info`` frames likewise."""
         def grow(a):
             return None if a is None else a[self.of]
         whole = motion.replace(positions=grow(cleaned.positions),
@@ -100,4 +102,5 @@ class HeldFrames:
                          replaced=grow(r.replaced),
                          info=map_frames(r.info, self.kept, stop) if not r.skipped else r.info)
                  for r in records]
+        whole.fill_errors = written_fill_errors(whole, grown)
         return whole, grown, grow(residual)
