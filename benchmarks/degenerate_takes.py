@@ -28,6 +28,14 @@ capture's output with every frame twice.
 
     python benchmarks/degenerate_takes.py [--formats c3d,bvh,kinect] [--sizes 5000,50000]
     python benchmarks/degenerate_takes.py --held
+    python benchmarks/degenerate_takes.py --cuts
+
+``--cuts``: takes joined (:mod:`mocapfix.pipeline.cuts`): each capture's first 2 s played
+over and over to 3,000 frames, and two takes of one subject joined (C3D: 85_02's two
+halves, the second moved 50 cm), cleaned in process with the default as one take (the
+cut detection turned off) and as the default does: the cuts found against the joins made,
+the report's status and samples flagged, the distance from the input, and the distance
+from the take's parts each cleaned alone (0: nothing reached across a join).
 """
 from __future__ import annotations
 
@@ -117,14 +125,91 @@ def held() -> None:
                   flush=True)
 
 
+#: a loop of each capture's first 2 s, and two takes joined (C3D: 85_02's halves, the
+#: second 50 cm away: the one C3D subject with two takes of one marker set has none)
+JOINED = (("c3d/cmu_85_02.c3d", None), ("c3d/hdm05_HDM_mm_01-02_03_120.c3d", None),
+          ("bvh/cmu_cgspeed_131_03.bvh", "bvh/cmu_cgspeed_131_01.bvh"),
+          ("asfamc/05_02.amc", "asfamc/05_01.amc"),
+          ("kinect/kv2_laban_Ges01_wavehand.csv", "kinect/kv2_laban_Ges02_balancinghands.csv"))
+
+
+def _as_take(base, positions, channels, frames):
+    return base.replace(positions=positions, channels=channels, source=None, times=None,
+                        confidence=None if base.confidence is None else base.confidence[frames])
+
+
+def _joined_takes(rel: str, other: str | None):
+    """``(name, take, parts)``: the 2 s loop over 3,000 frames, and two takes joined; each
+    with the frame ranges of its parts."""
+    base = read(long_takes.DATA / rel)
+    period = int(2 * base.fps)
+    pick = np.arange(3000) % period
+    loop = _as_take(base, base.positions[pick],
+                    None if base.channels is None else base.channels[pick], pick)
+    yield "2 s loop", loop, [(a, min(a + period, 3000)) for a in range(0, 3000, period)]
+    if other is None:
+        half = base.n_frames // 2
+        shift = np.array([500.0, 0.0, 0.0]) / 1000.0 / base.metres_per_unit
+        P = np.concatenate([base.positions[:half], base.positions[half:2 * half] + shift])
+        yield "halves, 50 cm apart", _as_take(base, P, None, np.arange(2 * half)), \
+            [(0, half), (half, 2 * half)]
+        return
+    second = read(long_takes.DATA / other)
+    T1 = base.n_frames
+    if base.channels is not None:
+        channels = np.concatenate([base.channels, second.channels])
+        take = base.replace(channels=channels, positions=base.rig.positions(channels),
+                            source=None, times=None, confidence=None)
+    else:
+        take = base.replace(positions=np.concatenate([base.positions, second.positions]),
+                            confidence=np.concatenate([base.confidence, second.confidence]),
+                            source=None, times=None)
+    yield f"+ {Path(other).stem}", take, [(0, T1), (T1, take.n_frames)]
+
+
+def joined() -> None:
+    """The ``--cuts`` table."""
+    from mocapfix import api
+    from mocapfix.pipeline import cuts
+
+    print("| capture | take | frames | cuts found / joins | cleaned as | status | samples "
+          "flagged | moved max / p99 (mm) | from the parts cleaned alone, max (mm) |")
+    print("|---|---|---:|---:|---|---|---:|---:|---:|")
+    real = cuts.take_cuts
+    for rel, other in JOINED:
+        for name, take, parts in _joined_takes(rel, other):
+            alone = np.concatenate([api.clean(take.slice_frames(a, b))[0].positions
+                                    for a, b in parts])
+            found = len(real(take))
+            for how in ("one take", "default"):
+                cuts_of = (lambda m: np.zeros(0, np.intp)) if how == "one take" else real
+                import mocapfix.cleaning as cleaning
+                cleaning.take_cuts = cuts_of
+                try:
+                    cleaned, report = api.clean(take)
+                finally:
+                    cleaning.take_cuts = real
+                mm = take.metres_per_unit * 1e3
+                moved = np.linalg.norm(cleaned.positions - take.positions, axis=-1) * mm
+                apart = np.linalg.norm(cleaned.positions - alone, axis=-1) * mm
+                f = report["file"]
+                print(f"| {rel} | {name} | {take.n_frames} | {found} / {len(parts) - 1} | {how} "
+                      f"| {f['status']} | {f['samples_flagged']} | {np.nanmax(moved):.1f} / "
+                      f"{np.nanpercentile(moved, 99):.2f} | {np.nanmax(apart):.1f} |", flush=True)
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--formats", default="c3d,bvh,kinect")
     ap.add_argument("--sizes", default="5000,50000")
     ap.add_argument("--held", action="store_true", help="only the held-frames table")
+    ap.add_argument("--cuts", action="store_true", help="only the joined-takes table")
     args = ap.parse_args()
     if args.held:
         held()
+        return
+    if args.cuts:
+        joined()
         return
     sizes = [int(s) for s in args.sizes.split(",")]
     print("| format | take | " + " | ".join(f"CPU {n:,} (s)" for n in sizes)

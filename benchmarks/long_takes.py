@@ -6,7 +6,10 @@ The takes are built from shared captures, not by repeating one: pieces of 5–20
 random from several takes of one subject or sensor (C3D: the one CMU capture with its
 41 markers), each played forwards and then backwards (so the turn is continuous), joined
 with the root (markers: every point) moved so each piece starts where the last ended,
-plus small noise (0.2 mm; BVH/AMC channels 0.01). Markers then get the ``occlusion``
+plus small noise (0.2 mm; BVH/AMC channels 0.01). The pose still jumps where two pieces
+meet; where most joints jump over 5 cm (every join of the AMC take, a third of the Kinect
+take's, none of the BVH and C3D takes') the join is a cut (:mod:`mocapfix.pipeline.cuts`)
+and the default cleans the take as the pieces between. Markers then get the ``occlusion``
 protocol's ``mixed`` corruption on every 4,500-frame stretch (gaps, jitter, spikes at the
 rate a real capture has them), so that every step has work.
 

@@ -16,8 +16,10 @@ from mocapfix.core.fileio import NAME_MAX, atomic_write_text, is_stream, refuse_
 from mocapfix.core.motion import Motion
 from mocapfix.pipeline.held import HeldFrames
 from mocapfix.pipeline.steps import Pipeline, StepRecord, written_fill_errors
-from mocapfix.pipeline.windows import (Windows, merge_info, over_budget, paste, point_cuts,
-                                       shifted_info, window_for)
+from mocapfix.pipeline.cuts import note as cuts_note
+from mocapfix.pipeline.cuts import take_cuts
+from mocapfix.pipeline.windows import (Pieces, Windows, merge_info, over_budget, paste, pieces,
+                                       point_cuts, shifted_info, window_for)
 from mocapfix.quality.render import ranked
 from mocapfix.quality.report import CleanResult, build_report, to_html, to_json, to_markdown
 from mocapfix.pipeline.selection import own_channels
@@ -39,17 +41,23 @@ def clean_motion(motion: Motion, pipeline: Pipeline, to: str | None = None,
     overlapping windows (:mod:`mocapfix.pipeline.windows`; ``"budget"``, the default);
     :class:`~mocapfix.pipeline.windows.Windows` to choose them, None to clean it whole.
     A take whose frames repeat the frame before them is cleaned on its distinct frames
-    (:mod:`mocapfix.pipeline.held`)."""
+    (:mod:`mocapfix.pipeline.held`), and a take that jumps as a whole somewhere (takes
+    joined) as the takes between its jumps (:mod:`mocapfix.pipeline.cuts`)."""
     started = time.perf_counter()
     why = pipeline.not_cleaned(motion)
     held = HeldFrames.find(motion)
     distinct = motion if held is None else held.take(motion)
     if windows == "budget":
         windows = window_for(pipeline.memory_budget, distinct.n_frames, motion.n_joints, motion.fps)
-    if windows is None or len(windows.cuts(distinct.n_frames)) <= 2:
+    at = take_cuts(distinct)
+    plan = pieces(distinct.n_frames, windows, at)
+    if plan is None:
         cleaned, records, residual = _clean_span(distinct, pipeline, why)
     else:
-        cleaned, records, residual = _clean_windowed(distinct, pipeline, why, windows)
+        cleaned, records, residual = _clean_windowed(distinct, pipeline, why, plan,
+                                                     distances=windows is None)
+    if len(at):     # in place: replace() would copy the take's arrays
+        cleaned.notes = [*cleaned.notes, cuts_note(at if held is None else held.kept[at])]
     if held is not None:
         cleaned, records, residual = held.expand(motion, cleaned, records, residual)
     if to is not None and to != motion.format:
@@ -76,13 +84,16 @@ def _clean_span(motion: Motion, pipeline: Pipeline, why: list, points: np.ndarra
     return cleaned, records, residual
 
 
-def _clean_windowed(motion: Motion, pipeline: Pipeline, why: list, windows: Windows):
-    """:func:`_clean_span` over overlapping windows, put together frame by frame
-    (:mod:`mocapfix.pipeline.windows`). The points the pipeline cleans are decided once,
-    on the whole take."""
+def _clean_windowed(motion: Motion, pipeline: Pipeline, why: list, plan: Pieces,
+                    distances: bool = False):
+    """:func:`_clean_span` over the pieces of ``plan`` (overlapping windows, the takes
+    between cuts), put together frame by frame (:mod:`mocapfix.pipeline.windows`). The
+    points the pipeline cleans are decided once, on the whole take. ``distances``: the
+    steps' records keep how far they moved each sample (a take the memory budget lets
+    be cleaned whole), not only the mean."""
     T, J = motion.n_frames, motion.n_joints
-    cuts = windows.cuts(T)
-    per_point = point_cuts(motion.missing, cuts, windows.overlap)
+    cuts = list(plan.cuts)
+    per_point = point_cuts(motion.missing, cuts, plan.overlaps)
     points = np.array([w is None for w in why], bool)
     positions = motion.positions.copy()
     confidence = None if motion.confidence is None else motion.confidence.copy()
@@ -93,7 +104,7 @@ def _clean_windowed(motion: Motion, pipeline: Pipeline, why: list, windows: Wind
     infos: list[list] = []
     heads: list = []
     for k in range(len(cuts) - 1):
-        lo, hi = max(cuts[k] - windows.overlap, 0), min(cuts[k + 1] + windows.overlap, T)
+        lo, hi = plan.bounds(k)
         start, stop = per_point[k], per_point[k + 1]
         part, records, res = _clean_span(motion.slice_frames(lo, hi), pipeline, why, points)
         paste(positions, part.positions, lo, start, stop)
@@ -112,7 +123,9 @@ def _clean_windowed(motion: Motion, pipeline: Pipeline, why: list, windows: Wind
             heads = [(rec.step, rec.cleaner, rec.info) for rec in records]
             # of the distances moved only their sum is kept (the report gives the mean)
             masks = [{"filled": np.zeros((T, J), bool), "flagged": np.zeros((T, J), bool),
-                      "moved": 0.0, "replaced": None} for _ in records]
+                      "moved": 0.0, "replaced": None,
+                      "distances": np.zeros((T, J)) if distances else None}
+                     for _ in records]
             infos = [[] for _ in records]
         for rec, mask, info in zip(records, masks, infos):
             info.append((shifted_info(rec.info, lo, start, stop, motion.names), rec.seconds,
@@ -120,9 +133,12 @@ def _clean_windowed(motion: Motion, pipeline: Pipeline, why: list, windows: Wind
             if rec.skipped:
                 continue            # nothing to paste: its masks stay zero pages, never touched
             for key in ("filled", "flagged"):
-                paste(mask[key], getattr(rec, key), lo, start, stop)
+                if getattr(rec, key).any():     # an empty one stays zero pages
+                    paste(mask[key], getattr(rec, key), lo, start, stop)
             mask["moved"] += sum(float(rec.moved[a - lo:b - lo, j].sum())
                                  for j, (a, b) in enumerate(zip(start.tolist(), stop.tolist())))
+            if mask["distances"] is not None:
+                paste(mask["distances"], rec.moved, lo, start, stop)
             if rec.replaced is not None:
                 if mask["replaced"] is None:
                     mask["replaced"] = np.zeros((T, J), bool)
@@ -136,15 +152,19 @@ def _clean_windowed(motion: Motion, pipeline: Pipeline, why: list, windows: Wind
         merged = merge_info([i for i, _, _ in info])
         merged["windows"] = len(info)
         skipped = skipped.pop() if len(skipped) == 1 else None
+        kept = mask["distances"] is not None
         records.append(StepRecord(step, cleaner, sum(s for _, s, _ in info),
-                                  mask["filled"], mask["flagged"], np.zeros((0, J)),
+                                  mask["filled"], mask["flagged"],
+                                  mask["distances"] if kept else np.zeros((0, J)),
                                   merged if skipped is None else first_info, skipped,
-                                  mask["replaced"], moved_mean=mask["moved"] / (T * J)))
-    notes.append(f"cleaned in {len(cuts) - 1} windows of {windows.frames} frames with "
-                 f"{windows.overlap} frames of overlap (memory_budget)")
-    heavy = over_budget(pipeline.memory_budget, T, J)
-    if heavy:
-        notes.append(heavy)
+                                  mask["replaced"],
+                                  moved_mean=None if kept else mask["moved"] / (T * J)))
+    if plan.windows is not None:
+        notes.append(f"cleaned in {len(cuts) - 1} windows of {plan.windows.frames} frames "
+                     f"with {plan.windows.overlap} frames of overlap (memory_budget)")
+        heavy = over_budget(pipeline.memory_budget, T, J)
+        if heavy:
+            notes.append(heavy)
     cleaned = motion.replace(positions=positions, confidence=confidence, channels=channels,
                              times=motion.times, notes=notes)
     cleaned.fill_errors = written_fill_errors(cleaned, records)   # in place: no copy of the take

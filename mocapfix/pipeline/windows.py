@@ -14,6 +14,10 @@ noise level, the fill-error calibration) estimate it per window, and that differ
 measured, not assumed away (``benchmarks/long_takes.py`` compares windowed and whole-take
 outputs).
 
+A take with cuts (:mod:`mocapfix.pipeline.cuts`: frames where it jumps as a whole, as one
+take ends and another begins) is cut there with no overlap, each of its takes cleaned on
+its own (and in windows, when longer than one): :func:`pieces`.
+
 What the steps record is put together frame by frame as the output is (the per-sample
 masks of :class:`~mocapfix.pipeline.steps.StepRecord`); their ``info`` is merged
 (:func:`merge_info`): frame-numbered entries keep the window that gave the frame, counts
@@ -113,16 +117,50 @@ def over_budget(budget: int | None, n_frames: int, n_joints: int) -> str | None:
             "not the take's")
 
 
-def point_cuts(missing: np.ndarray, cuts: list[int], overlap: int) -> np.ndarray:
+@dataclass(frozen=True)
+class Pieces:
+    """The pieces a take is cleaned in: piece ``k`` gives the frames between ``cuts[k]``
+    and ``cuts[k + 1]`` (per point: :func:`point_cuts`) and is cleaned on those and
+    ``overlaps`` frames each side (``overlaps[k]`` at cut ``k``: 0 at the take's ends and
+    at the cuts of :mod:`mocapfix.pipeline.cuts`, where the take is two takes).
+    ``windows``: the memory budget's windows the pieces were cut in (None: none)."""
+
+    cuts: tuple
+    overlaps: tuple
+    windows: Windows | None = None
+
+    def bounds(self, k: int) -> tuple[int, int]:
+        """The frames piece ``k`` is cleaned on."""
+        return self.cuts[k] - self.overlaps[k], self.cuts[k + 1] + self.overlaps[k + 1]
+
+
+def pieces(n_frames: int, windows: Windows | None, take_cuts=()) -> Pieces | None:
+    """The pieces of a take of ``n_frames``: the takes between ``take_cuts`` (no overlap),
+    each cut in ``windows`` when longer than one (None: the take is one piece)."""
+    edges = [0, *(int(c) for c in take_cuts), n_frames]
+    cuts, overlaps = [0], [0]
+    for a, b in zip(edges[:-1], edges[1:]):
+        inner = windows.cuts(b - a)[1:-1] if windows is not None else []
+        cuts += [a + c for c in inner] + [b]
+        overlaps += [windows.overlap] * len(inner) + [0] if inner else [0]
+    if len(cuts) <= 2:
+        return None
+    return Pieces(tuple(cuts), tuple(overlaps),
+                  windows if any(overlaps) else None)
+
+
+def point_cuts(missing: np.ndarray, cuts: list[int], overlap) -> np.ndarray:
     """(len(cuts), J) the frame each point's output switches window at: for each inner
     nominal cut, the frame ``f`` nearest to it within ``overlap // 2`` with the point seen
     on frames ``f − 1`` and ``f`` (no gap spans the switch); the nominal cut where there is
-    none. The first row is 0 and the last ``T``."""
+    none. The first row is 0 and the last ``T``. ``overlap``: one for every cut, or one
+    per cut (0: the cut itself)."""
     T, J = missing.shape
     out = np.empty((len(cuts), J), np.intp)
     out[0], out[-1] = 0, T
-    half = overlap // 2
+    overlaps = [overlap] * len(cuts) if np.isscalar(overlap) else list(overlap)
     for k, c in enumerate(cuts[1:-1], start=1):
+        half = overlaps[k] // 2
         lo, hi = max(c - half, 1), min(c + half, T - 1)
         frames = np.arange(lo, hi + 1)
         ok = ~missing[lo - 1:hi] & ~missing[lo:hi + 1]               # (len(frames), J)

@@ -80,6 +80,7 @@ def summarise(motion: Motion) -> dict:
         "empty_frames": f["empty_frames"],
         "frames_outside_take": f.get("frames_outside_take", []),
         "held_frames": f["held_frames"],
+        "cut_frames": f["cut_frames"],
         "notes": list(motion.notes),
     }
     if motion.format == "kinect":
@@ -161,6 +162,10 @@ def format_text(summary: dict, verbose: bool = False) -> str:
     if s.get("held_frames"):
         lines.append(f"  held        {s['held_frames']} frames repeat the frame before them "
                      "exactly (no new measurement; clean cleans each once)")
+    if s.get("cut_frames"):
+        shown = ", ".join(map(str, s["cut_frames"][:10])) + (", ..." if len(s["cut_frames"]) > 10 else "")
+        lines.append(f"  cuts        the take jumps as a whole at frames {shown} (takes joined? "
+                     "clean cleans each part on its own)")
     for note in s["notes"]:
         lines.append(f"  note        {note}")
     return "\n".join(lines)

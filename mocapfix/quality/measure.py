@@ -34,6 +34,7 @@ from mocapfix.core.metrics import bone_lengths, rms_acceleration
 from mocapfix.core.motion import Motion, missing_samples
 from mocapfix.pipeline.selection import DEFAULT_POLICY, not_cleaned, take
 from mocapfix.pipeline.unlabelled import Unlabelled, is_unlabelled
+from mocapfix.pipeline.cuts import cut_frames
 from mocapfix.pipeline.held import held_frames
 
 #: an interval longer than this many times the median is a dropped-frame gap
@@ -194,6 +195,7 @@ def measure_input(motion: Motion, *, swaps: bool = True, outliers: bool = True,
     bones = bones_of(motion)
     bvar = bone_variation(motion.positions, bones)
     jbvar = per_joint_bone_variation(bvar, bones, J)
+    cuts = cut_frames(motion)
     joints = []
     for j in range(J):
         joints.append({
@@ -240,6 +242,7 @@ def measure_input(motion: Motion, *, swaps: bool = True, outliers: bool = True,
         "swaps": swap_list,
         **timing(motion),
         "held_frames": int(held_frames(motion).sum()),
+        "cuts": len(cuts), "cut_frames": cuts,
         "notes": notes,
     }
     if not marker.all():

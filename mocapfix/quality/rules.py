@@ -114,6 +114,9 @@ METRICS = {m.name: m for m in (
            "intervals longer than 1.5x the median, repeated or backward", None),
     Metric("held_frames", "input", "count", "{v} held frames",
            "frames that repeat the frame before them exactly (no new measurement)", None),
+    Metric("cuts", "input", "count", "the take jumps as a whole at {v} frames",
+           "frames where every point jumps at once (takes joined, a tracker that lost "
+           "the subject)", None),
     Metric("swaps", "input", "count", "{v} suspected marker swaps",
            "label swaps the swaps cleaner finds (C3D)", None),
     Metric("fps", "input", "frequency", "frame rate {v}", "frame rate (judged from below)",
@@ -140,7 +143,7 @@ METRICS = {m.name: m for m in (
 )}
 
 _FILE_ONLY_KEYS = {"dropped_frames": "dropped_frames", "timestamp_jumps": "timestamp_jumps",
-                   "held_frames": "held_frames", "fps": "fps"}
+                   "held_frames": "held_frames", "cuts": "cuts", "fps": "fps"}
 
 
 def show(kind: str, value) -> str:

@@ -246,3 +246,28 @@ def test_check_counts_held_frames_and_a_rule_can_fail_on_them(tmp_path):
     assert files["twice.c3d"]["file"]["held_frames"] == base.n_frames
     assert files["twice.c3d"]["status"] == "FAIL"
     assert files["once.c3d"]["file"]["held_frames"] == 0 and files["once.c3d"]["status"] == "OK"
+
+
+def test_check_counts_a_takes_cuts_and_a_rule_can_fail_on_them(tmp_path):
+    """CMU 85_02's halves joined with the second 50 cm away: ``check`` finds the one frame
+    where the take jumps as a whole (``cuts``; ``info`` lists it), and a rule on it fails
+    that file and not the capture."""
+    from mocapfix import read
+    base = read(shared("c3d/cmu_85_02.c3d")).replace(source=None, confidence=None)
+    half = base.n_frames // 2
+    P = np.concatenate([base.positions[:half], base.positions[half:2 * half] + [500.0, 0, 0]])
+    folder = tmp_path / "in"
+    folder.mkdir()
+    write(base, folder / "once.c3d")
+    write(base.replace(positions=P), folder / "joined.c3d")
+    rules = tmp_path / "rules.yaml"
+    rules.write_text("version: 1\nrules:\n  - metric: cuts\n    fail: 0\n")
+    result = CliRunner().invoke(main, ["check", str(folder), "-r", str(rules), "--json"])
+    assert result.exit_code == 1, result.output
+    files = {f["path"].split("/")[-1]: f for f in json.loads(result.stdout)["files"]}
+    assert files["joined.c3d"]["file"]["cuts"] == 1
+    assert files["joined.c3d"]["file"]["cut_frames"] == [half]
+    assert files["joined.c3d"]["status"] == "FAIL"
+    assert files["once.c3d"]["file"]["cuts"] == 0 and files["once.c3d"]["status"] == "OK"
+    info = CliRunner().invoke(main, ["info", str(folder / "joined.c3d")])
+    assert f"the take jumps as a whole at frames {half}" in info.output
