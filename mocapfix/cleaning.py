@@ -160,8 +160,11 @@ def _clean_windowed(motion: Motion, pipeline: Pipeline, why: list, plan: Pieces,
                                   mask["replaced"],
                                   moved_mean=None if kept else mask["moved"] / (T * J)))
     if plan.windows is not None:
+        apart = sum(o == 0 for o in plan.overlaps[1:-1])    # the take's own cuts
         notes.append(f"cleaned in {len(cuts) - 1} windows of {plan.windows.frames} frames "
-                     f"with {plan.windows.overlap} frames of overlap (memory_budget)")
+                     f"with {plan.windows.overlap} frames of overlap (memory_budget)"
+                     + (f"; cut with no overlap where the take jumps as a whole ({apart} "
+                        f"frame{'s' if apart > 1 else ''})" if apart else ""))
         heavy = over_budget(pipeline.memory_budget, T, J)
         if heavy:
             notes.append(heavy)

@@ -127,6 +127,28 @@ def test_joined_takes_are_repaired_each_on_its_own_and_no_fill_crosses_the_cut()
     np.testing.assert_array_equal(out.positions, np.concatenate(alone), strict=True)
 
 
+def test_a_joined_take_in_windows_is_each_take_in_its_windows():
+    """Cuts and memory-budget windows together: the joined take cleaned in windows of 700
+    frames is each of its takes cleaned in windows of 700 frames, bit for bit, and the
+    report says both."""
+    base = read(shared("c3d/hdm05_HDM_mm_01-02_03_120.c3d")).replace(source=None, confidence=None)
+    half = base.n_frames // 2
+    shift = np.array([500.0, 0.0, 0.0]) / 1000.0 / base.metres_per_unit
+    parts = [occlusion(base.slice_frames(0, half), "mixed", 0)[0].replace(confidence=None),
+             occlusion(base.slice_frames(half, 2 * half), "mixed", 1)[0].replace(confidence=None)]
+    joined = base.replace(positions=np.concatenate([parts[0].positions, parts[1].positions + shift]))
+    pipeline = load_config(resolve_config("default"))
+    windows = Windows(700, 120)
+    result = clean_motion(joined, pipeline, windows=windows)
+    alone = [clean_motion(joined.slice_frames(a, b), pipeline, windows=windows).cleaned.positions
+             for a, b in ((0, half), (half, 2 * half))]
+    np.testing.assert_array_equal(result.cleaned.positions, np.concatenate(alone), strict=True)
+    notes = build_report(result)["file"]["notes"]
+    assert any(n.startswith("cleaned in 6 windows of 700 frames") and n.endswith(
+        "cut with no overlap where the take jumps as a whole (1 frame)") for n in notes)
+    assert any(n.startswith("the take jumps as a whole at 1 frame (1995)") for n in notes)
+
+
 @pytest.mark.parametrize("subdir", ["c3d", "bvh", "asfamc", "kinect"])
 def test_the_shared_captures_have_no_cut_but_the_kinect_tracker_jump(subdir):
     """The detector's false alarms on real takes: none of the shared captures jumps as a
