@@ -79,24 +79,24 @@ def jumps(positions: np.ndarray, frames: slice | None = None) -> np.ndarray:
 def take_cuts(motion: Motion) -> np.ndarray:
     """The frames where ``motion`` jumps as a whole (the first frame of the take after each
     cut), sorted; empty when there are none (see the module docstring). The take is
-    measured :data:`BLOCK` frames at a time, twice (a point's usual jump is the median of
-    its medians over the blocks: its median when the take is one block), so the memory
-    does not grow with the take."""
+    measured :data:`BLOCK` frames at a time, twice but for the first block (a point's usual
+    jump is the median of its medians over the blocks: its median when the take is one
+    block), so the memory does not grow with the take."""
     T = motion.n_frames
     if T < 4:
         return np.zeros(0, np.intp)
     P, unit = motion.positions, motion.metres_per_unit
     blocks = [slice(a, min(a + BLOCK, T)) for a in range(0, T, BLOCK)]
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)         # a point never seen: no jumps
-        medians = np.array([np.nanmedian(jumps(P, b), axis=0) for b in blocks])
-        usual = 1.4826 * np.nanmedian(medians, axis=0)
+    first = jumps(P, blocks[0])                    # a take of one block: measured once
+    medians = np.array([_column_medians(first if k == 0 else jumps(P, b))
+                        for k, b in enumerate(blocks)])
+    usual = 1.4826 * _column_medians(medians)
     points = int(np.isfinite(medians).any(axis=0).sum())
     usual = np.maximum(np.nan_to_num(usual, nan=np.inf), FLOOR_M / unit)
     share, size = np.zeros(T), np.zeros(T)
     frames = []
-    for b in blocks:
-        e = jumps(P, b)
+    for k, b in enumerate(blocks):
+        e = first if k == 0 else jumps(P, b)
         with np.errstate(invalid="ignore"):
             big = (e > RATIO * usual) & (e > MIN_JUMP_M / unit)
         n_has, n_big = (~np.isnan(e)).sum(axis=1), big.sum(axis=1)
@@ -118,6 +118,21 @@ def take_cuts(motion: Motion) -> np.ndarray:
         if run[-1] - run[0] <= 2 and one_peak and not (share[around] >= SHARE / 2).any():
             cuts.append(t)
     return _isolated(np.array(cuts, np.intp), T, max(round(MIN_PART_S * motion.fps), 2))
+
+
+def _column_medians(x: np.ndarray) -> np.ndarray:
+    """The median of each column of ``x`` over its values that are not NaN (NaN where
+    there is none): ``np.nanmedian(x, axis=0)``, which loops over the columns in Python
+    below 600 rows (a short take's whole cost), sorted here instead."""
+    if len(x) >= 600:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)     # a point never seen
+            return np.nanmedian(x, axis=0)
+    ordered = np.sort(x, axis=0)                                 # NaN sort last
+    n = (~np.isnan(x)).sum(axis=0)
+    lo = np.take_along_axis(ordered, np.maximum((n - 1) // 2, 0)[None], axis=0)[0]
+    hi = np.take_along_axis(ordered, np.minimum(n // 2, len(x) - 1)[None], axis=0)[0]
+    return np.where(n > 0, (lo + hi) / 2, np.nan)
 
 
 def _isolated(cuts: np.ndarray, T: int, shortest: int) -> np.ndarray:
