@@ -10,7 +10,7 @@ from mocapfix.bench.corrupt import occlusion
 from mocapfix.cleaning import clean_motion
 from mocapfix.config import load_config
 from mocapfix.core.presets import resolve_config
-from mocapfix.pipeline.cuts import jumps, take_cuts
+from mocapfix.pipeline.cuts import cut_frames, jumps, take_cuts
 from mocapfix.pipeline.windows import Windows, pieces
 from mocapfix.quality.report import build_report
 from tests.conftest import need, shared, shared_files
@@ -104,6 +104,22 @@ def test_a_looped_capture_comes_out_as_the_capture_does():
     assert report["file"]["samples_flagged"] == 0
     assert any(n.startswith("the take jumps as a whole at 12 frames (240, 480,")
                for n in report["file"]["notes"])
+
+
+def test_cuts_are_found_on_the_distinct_frames_of_a_take_with_held_frames():
+    """The 85_02 loop with every frame written twice: the cuts are found as ``clean``
+    finds them, on its distinct frames, and given in the file's frames; the output is the
+    loop's output with every frame twice."""
+    base = read(shared("c3d/cmu_85_02.c3d"))
+    loop, _ = _looped(base)
+    doubled = loop.replace(positions=loop.positions.repeat(2, axis=0))
+    assert cut_frames(doubled) == [2 * f for f in range(240, 3000, 240)]
+    pipeline = load_config(resolve_config("default"))
+    result = clean_motion(doubled, pipeline)
+    once = clean_motion(loop, pipeline).cleaned.positions
+    np.testing.assert_array_equal(result.cleaned.positions, once.repeat(2, axis=0))
+    assert any(n.startswith("the take jumps as a whole at 12 frames (480, 960,")
+               for n in result.cleaned.notes)
 
 
 def test_joined_takes_are_repaired_each_on_its_own_and_no_fill_crosses_the_cut():
