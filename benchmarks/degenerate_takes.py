@@ -31,8 +31,8 @@ capture's output with every frame twice.
     python benchmarks/degenerate_takes.py --cuts
 
 ``--cuts``: takes joined (:mod:`mocapfix.pipeline.cuts`): each capture's first 2 s played
-over and over to 3,000 frames, and two takes of one subject joined (C3D: 85_02's two
-halves, the second moved 50 cm), cleaned in process with the default as one take (the
+over and over to 3,000 frames, and two takes of one subject joined (C3D: the capture's
+two halves, the second moved 50 cm), cleaned in process with the default as one take (the
 cut detection turned off) and as the default does: the cuts found against the joins made,
 the report's status and samples flagged, the distance from the input, and the distance
 from the take's parts each cleaned alone (0: nothing reached across a join).
@@ -125,8 +125,8 @@ def held() -> None:
                   flush=True)
 
 
-#: a loop of each capture's first 2 s, and two takes joined (C3D: 85_02's halves, the
-#: second 50 cm away: the one C3D subject with two takes of one marker set has none)
+#: a loop of each capture's first 2 s, and two takes joined (C3D: the capture's halves,
+#: the second 50 cm away: no two shared C3D captures have one marker set)
 JOINED = (("c3d/cmu_85_02.c3d", None), ("c3d/hdm05_HDM_mm_01-02_03_120.c3d", None),
           ("bvh/cmu_cgspeed_131_03.bvh", "bvh/cmu_cgspeed_131_01.bvh"),
           ("asfamc/05_02.amc", "asfamc/05_01.amc"),
@@ -169,6 +169,7 @@ def _joined_takes(rel: str, other: str | None):
 
 def joined() -> None:
     """The ``--cuts`` table."""
+    import mocapfix.cleaning as cleaning
     from mocapfix import api
     from mocapfix.pipeline import cuts
 
@@ -183,7 +184,6 @@ def joined() -> None:
             found = len(real(take))
             for how in ("one take", "default"):
                 cuts_of = (lambda m: np.zeros(0, np.intp)) if how == "one take" else real
-                import mocapfix.cleaning as cleaning
                 cleaning.take_cuts = cuts_of
                 try:
                     cleaned, report = api.clean(take)

@@ -187,8 +187,9 @@ def report_paths(output: Path, kinds) -> dict[str, Path]:
 
 
 def output_files(output: Path) -> list[Path]:
-    """Every file a clean of ``output`` may write: the motion, an ASF beside an AMC, and
-    the reports of every kind (for removing stale ones)."""
+    """The files a clean of ``output`` writes under its name: the motion and the reports
+    of every kind (for removing stale ones). Not the ASF an AMC is written beside, which
+    the subject's other AMCs there share (:func:`mocapfix.batch.plan.skeleton_written`)."""
     return [output, *report_paths(output, REPORT_KINDS).values()]
 
 

@@ -28,7 +28,8 @@ from typing import Callable
 
 from mocapfix.batch.discovery import discover_inputs
 from mocapfix.batch.manifest import Manifest, lock_output_folder, run_key, unlock_output_folder
-from mocapfix.batch.plan import Job, check_output_folder, plan_outputs, skeleton_conflicts
+from mocapfix.batch.plan import (Job, check_output_folder, plan_outputs, skeleton_conflicts,
+                                 skeleton_written)
 from mocapfix.batch.tasks import error_result, internal_error, run_tasks
 from mocapfix.cleaning import output_files, remove_outputs
 from mocapfix.core.errors import MocapfixError, WriteError, name_the_file
@@ -303,10 +304,17 @@ def run_clean(plan: CleanPlan, *, workers: int = 1, spec=None,
         plan.release()
 
 
+def _written_anew(job: Job) -> list[Path]:
+    """The files cleaning ``job`` writes: its output, its reports and, for an AMC, the
+    copy of its ASF beside it."""
+    skeleton = skeleton_written(job)
+    return [*output_files(job.output), *([skeleton[0]] if skeleton else [])]
+
+
 def _run(plan: CleanPlan, workers: int, spec, on_result) -> list[dict]:
     # a killed run leaves its half-written temporaries; the files this run writes anew
     # take theirs away (never anything else; another run's are safe: the run lock)
-    remove_stale_temporaries(f for j in plan.todo for f in output_files(j.output))
+    remove_stale_temporaries(f for j in plan.todo for f in _written_anew(j))
     finished_here: list[str] = []
 
     def noted(write, *args):

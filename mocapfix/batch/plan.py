@@ -168,7 +168,7 @@ def _check_shared_skeletons(jobs: list[Job]) -> None:
     named one by one land side by side): a ConfigError naming both."""
     skeletons: dict[Path, tuple[Path, Path]] = {}
     for job in jobs:
-        found = _skeleton_written(job)
+        found = skeleton_written(job)
         if found is None:
             continue
         target, asf = found
@@ -187,7 +187,7 @@ def skeleton_conflicts(jobs: list[Job]) -> list[str]:
     before any file is touched (``--dry-run`` with it), and its writers skip the check."""
     from mocapfix.formats.asfamc import file_names, skeleton_conflict
 
-    copies = {job: _skeleton_written(job) for job in jobs}
+    copies = {job: skeleton_written(job) for job in jobs}
     folders: dict[Path, dict] = {}
     for job, found in copies.items():
         if found is not None:
@@ -223,7 +223,7 @@ def skeleton_conflicts(jobs: list[Job]) -> list[str]:
     return out
 
 
-def _skeleton_written(job: Job) -> tuple[Path, Path] | None:
+def skeleton_written(job: Job) -> tuple[Path, Path] | None:
     """(the ASF file ``job`` writes, the ASF it copies): an AMC's copy beside its output,
     or an ASF named as an input itself; None for other files."""
     from mocapfix.formats.asfamc import skeleton_output

@@ -21,13 +21,13 @@ fast smooth motion keeps small and a jump makes the size of the jump. Frame ``t`
 when, of the points with a jump there, at least :data:`SHARE` jump more than
 :data:`RATIO` times their own usual jump (1.4826 × the median over the take, at least
 :data:`FLOOR_M`) and more than :data:`MIN_JUMP_M`, at least three of them, and the
-points with a jump there are at least half the take's. A jump also shows, half as large, on the frames either
-side: of neighbouring candidate frames the one with the largest median jump is the cut,
-when it is the only large one (the whole body one frame off and back has two, 1.5 times
-its offset each) and the frames around are quiet.
-Cuts closer than :data:`MIN_PART_S` to each other or to an end of the take are a burst of
-whole-body errors (a tracker's glitch of a few frames), not a new take: they are left to
-the cleaners.
+points with a jump there are at least half the take's. A jump also shows, half as large,
+on the frames either side: of neighbouring candidate frames the one with the largest
+median jump is the cut, when it is the only large one (the whole body one frame off and
+back has two, 1.5 times its offset each) and the frames around are quiet. Cuts closer
+than :data:`MIN_PART_S` to each other or to an end of the take are a burst of whole-body
+errors (a tracker's glitch of a few frames), not a new take: they are left to the
+cleaners.
 """
 from __future__ import annotations
 

@@ -184,7 +184,8 @@ def test_a_rerun_takes_away_the_temporaries_a_killed_run_left(tmp_path):
     out = tmp_path / "out"
     (out / "take0").mkdir(parents=True)
     stale = [out / "take0" / ".walk_markers.c3d.k3j_9x2a.part",
-             out / "take0" / ".walk_markers.c3d.report.json.abcdefgh.part"]
+             out / "take0" / ".walk_markers.c3d.report.json.abcdefgh.part",
+             out / "take0" / ".walker.asf.ikbk1snr.part"]            # the ASF beside an AMC
     kept = [out / "take0" / ".other.c3d.abcdefgh.part",             # not written by this run
             out / "take0" / ".walk_markers.c3d.notes.part",          # not the temporary pattern
             out / "take0" / "walk_markers.c3d.abcdefgh.part"]        # not hidden
