@@ -31,11 +31,10 @@ cleaners.
 """
 from __future__ import annotations
 
-import warnings
-
 import numpy as np
 
 from mocapfix.core.motion import Motion
+from mocapfix.solvers.nanstats import nanmedian_columns
 
 #: frames measured at a time (the temporaries stay a few MB)
 BLOCK = 4096
@@ -88,9 +87,9 @@ def take_cuts(motion: Motion) -> np.ndarray:
     P, unit = motion.positions, motion.metres_per_unit
     blocks = [slice(a, min(a + BLOCK, T)) for a in range(0, T, BLOCK)]
     first = jumps(P, blocks[0])                    # a take of one block: measured once
-    medians = np.array([_column_medians(first if k == 0 else jumps(P, b))
+    medians = np.array([nanmedian_columns(first if k == 0 else jumps(P, b))
                         for k, b in enumerate(blocks)])
-    usual = 1.4826 * _column_medians(medians)
+    usual = 1.4826 * nanmedian_columns(medians)
     points = int(np.isfinite(medians).any(axis=0).sum())
     usual = np.maximum(np.nan_to_num(usual, nan=np.inf), FLOOR_M / unit)
     share, size = np.zeros(T), np.zeros(T)
@@ -120,21 +119,6 @@ def take_cuts(motion: Motion) -> np.ndarray:
     return _isolated(np.array(cuts, np.intp), T, max(round(MIN_PART_S * motion.fps), 2))
 
 
-def _column_medians(x: np.ndarray) -> np.ndarray:
-    """The median of each column of ``x`` over its values that are not NaN (NaN where
-    there is none): ``np.nanmedian(x, axis=0)``, which loops over the columns in Python
-    below 600 rows (a short take's whole cost), sorted here instead."""
-    if len(x) >= 600:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", RuntimeWarning)     # a point never seen
-            return np.nanmedian(x, axis=0)
-    ordered = np.sort(x, axis=0)                                 # NaN sort last
-    n = (~np.isnan(x)).sum(axis=0)
-    lo = np.take_along_axis(ordered, np.maximum((n - 1) // 2, 0)[None], axis=0)[0]
-    hi = np.take_along_axis(ordered, np.minimum(n // 2, len(x) - 1)[None], axis=0)[0]
-    return np.where(n > 0, (lo + hi) / 2, np.nan)
-
-
 def _isolated(cuts: np.ndarray, T: int, shortest: int) -> np.ndarray:
     """The cuts at least ``shortest`` frames from every other cut and from both ends."""
     parts = np.diff(np.concatenate([[0], cuts, [T]]))
@@ -150,11 +134,9 @@ def note(frames: np.ndarray) -> str:
             f"{len(frames) + 1} takes between were cleaned each on its own")
 
 
-def cut_frames(motion: Motion) -> list[int]:
+def cut_frames(motion: Motion, held) -> list[int]:
     """The take's frames where it jumps as a whole, found on its distinct frames as
-    ``clean`` finds them (:mod:`mocapfix.pipeline.held`)."""
-    from mocapfix.pipeline.held import HeldFrames
-
-    held = HeldFrames.find(motion)
+    ``clean`` finds them: ``held`` is the take's
+    :meth:`HeldFrames.find <mocapfix.pipeline.held.HeldFrames.find>` (None: no held frames)."""
     at = take_cuts(motion if held is None else held.take(motion))
     return (at if held is None else held.kept[at]).tolist()

@@ -142,7 +142,7 @@ def pieces(n_frames: int, windows: Windows | None, take_cuts=()) -> Pieces | Non
     for a, b in zip(edges[:-1], edges[1:]):
         inner = windows.cuts(b - a)[1:-1] if windows is not None else []
         cuts += [a + c for c in inner] + [b]
-        overlaps += [windows.overlap] * len(inner) + [0] if inner else [0]
+        overlaps += [windows.overlap if inner else 0] * len(inner) + [0]
     if len(cuts) <= 2:
         return None
     return Pieces(tuple(cuts), tuple(overlaps),

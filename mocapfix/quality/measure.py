@@ -35,7 +35,7 @@ from mocapfix.core.motion import Motion, missing_samples
 from mocapfix.pipeline.selection import DEFAULT_POLICY, not_cleaned, take
 from mocapfix.pipeline.unlabelled import Unlabelled, is_unlabelled
 from mocapfix.pipeline.cuts import cut_frames
-from mocapfix.pipeline.held import held_frames
+from mocapfix.pipeline.held import HeldFrames
 
 #: an interval longer than this many times the median is a dropped-frame gap
 GAP_FACTOR = 1.5
@@ -195,7 +195,8 @@ def measure_input(motion: Motion, *, swaps: bool = True, outliers: bool = True,
     bones = bones_of(motion)
     bvar = bone_variation(motion.positions, bones)
     jbvar = per_joint_bone_variation(bvar, bones, J)
-    cuts = cut_frames(motion)
+    held = HeldFrames.find(motion)
+    cuts = cut_frames(motion, held)
     joints = []
     for j in range(J):
         joints.append({
@@ -241,7 +242,7 @@ def measure_input(motion: Motion, *, swaps: bool = True, outliers: bool = True,
         "bone_variation": finite(np.nanmax(bvar)) if np.isfinite(bvar).any() else None,
         "swaps": swap_list,
         **timing(motion),
-        "held_frames": int(held_frames(motion).sum()),
+        "held_frames": 0 if held is None else T - len(held.kept),
         "cuts": len(cuts), "cut_frames": cuts,
         "notes": notes,
     }

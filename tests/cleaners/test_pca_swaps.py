@@ -356,19 +356,19 @@ def test_fill_pca_rejects_fills_outside_the_capture_volume():
 
 
 def test_swaps_nanmedian_equals_numpy():
-    """The sort-based median of the rigid templates: known answers (odd and even counts,
+    """The sort-based median of the rigid templates (and of the cut detection's jumps): known answers (odd and even counts,
     an all-NaN column) and numpy's nanmedian on random distances with NaN."""
-    from mocapfix.solvers.swaps import _nanmedian_first_axis
+    from mocapfix.solvers.nanstats import nanmedian_columns
 
     x = np.array([[1.0, 4.0, np.nan], [np.nan, 2.0, np.nan], [3.0, 9.0, np.nan],
                   [7.0, 1.0, np.nan]])
-    out = _nanmedian_first_axis(x)
+    out = nanmedian_columns(x)
     assert out[0] == 3.0 and out[1] == 3.0 and np.isnan(out[2])
     rng = np.random.default_rng(5)
     d = rng.random((301, 9, 9)) * 500
     d[rng.random(d.shape) < 0.2] = np.nan
     with np.errstate(invalid="ignore"):
-        assert np.array_equal(_nanmedian_first_axis(d), np.nanmedian(d, axis=0), equal_nan=True)
+        assert np.array_equal(nanmedian_columns(d), np.nanmedian(d, axis=0), equal_nan=True)
 
 
 def test_swaps_pair_distances_equal_the_direct_norms():

@@ -11,6 +11,7 @@ from mocapfix.cleaning import clean_motion
 from mocapfix.config import load_config
 from mocapfix.core.presets import resolve_config
 from mocapfix.pipeline.cuts import cut_frames, jumps, take_cuts
+from mocapfix.pipeline.held import HeldFrames
 from mocapfix.pipeline.windows import Windows, pieces
 from mocapfix.quality.report import build_report
 from tests.conftest import need, shared, shared_files
@@ -113,7 +114,7 @@ def test_cuts_are_found_on_the_distinct_frames_of_a_take_with_held_frames():
     base = read(shared("c3d/cmu_85_02.c3d"))
     loop, _ = _looped(base)
     doubled = loop.replace(positions=loop.positions.repeat(2, axis=0))
-    assert cut_frames(doubled) == [2 * f for f in range(240, 3000, 240)]
+    assert cut_frames(doubled, HeldFrames.find(doubled)) == [2 * f for f in range(240, 3000, 240)]
     pipeline = load_config(resolve_config("default"))
     result = clean_motion(doubled, pipeline)
     once = clean_motion(loop, pipeline).cleaned.positions
