@@ -134,15 +134,21 @@ def timing(motion: Motion) -> dict:
     return out
 
 
-def outlier_flags(motion: Motion) -> np.ndarray:
-    """(T, J) samples the ``spikes`` cleaner with its default settings would flag."""
+def outlier_flags(motion: Motion, cuts=()) -> np.ndarray:
+    """(T, J) samples the ``spikes`` cleaner with its default settings would flag, on each
+    take between ``cuts`` (the frames where the take jumps as a whole,
+    :mod:`mocapfix.pipeline.cuts`) as ``clean`` cleans them: a join is no outlier."""
     T, J = motion.positions.shape[:2]
-    if T < 5 or J == 0:
-        return np.zeros((T, J), bool)
+    flags = np.zeros((T, J), bool)
+    if J == 0:
+        return flags
     det = build("spikes")
     half = max(1, int(round(det.frames("window", motion) / 2.0)))
-    flags, _ = hampel_flags(motion.positions, half, det["k"], det.length("min_jump", motion),
-                            det["passes"])
+    edges = [0, *cuts, T]
+    for a, b in zip(edges[:-1], edges[1:]):
+        if b - a >= 5:
+            flags[a:b], _ = hampel_flags(motion.positions[a:b], half, det["k"],
+                                         det.length("min_jump", motion), det["passes"])
     return flags & ~motion.missing
 
 
@@ -188,15 +194,15 @@ def measure_input(motion: Motion, *, swaps: bool = True, outliers: bool = True,
     span = take_frames(missing, marker)
     count, longest, (col, start, length) = gap_runs(missing[span])
     start = start + span.start
-    flags = outlier_flags(motion) if outliers else np.zeros((T, J), bool)
+    held = HeldFrames.find(motion)
+    cuts = cut_frames(motion, held)
+    flags = outlier_flags(motion, cuts) if outliers else np.zeros((T, J), bool)
     observed = (~missing).sum(axis=0)
     T_take = span.stop - span.start
     jit = jitter(motion)
     bones = bones_of(motion)
     bvar = bone_variation(motion.positions, bones)
     jbvar = per_joint_bone_variation(bvar, bones, J)
-    held = HeldFrames.find(motion)
-    cuts = cut_frames(motion, held)
     joints = []
     for j in range(J):
         joints.append({

@@ -13,6 +13,7 @@ from mocapfix.core.presets import resolve_config
 from mocapfix.pipeline.cuts import cut_frames, jumps, take_cuts
 from mocapfix.pipeline.held import HeldFrames
 from mocapfix.pipeline.windows import Windows, pieces
+from mocapfix.quality.measure import outlier_flags
 from mocapfix.quality.report import build_report
 from tests.conftest import need, shared, shared_files
 
@@ -164,6 +165,22 @@ def test_a_joined_take_in_windows_is_each_take_in_its_windows():
     assert any(n.startswith("cleaned in 6 windows of 700 frames") and n.endswith(
         "cut with no overlap where the take jumps as a whole (1 frame)") for n in notes)
     assert any(n.startswith("the take jumps as a whole at 1 frame (1995)") for n in notes)
+
+
+def test_check_counts_no_outlier_at_a_cut():
+    """``check``'s outlier figure takes the takes between the cuts as ``clean`` does: at
+    the join of 85_02's halves (50 cm apart) the spike test on the whole take flags every
+    marker, on the two takes none; the flags are each half's own."""
+    base = read(shared("c3d/cmu_85_02.c3d")).replace(source=None, confidence=None)
+    half = base.n_frames // 2
+    P = np.concatenate([base.positions[:half], base.positions[half:2 * half] + [500.0, 0, 0]])
+    joined = base.replace(positions=P)
+    around = slice(half - 3, half + 3)
+    assert outlier_flags(joined)[around].any(axis=0).mean() > 0.9
+    flags = outlier_flags(joined, [half])
+    assert not flags[around].any()
+    np.testing.assert_array_equal(flags, np.concatenate(
+        [outlier_flags(joined.slice_frames(0, half)), outlier_flags(joined.slice_frames(half))]))
 
 
 @pytest.mark.parametrize("subdir", ["c3d", "bvh", "asfamc", "kinect"])
