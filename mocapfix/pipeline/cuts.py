@@ -82,7 +82,7 @@ def take_cuts(motion: Motion) -> np.ndarray:
     jump is the median of its medians over the blocks: its median when the take is one
     block), so the memory does not grow with the take."""
     T = motion.n_frames
-    if T < 4:
+    if T < 4 or motion.n_joints < 3:          # a cut needs three points that jump
         return np.zeros(0, np.intp)
     P, unit = motion.positions, motion.metres_per_unit
     blocks = [slice(a, min(a + BLOCK, T)) for a in range(0, T, BLOCK)]

@@ -76,7 +76,9 @@ def _bones(motion: Motion, keep: np.ndarray) -> list[list[int]]:
 def up_axis(metres: np.ndarray) -> int:
     """The vertical axis of a capture of people: per frame, the extent of the points along
     each axis; a body is taller than it is wide or deep, so the axis of the largest median
-    extent is up (Y for BVH/AMC/Kinect, Z for most C3D)."""
+    extent is up (Y for BVH/AMC/Kinect, Z for most C3D); Z when nothing is seen."""
+    if not metres.size:                     # no point or no frame: no extent to compare
+        return 2
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)     # frames where nothing is seen
         extent = np.nanmax(metres, axis=1) - np.nanmin(metres, axis=1)      # (T, 3)
