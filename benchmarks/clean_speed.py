@@ -25,13 +25,19 @@
    joints, 56 s), ``mocapfix clean`` with the default config (rotation_outliers →
    rotation_denoise → write-back), best of three runs.
 
+5. ``--markers``: many markers. CMU 85_02 (41 markers) side by side with copies of
+   itself played from other frames, 1.5 m apart, to 41 / 82 / 164 / 328 markers, 2,000
+   frames, the ``mixed`` corruption; ``mocapfix clean`` wall time, peak resident memory
+   and each step's seconds (the swap search looks at every pair of markers on every
+   frame: its time grows with the pairs, its memory must not grow with the take).
+
 Every child process may write and use compiled bytecode (``PYTHONDONTWRITEBYTECODE`` is
 dropped from its environment: an installed tool runs from its ``__pycache__``; compiling
 mocapfix's modules from source costs ~0.2 s a run); case 1 and the start-up keep the best
 of three runs.
 
-    python benchmarks/clean_speed.py [--scaling | --animation | --single]
-        (only case 3 / case 4 / case 1)
+    python benchmarks/clean_speed.py [--scaling | --animation | --single | --markers]
+        (only case 3 / case 4 / case 1 / case 5)
 """
 from __future__ import annotations
 
@@ -224,8 +230,43 @@ def long_take():
     print(f"| CMU 05_02 ×6 (AMC) | {len(channels)} × {take.n_joints} | {t:.2f} |")
 
 
+def many_markers():
+    import json
+
+    base = read(DATA / "cmu_85_02.c3d")
+    T = 2000
+    loop = np.concatenate([base.positions, base.positions[::-1]])
+    cli = [sys.executable, "-m", "mocapfix.cli"]
+    print("\n| frames × markers | `mocapfix clean` wall (s) | peak RSS (MiB) | "
+          "swaps (s) | trust (s) | fill_ensemble (s) | tsmc (s) |")
+    print("|---|---:|---:|---:|---:|---:|---:|")
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        for copies in (1, 2, 4, 8):
+            parts, names = [], []
+            for c in range(copies):
+                part = loop[(np.arange(T) + c * 97) % len(loop)].copy()
+                part[..., 0] += 1500.0 * c
+                parts.append(part)
+                names += [f"S{c}:{n.split(':')[-1]}" for n in base.names]
+            take = base.replace(positions=np.concatenate(parts, axis=1), names=names,
+                                source=None, confidence=None)
+            corrupted, _ = occlusion(take, "mixed", 0)
+            src = tmp / f"m{copies}.c3d"
+            write(_fresh(take, corrupted.positions), src)
+            wall, peak = _peak_mib_of(cli + ["clean", str(src), "-o", str(tmp / f"o{copies}"),
+                                             "--report", "json"])
+            report = json.loads(next((tmp / f"o{copies}").glob("*.report.json")).read_text())
+            secs = {s["cleaner"]: s.get("seconds", 0.0) for s in report["steps"]}
+            print(f"| {T} × {take.n_joints} | {wall:.1f} | {peak:.0f} | "
+                  + " | ".join(f"{secs.get(n, 0.0):.2f}" for n in
+                               ("swaps", "trust", "fill_ensemble", "tsmc")) + " |")
+
+
 if __name__ == "__main__":
-    if "--scaling" in sys.argv:
+    if "--markers" in sys.argv:
+        many_markers()
+    elif "--scaling" in sys.argv:
         scaling()
     elif "--animation" in sys.argv:
         long_take()

@@ -13,6 +13,14 @@ from mocapfix.solvers.rigid import norms
 
 _CHUNK_ENTRIES = 200_000   # frames x pairs handled at once in the all-pairs scan (two threads
 #                            measured 0.11 s against 0.18 s with 400,000: each chunk stays in cache)
+#: ... but at least this many frames a chunk while they stay under _MAX_CHUNK_ENTRIES: with
+#: hundreds of markers a chunk of one frame spent half the scan's time on the per-chunk work
+#: (328 markers, 2,000 frames: 7.0 s, 3.4 s with chunks of 9 frames)
+_MIN_CHUNK_FRAMES = 8
+_MAX_CHUNK_ENTRIES = 2_000_000
+#: jobs the all-pairs scan's chunks are shared out in (each keeps one running maximum, so
+#: what is held does not grow with the take)
+_SCAN_JOBS = 16
 
 
 def _cross_distance(X, Y):
@@ -75,26 +83,44 @@ def rigid_templates(P):
     varies (median absolute deviation over frames), and the median distances.
 
     Returns partners (J, J) -- row j sorted by spread, j itself last -- and the median
-    distance matrix (J, J)."""
+    distance matrix (J, J). The distances of up to 600 frames are measured a block of
+    markers at a time, each block against the markers from its first on (a distance and
+    its statistics are the same both ways, bit for bit), so the temporaries stay near
+    :data:`_TEMPLATE_ENTRIES` values: all pairs at once were 600 × J² (2.3 GB with 328
+    markers)."""
     T = P.shape[0]
     step = max(1, T // 600)                      # a subsample is enough for medians
     S = P[::step]
-    D = _pair_distances(S)                       # (T', J, J)
-    med = nanmedian_columns(D)
-    spread = nanmedian_columns(np.abs(D - med))
+    n, J = S.shape[:2]
+    med, spread = np.empty((J, J)), np.empty((J, J))
+    rows = max(1, _TEMPLATE_ENTRIES // max(n * J, 1))
+    for a in range(0, J, rows):
+        b = min(a + rows, J)
+        D = _pair_distances(S, a, b)             # (T', b - a, J - a)
+        m = nanmedian_columns(D)
+        D -= m
+        s = nanmedian_columns(np.abs(D, out=D))
+        med[a:b, a:], spread[a:b, a:] = m, s
+        med[b:, a:b], spread[b:, a:b] = m[:, b - a:].T, s[:, b - a:].T
     spread = np.where(np.isnan(spread), np.inf, spread)
     np.fill_diagonal(spread, np.inf)
     return np.argsort(spread, axis=1, kind="stable"), med
 
 
-def _pair_distances(S):
-    """(T, J, J) distances between every two markers of (T, J, 3) ``S``: the same sums as
-    ``norms(S[:, :, None] - S[:, None])``, one coordinate at a time (6x faster than the
-    (T, J, J, 3) difference array)."""
+#: distances held at once by :func:`rigid_templates` (frames × markers × markers)
+_TEMPLATE_ENTRIES = 2_000_000
+
+
+def _pair_distances(S, first: int = 0, stop: int | None = None):
+    """(T, stop − first, J − first) distances from the markers ``first .. stop − 1`` of (T,
+    J, 3) ``S`` to the markers from ``first`` on (all of them to all by default): the same
+    sums as ``norms(S[:, :, None] - S[:, None])``, one coordinate at a time (6x faster than
+    the (T, J, J, 3) difference array)."""
+    stop = S.shape[1] if stop is None else stop
     d = None
     for k in range(3):
-        x = np.ascontiguousarray(S[..., k])
-        diff = x[:, :, None] - x[:, None, :]
+        x = np.ascontiguousarray(S[:, first:, k])
+        diff = x[:, :stop - first, None] - x[:, None, :]
         diff *= diff
         if d is None:
             d = diff
@@ -126,7 +152,7 @@ def candidate_pairs(P: np.ndarray, threshold: float) -> list[tuple[float, int, i
 
     t_all = np.arange(2, T - 1)
     iu = np.triu_indices(J, k=1)
-    chunk = max(1, _CHUNK_ENTRIES // (J * J))
+    chunk = max(1, _CHUNK_ENTRIES // (J * J), min(_MIN_CHUNK_FRAMES, _MAX_CHUNK_ENTRIES // (J * J)))
 
     def strongest(t):
         """The largest event strength of every pair on frames ``t`` (-inf: none)."""
@@ -153,10 +179,20 @@ def candidate_pairs(P: np.ndarray, threshold: float) -> list[tuple[float, int, i
             best = np.where(hit, keep - swap, -np.inf).max(axis=0)
         return best
 
-    # the chunks are independent (a maximum over them): on the task's threads
-    best = np.max(parallel_map(strongest, [t_all[lo:lo + chunk]
-                                           for lo in range(0, len(t_all), chunk)]),
-                  axis=0, initial=-np.inf)
+    def strongest_of(chunks):
+        """The largest event strength of every pair over ``chunks`` (a running maximum:
+        the chunks' own arrays are not held, with hundreds of markers a chunk's is MBs)."""
+        best = np.full(len(iu[0]), -np.inf)
+        for t in chunks:
+            np.maximum(best, strongest(t), out=best)
+        return best
+
+    # the chunks are independent (a maximum over them): on the task's threads, in
+    # _SCAN_JOBS runs of consecutive chunks
+    chunks = [t_all[lo:lo + chunk] for lo in range(0, len(t_all), chunk)]
+    per_job = -(-len(chunks) // _SCAN_JOBS)
+    jobs = [chunks[k:k + per_job] for k in range(0, len(chunks), per_job)]
+    best = np.max(parallel_map(strongest_of, jobs), axis=0, initial=-np.inf)
     found = np.flatnonzero(np.isfinite(best))
     order = found[np.lexsort((iu[1][found], iu[0][found], -best[found]))]
     return [(float(best[p]), int(iu[0][p]), int(iu[1][p])) for p in order]

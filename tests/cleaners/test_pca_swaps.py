@@ -381,3 +381,62 @@ def test_swaps_pair_distances_equal_the_direct_norms():
     got = _pair_distances(S)
     assert np.allclose(got, direct, rtol=1e-14, atol=1e-12, equal_nan=True)
     assert got[3, 2, 5] == pytest.approx(np.sqrt(np.sum((S[3, 2] - S[3, 5]) ** 2)))
+
+
+def test_swaps_templates_by_blocks_equal_all_pairs_at_once(monkeypatch):
+    # the templates were measured on all marker pairs at once: 600 × J² distances (2.3 GB
+    # with 328 markers); now a block of markers at a time against those after it
+    import warnings
+
+    import mocapfix.solvers.swaps as swaps
+
+    rng = np.random.default_rng(7)
+    P = rng.normal(size=(1300, 23, 3)) * 300 + rng.normal(size=(1, 23, 3)) * 1000
+    P[rng.random((1300, 23)) < 0.15] = np.nan
+    P[:, 5] = np.nan                                    # a marker never seen
+    S = P[::2]                                          # the templates' subsample (T // 600)
+    D = np.linalg.norm(S[:, :, None] - S[:, None], axis=-1)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)     # the never-seen marker's columns
+        med = np.nanmedian(D, axis=0)
+        spread = np.nanmedian(np.abs(D - med), axis=0)
+    spread = np.where(np.isnan(spread), np.inf, spread)
+    np.fill_diagonal(spread, np.inf)
+    for entries in (650 * 23, 650 * 23 * 4, 10**9):     # blocks of 1 and 4 markers, one block
+        monkeypatch.setattr(swaps, "_TEMPLATE_ENTRIES", entries)
+        partners, got = swaps.rigid_templates(P)
+        assert np.allclose(got, med, rtol=1e-12, atol=1e-9, equal_nan=True)
+        assert np.array_equal(np.isnan(got), np.isnan(med))
+        # each row's partners by their spread, the marker itself and the never-seen one last
+        assert np.array_equal(partners, np.argsort(spread, axis=1, kind="stable"))
+        assert np.array_equal(got, got.T, equal_nan=True)
+
+
+def test_swaps_all_pairs_scan_equals_the_pair_by_pair_gain(monkeypatch):
+    # the scan's chunks (at least 8 frames with many markers) and their running maxima per
+    # job must find each pair's strongest event as swap_gain/is_event find it pair by pair
+    import mocapfix.solvers.swaps as swaps
+
+    rng = np.random.default_rng(8)
+    T, J = 400, 9
+    P = np.cumsum(rng.normal(size=(T, J, 3)) * 3, axis=0) + rng.normal(size=(1, J, 3)) * 400
+    P[rng.random((T, J)) < 0.05] = np.nan
+    P[100:180, [2, 6]] = P[100:180, [6, 2]]             # two label exchanges
+    P[250:300, [0, 4]] = P[250:300, [4, 0]]
+    expected = []
+    for a in range(J):
+        for b in range(a + 1, J):
+            keep, swap, apart = swaps.swap_gain(P[:, a], P[:, b])
+            hit = swaps.is_event(keep, swap, apart, 20.0)
+            if hit.any():
+                expected.append((float(np.max((keep - swap)[hit])), a, b))
+    expected.sort(key=lambda e: (-e[0], e[1], e[2]))
+    assert {(a, b) for _, a, b in expected} >= {(2, 6), (0, 4)}
+    # one chunk of all 395 frames; chunks of 8 frames in 3 jobs; of one frame in 5 jobs
+    for entries, least, jobs in ((200_000, 8, 16), (1, 8, 3), (1, 1, 5)):
+        monkeypatch.setattr(swaps, "_CHUNK_ENTRIES", entries)
+        monkeypatch.setattr(swaps, "_MIN_CHUNK_FRAMES", least)
+        monkeypatch.setattr(swaps, "_SCAN_JOBS", jobs)
+        got = swaps.candidate_pairs(P, 20.0)
+        assert [(a, b) for _, a, b in got] == [(a, b) for _, a, b in expected]
+        assert np.allclose([s for s, _, _ in got], [s for s, _, _ in expected], rtol=1e-9)
