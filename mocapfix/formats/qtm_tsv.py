@@ -19,12 +19,14 @@ header, whose QTM versions wrote gaps as zeros, an exact ``0, 0, 0`` triple is m
 (``zero_missing=False`` turns that off). Writing back uses the file's own representation
 (zeros with the file's decimals, ``NaN``, or empty fields).
 
-Reading: names from ``MARKER_NAMES`` (as written), ``fps`` from ``FREQUENCY``, units mm
+Reading: names from ``MARKER_NAMES`` (as written), ``fps`` from ``FREQUENCY`` (``EXT``,
+which QTM writes for an external timebase in edge triggered mode: frames per second between
+the first and last rows' Frame and Time, noted; without those columns refused), units mm
 (QTM exports 3D data in millimetres), ``times`` from the Time column or the frame count.
 ``NO_OF_MARKERS`` must equal the number of names; a ``NO_OF_FRAMES`` that differs from the
 rows present is noted. Columns the column header names after the markers' X, Y, Z are not
-read (noted; kept as read and written back unchanged); rows without them are read too. Every other header line is kept verbatim for writing back.
-Malformations are one UnreadableFileError naming the line.
+read (noted; kept as read and written back unchanged); rows without them are read too.
+Every other header line is kept verbatim for writing back. Malformations are one UnreadableFileError naming the line.
 
 Why hand-written: the layout is a plain table behind a key/value header; no dependency
 reads it and writes it back unchanged. The file is held once, as its bytes with the offsets
@@ -81,7 +83,9 @@ def read(path, fps: float | None = None, units: str | None = None,
                                             "MARKER_NAMES before the data)", line=i + 1)
     notes: list[str] = []
     rate_line, rate_fields = header["FREQUENCY"]
-    rate = tt.positive_rate(path, (rate_fields or [""])[0], rate_line + 1, "FREQUENCY")
+    token = (rate_fields or [""])[0]
+    external = token.strip().upper() == "EXT"   # external timebase, edge triggered: no rate
+    rate = None if external else tt.positive_rate(path, token, rate_line + 1, "FREQUENCY")
     names_line, names = header["MARKER_NAMES"]
     names = [n for n in names]
     while names and not names[-1].strip():
@@ -146,10 +150,13 @@ def read(path, fps: float | None = None, units: str | None = None,
     declared = _count(path, header, "NO_OF_FRAMES")
     if declared != T:
         notes.append(f"NO_OF_FRAMES says {declared} but the file holds {T} rows")
-    rate = float(fps) if fps is not None else rate
     if lead:
         times = tt.key_column(path, keys[:, 1], first, "Time") - keys[0, 1]
-    else:
+    if fps is not None:
+        rate = float(fps)
+    elif external:
+        rate = _time_rate(path, keys if lead else None, rate_line + 1, notes)
+    if not lead:
         times = np.arange(T) / rate
     source = tt.TableSource(
         layout=LAYOUT, text=text, sep="\t", names=names,
@@ -178,6 +185,24 @@ def _rows(path, text, first: int, stop: int, n_fields: int, cols: np.ndarray, le
                              f"a data row of {width} fields", _MISSING)
     except UnreadableFileError:
         raise error from None
+
+
+def _time_rate(path, keys, line: int, notes: list[str]) -> float:
+    """The frame rate of a file whose FREQUENCY is ``EXT`` (QTM's external timebase in edge
+    triggered mode, line ``line``): frames per second between its first and last rows, by
+    their Frame and Time columns (``keys``; None when it has none)."""
+    frames = keys[-1] - keys[0] if keys is not None and len(keys) > 1 else np.zeros(2)
+    if keys is None or not (frames[0] > 0 and frames[1] > 0):
+        why = ("the file has no Frame and Time columns" if keys is None else
+               "the file holds one row" if len(keys) < 2 else
+               "its Frame and Time columns do not increase from the first row to the last")
+        raise UnreadableFileError(path, f"FREQUENCY is EXT (external timebase) and {why}: no "
+                                        "frame rate to read", line=line)
+    rate = tt.positive_rate(path, f"{frames[0] / frames[1]:.9g}", line,
+                            "FREQUENCY EXT: the Frame and Time columns' rate")
+    notes.append(f"FREQUENCY is EXT (external timebase): {rate:g} Hz taken from the Frame "
+                 "and Time columns")
+    return rate
 
 
 def _header(text) -> tuple[dict[str, tuple[int, list[str]]], int]:

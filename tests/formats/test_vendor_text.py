@@ -344,3 +344,41 @@ def test_qtm_rows_holding_columns_after_the_markers_on_some_rows_only(tmp_path):
         formats.read(path)
     assert info.value.line == at + 3
     assert "65 fields where 66 were expected" in str(info.value)
+
+
+def test_qtm_external_timebase_frequency_ext_takes_the_rate_from_frame_and_time(tmp_path):
+    """QTM writes ``FREQUENCY<TAB>EXT`` for an external timebase in edge triggered mode (QTM
+    manual, "Motion data (.tsv)"). Such a file was refused ("FREQUENCY 'EXT' is not a
+    number") even when the caller gave fps; now the rate is the frames per second between
+    its first and last rows' Frame and Time, noted, and the file writes back unchanged."""
+    source = VENDOR / "qtm_hand_embodiment_recording.tsv"
+    text = source.read_bytes().decode()
+    assert "\nFREQUENCY\t100\n" in text
+    path = tmp_path / "ext.tsv"
+    path.write_bytes(text.replace("\nFREQUENCY\t100\n", "\nFREQUENCY\tEXT\n").encode())
+    plain = formats.read(source)
+    motion = formats.read(path)
+    rows = [r for r in _rows("qtm_hand_embodiment_recording.tsv", "\t") if r and r[0].isdigit()]
+    frames, times = float(rows[-1][0]) - float(rows[0][0]), float(rows[-1][1]) - float(rows[0][1])
+    assert motion.fps == pytest.approx(frames / times) and motion.fps == pytest.approx(100.0)
+    assert any("FREQUENCY is EXT" in n and "Frame and Time" in n for n in motion.notes)
+    np.testing.assert_array_equal(motion.positions, plain.positions)
+    np.testing.assert_array_equal(motion.times, plain.times)
+    assert formats.read(path, fps=50).fps == 50.0
+    out = tmp_path / "out.tsv"
+    formats.write(motion, out)
+    assert out.read_bytes() == path.read_bytes()
+
+
+def test_qtm_frequency_ext_without_frame_and_time_is_named(tmp_path):
+    """The older layout (no Frame/Time columns) with FREQUENCY EXT holds no rate: one
+    message naming the FREQUENCY line, or the rate the caller gives."""
+    text = (VENDOR / "qtm_old_doc.tsv").read_bytes().decode()
+    path = tmp_path / "ext_old.tsv"
+    path.write_bytes(text.replace("FREQUENCY\t240", "FREQUENCY\tEXT").encode())
+    with pytest.raises(UnreadableFileError) as info:
+        formats.read(path)
+    assert info.value.line == 4
+    assert "FREQUENCY is EXT (external timebase) and the file has no Frame and Time columns" \
+        in str(info.value)
+    assert formats.read(path, fps=240).fps == 240.0
