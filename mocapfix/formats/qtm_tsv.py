@@ -19,11 +19,14 @@ header, whose QTM versions wrote gaps as zeros, an exact ``0, 0, 0`` triple is m
 (``zero_missing=False`` turns that off). Writing back uses the file's own representation
 (zeros with the file's decimals, ``NaN``, or empty fields).
 
-Reading: names from ``MARKER_NAMES`` (as written), ``fps`` from ``FREQUENCY``, units mm
+Reading: names from ``MARKER_NAMES`` (as written), ``fps`` from ``FREQUENCY`` (``EXT``,
+which QTM writes for an external timebase in edge triggered mode: frames per second between
+the first and last rows' Frame and Time, noted; without those columns refused), units mm
 (QTM exports 3D data in millimetres), ``times`` from the Time column or the frame count.
 ``NO_OF_MARKERS`` must equal the number of names; a ``NO_OF_FRAMES`` that differs from the
-rows present is noted. Every other header line is kept verbatim for writing back.
-Malformations are one UnreadableFileError naming the line.
+rows present is noted. Columns the column header names after the markers' X, Y, Z are not
+read (noted; kept as read and written back unchanged); rows without them are read too.
+Every other header line is kept verbatim for writing back. Malformations are one UnreadableFileError naming the line.
 
 Why hand-written: the layout is a plain table behind a key/value header; no dependency
 reads it and writes it back unchanged. The file is held once, as its bytes with the offsets
@@ -52,6 +55,8 @@ LAYOUT = "qtm_tsv"
 _KEY = re.compile(r"^[A-Z][A-Z0-9_]*$")
 #: the header keys this reader needs
 _REQUIRED = ("NO_OF_FRAMES", "NO_OF_MARKERS", "FREQUENCY", "MARKER_NAMES")
+#: what a data row holds for a missing coordinate
+_MISSING = ("", "NaN", "nan")
 
 
 def sniff(head: bytes) -> bool:
@@ -78,7 +83,9 @@ def read(path, fps: float | None = None, units: str | None = None,
                                             "MARKER_NAMES before the data)", line=i + 1)
     notes: list[str] = []
     rate_line, rate_fields = header["FREQUENCY"]
-    rate = tt.positive_rate(path, (rate_fields or [""])[0], rate_line + 1, "FREQUENCY")
+    token = (rate_fields or [""])[0]
+    external = token.strip().upper() == "EXT"   # external timebase, edge triggered: no rate
+    rate = None if external else tt.positive_rate(path, token, rate_line + 1, "FREQUENCY")
     names_line, names = header["MARKER_NAMES"]
     names = [n for n in names]
     while names and not names[-1].strip():
@@ -115,19 +122,22 @@ def read(path, fps: float | None = None, units: str | None = None,
                                             f"{tt.quote(columns[bad] if bad < len(columns) else '')}"
                                             f", expected {expected[bad]!r}", line=column_line + 1)
         lead, n_fields = 2, len(columns)
+        beyond = columns[2 + 3 * J:]
     else:
         width = first_row.rstrip("\t").count("\t") + 1
         lead = 2 if width == 2 + 3 * J else 0
-        n_fields = lead + 3 * J
-    cols = np.arange(n_fields) if lead else np.arange(3 * J)
-    missing_tokens = ("", "NaN", "nan")
-    keys, flat = tt.parse_rows(path, text, first, stop, "\t", n_fields, cols,
-                               lead, f"a data row of {n_fields} fields", missing_tokens)
+        n_fields, beyond = lead + 3 * J, []
+    cols = np.arange(lead + 3 * J)
+    keys, flat = _rows(path, text, first, stop, n_fields, cols, lead)
+    if beyond:
+        many = len(beyond) > 1
+        notes.append(f"{len(beyond)} column{'s' if many else ''} after the markers "
+                     f"({tt.quote(beyond[0])}{', ...' if many else ''}) not read: kept as read")
     T = len(flat)
     positions = tt.markers(flat, notes)
     zeros = np.all(positions == 0.0, axis=2)
     as_missing = (not headed) if zero_missing is None else bool(zero_missing)
-    decimals = tt.max_decimals(first_row.split("\t")[lead:])
+    decimals = tt.max_decimals(first_row.split("\t")[lead:lead + 3 * J])
     token = _missing_token(text, first, stop, as_missing, decimals)
     if zeros.any():
         if as_missing:
@@ -140,10 +150,13 @@ def read(path, fps: float | None = None, units: str | None = None,
     declared = _count(path, header, "NO_OF_FRAMES")
     if declared != T:
         notes.append(f"NO_OF_FRAMES says {declared} but the file holds {T} rows")
-    rate = float(fps) if fps is not None else rate
     if lead:
         times = tt.key_column(path, keys[:, 1], first, "Time") - keys[0, 1]
-    else:
+    if fps is not None:
+        rate = float(fps)
+    elif external:
+        rate = _time_rate(path, keys if lead else None, rate_line + 1, notes)
+    if not lead:
         times = np.arange(T) / rate
     source = tt.TableSource(
         layout=LAYOUT, text=text, sep="\t", names=names,
@@ -152,6 +165,44 @@ def read(path, fps: float | None = None, units: str | None = None,
         decimals=decimals, extra={"headed": headed, "zero_missing": as_missing})
     return Motion(positions, names, rate, units="mm", metres_per_unit=0.001, times=times,
                   source=source, notes=notes, kinds=["marker"] * J)
+
+
+def _rows(path, text, first: int, stop: int, n_fields: int, cols: np.ndarray, lead: int):
+    """(keys, marker columns) of the data rows: ``n_fields`` fields each, as the column
+    header names (columns after the markers -- any the header names -- are not read),
+    else exactly the ``lead + 3J`` the frame, time and markers need; when neither fits,
+    the error for ``n_fields``."""
+    width = len(cols)
+    try:
+        return tt.parse_rows(path, text, first, stop, "\t", n_fields, cols, lead,
+                             f"a data row of {n_fields} fields", _MISSING)
+    except UnreadableFileError as exc:
+        if n_fields == width:
+            raise
+        error = exc
+    try:
+        return tt.parse_rows(path, text, first, stop, "\t", width, cols, lead,
+                             f"a data row of {width} fields", _MISSING)
+    except UnreadableFileError:
+        raise error from None
+
+
+def _time_rate(path, keys, line: int, notes: list[str]) -> float:
+    """The frame rate of a file whose FREQUENCY is ``EXT`` (QTM's external timebase in edge
+    triggered mode, line ``line``): frames per second between its first and last rows, by
+    their Frame and Time columns (``keys``; None when it has none)."""
+    frames = keys[-1] - keys[0] if keys is not None and len(keys) > 1 else np.zeros(2)
+    if keys is None or not (frames[0] > 0 and frames[1] > 0):
+        why = ("the file has no Frame and Time columns" if keys is None else
+               "the file holds one row" if len(keys) < 2 else
+               "its Frame and Time columns do not increase from the first row to the last")
+        raise UnreadableFileError(path, f"FREQUENCY is EXT (external timebase) and {why}: no "
+                                        "frame rate to read", line=line)
+    rate = tt.positive_rate(path, f"{frames[0] / frames[1]:.9g}", line,
+                            "FREQUENCY EXT: the Frame and Time columns' rate")
+    notes.append(f"FREQUENCY is EXT (external timebase): {rate:g} Hz taken from the Frame "
+                 "and Time columns")
+    return rate
 
 
 def _header(text) -> tuple[dict[str, tuple[int, list[str]]], int]:

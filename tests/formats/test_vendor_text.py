@@ -277,3 +277,108 @@ def test_a_fresh_file_holds_the_same_positions_in_metres_whatever_the_unit(tmp_p
     metres = back.positions * back.metres_per_unit - amc.positions * amc.metres_per_unit
     assert np.nanmax(np.abs(metres)) < 1e-6
     assert any("are converted" in n for n in formats.losses(amc, fmt))
+
+
+@pytest.mark.parametrize("extra_head,extra_cell", [
+    (["Extra 1"], lambda t: [f"{t * 0.5:.3f}"]),                         # 1 numeric column
+    (["Extra 1", "Extra 2"], lambda t: [f"{t:.3f}", "0.000"]),           # 2 (not 3J wide)
+    (["P X", "P Y", "P Z"], lambda t: ["1.000", "2.000", f"{t:.3f}"]),   # 3: a marker's width
+    (["Type"], lambda t: ["Measured" if t % 2 else "Gap-filled"]),       # words
+], ids=["one", "two", "three", "words"])
+def test_qtm_columns_after_the_markers_are_kept_not_read(tmp_path, extra_head, extra_cell):
+    """A headed QTM TSV whose column header names columns after the markers' X, Y, Z
+    (rows holding them): the markers are read as without them, the extra columns noted,
+    kept and written back unchanged. They used to reach the marker array: a reshape
+    ValueError ("cannot reshape array of size 21"), or, three of them, a 22nd marker
+    without a name ("21 names for 22 joints")."""
+    source = VENDOR / "qtm_hand_embodiment_recording.tsv"
+    lines = source.read_bytes().decode().split("\n")
+    at = next(i for i, line in enumerate(lines) if line.startswith("Frame\t"))
+    assert lines[at].endswith("Z\t")                     # the real export's trailing tab
+    lines[at] += "\t".join(extra_head)
+    for t in range(at + 1, len(lines)):
+        if lines[t]:
+            lines[t] += "\t" + "\t".join(extra_cell(t))
+    path = tmp_path / "extra.tsv"
+    path.write_bytes("\n".join(lines).encode())
+    plain = formats.read(source)
+    motion = formats.read(path)
+    assert motion.names == plain.names and len(motion.names) == 21
+    np.testing.assert_array_equal(motion.positions, plain.positions)
+    np.testing.assert_array_equal(motion.times, plain.times)
+    n = len(extra_head)
+    assert any(f"{n} column{'s' if n > 1 else ''} after the markers ({extra_head[0]!r}" in note
+               for note in motion.notes)
+    out = tmp_path / "out.tsv"
+    formats.write(motion, out)
+    assert out.read_bytes() == path.read_bytes()
+    motion.positions[0, 20] = [1.0, 2.0, 3.0]
+    formats.write(motion, out)
+    row = out.read_bytes().decode().split("\n")[at + 1].split("\t")
+    assert row[2 + 3 * 20:2 + 3 * 21] == ["1.000", "2.000", "3.000"]
+    assert row[2 + 3 * 21:] == extra_cell(at + 1)
+
+
+def test_qtm_header_columns_after_the_markers_that_no_row_holds(tmp_path):
+    """The column header names a column after the markers that the rows do not hold: the
+    rows are read with the frame, time and marker fields they have."""
+    source = VENDOR / "qtm_hand_embodiment_recording.tsv"
+    text = source.read_bytes().decode()
+    path = tmp_path / "named.tsv"
+    path.write_bytes(text.replace("pillow_right Z\t", "pillow_right Z\tExtra\t", 1).encode())
+    motion = formats.read(path)
+    np.testing.assert_array_equal(motion.positions, formats.read(source).positions)
+
+
+def test_qtm_rows_holding_columns_after_the_markers_on_some_rows_only(tmp_path):
+    """Rows of two widths (the header naming the extra column): refused naming the first
+    row without it, not a traceback."""
+    source = VENDOR / "qtm_hand_embodiment_recording.tsv"
+    lines = source.read_bytes().decode().split("\n")
+    at = next(i for i, line in enumerate(lines) if line.startswith("Frame\t"))
+    lines[at] += "Extra"
+    lines[at + 1] += "\t7.0"                     # frame 1 holds it, frame 2 does not
+    path = tmp_path / "ragged.tsv"
+    path.write_bytes("\n".join(lines).encode())
+    with pytest.raises(UnreadableFileError) as info:
+        formats.read(path)
+    assert info.value.line == at + 3
+    assert "65 fields where 66 were expected" in str(info.value)
+
+
+def test_qtm_external_timebase_frequency_ext_takes_the_rate_from_frame_and_time(tmp_path):
+    """QTM writes ``FREQUENCY<TAB>EXT`` for an external timebase in edge triggered mode (QTM
+    manual, "Motion data (.tsv)"). Such a file was refused ("FREQUENCY 'EXT' is not a
+    number") even when the caller gave fps; now the rate is the frames per second between
+    its first and last rows' Frame and Time, noted, and the file writes back unchanged."""
+    source = VENDOR / "qtm_hand_embodiment_recording.tsv"
+    text = source.read_bytes().decode()
+    assert "\nFREQUENCY\t100\n" in text
+    path = tmp_path / "ext.tsv"
+    path.write_bytes(text.replace("\nFREQUENCY\t100\n", "\nFREQUENCY\tEXT\n").encode())
+    plain = formats.read(source)
+    motion = formats.read(path)
+    rows = [r for r in _rows("qtm_hand_embodiment_recording.tsv", "\t") if r and r[0].isdigit()]
+    frames, times = float(rows[-1][0]) - float(rows[0][0]), float(rows[-1][1]) - float(rows[0][1])
+    assert motion.fps == pytest.approx(frames / times) and motion.fps == pytest.approx(100.0)
+    assert any("FREQUENCY is EXT" in n and "Frame and Time" in n for n in motion.notes)
+    np.testing.assert_array_equal(motion.positions, plain.positions)
+    np.testing.assert_array_equal(motion.times, plain.times)
+    assert formats.read(path, fps=50).fps == 50.0
+    out = tmp_path / "out.tsv"
+    formats.write(motion, out)
+    assert out.read_bytes() == path.read_bytes()
+
+
+def test_qtm_frequency_ext_without_frame_and_time_is_named(tmp_path):
+    """The older layout (no Frame/Time columns) with FREQUENCY EXT holds no rate: one
+    message naming the FREQUENCY line, or the rate the caller gives."""
+    text = (VENDOR / "qtm_old_doc.tsv").read_bytes().decode()
+    path = tmp_path / "ext_old.tsv"
+    path.write_bytes(text.replace("FREQUENCY\t240", "FREQUENCY\tEXT").encode())
+    with pytest.raises(UnreadableFileError) as info:
+        formats.read(path)
+    assert info.value.line == 4
+    assert "FREQUENCY is EXT (external timebase) and the file has no Frame and Time columns" \
+        in str(info.value)
+    assert formats.read(path, fps=240).fps == 240.0
