@@ -17,7 +17,7 @@ from mocapfix.core.motion import Motion
 from mocapfix.pipeline.held import HeldFrames
 from mocapfix.pipeline.steps import Pipeline, StepRecord, written_fill_errors
 from mocapfix.pipeline.cuts import note as cuts_note
-from mocapfix.pipeline.cuts import take_cuts
+from mocapfix.pipeline.cuts import cut_points, take_cuts
 from mocapfix.pipeline.windows import (Pieces, Windows, merge_info, over_budget, paste, pieces,
                                        point_cuts, shifted_info, window_for)
 from mocapfix.quality.render import ranked
@@ -49,7 +49,7 @@ def clean_motion(motion: Motion, pipeline: Pipeline, to: str | None = None,
     distinct = motion if held is None else held.take(motion)
     if windows == "budget":
         windows = window_for(pipeline.memory_budget, distinct.n_frames, motion.n_joints, motion.fps)
-    at = take_cuts(distinct)
+    at = take_cuts(distinct, cut_points(motion))
     plan = pieces(distinct.n_frames, windows, at)
     if plan is None:
         cleaned, records, residual = _clean_span(distinct, pipeline, why)

@@ -27,13 +27,15 @@ median jump is the cut, when it is the only large one (the whole body one frame 
 back has two, 1.5 times its offset each) and the frames around are quiet. Cuts closer
 than :data:`MIN_PART_S` to each other or to an end of the take are a burst of whole-body
 errors (a tracker's glitch of a few frames), not a new take: they are left to the
-cleaners.
+cleaners. The points are the take's markers or joints (:func:`cut_points`): a C3D's model
+outputs and unlabelled trajectories are not measured.
 """
 from __future__ import annotations
 
 import numpy as np
 
 from mocapfix.core.motion import Motion
+from mocapfix.pipeline.selection import not_cleaned
 from mocapfix.solvers.nanstats import nanmedian_columns
 
 #: frames measured at a time (the temporaries stay a few MB)
@@ -52,18 +54,22 @@ QUIET = 4
 MIN_PART_S = 0.5
 
 
-def jumps(positions: np.ndarray, frames: slice | None = None) -> np.ndarray:
+def jumps(positions: np.ndarray, frames: slice | None = None,
+          cols: np.ndarray | None = None) -> np.ndarray:
     """(T, J) float32 ``e_t`` of every point (see the module docstring), of ``frames``
-    (all of them by default); NaN where the point is missing at ``t − 1`` or ``t`` or has
-    no step on either side, and at ``t = 0``."""
-    T, J = positions.shape[:2]
+    (all of them by default) and the points ``cols`` (indices; all by default); NaN where
+    the point is missing at ``t − 1`` or ``t`` or has no step on either side, and at
+    ``t = 0``."""
+    T = positions.shape[0]
+    J = positions.shape[1] if cols is None else len(cols)
     first, last, _ = (frames or slice(None)).indices(T)
     out = np.full((last - first, J), np.nan, np.float32)
     for a in range(max(first, 1), last, BLOCK):
         b = min(a + BLOCK, last)
         # steps[k]: the step into frame a − 1 + k (NaN where there is none), k = 0 .. b − a + 1
         lo, hi = max(a - 2, 0), min(b + 1, T)
-        d = np.diff(positions[lo:hi], axis=0)                   # d[i]: into frame lo + 1 + i
+        block = positions[lo:hi] if cols is None else positions[lo:hi, cols]
+        d = np.diff(block, axis=0)                              # d[i]: into frame lo + 1 + i
         steps = np.full((b - a + 2, J, 3), np.nan)
         off = a - 2 - lo
         k0, k1 = max(0, -off), min(b - a + 2, len(d) - off)
@@ -75,33 +81,44 @@ def jumps(positions: np.ndarray, frames: slice | None = None) -> np.ndarray:
     return out
 
 
-def take_cuts(motion: Motion) -> np.ndarray:
+def cut_points(motion: Motion) -> np.ndarray | None:
+    """The points a cut is looked for on: the markers or joints, not the model outputs a
+    file lists nor unlabelled trajectories (by the default policy,
+    :mod:`mocapfix.pipeline.unlabelled`: a raw export's hundreds of fragments are not the
+    take's points, and measuring them cost most of a clean); indices, None for all. The
+    same for ``clean`` and ``check``/``info`` whatever their configs say."""
+    keep = np.array([why is None for why in not_cleaned(motion)], bool)
+    return None if keep.all() else np.flatnonzero(keep)
+
+
+def take_cuts(motion: Motion, points: np.ndarray | None = None) -> np.ndarray:
     """The frames where ``motion`` jumps as a whole (the first frame of the take after each
-    cut), sorted; empty when there are none (see the module docstring). The take is
-    measured :data:`BLOCK` frames at a time, twice but for the first block (a point's usual
-    jump is the median of its medians over the blocks: its median when the take is one
-    block), so the memory does not grow with the take."""
+    cut), sorted; empty when there are none (see the module docstring), measured on the
+    ``points`` (indices, all by default; :func:`cut_points`). The take is measured
+    :data:`BLOCK` frames at a time, twice but for the first block (a point's usual jump is
+    the median of its medians over the blocks: its median when the take is one block), so
+    the memory does not grow with the take."""
     T = motion.n_frames
-    if T < 4 or motion.n_joints < 3:          # a cut needs three points that jump
-        return np.zeros(0, np.intp)
+    if T < 4 or (motion.n_joints if points is None else len(points)) < 3:
+        return np.zeros(0, np.intp)               # a cut needs three points that jump
     P, unit = motion.positions, motion.metres_per_unit
     blocks = [slice(a, min(a + BLOCK, T)) for a in range(0, T, BLOCK)]
-    first = jumps(P, blocks[0])                    # a take of one block: measured once
-    medians = np.array([nanmedian_columns(first if k == 0 else jumps(P, b))
+    first = jumps(P, blocks[0], points)            # a take of one block: measured once
+    medians = np.array([nanmedian_columns(first if k == 0 else jumps(P, b, points))
                         for k, b in enumerate(blocks)])
     usual = 1.4826 * nanmedian_columns(medians)
-    points = int(np.isfinite(medians).any(axis=0).sum())
+    n_points = int(np.isfinite(medians).any(axis=0).sum())
     usual = np.maximum(np.nan_to_num(usual, nan=np.inf), FLOOR_M / unit)
     share, size = np.zeros(T), np.zeros(T)
     frames = []
     for k, b in enumerate(blocks):
-        e = first if k == 0 else jumps(P, b)
+        e = first if k == 0 else jumps(P, b, points)
         with np.errstate(invalid="ignore"):
             big = (e > RATIO * usual) & (e > MIN_JUMP_M / unit)
         n_has, n_big = (~np.isnan(e)).sum(axis=1), big.sum(axis=1)
         share[b] = n_big / np.maximum(n_has, 1)
         hit = np.flatnonzero((n_big >= np.maximum(SHARE * n_has, 3))
-                             & (n_has >= max(points / 2, 3)))
+                             & (n_has >= max(n_points / 2, 3)))
         size[b.start + hit] = np.median(np.where(big[hit], e[hit], 0.0), axis=1)
         frames.append(b.start + hit)
     frames = np.concatenate(frames)
@@ -138,5 +155,5 @@ def cut_frames(motion: Motion, held) -> list[int]:
     """The take's frames where it jumps as a whole, found on its distinct frames as
     ``clean`` finds them: ``held`` is the take's
     :meth:`HeldFrames.find <mocapfix.pipeline.held.HeldFrames.find>` (None: no held frames)."""
-    at = take_cuts(motion if held is None else held.take(motion))
+    at = take_cuts(motion if held is None else held.take(motion), cut_points(motion))
     return (at if held is None else held.kept[at]).tolist()

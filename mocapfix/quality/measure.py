@@ -196,7 +196,11 @@ def measure_input(motion: Motion, *, swaps: bool = True, outliers: bool = True,
     start = start + span.start
     held = HeldFrames.find(motion)
     cuts = cut_frames(motion, held)
-    flags = outlier_flags(motion, cuts) if outliers else np.zeros((T, J), bool)
+    # the outlier test on the points the rules judge: a raw export's hundreds of
+    # unlabelled fragments (skipped) cost most of a check and were reported, not judged
+    flags = np.zeros((T, J), bool)
+    if outliers and marker.any():
+        flags[:, marker] = outlier_flags(motion if marker.all() else take(motion, marker), cuts)
     observed = (~missing).sum(axis=0)
     T_take = span.stop - span.start
     jit = jitter(motion)
@@ -212,7 +216,8 @@ def measure_input(motion: Motion, *, swaps: bool = True, outliers: bool = True,
             "longest_gap_s": finite(longest[j] / fps) if longest[j] else 0.0,
             "longest_gap_frames": int(longest[j]),
             "never_seen": bool(T and observed[j] == 0),
-            "outliers": finite(flags[:, j].sum() / observed[j]) if observed[j] else 0.0,
+            "outliers": (None if why[j] else
+                         finite(flags[:, j].sum() / observed[j]) if observed[j] else 0.0),
             "jitter": finite(jit[j]),
             "bone_variation": finite(jbvar[j]),
             **({"skipped": why[j]} if why[j] else {}),

@@ -183,6 +183,34 @@ def test_check_counts_no_outlier_at_a_cut():
         [outlier_flags(joined.slice_frames(0, half)), outlier_flags(joined.slice_frames(half))]))
 
 
+def test_cuts_are_looked_for_on_the_labelled_markers_only():
+    """A raw export's unlabelled fragments (Vicon ``*N``) are not the take's points: 30 of
+    them jumping together at frame 400 beside 12 smooth markers are no cut (they were,
+    counted with the markers), a jump of the 12 markers is one whatever the fragments
+    do; ``check``'s outlier figure leaves the fragments unmeasured (None), as its rules
+    leave them unjudged."""
+    rng = np.random.default_rng(3)
+    P = _walkers() * 1000.0
+    frags = np.full((P.shape[0], 30, 3), np.nan)
+    for u in range(30):
+        start = int(rng.integers(380, 400))
+        frags[start:start + 40, u] = rng.normal(0, 800, 3) + np.arange(40)[:, None] * [1.0, 0, 0]
+    frags[400:] += [0.0, 300.0, 0.0]                # every fragment jumps 30 cm into frame 400
+    names = [f"m{j}" for j in range(12)] + [f"*{u}" for u in range(30)]
+    m = Motion(np.concatenate([P, frags], axis=1), names, 120.0)
+    assert take_cuts(m).tolist() == [400]           # all 42 points measured
+    assert cut_frames(m, None) == [] and take_cuts(m, np.arange(12)).size == 0
+    joined = m.positions.copy()
+    joined[700:, :12] += [0.0, 120.0, 0.0]
+    assert cut_frames(m.replace(positions=joined), None) == [700]
+    report = build_report(clean_motion(m.replace(positions=joined), load_config(resolve_config("default"))))
+    assert "1 frame (700)" in " ".join(report["file"]["notes"])
+    from mocapfix.quality.measure import measure_input
+    measured = measure_input(m)
+    assert measured["file"]["cuts"] == 0
+    assert [j["outliers"] is None for j in measured["joints"]] == [False] * 12 + [True] * 30
+
+
 @pytest.mark.parametrize("subdir", ["c3d", "bvh", "asfamc", "kinect"])
 def test_the_shared_captures_have_no_cut_but_the_kinect_tracker_jump(subdir):
     """The detector's false alarms on real takes: none of the shared captures jumps as a
