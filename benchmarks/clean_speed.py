@@ -29,7 +29,10 @@
    itself played from other frames, 1.5 m apart, to 41 / 82 / 164 / 328 markers, 2,000
    frames, the ``mixed`` corruption; ``mocapfix clean`` wall time, peak resident memory
    and each step's seconds (the swap search looks at every pair of markers on every
-   frame: its time grows with the pairs, its memory must not grow with the take).
+   frame: its time grows with the pairs, its memory must not grow with the take). Then a
+   raw export: 85_02 looped to 4,000 frames with 1,000 unlabelled fragments (Vicon ``*N``
+   names, each seen on 1–60 frames somewhere): ``clean``, ``check`` and ``info``, wall
+   time and peak memory.
 
 Every child process may write and use compiled bytecode (``PYTHONDONTWRITEBYTECODE`` is
 dropped from its environment: an installed tool runs from its ``__pycache__``; compiling
@@ -261,6 +264,26 @@ def many_markers():
             print(f"| {T} × {take.n_joints} | {wall:.1f} | {peak:.0f} | "
                   + " | ".join(f"{secs.get(n, 0.0):.2f}" for n in
                                ("swaps", "trust", "fill_ensemble", "tsmc")) + " |")
+        raw = tmp / "raw.c3d"
+        T, U = 4000, 1000
+        rng = np.random.default_rng(0)
+        fragments = np.full((T, U, 3), np.nan)
+        for u in range(U):
+            start, n = int(rng.integers(0, T - 60)), int(rng.integers(1, 60))
+            fragments[start:start + n, u] = (rng.normal(size=3) * 800
+                                             + np.cumsum(rng.normal(size=(n, 3)), axis=0))
+        take = base.replace(positions=np.concatenate([loop[np.arange(T) % len(loop)], fragments],
+                                                     axis=1),
+                            names=list(base.names) + [f"*{u}" for u in range(U)],
+                            source=None, confidence=None)
+        write(take, raw)
+        print(f"\n| raw export, {T} frames × {base.n_joints} markers + {U} unlabelled fragments "
+              "| wall (s) | peak RSS (MiB) |")
+        print("|---|---:|---:|")
+        for what, args in (("clean", ["clean", str(raw), "-o", str(tmp / "raw_out")]),
+                           ("check", ["check", str(raw)]), ("info", ["info", str(raw)])):
+            wall, peak = _peak_mib_of(cli + args)
+            print(f"| `mocapfix {what}` | {wall:.1f} | {peak:.0f} |")
 
 
 if __name__ == "__main__":
