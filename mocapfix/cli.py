@@ -266,9 +266,17 @@ def view(files, before, after, output, open_it, budget, fps):
         _fail("nothing to view: give FILE... or --before IN --after OUT", debug)
     options = {"default_fps": fps} if fps else {}
     try:
+        from mocapfix.batch.plan import check_output_file
+        from mocapfix.core.fileio import atomic_write_text
+
         paths = [before, after] if before is not None else list(files)
         limit = int(budget * 1e6)
-        if len(paths) == 1 and str(paths[0]).endswith(viewer.REPORT_SUFFIX):
+        report = len(paths) == 1 and str(paths[0]).endswith(viewer.REPORT_SUFFIX)
+        # `view take.bvh -o take.bvh` replaced the capture with the page; a report's view
+        # reads the input and output it names
+        read_too = viewer.report_files(paths[0])[:2] if report else ()
+        check_output_file(output, "-o", [*paths, *read_too])
+        if report:
             page = viewer.from_report(paths[0], budget=limit, **options)
         else:
             motions = [read(p, **options) for p in paths]
@@ -276,7 +284,7 @@ def view(files, before, after, output, open_it, budget, fps):
                 page = viewer.before_after(*motions, budget=limit)
             else:
                 page = viewer.single(motions, budget=limit)
-        Path(output).write_text(page, encoding="utf-8")
+        atomic_write_text(output, page)
     except (MocapfixError, ValueError, OSError) as exc:
         _fail(one_line(str(exc)), debug, exc)
     Out(obj["verbosity"]).line(f"wrote {output} ({len(page.encode()) / 1e6:.2f} MB)")

@@ -1,0 +1,59 @@
+"""`mocapfix view -o`: the page never replaces a capture it shows (or one beside it), and
+is written as every other output is (atomically, usual permissions)."""
+from __future__ import annotations
+
+import os
+import shutil
+
+import pytest
+from click.testing import CliRunner
+
+from conftest import SAMPLE_DATA
+from mocapfix.cli import main
+from mocapfix.core.fileio import current_umask
+
+BVH, C3D = SAMPLE_DATA / "walk.bvh", SAMPLE_DATA / "walk_markers.c3d"
+
+
+def _copies(tmp_path):
+    bvh, c3d = tmp_path / "walk.bvh", tmp_path / "walk_markers.c3d"
+    shutil.copy(BVH, bvh)
+    shutil.copy(C3D, c3d)
+    return bvh, c3d
+
+
+@pytest.mark.parametrize("target", ["the input", "beside"])
+def test_view_refuses_an_output_that_is_a_capture_it_reads(tmp_path, target):
+    bvh, c3d = _copies(tmp_path)
+    before = {p: p.read_bytes() for p in (bvh, c3d)}
+    out = bvh if target == "the input" else c3d
+    r = CliRunner().invoke(main, ["view", str(bvh), "-o", str(out)])
+    assert r.exit_code == 2, r.output
+    assert "Traceback" not in r.output and r.output.count("\n") == 1, r.output
+    assert f"-o {out}: would overwrite" in r.output, r.output
+    assert {p: p.read_bytes() for p in (bvh, c3d)} == before
+    assert sorted(os.listdir(tmp_path)) == ["walk.bvh", "walk_markers.c3d"]
+
+
+def test_view_of_a_report_refuses_to_overwrite_the_input_it_names(tmp_path):
+    src = tmp_path / "in"
+    src.mkdir()
+    bvh, _ = _copies(src)
+    r = CliRunner().invoke(main, ["clean", str(bvh), "-o", str(tmp_path / "out"), "-q"])
+    assert r.exit_code == 0, r.output
+    original = bvh.read_bytes()
+    r = CliRunner().invoke(main, ["view", str(tmp_path / "out" / "walk.bvh.report.json"),
+                                  "-o", str(bvh)])
+    assert r.exit_code == 2 and f"would overwrite the input {bvh}" in r.output, r.output
+    assert bvh.read_bytes() == original
+
+
+def test_the_page_is_written_atomically_with_the_usual_permissions(tmp_path):
+    bvh, _ = _copies(tmp_path)
+    out = tmp_path / "v.html"
+    os.symlink(tmp_path / "elsewhere.html", out)         # replaced, not written through
+    r = CliRunner().invoke(main, ["view", str(bvh), "-o", str(out)])
+    assert r.exit_code == 0, r.output
+    assert not out.is_symlink() and not (tmp_path / "elsewhere.html").exists()
+    assert out.stat().st_mode & 0o777 == 0o666 & ~current_umask()
+    assert not [n for n in os.listdir(tmp_path) if n.endswith(".part")]
