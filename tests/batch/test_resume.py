@@ -390,3 +390,31 @@ def test_one_file_found_through_two_given_paths_resumes(tmp_path):
     no_traceback(r)
     assert r.exit_code == 0, r.output
     assert r.output.count("finished earlier") >= 2 and "exist already" not in r.output, r.output
+
+
+@pytest.mark.parametrize("damage", [
+    {"summary": "x"}, {"summary": {"worst": 5}}, {"summary": {"worst": [["a"]]}},
+    {"files": [None]}, {"quality": 5}, {"quality": "<script>alert(1)</script>"},
+    {"output": None}, {"status": "failed", "error": 5},
+])
+def test_a_damaged_record_of_another_file_does_not_stop_the_batch_index(tmp_path, damage):
+    # with --report html the index lists every record of the folder's manifest: a record
+    # (of any file) whose summary, quality, error or files had another type ended the run
+    # with "internal error AttributeError/TypeError/ValueError" after its file was
+    # cleaned, without the config record; a quality that is markup went into the page
+    out = tmp_path / "out"
+    cfg = config_file(tmp_path)
+    r = CliRunner().invoke(main, ["clean", str(BVH), "-o", str(out), "-c", cfg, "--report", "html"])
+    assert r.exit_code == 0, r.output
+    manifest = out / MANIFEST_NAME
+    record = json.loads(manifest.read_text().splitlines()[0])
+    with manifest.open("a") as fh:
+        fh.write(json.dumps({**record, "input": str(tmp_path / "other.bvh"), **damage}) + "\n")
+    r = CliRunner().invoke(main, ["clean", str(KIN), "-o", str(out), "-c", cfg, "--report", "html"])
+    no_traceback(r)
+    assert r.exit_code == 0 and "internal error" not in r.output, r.output
+    assert (out / "walk_kinect_v2.csv").is_file() and (out / "mocapfix-config.yaml").is_file()
+    index = (out / "index.html").read_text(encoding="utf-8")
+    assert "walk_kinect_v2.csv" in index and "alert(1)" not in index
+    assert "finished earlier" in CliRunner().invoke(
+        main, ["clean", str(BVH), "-o", str(out), "-c", cfg, "--report", "html"]).output
