@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import stat
 import threading
 from concurrent.futures import Executor
 from dataclasses import dataclass, field
@@ -235,7 +236,7 @@ def _plan(outdir: Path, pipeline: Pipeline, jobs, config_file: Path, config_text
                                "model, report kinds, --fps, version, input or skeleton"
                                if other else ""))
     if policy == "skip" and existing and config_file.exists() and \
-            _config_body(config_file.read_text(encoding="utf-8")) != _config_body(config_text):
+            _config_body(_recorded_config(config_file)) != _config_body(config_text):
         raise MocapfixError(f"{config_file}: the outputs there were made with another config; "
                             "--skip-existing would mix two configs in one folder (use --overwrite "
                             "or another output folder)")
@@ -266,6 +267,33 @@ def _plan(outdir: Path, pipeline: Pipeline, jobs, config_file: Path, config_text
         raise MocapfixError(conflicts[0] + more + "; nothing was cleaned")
     return CleanPlan(pipeline, outdir, tuple(reports), {"default_fps": fps} if fps else None,
                      manifest, config_text, config_file, todo, skipped, made, to, lock=lock[0])
+
+
+def _recorded_config(config_file: Path) -> str:
+    """The text of an earlier run's config record, for ``--skip-existing`` to compare: read
+    only from a regular file and at most a config's size (``read_text`` of a folder there
+    was an internal IsADirectoryError, of a FIFO a wait forever, of a link to /dev/zero a
+    memory blow-up); bytes that are not UTF-8 read as U+FFFD (another config, then)."""
+    from mocapfix.core.yamlsafe import MAX_BYTES
+
+    try:
+        st = os.stat(config_file)
+    except OSError as exc:
+        raise MocapfixError(f"{config_file}: cannot read the config record of the outputs "
+                            f"there: {exc.strerror or exc}") from None
+    if not stat.S_ISREG(st.st_mode):
+        what = "a folder" if stat.S_ISDIR(st.st_mode) else \
+            "not a file (a device, a FIFO or a link to one)"
+        raise MocapfixError(f"{config_file}: is {what}; --skip-existing cannot tell which "
+                            "config made the outputs there (move it away, or use --overwrite "
+                            "or another output folder)")
+    try:
+        with open(config_file, "rb") as fh:
+            data = fh.read(MAX_BYTES + 1)
+    except OSError as exc:
+        raise MocapfixError(f"{config_file}: cannot read the config record of the outputs "
+                            f"there: {exc.strerror or exc}") from None
+    return data.decode("utf-8", errors="replace")
 
 
 def convert_pipeline() -> Pipeline:

@@ -17,7 +17,7 @@ from pathlib import Path
 import pytest
 from click.testing import CliRunner
 
-from conftest import SAMPLE_DATA, config_file, no_traceback, output_tree, shared
+from conftest import SAMPLE_DATA, config_file, hang_guard, no_traceback, output_tree, shared
 from mocapfix.core import models
 from mocapfix.cli import main
 from mocapfix.core.fileio import file_sha256
@@ -418,3 +418,32 @@ def test_a_damaged_record_of_another_file_does_not_stop_the_batch_index(tmp_path
     assert "walk_kinect_v2.csv" in index and "alert(1)" not in index
     assert "finished earlier" in CliRunner().invoke(
         main, ["clean", str(BVH), "-o", str(out), "-c", cfg, "--report", "html"]).output
+
+
+@pytest.mark.parametrize("record", ["folder", "fifo", "dev_zero", "not_utf8"])
+def test_skip_existing_reads_only_a_config_record_that_is_a_file(tmp_path, record):
+    # --skip-existing compares the config record of the folder with this run's config: it
+    # read whatever was there whole, so a folder was "internal error IsADirectoryError", a
+    # FIFO a wait forever, a link to /dev/zero a memory blow-up, bytes that are not UTF-8
+    # "internal error UnicodeDecodeError"
+    out = tmp_path / "out"
+    cfg = config_file(tmp_path)
+    assert CliRunner().invoke(main, ["clean", str(BVH), "-o", str(out), "-c", cfg]).exit_code == 0
+    (out / MANIFEST_NAME).unlink()          # no record: the output is "an output that exists"
+    path = out / "mocapfix-config.yaml"
+    path.unlink()
+    if record == "folder":
+        path.mkdir()
+    elif record == "fifo":
+        os.mkfifo(path)
+    elif record == "dev_zero":
+        path.symlink_to("/dev/zero")
+    else:
+        path.write_bytes(b"\xff\xfe version: 1\n")
+    output = (out / "walk.bvh").read_bytes()
+    with hang_guard(20):
+        r = CliRunner().invoke(main, ["clean", str(BVH), "-o", str(out), "-c", cfg, "--skip-existing"])
+    no_traceback(r)
+    assert r.exit_code == 2 and "internal error" not in r.output, r.output
+    assert f"{path}: " in r.output and "--skip-existing" in r.output, r.output
+    assert (out / "walk.bvh").read_bytes() == output
