@@ -178,7 +178,7 @@ def patterns(fn):
 
 from mocapfix.cli_options import executor_spec as _executor_spec  # noqa: E402
 from mocapfix.cli_options import executors  # noqa: E402,F401
-from mocapfix.cli_options import FPS, GivenPath, not_empty  # noqa: E402
+from mocapfix.cli_options import FPS, FiniteFloatRange, GivenPath, not_empty  # noqa: E402
 
 
 # -- info --------------------------------------------------------------------------------------
@@ -240,7 +240,7 @@ def info(inputs, as_json, fps, include, exclude):
 @click.option("-o", "--output", "output", type=GivenPath(dir_okay=False), default="view.html",
               show_default=True, help="The HTML file to write.")
 @click.option("--open", "open_it", is_flag=True, help="Open the page in the web browser.")
-@click.option("--budget", type=click.FloatRange(0.05, 1000), default=3.0, show_default=True,
+@click.option("--budget", type=FiniteFloatRange(0.05, 1000), default=3.0, show_default=True,
               help="MB the page may hold; longer takes keep every k-th frame.")
 @click.option("--fps", type=FPS, default=None,
               help="Frame rate for formats that do not store one (AMC; default 120).")

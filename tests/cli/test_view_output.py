@@ -57,3 +57,13 @@ def test_the_page_is_written_atomically_with_the_usual_permissions(tmp_path):
     assert not out.is_symlink() and not (tmp_path / "elsewhere.html").exists()
     assert out.stat().st_mode & 0o777 == 0o666 & ~current_umask()
     assert not [n for n in os.listdir(tmp_path) if n.endswith(".part")]
+
+
+@pytest.mark.parametrize("budget", ["nan", "NaN", "-nan"])
+def test_a_budget_that_is_not_a_number_is_a_usage_error_naming_the_option(tmp_path, budget):
+    # nan passed click's range check (every comparison with it is false) and the error
+    # was "cannot convert float NaN to integer", naming neither option nor value
+    out = tmp_path / "v.html"
+    r = CliRunner().invoke(main, ["view", str(BVH), "-o", str(out), "--budget", budget])
+    assert r.exit_code == 2 and "--budget" in r.output and "not a number" in r.output, r.output
+    assert not out.exists()
