@@ -399,9 +399,10 @@ def clean_batch(inputs, outdir, config="default", *, reports=("json",), policy: 
                 fps: float | None = None, workers: int = 1, include=(), exclude=(),
                 allow_inside_input: bool = False, on_result: Callable | None = None,
                 to: str | None = None) -> dict:
-    """Clean files and folders into ``outdir`` as ``mocapfix clean`` does: ``config`` is a
-    preset name, a YAML path or a :class:`~mocapfix.pipeline.steps.Pipeline` (``"convert"``:
-    no cleaning, as ``mocapfix convert``); ``policy`` None, ``"overwrite"`` or ``"skip"``
+    """Clean files and folders (``inputs``: a path, or a list of them) into ``outdir`` as
+    ``mocapfix clean`` does: ``config`` is a preset name, a YAML path or a
+    :class:`~mocapfix.pipeline.steps.Pipeline` (``"convert"``: no cleaning, as ``mocapfix
+    convert``); ``policy`` None, ``"overwrite"`` or ``"skip"``
     (the CLI's ``--overwrite`` and ``--skip-existing``); ``to`` the output format (None:
     each input's own). Returns ``{"files": [result per file cleaned], "skipped":
     [(input, why), ...], "ignored": [(path, why) of files discovery passed over],
@@ -410,10 +411,15 @@ def clean_batch(inputs, outdir, config="default", *, reports=("json",), policy: 
     from mocapfix.config import load_config
     from mocapfix.core.presets import resolve_config
 
+    if isinstance(inputs, (str, bytes, os.PathLike)):
+        # one path, not a list of them: "takes" was the inputs "t", "a", "k", ...; an
+        # absolute path's first "/" walked the whole file system
+        inputs = [inputs]
+    inputs = [os.fsdecode(i) for i in inputs]
     pipeline = (config if isinstance(config, Pipeline) else convert_pipeline()
                 if config == "convert" else load_config(resolve_config(config)))
-    found = discover_inputs([str(i) for i in inputs], include, exclude)
-    plan = plan_clean(found.files, outdir, pipeline, inputs=[str(i) for i in inputs],
+    found = discover_inputs(inputs, include, exclude)
+    plan = plan_clean(found.files, outdir, pipeline, inputs=inputs,
                       reports=reports, policy=policy, fps=fps,
                       allow_inside_input=allow_inside_input, to=to)
     results = run_clean(plan, workers=workers, on_result=on_result)
