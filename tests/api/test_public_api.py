@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import mocapfix
-from conftest import REPO, shared
+from conftest import REPO, hang_guard, shared
 
 
 def test_a_notebook_cleans_a_shared_c3d_with_the_default_and_a_preset_with_overrides():
@@ -78,3 +78,14 @@ def test_the_docstring_examples_run(module, monkeypatch):
     monkeypatch.chdir(REPO)            # the examples name sample_data/ as the README does
     failed, tried = doctest.testmod(importlib.import_module(module), verbose=False)[:2]
     assert tried > 0 and failed == 0
+
+
+@pytest.mark.parametrize("call", [mocapfix.clean, mocapfix.check])
+def test_a_fifo_given_to_clean_or_check_is_refused_not_waited_on(tmp_path, call):
+    # the batch commands refuse a FIFO before reading; mocapfix.clean(path) and
+    # mocapfix.check(path) opened it and waited for a writer forever
+    fifo = tmp_path / "take.bvh"
+    os.mkfifo(fifo)
+    with hang_guard(20), pytest.raises(mocapfix.core.errors.UnreadableFileError,
+                                       match="take.bvh: cannot read: a FIFO"):
+        call(fifo)

@@ -8,7 +8,7 @@ import shutil
 import pytest
 from click.testing import CliRunner
 
-from conftest import SAMPLE_DATA
+from conftest import SAMPLE_DATA, hang_guard
 from mocapfix.cli import main
 from mocapfix.core.fileio import current_umask
 
@@ -66,4 +66,24 @@ def test_a_budget_that_is_not_a_number_is_a_usage_error_naming_the_option(tmp_pa
     out = tmp_path / "v.html"
     r = CliRunner().invoke(main, ["view", str(BVH), "-o", str(out), "--budget", budget])
     assert r.exit_code == 2 and "--budget" in r.output and "not a number" in r.output, r.output
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("kind", ["fifo", "device"])
+@pytest.mark.parametrize("how", ["file", "after", "report"])
+def test_view_refuses_a_fifo_or_device_as_an_input_at_once(tmp_path, kind, how):
+    # info and check refuse them (discovery); view read a FIFO, waiting for a writer
+    # forever, and a link to /dev/zero without end
+    special = tmp_path / ("take.report.json" if how == "report" else "take.bvh")
+    if kind == "fifo":
+        os.mkfifo(special)
+    else:
+        special.symlink_to("/dev/null")     # (a link to /dev/zero: no end, no memory left)
+    args = {"file": [str(special)], "report": [str(special)],
+            "after": ["--before", str(BVH), "--after", str(special)]}[how]
+    out = tmp_path / "v.html"
+    with hang_guard(20):
+        r = CliRunner().invoke(main, ["view", *args, "-o", str(out)])
+    assert r.exit_code == 2 and "Traceback" not in r.output, r.output
+    assert f"{special}: cannot read: a " in r.output, r.output
     assert not out.exists()
