@@ -16,6 +16,7 @@ from mocapfix.core.errors import (MocapfixError, UnreadableFileError, name_the_f
                                   printable)
 
 EXIT_OK, EXIT_SOME_FAILED, EXIT_USAGE, EXIT_UNREADABLE = 0, 1, 2, 3
+EXIT_INTERRUPTED = 130          # Ctrl-C (SIGINT): 128 + 2, as shells report it
 
 
 def _fail(message: str, debug: bool, exc: BaseException | None = None, code: int = EXIT_USAGE):
@@ -77,6 +78,11 @@ class _OneLineErrors(click.Group):
             return super().invoke(ctx)
         except (click.exceptions.ClickException, click.exceptions.Exit, click.exceptions.Abort):
             raise
+        except KeyboardInterrupt:
+            # click's "Aborted!" exited 1, which says "some files failed, the others were
+            # written" (clean) or "a rule failed" (check); 128 + SIGINT, as a shell says it
+            click.echo("\nmocapfix: interrupted", err=True)
+            sys.exit(EXIT_INTERRUPTED)
         except BrokenPipeError:
             # the reader of our output went away (`mocapfix info DIR | head`): stop quietly,
             # as the writer of a pipe does; stdout to devnull so the final flush is silent

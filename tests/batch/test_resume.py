@@ -447,3 +447,36 @@ def test_skip_existing_reads_only_a_config_record_that_is_a_file(tmp_path, recor
     assert r.exit_code == 2 and "internal error" not in r.output, r.output
     assert f"{path}: " in r.output and "--skip-existing" in r.output, r.output
     assert (out / "walk.bvh").read_bytes() == output
+
+
+@pytest.mark.slow
+def test_an_interrupted_batch_exits_130_leaves_no_temporary_and_resumes(tmp_path):
+    # Ctrl-C (SIGINT to the whole process group) ended the run with click's "Aborted!"
+    # and exit 1, which says "some files failed, the others were written"
+    src, cfg = _inputs(tmp_path), _cfg(tmp_path)
+    out = tmp_path / "out"
+    env = {**os.environ, "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}
+    proc = subprocess.Popen([sys.executable, "-m", "mocapfix.cli", "clean", str(src), "-o", str(out),
+                             "-c", cfg, "-j", "2"], env=env, start_new_session=True,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    deadline = time.monotonic() + 240
+    try:
+        while len(_done(out)) < 2 and proc.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.02)
+        os.killpg(proc.pid, signal.SIGINT)                # as Ctrl-C in a terminal
+        _, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait(timeout=30)
+    done = _done(out)
+    assert len(done) < 12, "the batch finished before it could be interrupted"
+    assert proc.returncode == 130, err
+    assert "mocapfix: interrupted" in err and "Traceback" not in err and "Aborted" not in err, err
+    assert not list(out.rglob("*.part")) and not (out / ".mocapfix.lock").exists()
+    for report in out.rglob("*.report.json"):
+        json.loads(report.read_text())
+    r = _run(src, "-o", out, "-c", cfg, "-j", "2")
+    assert r.exit_code == 0, r.output
+    assert len(_done(out)) == 12
