@@ -89,3 +89,18 @@ def test_a_fifo_given_to_clean_or_check_is_refused_not_waited_on(tmp_path, call)
     with hang_guard(20), pytest.raises(mocapfix.core.errors.UnreadableFileError,
                                        match="take.bvh: cannot read: a FIFO"):
         call(fifo)
+
+
+SAMPLE_BVH = REPO / "sample_data" / "walk.bvh"
+
+
+@pytest.mark.parametrize("call", [
+    lambda: mocapfix.load_config(""),
+    lambda: mocapfix.clean(SAMPLE_BVH, " "),
+    lambda: mocapfix.check(SAMPLE_BVH, ""),
+    lambda: mocapfix.check(SAMPLE_BVH, would_clean=""),
+], ids=["load_config", "clean", "check", "would_clean"])
+def test_an_empty_config_or_rules_name_is_refused_as_empty(call):
+    # "" is the current folder as a path: the error was ": is a folder, not a config file"
+    with pytest.raises(mocapfix.core.errors.ConfigError, match="is an empty name"):
+        call()
