@@ -37,7 +37,17 @@ def load_config(name_or_path) -> Pipeline:
     from mocapfix.config import load_config as load_file
     from mocapfix.core.presets import resolve_config
 
-    return load_file(resolve_config(name_or_path))
+    return load_file(resolve_config(_given(name_or_path, "config")))
+
+
+def _given(name_or_path, what: str):
+    """``name_or_path``, refused when it is an empty string: ``""`` is the current folder
+    as a path, and the error was ": is a folder, not a config file" (the CLI refuses
+    ``-c ""`` likewise)."""
+    if isinstance(name_or_path, str) and not name_or_path.strip():
+        raise ConfigError(f"the {what} is an empty name (an unset variable?); give a preset "
+                          "name or a file")
+    return name_or_path
 
 
 def _pipeline(config, overrides: dict) -> Pipeline:
@@ -78,9 +88,17 @@ def _pipeline(config, overrides: dict) -> Pipeline:
 def _motion(motion_or_path, fps: float | None) -> Motion:
     if isinstance(motion_or_path, Motion):
         return motion_or_path
+    import os
+
+    from mocapfix.batch.discovery import regular_file_problem
+    from mocapfix.core.errors import UnreadableFileError
     from mocapfix.formats import read
 
-    return read(Path(motion_or_path), default_fps=fps)
+    path = Path(motion_or_path)
+    problem = os.path.exists(path) and regular_file_problem(path)
+    if problem:                 # a FIFO waited for a writer forever, a link to /dev/zero never ended
+        raise UnreadableFileError(path, f"cannot read: {problem}")
+    return read(path, default_fps=fps)
 
 
 def clean(motion_or_path, config="default", *, fps: float | None = None,
@@ -158,5 +176,6 @@ def check(motion_or_path, rules="default", *, fps: float | None = None,
     from mocapfix.quality.rules import load_rules, resolve_rules_path
 
     pipeline = None if would_clean is None else _pipeline(would_clean, {})
-    return check_motion(_motion(motion_or_path, fps), load_rules(resolve_rules_path(rules)),
+    return check_motion(_motion(motion_or_path, fps),
+                        load_rules(resolve_rules_path(_given(rules, "rule set"))),
                         pipeline)

@@ -16,6 +16,7 @@ from mocapfix.core.errors import (MocapfixError, UnreadableFileError, name_the_f
                                   printable)
 
 EXIT_OK, EXIT_SOME_FAILED, EXIT_USAGE, EXIT_UNREADABLE = 0, 1, 2, 3
+EXIT_INTERRUPTED = 130          # Ctrl-C (SIGINT): 128 + 2, as shells report it
 
 
 def _fail(message: str, debug: bool, exc: BaseException | None = None, code: int = EXIT_USAGE):
@@ -77,6 +78,11 @@ class _OneLineErrors(click.Group):
             return super().invoke(ctx)
         except (click.exceptions.ClickException, click.exceptions.Exit, click.exceptions.Abort):
             raise
+        except KeyboardInterrupt:
+            # click's "Aborted!" exited 1, which says "some files failed, the others were
+            # written" (clean) or "a rule failed" (check); 128 + SIGINT, as a shell says it
+            click.echo("\nmocapfix: interrupted", err=True)
+            sys.exit(EXIT_INTERRUPTED)
         except BrokenPipeError:
             # the reader of our output went away (`mocapfix info DIR | head`): stop quietly,
             # as the writer of a pipe does; stdout to devnull so the final flush is silent
@@ -178,7 +184,7 @@ def patterns(fn):
 
 from mocapfix.cli_options import executor_spec as _executor_spec  # noqa: E402
 from mocapfix.cli_options import executors  # noqa: E402,F401
-from mocapfix.cli_options import FPS, GivenPath, not_empty  # noqa: E402
+from mocapfix.cli_options import FPS, FiniteFloatRange, GivenPath, not_empty  # noqa: E402
 
 
 # -- info --------------------------------------------------------------------------------------
@@ -240,7 +246,7 @@ def info(inputs, as_json, fps, include, exclude):
 @click.option("-o", "--output", "output", type=GivenPath(dir_okay=False), default="view.html",
               show_default=True, help="The HTML file to write.")
 @click.option("--open", "open_it", is_flag=True, help="Open the page in the web browser.")
-@click.option("--budget", type=click.FloatRange(0.05, 1000), default=3.0, show_default=True,
+@click.option("--budget", type=FiniteFloatRange(0.05, 1000), default=3.0, show_default=True,
               help="MB the page may hold; longer takes keep every k-th frame.")
 @click.option("--fps", type=FPS, default=None,
               help="Frame rate for formats that do not store one (AMC; default 120).")
@@ -266,9 +272,19 @@ def view(files, before, after, output, open_it, budget, fps):
         _fail("nothing to view: give FILE... or --before IN --after OUT", debug)
     options = {"default_fps": fps} if fps else {}
     try:
+        from mocapfix.batch.plan import check_output_file
+        from mocapfix.core.fileio import atomic_write_text
+
         paths = [before, after] if before is not None else list(files)
+        for p in paths:                 # as discovery: a FIFO waited forever for a writer
+            _refuse_special_file(p)
         limit = int(budget * 1e6)
-        if len(paths) == 1 and str(paths[0]).endswith(viewer.REPORT_SUFFIX):
+        report = len(paths) == 1 and str(paths[0]).endswith(viewer.REPORT_SUFFIX)
+        # `view take.bvh -o take.bvh` replaced the capture with the page; a report's view
+        # reads the input and output it names
+        read_too = viewer.report_files(paths[0])[:2] if report else ()
+        check_output_file(output, "-o", [*paths, *read_too])
+        if report:
             page = viewer.from_report(paths[0], budget=limit, **options)
         else:
             motions = [read(p, **options) for p in paths]
@@ -276,13 +292,26 @@ def view(files, before, after, output, open_it, budget, fps):
                 page = viewer.before_after(*motions, budget=limit)
             else:
                 page = viewer.single(motions, budget=limit)
-        Path(output).write_text(page, encoding="utf-8")
+        atomic_write_text(output, page)
     except (MocapfixError, ValueError, OSError) as exc:
         _fail(one_line(str(exc)), debug, exc)
     Out(obj["verbosity"]).line(f"wrote {output} ({len(page.encode()) / 1e6:.2f} MB)")
     if open_it:
         import webbrowser
         webbrowser.open(Path(output).resolve().as_uri())
+
+
+def _refuse_special_file(path) -> None:
+    """An UnreadableFileError for a FIFO, a device or a socket (or a link to one) named as
+    an input, as batch discovery refuses it: reading a FIFO waits for a writer forever, a
+    link to /dev/zero never ends."""
+    from pathlib import Path
+
+    from mocapfix.batch.discovery import regular_file_problem
+
+    problem = os.path.exists(path) and regular_file_problem(Path(path))
+    if problem:
+        raise UnreadableFileError(path, f"cannot read: {problem}")
 
 
 # -- cleaners / configs --------------------------------------------------------------------------

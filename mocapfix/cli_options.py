@@ -59,6 +59,18 @@ class FrameRate(click.ParamType):
 FPS = FrameRate()
 
 
+class FiniteFloatRange(click.FloatRange):
+    """``click.FloatRange`` that refuses ``nan``, which passes its bounds (every comparison
+    with it is false): ``view --budget nan`` said only "cannot convert float NaN to
+    integer"."""
+
+    def convert(self, value, param, ctx):
+        number = super().convert(value, param, ctx)
+        if not math.isfinite(number):
+            self.fail(f"{value!r} is not a number", param, ctx)
+        return number
+
+
 class GivenPath(click.Path):
     """``click.Path`` that refuses an empty string: ``""`` (an unset shell variable in
     ``-o "$OUT"`` or an input ``"$TAKES"``) meant the current folder, so ``clean`` wrote

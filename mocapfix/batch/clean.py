@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import stat
 import threading
 from concurrent.futures import Executor
 from dataclasses import dataclass, field
@@ -235,7 +236,7 @@ def _plan(outdir: Path, pipeline: Pipeline, jobs, config_file: Path, config_text
                                "model, report kinds, --fps, version, input or skeleton"
                                if other else ""))
     if policy == "skip" and existing and config_file.exists() and \
-            _config_body(config_file.read_text(encoding="utf-8")) != _config_body(config_text):
+            _config_body(_recorded_config(config_file)) != _config_body(config_text):
         raise MocapfixError(f"{config_file}: the outputs there were made with another config; "
                             "--skip-existing would mix two configs in one folder (use --overwrite "
                             "or another output folder)")
@@ -266,6 +267,33 @@ def _plan(outdir: Path, pipeline: Pipeline, jobs, config_file: Path, config_text
         raise MocapfixError(conflicts[0] + more + "; nothing was cleaned")
     return CleanPlan(pipeline, outdir, tuple(reports), {"default_fps": fps} if fps else None,
                      manifest, config_text, config_file, todo, skipped, made, to, lock=lock[0])
+
+
+def _recorded_config(config_file: Path) -> str:
+    """The text of an earlier run's config record, for ``--skip-existing`` to compare: read
+    only from a regular file and at most a config's size (``read_text`` of a folder there
+    was an internal IsADirectoryError, of a FIFO a wait forever, of a link to /dev/zero a
+    memory blow-up); bytes that are not UTF-8 read as U+FFFD (another config, then)."""
+    from mocapfix.core.yamlsafe import MAX_BYTES
+
+    try:
+        st = os.stat(config_file)
+    except OSError as exc:
+        raise MocapfixError(f"{config_file}: cannot read the config record of the outputs "
+                            f"there: {exc.strerror or exc}") from None
+    if not stat.S_ISREG(st.st_mode):
+        what = "a folder" if stat.S_ISDIR(st.st_mode) else \
+            "not a file (a device, a FIFO or a link to one)"
+        raise MocapfixError(f"{config_file}: is {what}; --skip-existing cannot tell which "
+                            "config made the outputs there (move it away, or use --overwrite "
+                            "or another output folder)")
+    try:
+        with open(config_file, "rb") as fh:
+            data = fh.read(MAX_BYTES + 1)
+    except OSError as exc:
+        raise MocapfixError(f"{config_file}: cannot read the config record of the outputs "
+                            f"there: {exc.strerror or exc}") from None
+    return data.decode("utf-8", errors="replace")
 
 
 def convert_pipeline() -> Pipeline:
@@ -371,9 +399,10 @@ def clean_batch(inputs, outdir, config="default", *, reports=("json",), policy: 
                 fps: float | None = None, workers: int = 1, include=(), exclude=(),
                 allow_inside_input: bool = False, on_result: Callable | None = None,
                 to: str | None = None) -> dict:
-    """Clean files and folders into ``outdir`` as ``mocapfix clean`` does: ``config`` is a
-    preset name, a YAML path or a :class:`~mocapfix.pipeline.steps.Pipeline` (``"convert"``:
-    no cleaning, as ``mocapfix convert``); ``policy`` None, ``"overwrite"`` or ``"skip"``
+    """Clean files and folders (``inputs``: a path, or a list of them) into ``outdir`` as
+    ``mocapfix clean`` does: ``config`` is a preset name, a YAML path or a
+    :class:`~mocapfix.pipeline.steps.Pipeline` (``"convert"``: no cleaning, as ``mocapfix
+    convert``); ``policy`` None, ``"overwrite"`` or ``"skip"``
     (the CLI's ``--overwrite`` and ``--skip-existing``); ``to`` the output format (None:
     each input's own). Returns ``{"files": [result per file cleaned], "skipped":
     [(input, why), ...], "ignored": [(path, why) of files discovery passed over],
@@ -382,10 +411,15 @@ def clean_batch(inputs, outdir, config="default", *, reports=("json",), policy: 
     from mocapfix.config import load_config
     from mocapfix.core.presets import resolve_config
 
+    if isinstance(inputs, (str, bytes, os.PathLike)):
+        # one path, not a list of them: "takes" was the inputs "t", "a", "k", ...; an
+        # absolute path's first "/" walked the whole file system
+        inputs = [inputs]
+    inputs = [os.fsdecode(i) for i in inputs]
     pipeline = (config if isinstance(config, Pipeline) else convert_pipeline()
                 if config == "convert" else load_config(resolve_config(config)))
-    found = discover_inputs([str(i) for i in inputs], include, exclude)
-    plan = plan_clean(found.files, outdir, pipeline, inputs=[str(i) for i in inputs],
+    found = discover_inputs(inputs, include, exclude)
+    plan = plan_clean(found.files, outdir, pipeline, inputs=inputs,
                       reports=reports, policy=policy, fps=fps,
                       allow_inside_input=allow_inside_input, to=to)
     results = run_clean(plan, workers=workers, on_result=on_result)

@@ -185,13 +185,16 @@ def discover_inputs(inputs, include=(), exclude=(), sniff: bool = True,
 def _once(files: list, skipped: list, by_file: bool = False) -> tuple[list, list]:
     """Drop a file named a second time with the same output name (``clean in in/walk.bvh``,
     or one file given twice): it is processed once, and the skip says why."""
-    seen: set = set()
+    seen: dict = {}
     kept = []
     for f in files:
         key = (os.path.realpath(f.path), None if by_file else f.relative)
         if key in seen:
-            skipped.append((str(f.path), "given more than once (processed once)"))
+            # a link in a folder to a file beside it was "given more than once" too
+            first = seen[key]
+            skipped.append((str(f.path), "given more than once (processed once)" if first == f.path
+                            else f"the same file as {first} (processed once)"))
             continue
-        seen.add(key)
+        seen[key] = f.path
         kept.append(f)
     return kept, skipped

@@ -110,7 +110,7 @@ class Manifest:
                     rec = json.loads(line)
                 except ValueError:
                     continue                      # a torn last line after a crash
-                if isinstance(rec, dict) and isinstance(rec.get("input"), str):
+                if _well_formed(rec):
                     self.records[_key(rec)] = rec
 
     def _same_run(self, rec: dict) -> bool:
@@ -321,6 +321,28 @@ def _refuse_link(path: Path) -> None:
         what = "a symbolic link" if stat.S_ISLNK(mode) else "not a regular file"
         raise ConfigError(f"{path}: the output folder's manifest is {what}; mocapfix does not "
                           "write through it (remove it, or choose another output folder)")
+
+
+def _well_formed(rec) -> bool:
+    """A record of the shape :class:`Manifest` writes. The journal is a text file anyone
+    (or another version) may have changed: a record with a summary, quality, error or file
+    list of another type crashed the run at its end, when ``--report html`` listed every
+    record in the batch index (after the file was cleaned, before the config record). A
+    record that is not is dropped, as a torn line is: its file is not finished."""
+    if not (isinstance(rec, dict) and isinstance(rec.get("input"), str)
+            and isinstance(rec.get("output"), str)
+            and rec.get("status") in ("done", "failed", "started")):
+        return False
+    files, summary = rec.get("files", []), rec.get("summary", {})
+    if not (isinstance(files, list) and all(isinstance(f, str) for f in files)
+            and isinstance(rec.get("error", ""), str) and isinstance(summary, dict)):
+        return False
+    worst = summary.get("worst", [])
+    if not (isinstance(worst, list) and all(isinstance(w, list) and len(w) == 2
+                                            and all(isinstance(x, str) for x in w)
+                                            for w in worst)):
+        return False
+    return rec["status"] != "done" or rec.get("quality") in ("OK", "WARN", "FAIL")
 
 
 def _key(rec: dict) -> tuple:

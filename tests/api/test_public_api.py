@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import mocapfix
-from conftest import REPO, shared
+from conftest import REPO, hang_guard, shared
 
 
 def test_a_notebook_cleans_a_shared_c3d_with_the_default_and_a_preset_with_overrides():
@@ -78,3 +78,29 @@ def test_the_docstring_examples_run(module, monkeypatch):
     monkeypatch.chdir(REPO)            # the examples name sample_data/ as the README does
     failed, tried = doctest.testmod(importlib.import_module(module), verbose=False)[:2]
     assert tried > 0 and failed == 0
+
+
+@pytest.mark.parametrize("call", [mocapfix.clean, mocapfix.check])
+def test_a_fifo_given_to_clean_or_check_is_refused_not_waited_on(tmp_path, call):
+    # the batch commands refuse a FIFO before reading; mocapfix.clean(path) and
+    # mocapfix.check(path) opened it and waited for a writer forever
+    fifo = tmp_path / "take.bvh"
+    os.mkfifo(fifo)
+    with hang_guard(20), pytest.raises(mocapfix.core.errors.UnreadableFileError,
+                                       match="take.bvh: cannot read: a FIFO"):
+        call(fifo)
+
+
+SAMPLE_BVH = REPO / "sample_data" / "walk.bvh"
+
+
+@pytest.mark.parametrize("call", [
+    lambda: mocapfix.load_config(""),
+    lambda: mocapfix.clean(SAMPLE_BVH, " "),
+    lambda: mocapfix.check(SAMPLE_BVH, ""),
+    lambda: mocapfix.check(SAMPLE_BVH, would_clean=""),
+], ids=["load_config", "clean", "check", "would_clean"])
+def test_an_empty_config_or_rules_name_is_refused_as_empty(call):
+    # "" is the current folder as a path: the error was ": is a folder, not a config file"
+    with pytest.raises(mocapfix.core.errors.ConfigError, match="is an empty name"):
+        call()

@@ -45,3 +45,22 @@ def test_a_dry_plan_makes_no_folder_and_refuses_like_the_run(tmp_path):
     assert plan.made == [out, tmp_path / "new"]
     with pytest.raises(ValueError, match="policy"):
         plan_clean(found.files, out, pipeline, policy="replace")
+
+
+@pytest.mark.parametrize("kind", [str, Path, lambda p: str(p).encode()], ids=["str", "Path", "bytes"])
+def test_one_path_is_one_input_not_a_list_of_its_characters(tmp_path, monkeypatch, kind):
+    # clean_batch("takes", out) iterated the string: the inputs "t", "a", "k", ... ("t: no
+    # such file or folder"), and an absolute path's first input "/" walked the whole file
+    # system first; a Path was "'PosixPath' object is not iterable"
+    import shutil
+
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "a").mkdir()               # a folder named like one of the characters
+    shutil.copy(SAMPLE_DATA / "walk.bvh", tmp_path / "a" / "stray.bvh")
+    take = tmp_path / "in" / "walk.bvh"
+    take.parent.mkdir()
+    shutil.copy(SAMPLE_DATA / "walk.bvh", take)
+    result = clean_batch(kind(take), tmp_path / "out", "default")
+    assert [Path(r["input"]) for r in result["files"]] == [take]
+    assert result["files"][0]["status"] != "ERROR"
+    assert sorted(p.name for p in (tmp_path / "out").iterdir() if p.suffix == ".bvh") == ["walk.bvh"]

@@ -127,3 +127,19 @@ def test_output_folder_equal_to_the_input_folder_says_so(tmp_path):
     assert f"inside the output folder {src}" in r.output
     assert (src / "walk.csv").read_bytes() == before
     assert sorted(p.name for p in src.iterdir()) == ["walk.csv"]
+
+
+def test_a_link_beside_the_file_it_names_is_said_to_be_that_file(tmp_path):
+    # check/info keep one of a link in a folder and the file it names beside it: the
+    # other was "given more than once" though the folder was given once
+    src = tmp_path / "in"
+    src.mkdir()
+    (src / "take.csv").write_bytes(KIN.read_bytes())
+    (src / "alias.csv").symlink_to("take.csv")
+    for command in (["check", "--exit-zero"], ["info"]):
+        r = CliRunner().invoke(main, [command[0], str(src), *command[1:]])
+        no_traceback(r)
+        assert r.exit_code == 0, r.output
+        assert f"SKIP  {src / 'take.csv'}: the same file as {src / 'alias.csv'} (processed once)" \
+            in r.output, r.output
+        assert "given more than once" not in r.output, r.output

@@ -17,7 +17,7 @@ from pathlib import Path
 import pytest
 from click.testing import CliRunner
 
-from conftest import SAMPLE_DATA, config_file, no_traceback, output_tree, shared
+from conftest import SAMPLE_DATA, config_file, hang_guard, no_traceback, output_tree, shared
 from mocapfix.core import models
 from mocapfix.cli import main
 from mocapfix.core.fileio import file_sha256
@@ -390,3 +390,93 @@ def test_one_file_found_through_two_given_paths_resumes(tmp_path):
     no_traceback(r)
     assert r.exit_code == 0, r.output
     assert r.output.count("finished earlier") >= 2 and "exist already" not in r.output, r.output
+
+
+@pytest.mark.parametrize("damage", [
+    {"summary": "x"}, {"summary": {"worst": 5}}, {"summary": {"worst": [["a"]]}},
+    {"files": [None]}, {"quality": 5}, {"quality": "<script>alert(1)</script>"},
+    {"output": None}, {"status": "failed", "error": 5},
+])
+def test_a_damaged_record_of_another_file_does_not_stop_the_batch_index(tmp_path, damage):
+    # with --report html the index lists every record of the folder's manifest: a record
+    # (of any file) whose summary, quality, error or files had another type ended the run
+    # with "internal error AttributeError/TypeError/ValueError" after its file was
+    # cleaned, without the config record; a quality that is markup went into the page
+    out = tmp_path / "out"
+    cfg = config_file(tmp_path)
+    r = CliRunner().invoke(main, ["clean", str(BVH), "-o", str(out), "-c", cfg, "--report", "html"])
+    assert r.exit_code == 0, r.output
+    manifest = out / MANIFEST_NAME
+    record = json.loads(manifest.read_text().splitlines()[0])
+    with manifest.open("a") as fh:
+        fh.write(json.dumps({**record, "input": str(tmp_path / "other.bvh"), **damage}) + "\n")
+    r = CliRunner().invoke(main, ["clean", str(KIN), "-o", str(out), "-c", cfg, "--report", "html"])
+    no_traceback(r)
+    assert r.exit_code == 0 and "internal error" not in r.output, r.output
+    assert (out / "walk_kinect_v2.csv").is_file() and (out / "mocapfix-config.yaml").is_file()
+    index = (out / "index.html").read_text(encoding="utf-8")
+    assert "walk_kinect_v2.csv" in index and "alert(1)" not in index
+    assert "finished earlier" in CliRunner().invoke(
+        main, ["clean", str(BVH), "-o", str(out), "-c", cfg, "--report", "html"]).output
+
+
+@pytest.mark.parametrize("record", ["folder", "fifo", "device", "not_utf8"])
+def test_skip_existing_reads_only_a_config_record_that_is_a_file(tmp_path, record):
+    # --skip-existing compares the config record of the folder with this run's config: it
+    # read whatever was there whole, so a folder was "internal error IsADirectoryError", a
+    # FIFO a wait forever, a link to /dev/zero a memory blow-up, bytes that are not UTF-8
+    # "internal error UnicodeDecodeError"
+    out = tmp_path / "out"
+    cfg = config_file(tmp_path)
+    assert CliRunner().invoke(main, ["clean", str(BVH), "-o", str(out), "-c", cfg]).exit_code == 0
+    (out / MANIFEST_NAME).unlink()          # no record: the output is "an output that exists"
+    path = out / "mocapfix-config.yaml"
+    path.unlink()
+    if record == "folder":
+        path.mkdir()
+    elif record == "fifo":
+        os.mkfifo(path)
+    elif record == "device":               # (/dev/zero: read without end before)
+        path.symlink_to("/dev/null")
+    else:
+        path.write_bytes(b"\xff\xfe version: 1\n")
+    output = (out / "walk.bvh").read_bytes()
+    with hang_guard(20):
+        r = CliRunner().invoke(main, ["clean", str(BVH), "-o", str(out), "-c", cfg, "--skip-existing"])
+    no_traceback(r)
+    assert r.exit_code == 2 and "internal error" not in r.output, r.output
+    assert f"{path}: " in r.output and "--skip-existing" in r.output, r.output
+    assert (out / "walk.bvh").read_bytes() == output
+
+
+@pytest.mark.slow
+def test_an_interrupted_batch_exits_130_leaves_no_temporary_and_resumes(tmp_path):
+    # Ctrl-C (SIGINT to the whole process group) ended the run with click's "Aborted!"
+    # and exit 1, which says "some files failed, the others were written"
+    src, cfg = _inputs(tmp_path), _cfg(tmp_path)
+    out = tmp_path / "out"
+    env = {**os.environ, "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}
+    proc = subprocess.Popen([sys.executable, "-m", "mocapfix.cli", "clean", str(src), "-o", str(out),
+                             "-c", cfg, "-j", "2"], env=env, start_new_session=True,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    deadline = time.monotonic() + 240
+    try:
+        while len(_done(out)) < 2 and proc.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.02)
+        os.killpg(proc.pid, signal.SIGINT)                # as Ctrl-C in a terminal
+        _, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait(timeout=30)
+    done = _done(out)
+    assert len(done) < 12, "the batch finished before it could be interrupted"
+    assert proc.returncode == 130, err
+    assert "mocapfix: interrupted" in err and "Traceback" not in err and "Aborted" not in err, err
+    assert not list(out.rglob("*.part")) and not (out / ".mocapfix.lock").exists()
+    for report in out.rglob("*.report.json"):
+        json.loads(report.read_text())
+    r = _run(src, "-o", out, "-c", cfg, "-j", "2")
+    assert r.exit_code == 0, r.output
+    assert len(_done(out)) == 12
