@@ -88,17 +88,11 @@ def _pipeline(config, overrides: dict) -> Pipeline:
 def _motion(motion_or_path, fps: float | None) -> Motion:
     if isinstance(motion_or_path, Motion):
         return motion_or_path
-    import os
-
-    from mocapfix.batch.discovery import regular_file_problem
-    from mocapfix.core.errors import UnreadableFileError
+    from mocapfix.batch.discovery import refuse_special_file
     from mocapfix.formats import read
 
-    path = Path(motion_or_path)
-    problem = os.path.exists(path) and regular_file_problem(path)
-    if problem:                 # a FIFO waited for a writer forever, a link to /dev/zero never ended
-        raise UnreadableFileError(path, f"cannot read: {problem}")
-    return read(path, default_fps=fps)
+    refuse_special_file(motion_or_path)     # a FIFO waited for a writer forever
+    return read(Path(motion_or_path), default_fps=fps)
 
 
 def clean(motion_or_path, config="default", *, fps: float | None = None,

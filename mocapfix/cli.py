@@ -272,12 +272,13 @@ def view(files, before, after, output, open_it, budget, fps):
         _fail("nothing to view: give FILE... or --before IN --after OUT", debug)
     options = {"default_fps": fps} if fps else {}
     try:
+        from mocapfix.batch.discovery import refuse_special_file
         from mocapfix.batch.plan import check_output_file
         from mocapfix.core.fileio import atomic_write_text
 
         paths = [before, after] if before is not None else list(files)
         for p in paths:                 # as discovery: a FIFO waited forever for a writer
-            _refuse_special_file(p)
+            refuse_special_file(p)
         limit = int(budget * 1e6)
         report = len(paths) == 1 and str(paths[0]).endswith(viewer.REPORT_SUFFIX)
         # `view take.bvh -o take.bvh` replaced the capture with the page; a report's view
@@ -299,19 +300,6 @@ def view(files, before, after, output, open_it, budget, fps):
     if open_it:
         import webbrowser
         webbrowser.open(Path(output).resolve().as_uri())
-
-
-def _refuse_special_file(path) -> None:
-    """An UnreadableFileError for a FIFO, a device or a socket (or a link to one) named as
-    an input, as batch discovery refuses it: reading a FIFO waits for a writer forever, a
-    link to /dev/zero never ends."""
-    from pathlib import Path
-
-    from mocapfix.batch.discovery import regular_file_problem
-
-    problem = os.path.exists(path) and regular_file_problem(Path(path))
-    if problem:
-        raise UnreadableFileError(path, f"cannot read: {problem}")
 
 
 # -- cleaners / configs --------------------------------------------------------------------------

@@ -21,7 +21,7 @@ import stat
 from dataclasses import dataclass
 from pathlib import Path
 
-from mocapfix.core.errors import ConfigError
+from mocapfix.core.errors import ConfigError, UnreadableFileError
 from mocapfix.formats import MOTION_SUFFIXES, TEXT_SUFFIXES
 
 _SKIP_SUFFIXES = (".report.json", ".report.md", ".report.html")
@@ -75,6 +75,16 @@ def regular_file_problem(path: Path) -> str | None:
     if stat.S_ISDIR(st.st_mode):
         return None
     return _special_kind(st.st_mode)
+
+
+def refuse_special_file(path) -> None:
+    """An UnreadableFileError for an existing ``path`` that is a FIFO, a device or a
+    socket (or a link to one), as discovery skips it: reading a FIFO waits for a writer
+    forever, a link to /dev/zero never ends. A missing path is left to the reader."""
+    path = Path(path)
+    problem = os.path.exists(path) and regular_file_problem(path)
+    if problem:
+        raise UnreadableFileError(path, f"cannot read: {problem}")
 
 
 def _head(path: Path) -> bytes | None:
