@@ -54,7 +54,8 @@ def _row(rec: dict) -> str:
 
     def num(key):
         return s.get(key) if isinstance(s.get(key), (int, float)) else None
-    cells = [f'<td data-v="{STATUS_ORDER.get(status, 9)}" class="{status}">{status}</td>',
+    shown = html.escape(str(status), quote=True)     # the manifest is a file anyone may edit
+    cells = [f'<td data-v="{STATUS_ORDER.get(status, 9)}" class="{shown}">{shown}</td>',
              f"<td>{link}</td>",
              _cell(str(s["frames"]) if num("frames") is not None else "–", num("frames")),
              _cell(_pct(num("missing_before")), num("missing_before")),

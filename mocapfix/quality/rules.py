@@ -508,9 +508,9 @@ def resolve_rules_path(name_or_path) -> Path:
 
 def parse_rules(data, source: str = "<rules>", stage: str = "input", _chain: tuple = ()) -> RuleSet:
     """The rules of ``data`` (a parsed rules file) after those of the files it ``extends``;
-    ``_chain``: the files being read that extend this one (a cycle is an error)."""
-    if data is None:
-        data = {}
+    ``_chain``: the files being read that extend this one (a cycle is an error). An empty
+    file is an error, as an empty config is (it judged every file OK with no rule: an
+    unfinished or truncated file passed everything); ``rules: []`` judges nothing."""
     check_document(data, source, what="a rules file", body="rules", known=_TOP_KEYS,
                    kind="rules", version=RULES_VERSION, line_of=lambda key: _key_line(data, key))
     rules: list[Rule] = []

@@ -96,3 +96,17 @@ def test_the_shared_data_batch_index_links_every_report(tmp_path):
                          capture_output=True, text=True, timeout=120, check=True).stdout
     frames = json.loads(html.unescape(re.search(r'data-probe="([^"]*)"', dom).group(1)))
     assert len(frames) == len(rows) and frames == sorted(frames)
+
+
+def test_a_record_edited_by_hand_goes_into_the_page_as_text():
+    # the manifest is a text file anyone may edit; its load drops records of another shape,
+    # and what reaches the page is escaped all the same (a status went into class="...")
+    from pathlib import Path
+
+    from mocapfix.quality.index import index_html
+
+    rec = {"input": "a.c3d", "output": "a<b>.c3d", "status": "done",
+           "quality": '"><script>x()</script>', "files": [], "summary": {"frames": 3}}
+    page = index_html([rec], Path("/tmp/out"))
+    assert "<script>x()" not in page and "a<b>" not in page
+    assert "&quot;&gt;&lt;script&gt;x()" in page and "a&lt;b&gt;.c3d" in page

@@ -79,11 +79,17 @@ def test_file_scope_aggregates_selected_joints():
     ("rules:\n  - metric: missing_after\n    fail: 1 %\n", r"clean's report"),
     ("rules:\n  - metric: missing\n", r"needs 'warn' or 'fail'"),
     ("version: 1\nrule: []\n", r"line 2.*unknown top-level key"),
+    ("", r"r.yaml: a rules file is a mapping with 'rules'"),      # empty: judged all OK
+    ("# nothing yet\n", r"a rules file is a mapping"),
     ("rules:\n  - metric: missing\n    fail: 1 %\n    formats: [fbx]\n", r"formats"),
 ])
 def test_rules_validation_names_the_line(text, pattern):
     with pytest.raises(ConfigError, match=pattern):
         loads_rules(text, "r.yaml")
+
+
+def test_rules_with_an_empty_list_judge_nothing():
+    assert loads_rules("rules: []\n", "r.yaml").rules == []
 
 
 def test_shipped_rule_sets_load():
