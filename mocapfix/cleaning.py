@@ -261,6 +261,7 @@ def clean_file(source: Path, output: Path, pipeline: Pipeline, reports=("json",)
         "reasons": sorted({r for j in report["joints"] for r in j["reasons"] if r.startswith(f["status"])})[:3]
         or f.get("reasons", []),
         "worst": [[j["name"], j["status"]] for j in ranked(report)[:3] if j["status"] != "OK"],
+        **({"steps_not_run": f["steps_not_run"]} if f.get("steps_not_run") else {}),
         **({"format": to, "not_carried": [n for n in result.cleaned.notes if n not in motion.notes]}
            if to and to != motion.format else {}),
     }

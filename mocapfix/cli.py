@@ -390,6 +390,9 @@ def _clean_line(r: dict, verbose: bool, graded: bool = True) -> str:
         return f"SKIP  {one_line(r['input'])}: {r['skipped']}"
     if verbose and r.get("reasons"):
         text += "\n      " + "\n      ".join(map(one_line, r["reasons"]))
+    if verbose:
+        for note in r.get("steps_not_run", []):
+            text += f"\n      note: {one_line(note)}"
     for note in r.get("not_carried", []):       # a conversion never drops data silently
         text += f"\n      not carried into {r['format']}: {one_line(note)}"
     return text

@@ -70,6 +70,9 @@ class Selection:
 
 #: the reason :func:`not_cleaned` gives for a point a selection leaves out
 EXCLUDED = "excluded by the config"
+#: a step's ``info["skipped"]`` when its own ``markers:``/``exclude:`` select none of the
+#: points the pipeline cleans in a file
+NO_MARKER_SELECTED = "no marker selected"
 
 
 def not_cleaned(motion: Motion, *selections: "Selection | None",

@@ -33,7 +33,8 @@ from mocapfix.core.errors import ConfigError
 from mocapfix.core.gaps import runs, take_frames
 from mocapfix.core.motion import Motion
 from mocapfix.core.quantity import Quantity, parse_quantity
-from mocapfix.pipeline.selection import Selection, keep_rig_joints, moved_channels, not_cleaned, put, take
+from mocapfix.pipeline.selection import (NO_MARKER_SELECTED, Selection, keep_rig_joints,
+                                         moved_channels, not_cleaned, put, take)
 from mocapfix.solvers.fill_error import uncertain_reason
 from mocapfix.solvers.rigid import norms
 from mocapfix.pipeline.unlabelled import Unlabelled
@@ -211,7 +212,7 @@ class Pipeline:
         uncertain to fill (None: no gate)."""
         cols = cleaned if step.select is None else cleaned & step.select.mask(motion.names)
         if not cols.any():
-            return motion.copy(), {"skipped": "no marker selected"}
+            return motion.copy(), {"skipped": NO_MARKER_SELECTED}
         span = take_frames(motion.missing, cols)
 
         def gate(frames: slice) -> FillGate | None:

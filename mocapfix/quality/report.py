@@ -42,7 +42,7 @@ from __future__ import annotations
 from mocapfix.quality.measure import CleanResult, measure_cleaning
 from mocapfix.quality.render import markdown_to_html, to_html, to_json, to_markdown
 from mocapfix.quality.rules import DEFAULT_THRESHOLDS, STATUS_ORDER, report_rules, report_thresholds
-from mocapfix.pipeline.selection import EXCLUDED
+from mocapfix.pipeline.selection import EXCLUDED, NO_MARKER_SELECTED
 from mocapfix.pipeline.unlabelled import is_unlabelled
 
 SCHEMA = "mocapfix.report/1"
@@ -74,6 +74,13 @@ def build_report(result: CleanResult, thresholds: dict | None = None) -> dict:
         file["notes"].append("every marker of this file is an unlabelled trajectory: nothing "
                              "was cleaned or graded (a config's unlabelled: {clean: true} "
                              "cleans them)")
+    # a step whose own markers:/exclude: select nothing here (a typo?) did not run
+    unselected = [f"{s['step']}: its markers:/exclude: select none of the markers cleaned in "
+                  "this file; it did not run" for s in measured["steps"]
+                  if measured["joints"] and (s.get("info") or {}).get("skipped") == NO_MARKER_SELECTED]
+    if unselected:
+        file["steps_not_run"] = unselected
+        file["notes"].extend(unselected)
     file["joints_by_status"] = {k: sum(j["status"] == k for j in measured["joints"])
                                 for k in STATUS_ORDER}
     report = {"schema": SCHEMA, "file": file, "steps": measured["steps"],

@@ -72,6 +72,27 @@ def test_quiet_and_verbose(tmp_path):
     assert r.exit_code == 0 and "LEFTWRIST" in r.stdout
 
 
+def test_a_step_whose_selection_matches_no_marker_says_so(tmp_path):
+    # a typo in a step's markers: silently turned the step off: the file was OK and only
+    # the JSON report's steps held "skipped"
+    import json
+
+    src = shared("c3d/c3dorg_s02_pc_real.c3d")
+    text = ("pipeline:\n  - cleaner: fill\n    markers: [LFT1]\n"
+            "  - cleaner: fill\n    markers: [NOPE]\n")
+    r = CliRunner().invoke(main, ["clean", str(src), "-o", str(tmp_path / "o"), "-v",
+                                  "-c", config_file(tmp_path, text)])
+    no_traceback(r)
+    note = "step 2 (fill): its markers:/exclude: select none of the markers cleaned"
+    assert note in r.stdout and "step 1 (fill): its" not in r.stdout
+    report = json.loads((tmp_path / "o" / (src.name + ".report.json")).read_text())
+    assert [n for n in report["file"]["notes"] if "did not run" in n] == report["file"]["steps_not_run"]
+    assert len(report["file"]["steps_not_run"]) == 1
+    r = CliRunner().invoke(main, ["clean", str(src), "-o", str(tmp_path / "o2"), "-v",
+                                  "-c", config_file(tmp_path, "pipeline:\n  - cleaner: fill\n", "all.yaml")])
+    assert "did not run" not in r.stdout
+
+
 @pytest.mark.parametrize("mask, mode", [(0o022, 0o644), (0o027, 0o640)])
 def test_outputs_honour_the_umask(tmp_path, mask, mode):
     old = os.umask(mask)
