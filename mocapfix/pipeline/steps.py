@@ -31,7 +31,7 @@ from mocapfix.cleaners.base import (FILL_ERRORS, REJECTED_FILLS, REPLACED_FRAMES
                                     FillGate, FittedCleaner, shift_frames)
 from mocapfix.core.errors import ConfigError
 from mocapfix.core.gaps import runs, take_frames
-from mocapfix.core.motion import Motion
+from mocapfix.core.motion import Motion, missing_samples
 from mocapfix.core.quantity import Quantity, parse_quantity
 from mocapfix.pipeline.selection import (NO_MARKER_SELECTED, Selection, keep_rig_joints,
                                          moved_channels, not_cleaned, put, take)
@@ -150,6 +150,10 @@ class Pipeline:
             motion = motion.replace(notes=[*motion.notes, why])
         # samples a step left as too uncertain to fill: no later step fills them
         settled = np.zeros(motion.positions.shape[:2], bool) if gated else None
+        # the points a step can change, where they are not all (a raw export's hundreds of
+        # unlabelled fragments beside the markers): what each step did is measured on them
+        # alone. A rig's joints move with their parents', so there every point is measured
+        touched = None if cleaned.all() or motion.rig is not None else np.flatnonzero(cleaned)
         for step in self.steps:
             if not step.applies(motion):
                 records.append(StepRecord.not_run(step, motion, "not for this format"))
@@ -157,22 +161,29 @@ class Pipeline:
             started = time.perf_counter()
             out, info = self._apply_step(step, motion, cleaned, settled)
             if gated:
-                out, info = self._gate(step, motion, out, info, settled)
-            records.append(StepRecord.compare(step, motion, out, info, time.perf_counter() - started))
+                out, info = self._gate(step, motion, out, info, settled, touched)
+            records.append(StepRecord.compare(step, motion, out, info, time.perf_counter() - started,
+                                              touched))
             motion = out
         return motion.replace(fill_errors=written_fill_errors(motion, records)), records
 
     def _gate(self, step: Step, before: Motion, after: Motion, info: dict,
-              settled: np.ndarray) -> tuple[Motion, dict]:
+              settled: np.ndarray, touched: np.ndarray | None = None) -> tuple[Motion, dict]:
         """The step's fills without those it gave no estimate for, or whose 90 % bound
         exceeds ``max_fill_error`` (put back as missing and listed in the info's
         :data:`REJECTED_FILLS` with their estimate and bound); marks in ``settled`` (in
-        place) every gap left as too uncertain, by the step or here."""
+        place) every gap left as too uncertain, by the step or here. ``touched``: the
+        points the step can change (indices; None: all)."""
         info = dict(info or {})
         limit_mm = self.max_fill_error.si * 1e3
         listed = {(name, int(e[0])): e for name, entries in (info.get(FILL_ERRORS) or {}).items()
                   for e in entries}
-        col, start, length = runs(before.missing & ~after.missing)
+        if touched is None:
+            col, start, length = runs(before.missing & ~after.missing)
+        else:
+            col, start, length = runs(missing_samples(before.positions[:, touched])
+                                      & ~missing_samples(after.positions[:, touched]))
+            col = touched[col]
         drop = []
         for j, s, n in zip(col.tolist(), start.tolist(), length.tolist()):
             entry = listed.get((after.names[j], s))        # the run the step estimated
@@ -349,16 +360,35 @@ class StepRecord:
         return self.flagged if self.replaced is None else self.flagged | self.replaced
 
     @classmethod
-    def compare(cls, step: Step, before: Motion, after: Motion, info: dict, seconds: float):
+    def compare(cls, step: Step, before: Motion, after: Motion, info: dict, seconds: float,
+                touched: np.ndarray | None = None):
+        """The record of ``step`` from the motion ``before`` and ``after`` it; ``touched``:
+        the points it can change (indices; None: all), the others being the same in both
+        (their samples neither filled, flagged, replaced nor moved)."""
         if after.positions.shape != before.positions.shape:
             raise ConfigError(f"{step.label}: cleaner changed the shape of the motion")
-        miss_before, miss_after = before.missing, after.missing
-        moved = norms(after.positions - before.positions)
-        moved[miss_before | miss_after] = 0.0
         info = info or {}
-        return cls(step.label, step.cleaner.name, seconds, miss_before & ~miss_after,
-                   ~miss_before & miss_after, moved, info,
-                   replaced=replaced_mask(info, after.names, miss_before.shape) & ~miss_before)
+        if touched is None:
+            miss_before, miss_after = before.missing, after.missing
+            moved = norms(after.positions - before.positions)
+            moved[miss_before | miss_after] = 0.0
+            return cls(step.label, step.cleaner.name, seconds, miss_before & ~miss_after,
+                       ~miss_before & miss_after, moved, info,
+                       replaced=replaced_mask(info, after.names, miss_before.shape) & ~miss_before)
+        shape = before.positions.shape[:2]
+        b, a = before.positions[:, touched], after.positions[:, touched]
+        mb, ma = missing_samples(b), missing_samples(a)
+        part = norms(a - b)
+        part[mb | ma] = 0.0
+        moved, filled, flagged = np.zeros(shape), np.zeros(shape, bool), np.zeros(shape, bool)
+        moved[:, touched], filled[:, touched], flagged[:, touched] = part, mb & ~ma, ~mb & ma
+        replaced = replaced_mask(info, after.names, shape)
+        replaced[:, touched] &= ~mb
+        others = np.setdiff1d(np.flatnonzero(replaced.any(axis=0)), touched)
+        if len(others):         # listed though the step could not change them: as the whole
+            replaced[:, others] &= ~missing_samples(before.positions[:, others])
+        return cls(step.label, step.cleaner.name, seconds, filled, flagged, moved, info,
+                   replaced=replaced)
 
     @classmethod
     def not_run(cls, step: Step, motion: Motion, why: str):

@@ -309,3 +309,35 @@ def test_benchmarks_leave_unlabelled_trajectories_out_of_the_truth():
     result = bench.run([hdm], "occlusion", none, seeds=1, settings=["gaps"])
     assert any("3 unlabelled trajectories left out of the truth (*0, *1, *2)" in n
                for n in result.notes), result.notes
+
+
+def test_the_steps_records_are_those_of_the_whole_take(pig):
+    """What each step did is measured on the points the pipeline cleans alone when others
+    sit beside them (a raw export's fragments: every step compared all 1,041 points of a
+    take to clean 41); the records are the ones the whole take gives: each step's masks and
+    distances against StepRecord.compare over every point, and nothing on the fragments."""
+    from mocapfix.pipeline.steps import StepRecord
+
+    _, path = pig
+    motion = read(path)
+    P = motion.positions.copy()
+    P[100:130, 3] = P[200:206, 7] = np.nan            # gaps to fill, a spike to judge
+    P[300, 5] += [80.0, 0.0, 0.0]
+    motion = motion.replace(positions=P, source=None)
+    pipe = load_config(default_config_path())
+    kept = np.array([w is None for w in pipe.not_cleaned(motion)])
+    assert not kept[-5:].any() and kept[:-5].all()
+    before = motion
+    for step in pipe.steps:
+        if not step.applies(before):
+            continue
+        after, info = pipe._apply_step(step, before, kept)
+        whole = StepRecord.compare(step, before, after, info, 0.0)
+        alone = StepRecord.compare(step, before, after, info, 0.0, np.flatnonzero(kept))
+        for key in ("filled", "flagged", "moved", "replaced"):
+            assert np.array_equal(getattr(alone, key), getattr(whole, key)), (step.label, key)
+        assert not whole.moved[:, -5:].any() and not whole.filled[:, -5:].any()
+        before = after
+    cleaned, records = pipe.run(motion)
+    assert sum(int(r.filled.sum()) for r in records) >= 36   # the steps did something
+    assert sum(int(r.outliers[300, 5]) for r in records) == 1
