@@ -89,8 +89,14 @@ def _motion(motion_or_path, fps: float | None) -> Motion:
     if isinstance(motion_or_path, Motion):
         return motion_or_path
     from mocapfix.batch.discovery import refuse_special_file
+    from mocapfix.core.quantity import frame_rate
     from mocapfix.formats import read
 
+    if fps is not None:         # "abc" was the file's fault: "malformed asfamc file (ValueError"
+        try:
+            fps = frame_rate(fps)
+        except ValueError as exc:
+            raise ConfigError(f"fps: {exc}") from None
     refuse_special_file(motion_or_path)     # a FIFO waited for a writer forever
     return read(Path(motion_or_path), default_fps=fps)
 

@@ -41,19 +41,12 @@ class FrameRate(click.ParamType):
     name = "fps"
 
     def convert(self, value, param, ctx):
-        from mocapfix.core.quantity import MAX_FRAME_RATE_HZ, MIN_FRAME_RATE_HZ
+        from mocapfix.core.quantity import frame_rate
 
-        if isinstance(value, float):
-            rate = value
-        else:
-            try:
-                rate = float(value)
-            except (TypeError, ValueError):
-                self.fail(f"{value!r} is not a number of frames per second", param, ctx)
-        if not (math.isfinite(rate) and MIN_FRAME_RATE_HZ <= rate <= MAX_FRAME_RATE_HZ):
-            self.fail(f"{value!r} is not a frame rate (a number of Hz from "
-                      f"{MIN_FRAME_RATE_HZ:g} to {MAX_FRAME_RATE_HZ:g})", param, ctx)
-        return rate
+        try:
+            return frame_rate(value)
+        except ValueError as exc:
+            self.fail(str(exc), param, ctx)
 
 
 FPS = FrameRate()

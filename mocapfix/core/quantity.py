@@ -29,6 +29,20 @@ MAX_FRAME_RATE_HZ = 100_000.0
 #: slowest: one frame in 1,000 s (a corrupt rate field, or a Frame Time of 1e308 s)
 MIN_FRAME_RATE_HZ = 0.001
 
+
+def frame_rate(value) -> float:
+    """``value`` as a frame rate in Hz (a number, or text of one), finite and from
+    :data:`MIN_FRAME_RATE_HZ` to :data:`MAX_FRAME_RATE_HZ`; a ValueError saying why not
+    (``--fps`` and the Python API's ``fps=``)."""
+    try:
+        rate = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{value!r} is not a number of frames per second") from None
+    if not (math.isfinite(rate) and MIN_FRAME_RATE_HZ <= rate <= MAX_FRAME_RATE_HZ):
+        raise ValueError(f"{value!r} is not a frame rate (a number of Hz from "
+                         f"{MIN_FRAME_RATE_HZ:g} to {MAX_FRAME_RATE_HZ:g})")
+    return rate
+
 _PATTERN = re.compile(r"^\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*([A-Za-z]*)\s*$")
 
 

@@ -104,3 +104,14 @@ def test_an_empty_config_or_rules_name_is_refused_as_empty(call):
     # "" is the current folder as a path: the error was ": is a folder, not a config file"
     with pytest.raises(mocapfix.core.errors.ConfigError, match="is an empty name"):
         call()
+
+
+@pytest.mark.parametrize("fps", ["abc", float("nan"), 0, -30, 1e9])
+def test_a_frame_rate_that_is_none_is_refused_as_the_callers(fps):
+    # fps="abc" was the file's fault: "malformed asfamc file (ValueError ...)"; nan named
+    # the ASF file
+    amc = shared("asfamc/05_01.amc")
+    with pytest.raises(mocapfix.core.errors.ConfigError, match=r"^fps: .*(not a number|not a frame rate)"):
+        mocapfix.clean(amc, fps=fps)
+    with pytest.raises(mocapfix.core.errors.ConfigError, match=r"^fps: "):
+        mocapfix.check(amc, fps=fps)
