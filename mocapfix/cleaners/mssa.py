@@ -45,6 +45,7 @@ from mocapfix.cleaners.base import FittedCleaner, Param
 from mocapfix.core.errors import MocapfixError
 from mocapfix.core.motion import Motion
 from mocapfix.solvers import rotchannels, ssa
+from mocapfix.solvers.nanstats import nanmedian_columns
 from mocapfix.solvers.segments import linear_bridge
 
 #: shipped model per rotation layout signature (first joints' names), used with no ``model``
@@ -171,8 +172,8 @@ class MSSA(FittedCleaner):
                                     f"motion has {first.fps:g} Hz; train one model per frame rate")
             feats.append(_features(mo, space)[0])
         allf = np.concatenate(feats)
-        mean = np.nanmean(allf, axis=0)
-        mean = np.where(np.isnan(mean), 0.0, mean)
+        seen = (~np.isnan(allf)).sum(axis=0)      # a channel never seen: mean 0, no warning
+        mean = np.nansum(allf, axis=0) / np.maximum(seen, 1)
         acc = ssa.LagCovariance(m, allf.shape[1])
         for n, F in enumerate(feats):
             acc.add(F - mean, step=self.values["window_step"])
@@ -287,7 +288,7 @@ class MSSA(FittedCleaner):
             E, mean, trained, source, _ = found
             info["bases"] = source
         else:
-            mean = np.nanmedian(F, axis=0)
+            mean = nanmedian_columns(F)           # no warning for a joint never seen
             mean = np.where(np.isnan(mean), 0.0, mean)
             scale = self._scale(space)
             E, vals, used = ssa.robust_bases(F - mean, m, energy=1.0, k=None, step=max(1, T // 1500),

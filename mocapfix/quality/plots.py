@@ -325,7 +325,9 @@ def _windows(changed: np.ndarray, size: np.ndarray, most: int = MOST_SPANS
     T = len(changed)
     if not changed.any():
         return [(0, T)], 0
-    near = np.convolve(changed, np.ones(2 * MARGIN + 1), "same") > 0
+    # the centred part of the full convolution: "same" gives the kernel's length, not T,
+    # for a take shorter than the kernel (a 3-frame take broke its HTML report)
+    near = np.convolve(changed, np.ones(2 * MARGIN + 1))[MARGIN:MARGIN + T] > 0
     _, s, _ = runs(near[:, None])
     at = np.flatnonzero(changed)
     # every span holds a changed frame: its first and last one

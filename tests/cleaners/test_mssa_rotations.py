@@ -490,3 +490,24 @@ def test_recurring_looks_for_recurrences_within_its_reach_only():
     one_cycle = glitches.recurring(X, mask, reach=40)             # one alike flick each side:
     assert np.flatnonzero(one_cycle[:, 0]).tolist() == [40, 584]  # the end flicks have one
     assert glitches.recurring(X, mask, reach=20)[flicks].all()    # none within reach
+
+
+@pytest.mark.parametrize("path", ["c3d/hdm05_HDM_mm_01-02_03_120.c3d",
+                                  "kinect/kv1_msr3d_a01_s01_e01_skeleton3D.txt"])
+def test_mssa_on_a_take_with_a_point_never_seen_warns_nothing(path):
+    # a marker (or joint) never seen: NumPy's "RuntimeWarning: All-NaN slice encountered"
+    # from the per-channel median of the file's own bases, printed to the user
+    import warnings
+
+    from mocapfix import formats
+
+    motion = formats.read(shared(path)).slice_frames(0, 300)
+    pos = motion.positions.copy()
+    pos[:, 5] = np.nan
+    motion = motion.replace(positions=pos)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        out, info = build("mssa").apply(motion)
+    assert not [w for w in caught if issubclass(w.category, RuntimeWarning)], [str(w.message) for w in caught]
+    assert "skipped" not in info
+    assert np.isnan(out.positions[:, 5]).all() or np.isfinite(out.positions[:, 5]).all()

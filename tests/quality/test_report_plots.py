@@ -243,3 +243,17 @@ def test_at_most_three_spans_are_plotted_and_the_rest_are_counted():
     page = to_html(build_report(result), result, viewer=False)
     assert [w[0] + 10 for _, w in _windows_of(page, "A")] == [4500, 3500, 2500]
     assert '<p class="more-spans">+2 more spans' in page
+
+
+@pytest.mark.parametrize("T", [3, 5, 20])
+def test_a_take_shorter_than_the_plot_margin_gets_its_html_report(T):
+    """A take of fewer than 2 × MARGIN + 1 frames with a change: the spans were found on a
+    mask of the kernel's length (21), not the take's, and the HTML report of the cleaned
+    3-frame HDM05 slice (optical-c3d) was 'internal error ValueError: operands could not
+    be broadcast together with shapes (21,) (3,)'."""
+    before = _line(T)[:, None, :]
+    after = before.copy()
+    after[T // 2, 0] += [0, 0, 5.0]
+    result = CleanResult(Motion(before, ["A"], **MM_C3D), Motion(after, ["A"], **MM_C3D), [])
+    page = to_html(build_report(result), result, viewer=False)
+    assert [w for _, w in _windows_of(page, "A")] == [(0, T)]
