@@ -887,15 +887,17 @@ def _positions_in_source_units(motion: Motion, source: C3DSource,
     return positions
 
 
-def _beyond_int16(new: np.ndarray, source: C3DSource, frames: slice = slice(None)) -> np.ndarray:
+def _beyond_int16(new: np.ndarray, source: C3DSource, frames: slice = slice(None),
+                  moved: bool = False) -> np.ndarray:
     """(T, P) True for the fills (samples missing in the source, present in ``new``: the
-    positions of ``frames``, in source units) that an int16 file's grid cannot hold:
-    beyond ±32767 × POINT:SCALE."""
+    positions of ``frames``, in source units; ``moved``: the samples present in both
+    instead) that an int16 file's grid cannot hold: beyond ±32767 × POINT:SCALE."""
     if source.storage != "int16":
         return np.zeros(new.shape[:2], bool)
     with np.errstate(invalid="ignore", over="ignore"):
         out = np.abs(np.rint(new / source.scale)) > 32767
-    return source.missing[frames] & np.isfinite(new).all(axis=2) & out.any(axis=2)
+    which = ~source.missing[frames] if moved else source.missing[frames]
+    return which & np.isfinite(new).all(axis=2) & out.any(axis=2)
 
 
 def _chunks(n_frames: int):
@@ -931,26 +933,35 @@ def kept_only_here(motion: Motion) -> list[str]:
 
 def storable(motion: Motion) -> Motion:
     """``motion`` as :func:`write` will store it in its source file: a fill an int16 file
-    cannot hold (far outside where the markers ever were) is made a gap again, with a
-    note, so that the report describes the file written. Other motions come back as
-    they are."""
+    cannot hold (far outside where the markers ever were) is made a gap again, and a
+    sample seen in the file but moved beyond that range (a smoother's overshoot of a
+    sample at the range's edge, where the file saturated) is held at the edge, each with a
+    note, so that the report describes the file written (the write failed for the whole
+    file). Other motions come back as they are."""
     source = motion.source
     if (not isinstance(source, C3DSource) or motion.positions.shape[:2] != source.shape
             or source.storage != "int16"):
         return motion
-    lost = np.zeros(source.shape, bool)
+    lost, held = np.zeros(source.shape, bool), np.zeros(source.shape, bool)
     for frames in _chunks(source.shape[0]):
-        lost[frames] = _beyond_int16(_positions_in_source_units(motion, source, frames),
-                                     source, frames)
-    if not lost.any():
+        new = _positions_in_source_units(motion, source, frames)
+        lost[frames] = _beyond_int16(new, source, frames)
+        held[frames] = _beyond_int16(new, source, frames, moved=True)
+    if not lost.any() and not held.any():
         return motion
     positions = motion.positions.copy()
     positions[lost] = np.nan
+    notes = list(motion.notes)
+    if lost.any():
+        notes.append(f"{int(lost.sum())} filled samples lie beyond the int16 range of the file "
+                     f"(±32767 × POINT:SCALE {source.scale:g}); left as gaps")
+    if held.any():
+        edge = 32767 * abs(source.scale) * source.metres_per_unit / motion.metres_per_unit
+        positions[held] = np.clip(positions[held], -edge, edge)
+        notes.append(f"{int(held.sum())} moved samples lie beyond the int16 range of the file "
+                     f"(±32767 × POINT:SCALE {source.scale:g}); held at its edge")
     confidence = None if motion.confidence is None else np.where(lost, 0.0, motion.confidence)
-    note = (f"{int(lost.sum())} filled samples lie beyond the int16 range of the file "
-            f"(±32767 × POINT:SCALE {source.scale:g}); left as gaps")
-    return motion.replace(positions=positions, confidence=confidence,
-                          notes=[*motion.notes, note])
+    return motion.replace(positions=positions, confidence=confidence, notes=notes)
 
 
 def _splice(motion: Motion, source: C3DSource, path, mark_missing: bool):

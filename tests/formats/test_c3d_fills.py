@@ -185,3 +185,31 @@ def test_the_report_describes_the_fills_an_int16_file_could_not_hold(tmp_path):
     listed = sum(g["length"] for j in report["joints"] for g in j["gaps"]["filled"])
     partly = sum(g["filled_frames"] for j in report["joints"] for g in j["gaps"]["unfilled"])
     assert listed + partly == int(filled[span].sum())
+
+
+def test_a_seen_sample_moved_beyond_an_int16_files_range_is_held_at_its_edge(tmp_path):
+    """c3d.org s06 stores int16 coordinates (POINT:SCALE 0.0215: ±705.8 mm) and LTHI_2's x
+    reaches the edge at frame 110 (the file saturated there). A smoother that moved it
+    0.01 mm beyond (optical-c3d's Butterworth) failed the whole file at the write ("coordinate
+    beyond the int16 range"); the sample is now held at the edge and the report says so."""
+    from mocapfix.cleaning import clean_file, clean_motion
+    from mocapfix.core.presets import resolve_config
+
+    src = shared("c3d/c3dorg_s06_MACsample.c3d")
+    edge = 32767 * 0.021541154012084007
+    motion = formats.read(src)
+    j = motion.names.index("LTHI_2")
+    assert motion.positions[110, j, 0] == pytest.approx(edge, abs=1e-9)
+    moved = motion.positions.copy()
+    moved[110, j, 0] += 0.5                              # a smoother's overshoot
+    moved[111, j] = moved[109, j]                        # a fill within the range
+    held = formats.storable(motion.replace(positions=moved))
+    assert held.positions[110, j, 0] == pytest.approx(edge, abs=1e-9)
+    assert np.array_equal(held.positions[111, j], moved[109, j])     # left as it was
+    assert any("1 moved samples lie beyond the int16 range" in n for n in held.notes)
+    pipeline = load_config(resolve_config("optical-c3d"))
+    out = tmp_path / "s06.c3d"
+    clean_file(src, out, pipeline)                       # was a WriteError
+    written = formats.read(out)
+    assert np.nanmax(np.abs(written.positions)) <= edge + 1e-6
+    assert written.positions[110, j, 0] == pytest.approx(edge, abs=1e-9)
