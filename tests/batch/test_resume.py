@@ -67,18 +67,28 @@ def _run(*args):
     return CliRunner().invoke(main, ["clean", *map(str, args)])
 
 
+def _background_batch(src, out, cfg, **popen) -> subprocess.Popen:
+    """``mocapfix clean src -o out -c cfg -j 2`` started in a process group of its own."""
+    env = {**os.environ, "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}
+    return subprocess.Popen([sys.executable, "-m", "mocapfix.cli", "clean", str(src), "-o",
+                             str(out), "-c", cfg, "-j", "2"], env=env, start_new_session=True,
+                            stdout=subprocess.DEVNULL, **popen)
+
+
+def _wait_until_done(out, n: int, proc: subprocess.Popen, seconds: float = 240) -> None:
+    """Until ``n`` files of the batch writing ``out`` are finished (or it ended)."""
+    deadline = time.monotonic() + seconds
+    while len(_done(out)) < n and proc.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.02)
+
+
 @pytest.mark.slow
 def test_killed_batch_resumes_and_skips_finished_files(tmp_path):
     src, cfg = _inputs(tmp_path), _cfg(tmp_path)
     out = tmp_path / "out"
-    env = {**os.environ, "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}
-    proc = subprocess.Popen([sys.executable, "-m", "mocapfix.cli", "clean", str(src), "-o", str(out),
-                             "-c", cfg, "-j", "2"], env=env, start_new_session=True,
-                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    deadline = time.monotonic() + 240
+    proc = _background_batch(src, out, cfg, stderr=subprocess.DEVNULL)
     try:
-        while len(_done(out)) < 3 and proc.poll() is None and time.monotonic() < deadline:
-            time.sleep(0.02)
+        _wait_until_done(out, 3, proc)
         os.killpg(proc.pid, signal.SIGKILL)               # the parent and its workers
     finally:
         proc.wait(timeout=30)
@@ -455,15 +465,10 @@ def test_an_interrupted_batch_exits_130_leaves_no_temporary_and_resumes(tmp_path
     # and exit 1, which says "some files failed, the others were written"
     src, cfg = _inputs(tmp_path), _cfg(tmp_path)
     out = tmp_path / "out"
-    env = {**os.environ, "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}
-    proc = subprocess.Popen([sys.executable, "-m", "mocapfix.cli", "clean", str(src), "-o", str(out),
-                             "-c", cfg, "-j", "2"], env=env, start_new_session=True,
-                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
-                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
-    deadline = time.monotonic() + 240
+    proc = _background_batch(src, out, cfg, stderr=subprocess.PIPE, text=True,
+                             preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     try:
-        while len(_done(out)) < 2 and proc.poll() is None and time.monotonic() < deadline:
-            time.sleep(0.02)
+        _wait_until_done(out, 2, proc)
         os.killpg(proc.pid, signal.SIGINT)                # as Ctrl-C in a terminal
         _, err = proc.communicate(timeout=60)
     finally:
