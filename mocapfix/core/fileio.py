@@ -8,6 +8,7 @@ import contextlib
 import errno
 import hashlib
 import os
+import re
 import stat
 import tempfile
 from pathlib import Path
@@ -78,12 +79,35 @@ def refuse_stream(path) -> None:
 
 def is_stream(path) -> bool:
     """True when ``path`` exists and is a character device or a pipe (/dev/null, /dev/stdout
-    into a pipe, a FIFO): :func:`atomic_open` writes into it in place."""
+    into a pipe, a FIFO), or names one of this process's open descriptors (/dev/stdout
+    redirected to a file): :func:`atomic_open` writes into it in place."""
     try:
         mode = os.stat(path).st_mode
     except OSError:
         return False
-    return stat.S_ISCHR(mode) or stat.S_ISFIFO(mode)
+    return stat.S_ISCHR(mode) or stat.S_ISFIFO(mode) or _names_a_descriptor(path)
+
+
+#: a path of an open descriptor: /proc/self/fd/N, /proc/PID/fd/N, /dev/fd/N
+_DESCRIPTOR = re.compile(r"^/(?:proc/(?:self|\d+)|dev)/fd/\d+$")
+
+
+def _names_a_descriptor(path) -> bool:
+    """Whether ``path`` is, or links (through any chain of links) to, an open descriptor's
+    path (``/dev/stdout`` → ``/proc/self/fd/1``). With the descriptor on a regular file
+    (``--junit /dev/stdout > report.xml``) the temporary-then-rename replaced the link
+    itself, /dev/stdout, with a regular file (run as root) and left the redirected file
+    empty."""
+    p = os.fspath(path)
+    for _ in range(40):                        # a loop of links ends here, not in a hang
+        if _DESCRIPTOR.match(os.path.normpath(p)):
+            return True
+        try:
+            target = os.readlink(p)
+        except OSError:                        # not a link (or gone): the chain ends
+            return False
+        p = os.path.join(os.path.dirname(p), target)
+    return False
 
 
 def _open_stream(path: Path, mode: str):
@@ -96,6 +120,13 @@ def _open_stream(path: Path, mode: str):
         st = os.stat(path)
     except OSError:
         return None
+    if stat.S_ISREG(st.st_mode) and _names_a_descriptor(path):
+        # /dev/stdout redirected to a file: appended to, after what the run printed there
+        try:
+            fd = os.open(path, os.O_WRONLY | os.O_APPEND)
+        except OSError as exc:
+            raise _write_error(path, exc) from None
+        return os.fdopen(fd, mode, **({} if "b" in mode else {"encoding": "utf-8", "newline": ""}))
     if stat.S_ISREG(st.st_mode) or stat.S_ISDIR(st.st_mode):
         return None
     if not (stat.S_ISCHR(st.st_mode) or stat.S_ISFIFO(st.st_mode)):

@@ -52,3 +52,43 @@ def test_junit_into_a_pipe_nobody_reads_is_an_error_not_a_hang(tmp_path):
     assert r.exit_code == 2, r.output
     assert f"{fifo}: cannot write: a named pipe (FIFO) that nothing reads" in r.output
     assert stat.S_ISFIFO(os.stat(fifo).st_mode)
+
+
+def test_junit_into_stdout_redirected_to_a_file_lands_in_that_file(tmp_path):
+    # `check --junit /dev/stdout > report.xml`: /dev/stdout links to /proc/self/fd/1, which
+    # is then the regular file report.xml; the temporary-then-rename replaced the link
+    # itself (as root: the machine's /dev/stdout) and left report.xml empty. The link here
+    # stands in for /dev/stdout (the real one must not be put at risk by a regression).
+    import subprocess
+    import sys
+
+    link = tmp_path / "stdout"
+    link.symlink_to("/proc/self/fd/1")
+    report = tmp_path / "report.xml"
+    with open(report, "wb") as out:
+        r = subprocess.run([sys.executable, "-m", "mocapfix.cli", "check", str(KIN), "--junit",
+                            str(link), "-q"], stdout=out, stderr=subprocess.PIPE, text=True,
+                           timeout=120)
+    assert r.returncode in (0, 1), r.stderr
+    assert link.is_symlink() and os.readlink(link) == "/proc/self/fd/1"
+    text = report.read_text()
+    assert "<?xml" in text and "walk_kinect_v2.csv" in text and "</testsuites>" in text
+
+
+def test_a_descriptor_path_is_written_in_place_through_a_chain_of_links(tmp_path):
+    from mocapfix.core.fileio import atomic_write_text, is_stream
+
+    target = tmp_path / "out.txt"
+    target.write_text("printed first\n")
+    with open(target, "a") as held:
+        first = tmp_path / "a"
+        first.symlink_to(f"/proc/self/fd/{held.fileno()}")
+        second = tmp_path / "b"
+        second.symlink_to("a")                          # a relative link to the link
+        assert is_stream(second) and not is_stream(target)
+        atomic_write_text(second, "then the page\n")
+        assert second.is_symlink() and first.is_symlink()
+    assert target.read_text() == "printed first\nthen the page\n"
+    loop = tmp_path / "loop"
+    loop.symlink_to("loop")
+    assert not is_stream(loop)
