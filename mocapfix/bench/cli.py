@@ -78,6 +78,13 @@ def bench(ctx, clean_files, protocol, methods, configs, seeds, settings, json_ou
             raise
         click.echo(f"mocapfix: error: {exc}", err=True)
         sys.exit(EXIT_USAGE)
+    once = {}
+    for f in clean_files:       # a file named twice counted twice in every mean
+        once.setdefault(os.path.realpath(f), f)
+    if len(once) < len(clean_files) and not quiet:
+        click.echo(f"bench: note: {len(clean_files) - len(once)} file(s) given more than once "
+                   "(benchmarked once)", err=True)
+    clean_files = tuple(once.values())
     if protocol == "kinect":  # CMU captures made into Kinect v2 CSVs: its own runner
         from mocapfix.bench.kinect import main as kinect_main
 

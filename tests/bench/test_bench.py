@@ -341,3 +341,19 @@ def test_bench_occlusion_on_a_three_frame_take_says_why(tmp_path):
     assert r.exit_code == 2, r.output
     assert "low >= high" not in r.output
     assert f"{short}: occlusion/" in r.output and "3 frames; the occlusion protocol needs at least 4" in r.output
+
+
+def test_a_file_named_twice_is_benchmarked_once(tmp_path):
+    # `bench walk.bvh walk.bvh` scored it twice: double weight in every mean, and no word
+    src = SAMPLE_DATA / "walk.bvh"
+    link = tmp_path / "again.bvh"
+    link.symlink_to(src)
+    args = ["--protocol", "feng2015", "--seeds", "1", "--settings", "snr20", "--methods", "none"]
+    once = CliRunner().invoke(main, ["bench", str(src), *args, "--json", str(tmp_path / "1.json")])
+    twice = CliRunner().invoke(main, ["bench", str(src), str(link), str(src), *args,
+                                      "--json", str(tmp_path / "2.json")])
+    no_traceback(twice)
+    assert once.exit_code == twice.exit_code == 0, twice.output
+    assert "2 file(s) given more than once (benchmarked once)" in twice.output
+    runs = [json.loads((tmp_path / n).read_text())["runs"] for n in ("1.json", "2.json")]
+    assert len(runs[1]) == len(runs[0]) > 0
