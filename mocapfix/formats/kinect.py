@@ -3,8 +3,9 @@
 Layouts (detected from content, never from the name):
 
 ``kinect_v2_csv``
-    Microsoft LabanotationSuite / KinectReader CSV, no header: a timestamp in 100 ns
-    ticks, then 25 x ``X,Y,Z,TrackingState`` (metres, camera space; state 0 NotTracked,
+    Microsoft LabanotationSuite / KinectReader CSV, no header: a whole-number timestamp
+    in 100 ns ticks (milliseconds when its median step is below 1000, as the suite's own
+    reader takes such stamps), then 25 x ``X,Y,Z,TrackingState`` (metres, camera space; state 0 NotTracked,
     1 Inferred, 2 Tracked), usually a trailing comma. Joint order = Kinect SDK 2.0
     ``JointType``. The same layout with 20 joints (Kinect SDK 1.x order) is accepted
     as ``kinect_v1_csv``.
@@ -643,7 +644,12 @@ def _read_kinect_csv(path, text, idx, notes, layout, fps, units) -> _Parsed:
         raise UnreadableFileError(path, "timestamp is not a number", line=int(idx[t]) + 1)
     coords = block[..., :3]
     missing = (states == 0) | _nonfinite_missing(coords, notes)
-    times, file_fps = _timing((ticks - np.median(ticks)) * 1e-7, notes)
+    fractional = ticks != np.round(ticks)
+    if fractional.any():
+        t = int(np.flatnonzero(fractional)[0])
+        raise UnreadableFileError(path, f"time stamp {ticks[t]:g} is not a whole number (100 ns "
+                                        "ticks or milliseconds expected)", line=int(idx[t]) + 1)
+    times, file_fps = _timing((ticks - np.median(ticks)) * _stamp_scale(ticks, notes), notes)
     T = len(idx)
     j = np.arange(n)
     return _Parsed(
@@ -655,6 +661,26 @@ def _read_kinect_csv(path, text, idx, notes, layout, fps, units) -> _Parsed:
         sep=",", times=times, file_fps=_or_default(file_fps, DEFAULT_FPS, notes),
         skeleton=kl.skeleton_for("kinect_v2" if n == 25 else "kinect_v1"), skip_lines=skipped,
         extra={"ticks0": float(ticks[0])})
+
+
+#: a median step of the headerless CSV's stamps below this is not 100 ns ticks (that
+#: would be over 10 kHz) but milliseconds
+MS_STAMP_STEP = 1000.0
+
+
+def _stamp_scale(stamps: np.ndarray, notes: list[str]) -> float:
+    """Seconds per unit of the headerless Kinect CSV's time stamps: 100 ns ticks (the
+    KinectReader's), or milliseconds when their median step is below ``MS_STAMP_STEP`` --
+    the LabanotationSuite's own reader (``LabanEditor/src/kinect.py``) takes such stamps
+    ("yamada data", 0, 33, 67, ...) as milliseconds; as ticks they gave ~300 000 fps and
+    the file was refused as a corrupt time column."""
+    dt = np.diff(stamps)
+    dt = dt[dt > 0]
+    if len(dt) and float(np.median(dt)) < MS_STAMP_STEP:
+        notes.append(f"time stamps read as milliseconds (median step {float(np.median(dt)):g}; "
+                     "as 100 ns ticks that would be over 10 kHz)")
+        return 1e-3
+    return 1e-7
 
 
 def _or_default(value: float, default: float, notes: list[str]) -> float:

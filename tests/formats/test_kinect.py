@@ -804,3 +804,32 @@ def test_edited_lines_a_chunk_of_frames_at_a_time_give_the_whole_take_bytes(name
     whole = kinect._edited_text(motion.source, edited)
     monkeypatch.setattr(kinect, "CHUNK", 7)
     assert kinect._edited_text(motion.source, edited) == whole
+
+
+# ---------------------------------------------------------------------------------------
+# variants found in the wild
+# ---------------------------------------------------------------------------------------
+def test_v2_csv_with_millisecond_stamps_is_read_as_milliseconds(tmp_path):
+    """The LabanotationSuite's own reader (LabanEditor/src/kinect.py) takes the KinectReader
+    layout with small stamps ("yamada data": 1, 34, 67, ... ms) as milliseconds; read as
+    100 ns ticks they gave ~300 000 fps and the file was refused as a corrupt time column."""
+    lines = [_v2_row(1 + round(1000 * t / 30), [(j / 10, t / 100, 2.0, 2) for j in range(25)])
+             for t in range(6)]
+    path = _write(tmp_path, "yamada.csv", "".join(lines))
+    motion = formats.read(path)
+    assert motion.source.layout == "kinect_v2_csv"
+    assert motion.fps == pytest.approx(30, rel=0.02)
+    assert motion.times[-1] == pytest.approx(0.167)
+    assert any("milliseconds" in n for n in motion.notes)
+    out = tmp_path / "out.csv"
+    formats.write(motion, out)
+    assert out.read_bytes() == path.read_bytes()
+
+
+def test_v2_csv_with_fractional_stamps_is_refused_naming_the_line(tmp_path):
+    lines = [_v2_row(f"{t / 30:.4f}", [(j / 10, t / 100, 2.0, 2) for j in range(25)])
+             for t in range(4)]
+    path = _write(tmp_path, "seconds.csv", "".join(lines))
+    with pytest.raises(UnreadableFileError, match=r"seconds\.csv:2: time stamp 0\.0333 is not "
+                                                  r"a whole number"):
+        formats.read(path)
