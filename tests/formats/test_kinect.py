@@ -833,3 +833,63 @@ def test_v2_csv_with_fractional_stamps_is_refused_naming_the_line(tmp_path):
     with pytest.raises(UnreadableFileError, match=r"seconds\.csv:2: time stamp 0\.0333 is not "
                                                   r"a whole number"):
         formats.read(path)
+
+
+def _lsl_kinect_file(tmp_path):
+    """The shape of an LSL-Kinect ``Kinect_Capture_MoCap_Data <date>.csv`` (its
+    MainWindow.xaml.cs: CsvHelper, CRLF): a settings line, a blank line, a header
+    ``TimeSpan,<JointType>_X,_Y,_Z,_Conf`` x 25, rows stamped ``yyyy-MM-dd HH:mm:ss.fff``,
+    confidence = TrackingState / 2, and a frame without the selected body written as 101
+    zeros after its stamp."""
+    rows = ["Software : LSL_Kinect,Version : 1.0.4.1,Stream nominal rate : 15,"
+            "Sequence Name : Reaching Task", "",
+            "TimeSpan," + ",".join(f"{n}{s}" for n in kl.KINECT_V2
+                                   for s in ("_X", "_Y", "_Z", "_Conf"))]
+    for t in range(6):
+        stamp = f"2020-07-03 16:01:47.{100 + 66 * t:03d}"
+        if t == 4:
+            rows.append(stamp + "," + ",".join(["0"] * 100))
+            continue
+        cells = []
+        for j in range(25):
+            cells += [f"{j / 10 + t / 1000:g}", f"{0.5 - j / 20:g}", f"{2 + j / 100:g}",
+                      "0.5" if j == 7 else "1"]
+        rows.append(stamp + "," + ",".join(cells))
+    return _write(tmp_path, "Kinect_Capture_MoCap_Data 2020.07.03 04.01 PM.csv",
+                  "\r\n".join(rows) + "\r\n")
+
+
+def test_lsl_kinect_csv_settings_line_date_stamps_and_bodiless_frame(tmp_path):
+    """Before: refused ("first line has 4 values"): the header is on line 3; then the
+    date-time stamps were "non-numeric"; and the frame without a body read as 25 joints
+    at the camera's origin."""
+    path = _lsl_kinect_file(tmp_path)
+    assert kinect.sniff(path.read_bytes()[:4096])
+    motion = formats.read(path)
+    assert motion.source.layout == "wide_csv"
+    assert motion.names == kl.KINECT_V2
+    assert motion.positions.shape == (6, 25, 3)
+    assert motion.positions[1, 2].tolist() == pytest.approx([0.201, 0.4, 2.02])
+    np.testing.assert_allclose(motion.times, np.arange(6) * 0.066)
+    assert motion.fps == pytest.approx(1 / 0.066)
+    assert motion.confidence[0, 7] == 0.5 and motion.confidence[0, 6] == 1.0
+    assert np.isnan(motion.positions[4]).all() and (motion.confidence[4] == 0).all()
+    assert not np.isnan(np.delete(motion.positions, 4, axis=0)).any()
+    out = tmp_path / "out.csv"
+    formats.write(motion, out)
+    assert out.read_bytes() == path.read_bytes()
+    motion.positions[4] = motion.positions[3]            # a cleaner filled the frame
+    formats.write(motion, out)
+    lines = out.read_text().splitlines()
+    assert lines[:3] == path.read_text().splitlines()[:3]
+    assert lines[7].split(",")[1:5] == ["0.003000", "0.500000", "2.000000", "0.500000"]
+
+
+def test_preamble_before_a_header_of_unknown_joints_is_still_refused(tmp_path):
+    path = _write(tmp_path, "other.csv", "Software : Tool,Version : 1\n\n"
+                  "time,Foo_X,Foo_Y,Foo_Z\n0,1,2,3\n")
+    with pytest.raises(UnreadableFileError, match="other.csv:1: not a Kinect skeleton layout"):
+        kinect.read(path)
+    assert not kinect.sniff(path.read_bytes())
+    with pytest.raises(UnreadableFileError, match="other.csv: not a known layout"):
+        formats.read(path)
