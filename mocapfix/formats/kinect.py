@@ -40,6 +40,11 @@ Layouts (detected from content, never from the name):
     ``name`` instead of joint accepted), one row per joint per frame; a joint without a
     row in some frame is missing there.
 
+More than one body per frame (a body/user column -- ``id``, ``BodyId``, ``TrackingId``,
+... -- holding two values at one time stamp or frame: Nuitrack's CSV recorder writes a
+row per tracked user) is refused naming the column; a body whose id changes between
+frames is still one body.
+
 Joint sets: a headed file whose joint names all belong to a built-in set (Kinect v1/v2,
 Azure Kinect, any spelling) gets that set's topology as ``motion.skeleton``; unknown
 names give no skeleton.
@@ -129,6 +134,10 @@ _FRAME_NAMES = {"frame", "frames", "frameindex", "frameno", "framenumber", "fram
                 "frameid", "index", "idx"}
 _JOINT_NAMES = {"joint", "jointname", "name", "jointtype", "label", "bone", "marker"}
 _STATE_NAMES = {"state", "trackingstate", "tracking"}
+#: a column naming the body/user a row belongs to (Nuitrack's CSV recorder: "id")
+_BODY_NAMES = {"id", "userid", "user", "body", "bodyid", "bodyindex", "bodynumber",
+               "trackingid", "skeletonid", "skeleton", "skeletonindex", "player", "playerid",
+               "playerindex", "person", "personid"}
 _CONF_NAMES = {"confidence", "conf"}
 
 
@@ -967,6 +976,8 @@ def _read_wide(path, text, idx, notes, layout, fps, units) -> _Parsed:
         path, text, data_idx, sep, len(columns), notes, groups)
     if not len(data_idx):
         raise UnreadableFileError(path, "no complete data row")
+    if time_col is not None:
+        _refuse_bodies_sharing_a_time(path, text, data_idx, sep, columns, time_col[0])
     T, J = len(data_idx), len(names)
     coords = _kept(coord_values, T).reshape(T, J, 3)
     missing = ~np.isfinite(coords).all(axis=2)
@@ -993,6 +1004,30 @@ def _read_wide(path, text, idx, notes, layout, fps, units) -> _Parsed:
         coord_field=np.broadcast_to(coord_cols, (T, J, 3)), state_field=state_field,
         state_kind=state_kind, sep=None if sep == " " else sep, times=times, file_fps=file_fps,
         units=unit, skeleton=skeleton, skip_lines=skipped)
+
+
+def _refuse_bodies_sharing_a_time(path, text: TextLines, idx, sep, columns, key_col: int):
+    """Refuse a file whose body/user column (``_BODY_NAMES``) holds two bodies at one
+    time stamp or frame: one row per body per frame (Nuitrack's CSV recorder, one row per
+    tracked user) was read as one body jumping between them, with "repeated frames"."""
+    body_cols = [c for c, name in enumerate(columns) if _norm(name) in _BODY_NAMES]
+    if not body_cols:
+        return
+    col = body_cols[0]
+    split = (lambda line: line.split(sep)) if sep != " " else str.split
+    seen: dict[str, str] = {}
+    for a in range(0, len(idx), CHUNK):
+        at = idx[a:a + CHUNK]
+        for k, line in enumerate(text.lines_at(at)):
+            cells = split(line)
+            key, body = cells[key_col].strip().strip('"'), cells[col].strip().strip('"')
+            first = seen.setdefault(key, body)
+            if first != body:
+                raise UnsupportedFeatureError(
+                    path, f"more than one body per frame: column {columns[col]!r} holds "
+                          f"{first!r} and {body!r} at {columns[key_col]} {key}; one body per "
+                          f"file is read (split the file by {columns[col]!r} first)",
+                    line=int(at[k]) + 1)
 
 
 def _wide_states(parsed, state, have, cols, idx, names, path, missing, coords=None, notes=None):
@@ -1125,6 +1160,9 @@ def _read_long(path, text, idx, notes, layout, fps, units) -> _Parsed:
     dup = np.nonzero(np.bincount(flat, minlength=T * J) > 1)[0]
     if len(dup):
         row = int(np.nonzero(flat == dup[0])[0][1])
+        bodies = [c for c in columns if _norm(c) in _BODY_NAMES]
+        if bodies:
+            _refuse_bodies_sharing_a_time(path, text, data_idx, sep, columns, key_col)
         raise UnreadableFileError(path, f"second row for joint {names[joint_of_row[row]]!r} in "
                                         "the same frame", line=int(data_idx[row]) + 1)
     line_of.ravel()[flat] = np.asarray(data_idx)

@@ -893,3 +893,47 @@ def test_preamble_before_a_header_of_unknown_joints_is_still_refused(tmp_path):
     assert not kinect.sniff(path.read_bytes())
     with pytest.raises(UnreadableFileError, match="other.csv: not a known layout"):
         formats.read(path)
+
+
+def _nuitrack_file(tmp_path, users):
+    """The shape of Nuitrack's CSV recorder (its doc's sample data): ``timestamp`` in
+    microseconds, the sensor's ``serial``, the user ``id``, ``JOINT_<NAME>.x/.y/.z`` and a
+    ``.rot`` on some joints; one row per tracked user per frame."""
+    joints = ["JOINT_WAIST", "JOINT_TORSO", "JOINT_NECK", "JOINT_HEAD"]
+    header = ["timestamp", "serial", "id"]
+    for j in joints:
+        header += [f"{j}.x", f"{j}.y", f"{j}.z"] + ([f"{j}.rot"] if j != "JOINT_WAIST" else [])
+    rows = [",".join(header)]
+    for t in range(6):
+        for user in users(t):
+            cells = [str(1715151474879921 + 33358 * t), "AS3M323001D", str(user)]
+            for k, j in enumerate(joints):
+                cells += [f"{-0.23 + user + k / 100:g}", f"{0.26 + k / 5:g}", f"{3.38 + t / 100:g}"]
+                cells += ["178.678"] if j != "JOINT_WAIST" else []
+            rows.append(",".join(cells))
+    return _write(tmp_path, "SkeletonData.csv", "\n".join(rows) + "\n")
+
+
+def test_rows_of_two_bodies_at_one_time_stamp_are_refused_naming_the_column(tmp_path):
+    """Before: Nuitrack rows of users 1 and 2 at the same stamps were read as one body
+    jumping between them ("3 repeated frames")."""
+    one = formats.read(_nuitrack_file(tmp_path, lambda t: [1]))
+    assert one.names == ["JOINT_WAIST", "JOINT_TORSO", "JOINT_NECK", "JOINT_HEAD"]
+    assert one.fps == pytest.approx(1e6 / 33358)
+    assert one.positions[2, 1].tolist() == pytest.approx([0.78, 0.46, 3.40])
+    # a user who leaves and comes back under a new id is still one body per frame
+    again = formats.read(_nuitrack_file(tmp_path, lambda t: [1] if t < 3 else [4]))
+    assert again.n_frames == 6
+    path = _nuitrack_file(tmp_path, lambda t: [1] if t < 3 else [1, 2])
+    with pytest.raises(UnreadableFileError, match=r"SkeletonData\.csv:6: more than one body per "
+                                                  r"frame: column 'id' holds '1' and '2'"):
+        formats.read(path)
+
+
+def test_long_layout_with_two_bodies_names_the_body_column(tmp_path):
+    rows = ["frame,body,joint,x,y,z"] + [f"{t},{b},{n},0.1,0.2,2.0" for t in range(2)
+                                         for b in (0, 1) for n in ("Head", "Neck")]
+    path = _write(tmp_path, "long.csv", "\n".join(rows) + "\n")
+    with pytest.raises(UnreadableFileError, match=r"long\.csv:4: more than one body per frame: "
+                                                  r"column 'body' holds '0' and '1' at frame 0"):
+        formats.read(path)
