@@ -1009,25 +1009,30 @@ def _read_wide(path, text, idx, notes, layout, fps, units) -> _Parsed:
 def _refuse_bodies_sharing_a_time(path, text: TextLines, idx, sep, columns, key_col: int):
     """Refuse a file whose body/user column (``_BODY_NAMES``) holds two bodies at one
     time stamp or frame: one row per body per frame (Nuitrack's CSV recorder, one row per
-    tracked user) was read as one body jumping between them, with "repeated frames"."""
+    tracked user) was read as one body jumping between them, with "repeated frames". A
+    column with a different value on every row is a row number, not a body."""
     body_cols = [c for c, name in enumerate(columns) if _norm(name) in _BODY_NAMES]
     if not body_cols:
         return
     col = body_cols[0]
     split = (lambda line: line.split(sep)) if sep != " " else str.split
-    seen: dict[str, str] = {}
+    keys, bodies = [], []
     for a in range(0, len(idx), CHUNK):
-        at = idx[a:a + CHUNK]
-        for k, line in enumerate(text.lines_at(at)):
+        for line in text.lines_at(idx[a:a + CHUNK]):
             cells = split(line)
-            key, body = cells[key_col].strip().strip('"'), cells[col].strip().strip('"')
-            first = seen.setdefault(key, body)
-            if first != body:
-                raise UnsupportedFeatureError(
-                    path, f"more than one body per frame: column {columns[col]!r} holds "
-                          f"{first!r} and {body!r} at {columns[key_col]} {key}; one body per "
-                          f"file is read (split the file by {columns[col]!r} first)",
-                    line=int(at[k]) + 1)
+            keys.append(cells[key_col].strip().strip('"'))
+            bodies.append(cells[col].strip().strip('"'))
+    if len(set(bodies)) in (1, len(bodies)):
+        return
+    seen: dict[str, str] = {}
+    for k, (key, body) in enumerate(zip(keys, bodies)):
+        first = seen.setdefault(key, body)
+        if first != body:
+            raise UnsupportedFeatureError(
+                path, f"more than one body per frame: column {columns[col]!r} holds "
+                      f"{first!r} and {body!r} at {columns[key_col]} {key}; one body per "
+                      f"file is read (split the file by {columns[col]!r} first)",
+                line=int(idx[k]) + 1)
 
 
 def _wide_states(parsed, state, have, cols, idx, names, path, missing, coords=None, notes=None):

@@ -937,3 +937,11 @@ def test_long_layout_with_two_bodies_names_the_body_column(tmp_path):
     with pytest.raises(UnreadableFileError, match=r"long\.csv:4: more than one body per frame: "
                                                   r"column 'body' holds '0' and '1' at frame 0"):
         formats.read(path)
+
+
+def test_a_row_number_column_named_id_is_not_a_body(tmp_path):
+    rows = ["id,time,Head_X,Head_Y,Head_Z,Neck_X,Neck_Y,Neck_Z"] + [
+        f"{k},{[0, 0.033, 0.033, 0.067][k]},0.1,0.5,2.0,0.1,0.3,2.0" for k in range(4)]
+    motion = formats.read(_write(tmp_path, "rows.csv", "\n".join(rows) + "\n"))
+    assert motion.n_frames == 4
+    assert any("1 repeated frames" in n for n in motion.notes)
