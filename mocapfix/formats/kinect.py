@@ -3,8 +3,9 @@
 Layouts (detected from content, never from the name):
 
 ``kinect_v2_csv``
-    Microsoft LabanotationSuite / KinectReader CSV, no header: a timestamp in 100 ns
-    ticks, then 25 x ``X,Y,Z,TrackingState`` (metres, camera space; state 0 NotTracked,
+    Microsoft LabanotationSuite / KinectReader CSV, no header: a whole-number timestamp
+    in 100 ns ticks (milliseconds when its median step is below 1000, as the suite's own
+    reader takes such stamps), then 25 x ``X,Y,Z,TrackingState`` (metres, camera space; state 0 NotTracked,
     1 Inferred, 2 Tracked), usually a trailing comma. Joint order = Kinect SDK 2.0
     ``JointType``. The same layout with 20 joints (Kinect SDK 1.x order) is accepted
     as ``kinect_v1_csv``.
@@ -28,12 +29,21 @@ Layouts (detected from content, never from the name):
     A header row with ``<Joint>_X, <Joint>_Y, <Joint>_Z`` columns (also ``<Joint>.X``,
     ``<Joint> X``, any case, optional unit tag ``(mm)``/``[mm]``), optional
     ``<Joint>_State``/``_TrackingState`` (0/1/2) or ``_Confidence`` (0..1) columns and an
-    optional time/timestamp/frame column; separator ``,``, ``;`` or tab. Other columns are
-    kept untouched. Empty cells are missing.
+    optional time/timestamp/frame column (numbers, or ISO dates and times
+    ``2020-07-03 16:01:47.123``); separator ``,``, ``;`` or tab. Other columns are
+    kept untouched. Empty cells are missing; so is a sample at exactly (0, 0, 0) with
+    confidence 0 (LSL-Kinect's frames without a body). Up to 5 lines of text may precede
+    the header when its joint names belong to a built-in set (LSL-Kinect's settings
+    line); they are kept as they are.
 ``long_csv``
     A header ``frame, joint, x, y, z[, state]`` (``time``/``timestamp`` instead of frame,
     ``name`` instead of joint accepted), one row per joint per frame; a joint without a
     row in some frame is missing there.
+
+More than one body per frame (a body/user column -- ``id``, ``BodyId``, ``TrackingId``,
+... -- holding two values at one time stamp or frame: Nuitrack's CSV recorder writes a
+row per tracked user) is refused naming the column; a body whose id changes between
+frames is still one body.
 
 Joint sets: a headed file whose joint names all belong to a built-in set (Kinect v1/v2,
 Azure Kinect, any spelling) gets that set's topology as ``motion.skeleton``; unknown
@@ -124,6 +134,10 @@ _FRAME_NAMES = {"frame", "frames", "frameindex", "frameno", "framenumber", "fram
                 "frameid", "index", "idx"}
 _JOINT_NAMES = {"joint", "jointname", "name", "jointtype", "label", "bone", "marker"}
 _STATE_NAMES = {"state", "trackingstate", "tracking"}
+#: a column naming the body/user a row belongs to (Nuitrack's CSV recorder: "id")
+_BODY_NAMES = {"id", "userid", "user", "body", "bodyid", "bodyindex", "bodynumber",
+               "trackingid", "skeletonid", "skeleton", "skeletonindex", "player", "playerid",
+               "playerindex", "person", "personid"}
 _CONF_NAMES = {"confidence", "conf"}
 
 
@@ -383,8 +397,38 @@ def _classify(content: list[str]) -> str | None:
         if len(tokens) == 4 and _looks_msr(content):
             return "msr_action3d"
         return None
-    sep = _header_sep(first)
-    return _header_layout(first.split(sep) if sep != " " else tokens)
+    found = _header_at(content)
+    return found[1] if found else None
+
+
+#: lines an exporter writes before a headed file's header (LSL-Kinect: a settings line
+#: "Software : LSL_Kinect,Version : 1.0.4.1,Stream nominal rate : 15,Sequence Name : ..."
+#: and a blank line)
+MAX_PREAMBLE = 5
+
+
+def _header_at(content: list[str]) -> tuple[int, str] | None:
+    """(position among ``content``, layout) of a headed file's header: the first content
+    line, or one after at most ``MAX_PREAMBLE`` lines of text (none of them all numbers)
+    when it is a wide header whose joint names all belong to a built-in set -- the
+    preamble is kept as it is, like any line the reader does not use."""
+    for k, line in enumerate(content[:MAX_PREAMBLE + 1]):
+        sep = _header_sep(line)
+        fields = line.split(sep) if sep != " " else line.split()
+        if k and all(_is_number(f) for f in _strip_trailing_empty(fields)):
+            return None
+        layout = _header_layout(fields)
+        if layout is None:
+            continue
+        if k and (layout != "wide_csv" or not _known_joint_set(fields)):
+            return None
+        return k, layout
+    return None
+
+
+def _known_joint_set(fields: list[str]) -> bool:
+    joints, _, _ = _wide_columns([_clean_header(f) for f in fields])
+    return kl.match_joint_set([j for j, r in joints.items() if "x" in r]) is not None
 
 
 def _classify_headerless_csv(fields: list[str]) -> str | None:
@@ -463,11 +507,17 @@ def read(path, fps: float | None = None, units: str | None = None,
     if layout is None:
         raise UnreadableFileError(path, _why_unknown(text.line(idx[0])), line=int(idx[0]) + 1)
     reader = _READERS[layout]
+    notes: list[str] = []
+    if layout in ("wide_csv", "long_csv"):
+        found = _header_at(text.lines_at(idx[:MAX_PREAMBLE + 1]))
+        if found and found[0]:
+            notes.append(f"{found[0]} line(s) before the header (line {idx[found[0]] + 1}) "
+                         "kept as they are")
+            idx = idx[found[0]:]
     for rate in (fps, default_fps):
         if rate is not None and not (np.isfinite(float(rate)) and float(rate) > 0):
             raise UnreadableFileError(path, f"fps must be a positive number, got {rate}")
     given = fps if fps is not None else default_fps
-    notes: list[str] = []
     parts = reader(path, text, idx, notes, layout=layout, fps=given, units=units)
     if not MIN_FRAME_RATE_HZ <= parts.file_fps <= MAX_FRAME_RATE_HZ:
         # time stamps 1e300 apart gave "90 frames at 0 fps", and cleaning overflowed
@@ -643,7 +693,12 @@ def _read_kinect_csv(path, text, idx, notes, layout, fps, units) -> _Parsed:
         raise UnreadableFileError(path, "timestamp is not a number", line=int(idx[t]) + 1)
     coords = block[..., :3]
     missing = (states == 0) | _nonfinite_missing(coords, notes)
-    times, file_fps = _timing((ticks - np.median(ticks)) * 1e-7, notes)
+    fractional = ticks != np.round(ticks)
+    if fractional.any():
+        t = int(np.flatnonzero(fractional)[0])
+        raise UnreadableFileError(path, f"time stamp {ticks[t]:g} is not a whole number (100 ns "
+                                        "ticks or milliseconds expected)", line=int(idx[t]) + 1)
+    times, file_fps = _timing((ticks - np.median(ticks)) * _stamp_scale(ticks, notes), notes)
     T = len(idx)
     j = np.arange(n)
     return _Parsed(
@@ -655,6 +710,26 @@ def _read_kinect_csv(path, text, idx, notes, layout, fps, units) -> _Parsed:
         sep=",", times=times, file_fps=_or_default(file_fps, DEFAULT_FPS, notes),
         skeleton=kl.skeleton_for("kinect_v2" if n == 25 else "kinect_v1"), skip_lines=skipped,
         extra={"ticks0": float(ticks[0])})
+
+
+#: a median step of the headerless CSV's stamps below this is not 100 ns ticks (that
+#: would be over 10 kHz) but milliseconds
+MS_STAMP_STEP = 1000.0
+
+
+def _stamp_scale(stamps: np.ndarray, notes: list[str]) -> float:
+    """Seconds per unit of the headerless Kinect CSV's time stamps: 100 ns ticks (the
+    KinectReader's), or milliseconds when their median step is below ``MS_STAMP_STEP`` --
+    the LabanotationSuite's own reader (``LabanEditor/src/kinect.py``) takes such stamps
+    ("yamada data", 0, 33, 67, ...) as milliseconds; as ticks they gave ~300 000 fps and
+    the file was refused as a corrupt time column."""
+    dt = np.diff(stamps)
+    dt = dt[dt > 0]
+    if len(dt) and float(np.median(dt)) < MS_STAMP_STEP:
+        notes.append(f"time stamps read as milliseconds (median step {float(np.median(dt)):g}; "
+                     "as 100 ns ticks that would be over 10 kHz)")
+        return 1e-3
+    return 1e-7
 
 
 def _or_default(value: float, default: float, notes: list[str]) -> float:
@@ -901,13 +976,16 @@ def _read_wide(path, text, idx, notes, layout, fps, units) -> _Parsed:
         path, text, data_idx, sep, len(columns), notes, groups)
     if not len(data_idx):
         raise UnreadableFileError(path, "no complete data row")
+    if time_col is not None:
+        _refuse_bodies_sharing_a_time(path, text, data_idx, sep, columns, time_col[0])
     T, J = len(data_idx), len(names)
     coords = _kept(coord_values, T).reshape(T, J, 3)
     missing = ~np.isfinite(coords).all(axis=2)
     empty_or_nan = int(missing.sum())
     state_kind, state_field, confidence = _wide_states(state_values, state, have, state_cols,
                                                         data_idx, names, path,
-                                                        missing)  # NotTracked -> missing
+                                                        missing,  # NotTracked -> missing
+                                                        coords=coords, notes=notes)
     if empty_or_nan:
         notes.append(f"{empty_or_nan} samples with empty/nan/inf cells read as missing")
     match = kl.match_joint_set(names)
@@ -915,7 +993,8 @@ def _read_wide(path, text, idx, notes, layout, fps, units) -> _Parsed:
     if match:
         notes.append(f"joint names match the {match[0]} set: its bone topology is used")
     unit = _guess_units(coords, missing, skeleton, tags, units, notes, path)
-    times, file_fps = _wide_times(time_values, data_idx, time_col, fps, path, notes)
+    times, file_fps = _wide_times(time_values, data_idx, time_col, fps, path, notes,
+                                  text=text, sep=sep)
     extra_cols = len(columns) - 3 * J - (time_col is not None) - int(np.sum(state_field[0] >= 0))
     if extra_cols > 0:
         notes.append(f"{extra_cols} other columns kept as they are")
@@ -927,10 +1006,41 @@ def _read_wide(path, text, idx, notes, layout, fps, units) -> _Parsed:
         units=unit, skeleton=skeleton, skip_lines=skipped)
 
 
-def _wide_states(parsed, state, have, cols, idx, names, path, missing):
+def _refuse_bodies_sharing_a_time(path, text: TextLines, idx, sep, columns, key_col: int):
+    """Refuse a file whose body/user column (``_BODY_NAMES``) holds two bodies at one
+    time stamp or frame: one row per body per frame (Nuitrack's CSV recorder, one row per
+    tracked user) was read as one body jumping between them, with "repeated frames". A
+    column with a different value on every row is a row number, not a body."""
+    body_cols = [c for c, name in enumerate(columns) if _norm(name) in _BODY_NAMES]
+    if not body_cols:
+        return
+    col = body_cols[0]
+    split = (lambda line: line.split(sep)) if sep != " " else str.split
+    keys, bodies = [], []
+    for a in range(0, len(idx), CHUNK):
+        for line in text.lines_at(idx[a:a + CHUNK]):
+            cells = split(line)
+            keys.append(cells[key_col].strip().strip('"'))
+            bodies.append(cells[col].strip().strip('"'))
+    if len(set(bodies)) in (1, len(bodies)):
+        return
+    seen: dict[str, str] = {}
+    for k, (key, body) in enumerate(zip(keys, bodies)):
+        first = seen.setdefault(key, body)
+        if first != body:
+            raise UnsupportedFeatureError(
+                path, f"more than one body per frame: column {columns[col]!r} holds "
+                      f"{first!r} and {body!r} at {columns[key_col]} {key}; one body per "
+                      f"file is read (split the file by {columns[col]!r} first)",
+                line=int(idx[k]) + 1)
+
+
+def _wide_states(parsed, state, have, cols, idx, names, path, missing, coords=None, notes=None):
     """Per-joint state (0/1/2) or confidence columns (``state``: (kind, role) of the
     first role any joint has; ``have``: the joints with one, at columns ``cols``); joints
-    without one count as tracked."""
+    without one count as tracked. A sample at exactly (0, 0, 0) with confidence 0 is
+    missing (LSL-Kinect writes a frame without its body as zeros with confidence 0: the
+    body read as present at the camera's origin)."""
     T, J = missing.shape
     if state is not None:
         kind = state[0]
@@ -951,18 +1061,50 @@ def _wide_states(parsed, state, have, cols, idx, names, path, missing):
             confidence[:, have] = _state_confidence(states, missing[:, have])
         else:
             confidence[:, have] = np.clip(np.nan_to_num(values, nan=0.0), 0.0, 1.0)
+            if coords is not None:
+                zero = (values == 0) & (coords[:, have] == 0).all(axis=2) & ~missing[:, have]
+                if zero.any():
+                    missing[:, have] |= zero
+                    if notes is not None:
+                        notes.append(f"{int(zero.sum())} samples at (0, 0, 0) with confidence 0 "
+                                     "read as missing")
         confidence[missing] = 0.0
         return kind, field_index, confidence
     return None, np.broadcast_to(-1, (T, J)), None
 
 
-def _wide_times(parsed, idx, time_col, fps, path, notes):
+#: a date and time in a time column (LSL-Kinect's "TimeSpan": 2020-07-03 16:01:47.123)
+_DATE_TIME = re.compile(r"^\d{4}-\d\d-\d\d[ T]\d\d:\d\d(:\d\d(\.\d+)?)?$")
+
+
+def _date_times(text: TextLines, idx: np.ndarray, sep, col: int) -> np.ndarray | None:
+    """Seconds since the first row's stamp of a time column of ISO dates and times, or
+    None when a cell of it is not one."""
+    split = (lambda line: line.split(sep)) if sep != " " else str.split
+    stamps = np.empty(len(idx), "datetime64[us]")
+    for a in range(0, len(idx), CHUNK):
+        cells = [split(line)[col].strip().strip('"') for line in text.lines_at(idx[a:a + CHUNK])]
+        if not all(_DATE_TIME.match(c) for c in cells):
+            return None
+        stamps[a:a + len(cells)] = np.array(cells, dtype="datetime64[us]")
+    return (stamps - stamps[0]) / np.timedelta64(1, "us") * 1e-6
+
+
+def _wide_times(parsed, idx, time_col, fps, path, notes, text=None, sep=None):
     if time_col is None:
         rate = fps or DEFAULT_FPS
         notes.append(RateAssumed(f"no time column: {DEFAULT_FPS:g} fps assumed"))
         return None, rate
     kind = time_col[1]
-    values = _kept(parsed, len(idx))[:, 0]
+    error = parsed[1]
+    clock = None
+    if error is not None and error[1] < len(idx) and text is not None:
+        clock = _date_times(text, idx, sep, time_col[0])
+        if clock is not None:
+            kind = "s"
+            notes.append("time column holds dates and times (yyyy-mm-dd hh:mm:ss.fff): "
+                         "read to the microsecond")
+    values = _kept(parsed, len(idx))[:, 0] if clock is None else clock
     if not np.isfinite(values).all():
         k = int(np.nonzero(~np.isfinite(values))[0][0])
         raise UnreadableFileError(path, "empty or non-numeric time/frame value",
@@ -1023,6 +1165,9 @@ def _read_long(path, text, idx, notes, layout, fps, units) -> _Parsed:
     dup = np.nonzero(np.bincount(flat, minlength=T * J) > 1)[0]
     if len(dup):
         row = int(np.nonzero(flat == dup[0])[0][1])
+        bodies = [c for c in columns if _norm(c) in _BODY_NAMES]
+        if bodies:
+            _refuse_bodies_sharing_a_time(path, text, data_idx, sep, columns, key_col)
         raise UnreadableFileError(path, f"second row for joint {names[joint_of_row[row]]!r} in "
                                         "the same frame", line=int(data_idx[row]) + 1)
     line_of.ravel()[flat] = np.asarray(data_idx)

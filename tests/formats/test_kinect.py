@@ -804,3 +804,144 @@ def test_edited_lines_a_chunk_of_frames_at_a_time_give_the_whole_take_bytes(name
     whole = kinect._edited_text(motion.source, edited)
     monkeypatch.setattr(kinect, "CHUNK", 7)
     assert kinect._edited_text(motion.source, edited) == whole
+
+
+# ---------------------------------------------------------------------------------------
+# variants found in the wild
+# ---------------------------------------------------------------------------------------
+def test_v2_csv_with_millisecond_stamps_is_read_as_milliseconds(tmp_path):
+    """The LabanotationSuite's own reader (LabanEditor/src/kinect.py) takes the KinectReader
+    layout with small stamps ("yamada data": 1, 34, 67, ... ms) as milliseconds; read as
+    100 ns ticks they gave ~300 000 fps and the file was refused as a corrupt time column."""
+    lines = [_v2_row(1 + round(1000 * t / 30), [(j / 10, t / 100, 2.0, 2) for j in range(25)])
+             for t in range(6)]
+    path = _write(tmp_path, "yamada.csv", "".join(lines))
+    motion = formats.read(path)
+    assert motion.source.layout == "kinect_v2_csv"
+    assert motion.fps == pytest.approx(30, rel=0.02)
+    assert motion.times[-1] == pytest.approx(0.167)
+    assert any("milliseconds" in n for n in motion.notes)
+    out = tmp_path / "out.csv"
+    formats.write(motion, out)
+    assert out.read_bytes() == path.read_bytes()
+
+
+def test_v2_csv_with_fractional_stamps_is_refused_naming_the_line(tmp_path):
+    lines = [_v2_row(f"{t / 30:.4f}", [(j / 10, t / 100, 2.0, 2) for j in range(25)])
+             for t in range(4)]
+    path = _write(tmp_path, "seconds.csv", "".join(lines))
+    with pytest.raises(UnreadableFileError, match=r"seconds\.csv:2: time stamp 0\.0333 is not "
+                                                  r"a whole number"):
+        formats.read(path)
+
+
+def _lsl_kinect_file(tmp_path):
+    """The shape of an LSL-Kinect ``Kinect_Capture_MoCap_Data <date>.csv`` (its
+    MainWindow.xaml.cs: CsvHelper, CRLF): a settings line, a blank line, a header
+    ``TimeSpan,<JointType>_X,_Y,_Z,_Conf`` x 25, rows stamped ``yyyy-MM-dd HH:mm:ss.fff``,
+    confidence = TrackingState / 2, and a frame without the selected body written as 101
+    zeros after its stamp."""
+    rows = ["Software : LSL_Kinect,Version : 1.0.4.1,Stream nominal rate : 15,"
+            "Sequence Name : Reaching Task", "",
+            "TimeSpan," + ",".join(f"{n}{s}" for n in kl.KINECT_V2
+                                   for s in ("_X", "_Y", "_Z", "_Conf"))]
+    for t in range(6):
+        stamp = f"2020-07-03 16:01:47.{100 + 66 * t:03d}"
+        if t == 4:
+            rows.append(stamp + "," + ",".join(["0"] * 100))
+            continue
+        cells = []
+        for j in range(25):
+            cells += [f"{j / 10 + t / 1000:g}", f"{0.5 - j / 20:g}", f"{2 + j / 100:g}",
+                      "0.5" if j == 7 else "1"]
+        rows.append(stamp + "," + ",".join(cells))
+    return _write(tmp_path, "Kinect_Capture_MoCap_Data 2020.07.03 04.01 PM.csv",
+                  "\r\n".join(rows) + "\r\n")
+
+
+def test_lsl_kinect_csv_settings_line_date_stamps_and_bodiless_frame(tmp_path):
+    """Before: refused ("first line has 4 values"): the header is on line 3; then the
+    date-time stamps were "non-numeric"; and the frame without a body read as 25 joints
+    at the camera's origin."""
+    path = _lsl_kinect_file(tmp_path)
+    assert kinect.sniff(path.read_bytes()[:4096])
+    motion = formats.read(path)
+    assert motion.source.layout == "wide_csv"
+    assert motion.names == kl.KINECT_V2
+    assert motion.positions.shape == (6, 25, 3)
+    assert motion.positions[1, 2].tolist() == pytest.approx([0.201, 0.4, 2.02])
+    np.testing.assert_allclose(motion.times, np.arange(6) * 0.066)
+    assert motion.fps == pytest.approx(1 / 0.066)
+    assert motion.confidence[0, 7] == 0.5 and motion.confidence[0, 6] == 1.0
+    assert np.isnan(motion.positions[4]).all() and (motion.confidence[4] == 0).all()
+    assert not np.isnan(np.delete(motion.positions, 4, axis=0)).any()
+    out = tmp_path / "out.csv"
+    formats.write(motion, out)
+    assert out.read_bytes() == path.read_bytes()
+    motion.positions[4] = motion.positions[3]            # a cleaner filled the frame
+    formats.write(motion, out)
+    lines = out.read_text().splitlines()
+    assert lines[:3] == path.read_text().splitlines()[:3]
+    assert lines[7].split(",")[1:5] == ["0.003000", "0.500000", "2.000000", "0.500000"]
+
+
+def test_preamble_before_a_header_of_unknown_joints_is_still_refused(tmp_path):
+    path = _write(tmp_path, "other.csv", "Software : Tool,Version : 1\n\n"
+                  "time,Foo_X,Foo_Y,Foo_Z\n0,1,2,3\n")
+    with pytest.raises(UnreadableFileError, match="other.csv:1: not a Kinect skeleton layout"):
+        kinect.read(path)
+    assert not kinect.sniff(path.read_bytes())
+    with pytest.raises(UnreadableFileError, match="other.csv: not a known layout"):
+        formats.read(path)
+
+
+def _nuitrack_file(tmp_path, users):
+    """The shape of Nuitrack's CSV recorder (its doc's sample data): ``timestamp`` in
+    microseconds, the sensor's ``serial``, the user ``id``, ``JOINT_<NAME>.x/.y/.z`` and a
+    ``.rot`` on some joints; one row per tracked user per frame."""
+    joints = ["JOINT_WAIST", "JOINT_TORSO", "JOINT_NECK", "JOINT_HEAD"]
+    header = ["timestamp", "serial", "id"]
+    for j in joints:
+        header += [f"{j}.x", f"{j}.y", f"{j}.z"] + ([f"{j}.rot"] if j != "JOINT_WAIST" else [])
+    rows = [",".join(header)]
+    for t in range(6):
+        for user in users(t):
+            cells = [str(1715151474879921 + 33358 * t), "AS3M323001D", str(user)]
+            for k, j in enumerate(joints):
+                cells += [f"{-0.23 + user + k / 100:g}", f"{0.26 + k / 5:g}", f"{3.38 + t / 100:g}"]
+                cells += ["178.678"] if j != "JOINT_WAIST" else []
+            rows.append(",".join(cells))
+    return _write(tmp_path, "SkeletonData.csv", "\n".join(rows) + "\n")
+
+
+def test_rows_of_two_bodies_at_one_time_stamp_are_refused_naming_the_column(tmp_path):
+    """Before: Nuitrack rows of users 1 and 2 at the same stamps were read as one body
+    jumping between them ("3 repeated frames")."""
+    one = formats.read(_nuitrack_file(tmp_path, lambda t: [1]))
+    assert one.names == ["JOINT_WAIST", "JOINT_TORSO", "JOINT_NECK", "JOINT_HEAD"]
+    assert one.fps == pytest.approx(1e6 / 33358)
+    assert one.positions[2, 1].tolist() == pytest.approx([0.78, 0.46, 3.40])
+    # a user who leaves and comes back under a new id is still one body per frame
+    again = formats.read(_nuitrack_file(tmp_path, lambda t: [1] if t < 3 else [4]))
+    assert again.n_frames == 6
+    path = _nuitrack_file(tmp_path, lambda t: [1] if t < 3 else [1, 2])
+    with pytest.raises(UnreadableFileError, match=r"SkeletonData\.csv:6: more than one body per "
+                                                  r"frame: column 'id' holds '1' and '2'"):
+        formats.read(path)
+
+
+def test_long_layout_with_two_bodies_names_the_body_column(tmp_path):
+    rows = ["frame,body,joint,x,y,z"] + [f"{t},{b},{n},0.1,0.2,2.0" for t in range(2)
+                                         for b in (0, 1) for n in ("Head", "Neck")]
+    path = _write(tmp_path, "long.csv", "\n".join(rows) + "\n")
+    with pytest.raises(UnreadableFileError, match=r"long\.csv:4: more than one body per frame: "
+                                                  r"column 'body' holds '0' and '1' at frame 0"):
+        formats.read(path)
+
+
+def test_a_row_number_column_named_id_is_not_a_body(tmp_path):
+    rows = ["id,time,Head_X,Head_Y,Head_Z,Neck_X,Neck_Y,Neck_Z"] + [
+        f"{k},{[0, 0.033, 0.033, 0.067][k]},0.1,0.5,2.0,0.1,0.3,2.0" for k in range(4)]
+    motion = formats.read(_write(tmp_path, "rows.csv", "\n".join(rows) + "\n"))
+    assert motion.n_frames == 4
+    assert any("1 repeated frames" in n for n in motion.notes)
