@@ -339,6 +339,13 @@ class FittedCleaner(Cleaner):
         """Set the learned state from a model file's header and arrays; returns self."""
         raise NotImplementedError
 
+    @staticmethod
+    def check_state(state, arrays: dict) -> None:
+        """A ValueError or TypeError when a model file's ``state`` and ``arrays`` cannot be
+        this cleaner's (indices past its joints, a rate of 0, an array of another rank):
+        :func:`mocapfix.core.models.load` makes it a corrupt model, when the config loads,
+        instead of an internal error on every file. Nothing to check by default."""
+
     def with_state(self, header: dict, arrays: dict) -> "FittedCleaner":
         """A new cleaner with this one's parameters and the given learned state (a model
         chosen per file; ``apply`` never changes the configured cleaner)."""
@@ -376,7 +383,8 @@ class FittedCleaner(Cleaner):
             return
         path = models.resolve(ref, base_dir, where=f"{self.step}: parameter '{self.model_param}'")
         header, arrays = models.load(path, cleaner=self.name,
-                                     where=f"{self.step}: parameter '{self.model_param}'")
+                                     where=f"{self.step}: parameter '{self.model_param}'",
+                                     check=self.check_state)
         if path.parent != models.SHIPPED_DIR:
             self.values[self.model_param] = str(path)   # absolute: workers need no config folder
         self._model_file = path

@@ -216,6 +216,24 @@ class MSSA(FittedCleaner):
                   "eigenvalues": self.eigenvalues_}
         return header, arrays
 
+    @staticmethod
+    def check_state(st, arrays: dict) -> None:
+        """A model's state must hold a positive frame rate, a window of at least one frame,
+        a layout, a matrix of bases and vectors of means and eigenvalues
+        (``FittedCleaner.check_state``)."""
+        from mocapfix.core.models import matrix, positive, window
+
+        if not isinstance(st, dict):
+            raise ValueError("no state")
+        positive(st, "fps")
+        window(st)
+        if not isinstance(st.get("layout"), list):
+            raise ValueError("state 'layout' is not a list")
+        matrix(arrays, "bases")
+        for name in ("mean", "eigenvalues"):
+            if name not in arrays or arrays[name].ndim != 1:
+                raise ValueError(f"array {name!r} is missing or not a vector")
+
     def load_state(self, header: dict, arrays: dict) -> "MSSA":
         st = header["state"]
         E = np.asarray(arrays["bases"], dtype=np.float64)
@@ -266,7 +284,8 @@ class MSSA(FittedCleaner):
             ships = models.shipped()
             for name in AUTO_MODELS:
                 if name in ships:
-                    header, arrays = models.load(ships[name], cleaner=self.name)
+                    header, arrays = models.load(ships[name], cleaner=self.name,
+                                                 check=self.check_state)
                     st = header["state"]
                     if fits([list(x) for x in st["layout"]], float(st["fps"]), st["space"]):
                         other = self.with_state(header, arrays)

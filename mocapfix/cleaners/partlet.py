@@ -330,6 +330,45 @@ class PartletDictionary(FittedCleaner):
         arrays["template"] = self.template_
         return header, arrays
 
+    @staticmethod
+    def check_state(st, arrays: dict) -> None:
+        """A model's state must index its own joints (partlets, frame joints), with a
+        positive sample rate, a window of at least one frame, dictionaries that are
+        matrices and a template of the frame joints (``FittedCleaner.check_state``)."""
+        from mocapfix.core.models import is_int, matrix, positive, window
+
+        if not isinstance(st, dict):
+            raise ValueError("no state")
+        joints = st.get("joints")
+        if not isinstance(joints, list) or not joints or not all(isinstance(j, str) for j in joints):
+            raise ValueError("state 'joints' is not a list of joint names")
+
+        def indices(value, what):
+            if not isinstance(value, list) or not value or not all(
+                    is_int(i) and 0 <= i < len(joints) for i in value):
+                raise ValueError(f"{what} is {value!r}, not indices into the {len(joints)} joints")
+
+        partlets = st.get("partlets")
+        if not isinstance(partlets, dict) or not partlets:
+            raise ValueError("state 'partlets' is not a table of partlets")
+        for name, members in partlets.items():
+            indices(members, f"partlet {name!r}")
+        indices(st.get("frame_joints"), "state 'frame_joints'")
+        positive(st, "sample_rate")
+        window(st)
+        for name in arrays:
+            if name.startswith(("dictionary_", "coarse_")):
+                matrix(arrays, name)
+        template = arrays.get("template")
+        if template is None or template.shape != (len(st["frame_joints"]), 3):
+            raise ValueError("array 'template' does not match the frame joints")
+        coarse = st.get("coarse")
+        if coarse:
+            if not isinstance(coarse, dict):
+                raise ValueError("state 'coarse' is not a table")
+            positive(coarse, "sample_rate", "coarse")
+            window(coarse, "coarse")
+
     def load_state(self, header: dict, arrays: dict) -> "PartletDictionary":
         st = header["state"]
         self.joints_ = list(st["joints"])
@@ -376,7 +415,8 @@ class PartletDictionary(FittedCleaner):
             if key in canon:
                 if name not in models.shipped():
                     break
-                header, arrays = models.load(models.shipped()[name], cleaner=self.name)
+                header, arrays = models.load(models.shipped()[name], cleaner=self.name,
+                                             check=self.check_state)
                 return self.with_state(header, arrays)
         raise ConfigError(
             f"{motion.path or 'motion'}: {self.step}: no partlet model for this skeleton (joints "

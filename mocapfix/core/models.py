@@ -133,9 +133,6 @@ def _load_cached(path: str, size: int, mtime_ns: int) -> tuple[dict, dict]:
         raise ConfigError(f"{path}: corrupt model file ({type(exc).__name__}: {exc})") from None
     try:
         _check_arrays(arrays)
-        check = _STATE_CHECKS.get(header.get("cleaner"))
-        if check is not None:
-            check(header.get("state"), arrays)
     except (ValueError, TypeError) as exc:
         raise ConfigError(f"{path}: corrupt model file ({exc})") from None
     for a in arrays.values():
@@ -143,11 +140,12 @@ def _load_cached(path: str, size: int, mtime_ns: int) -> tuple[dict, dict]:
     return header, arrays
 
 
-# -- what a cleaner's state must hold -------------------------------------------------------
+# -- what a model's arrays and state must hold ------------------------------------------------
 # A hand-edited or damaged model (a joint index past the joint list, a sample rate of 0,
 # NaN in a dictionary, an array of another rank) loaded as a config's model and failed
 # only on each file, as "internal error IndexError / ZeroDivisionError / LinAlgError", or
-# cleaned silently with NaN. Checked here, when the config is loaded, as a corrupt model.
+# cleaned silently with NaN. The arrays are checked here; each fitted cleaner's
+# ``check_state`` checks its state with the validators below, when the model is loaded.
 
 def _check_arrays(arrays: dict) -> None:
     """Every learned array holds finite real numbers (what :func:`save` writes)."""
@@ -158,23 +156,27 @@ def _check_arrays(arrays: dict) -> None:
             raise ValueError(f"array {name!r} holds NaN or infinite values")
 
 
-def _is_int(v) -> bool:
+def is_int(v) -> bool:
+    """A whole number of a model's JSON state (not a bool)."""
     return isinstance(v, int) and not isinstance(v, bool)
 
 
-def _positive(st: dict, key: str, what: str = "state") -> None:
+def positive(st: dict, key: str, what: str = "state") -> None:
+    """A ValueError unless ``st[key]`` is a finite number above 0."""
     v = st.get(key)
     if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v) or v <= 0:
         raise ValueError(f"{what} {key!r} is {v!r}, not a positive number")
 
 
-def _window(st: dict, what: str = "state") -> None:
+def window(st: dict, what: str = "state") -> None:
+    """A ValueError unless ``st["window"]`` is a whole number of at least 1."""
     v = st.get("window")
-    if not _is_int(v) or v < 1:
+    if not is_int(v) or v < 1:
         raise ValueError(f"{what} 'window' is {v!r}, not a whole number >= 1")
 
 
-def _matrix(arrays: dict, name: str) -> None:
+def matrix(arrays: dict, name: str) -> None:
+    """A ValueError unless ``arrays[name]`` is a matrix with at least one column."""
     a = arrays.get(name)
     if a is None:
         raise ValueError(f"no array {name!r}")
@@ -182,61 +184,11 @@ def _matrix(arrays: dict, name: str) -> None:
         raise ValueError(f"array {name!r} has shape {a.shape}, not rows × (1 or more) columns")
 
 
-def _check_partlet_state(st, arrays: dict) -> None:
-    if not isinstance(st, dict):
-        raise ValueError("no state")
-    joints = st.get("joints")
-    if not isinstance(joints, list) or not joints or not all(isinstance(j, str) for j in joints):
-        raise ValueError("state 'joints' is not a list of joint names")
-
-    def indices(value, what):
-        if not isinstance(value, list) or not value or not all(
-                _is_int(i) and 0 <= i < len(joints) for i in value):
-            raise ValueError(f"{what} is {value!r}, not indices into the {len(joints)} joints")
-
-    partlets = st.get("partlets")
-    if not isinstance(partlets, dict) or not partlets:
-        raise ValueError("state 'partlets' is not a table of partlets")
-    for name, members in partlets.items():
-        indices(members, f"partlet {name!r}")
-    indices(st.get("frame_joints"), "state 'frame_joints'")
-    _positive(st, "sample_rate")
-    _window(st)
-    for name in arrays:
-        if name.startswith(("dictionary_", "coarse_")):
-            _matrix(arrays, name)
-    template = arrays.get("template")
-    if template is None or template.shape != (len(st["frame_joints"]), 3):
-        raise ValueError("array 'template' does not match the frame joints")
-    coarse = st.get("coarse")
-    if coarse:
-        if not isinstance(coarse, dict):
-            raise ValueError("state 'coarse' is not a table")
-        _positive(coarse, "sample_rate", "coarse")
-        _window(coarse, "coarse")
-
-
-def _check_mssa_state(st, arrays: dict) -> None:
-    if not isinstance(st, dict):
-        raise ValueError("no state")
-    _positive(st, "fps")
-    _window(st)
-    if not isinstance(st.get("layout"), list):
-        raise ValueError("state 'layout' is not a list")
-    _matrix(arrays, "bases")
-    for name in ("mean", "eigenvalues"):
-        if name not in arrays or arrays[name].ndim != 1:
-            raise ValueError(f"array {name!r} is missing or not a vector")
-
-
-#: per cleaner, a check of the state a model file gives it (its ``load_state`` checks the
-#: sizes against each other): a ValueError or TypeError says what is wrong
-_STATE_CHECKS = {"partlet_dictionary": _check_partlet_state, "mssa": _check_mssa_state}
-
-
-def load(path, cleaner: str | None = None, where: str = "") -> tuple[dict, dict]:
+def load(path, cleaner: str | None = None, where: str = "",
+         check=None) -> tuple[dict, dict]:
     """(header, arrays) of a model file, checked; cached per process. ``cleaner``: the
-    cleaner that will use it (a model for another cleaner is refused)."""
+    cleaner that will use it (a model for another cleaner is refused); ``check(state,
+    arrays)``: its check of the state (a ValueError or TypeError makes the file corrupt)."""
     path = Path(path)
     prefix = f"{where}: " if where else ""
     try:
@@ -250,6 +202,11 @@ def load(path, cleaner: str | None = None, where: str = "") -> tuple[dict, dict]
     if cleaner is not None and header.get("cleaner") != cleaner:
         raise ConfigError(f"{prefix}{path} is a model for cleaner {header.get('cleaner')!r}, "
                           f"not {cleaner!r}")
+    if check is not None:
+        try:
+            check(header.get("state"), arrays)
+        except (ValueError, TypeError) as exc:
+            raise ConfigError(f"{prefix}{path}: corrupt model file ({exc})") from None
     return header, arrays
 
 
