@@ -142,8 +142,9 @@ def read(path, format: str | None = None, *, default_fps: float | None = None,
     """Read any supported file into a :class:`Motion`.
 
     ``fps`` (an option of every reader) overrides the file's rate; ``default_fps`` (the
-    command line's ``--fps``) is the rate of a file that stores none — AMC, and Kinect
-    text without time stamps — and leaves a stored rate alone (a note says it was not
+    command line's ``--fps``) is the rate of a file that stores none — AMC, Kinect text
+    without time stamps, a QTM TSV whose FREQUENCY is EXT without Frame and Time
+    columns — and leaves a stored rate alone (a note says it was not
     used where it differs: a batch of AMC and C3D files given ``--fps 60`` for the AMC
     files rewrote the C3D files' rate).
 
@@ -159,7 +160,7 @@ def read(path, format: str | None = None, *, default_fps: float | None = None,
         return _read_as(path, name, options)
     if name == "asfamc":                           # AMC files never store a rate
         return _read_as(path, name, {**options, "fps": default_fps})
-    if name == "kinect":                           # the reader knows which layouts store none
+    if name in ("kinect", "qtm_tsv"):             # the reader knows which files store none
         motion = _read_as(path, name, {**options, "default_fps": default_fps})
         if motion.source is not None and motion.source.extra.get("rate_assumed"):
             return motion

@@ -72,7 +72,8 @@ def sniff(head: bytes) -> bool:
 
 
 def read(path, fps: float | None = None, units: str | None = None,
-         zero_missing: bool | None = None, **options) -> Motion:
+         zero_missing: bool | None = None, default_fps: float | None = None,
+         **options) -> Motion:
     path = Path(path)
     text = tt.text_lines(path, read_input_bytes(path), "QTM TSV")
     header, i = _header(text)
@@ -152,8 +153,14 @@ def read(path, fps: float | None = None, units: str | None = None,
         notes.append(f"NO_OF_FRAMES says {declared} but the file holds {T} rows")
     if lead:
         times = tt.key_column(path, keys[:, 1], first, "Time") - keys[0, 1]
+    assumed = False
     if fps is not None:
         rate = float(fps)
+    elif external and not lead and default_fps is not None:
+        # the command line's --fps: the rate of a file that stores none
+        rate, assumed = float(default_fps), True
+        notes.append(f"FREQUENCY is EXT (external timebase) and the file has no Frame and Time "
+                     f"columns: {rate:g} Hz (--fps) used")
     elif external:
         rate = _time_rate(path, keys if lead else None, rate_line + 1, notes)
     if not lead:
@@ -162,7 +169,8 @@ def read(path, fps: float | None = None, units: str | None = None,
         layout=LAYOUT, text=text, sep="\t", names=names,
         row_line=np.arange(first, stop), x_field=lead + 3 * np.arange(J),
         original=positions.copy(), missing_token=token,
-        decimals=decimals, extra={"headed": headed, "zero_missing": as_missing})
+        decimals=decimals, extra={"headed": headed, "zero_missing": as_missing,
+                                  **({"rate_assumed": True} if assumed else {})})
     return Motion(positions, names, rate, units="mm", metres_per_unit=0.001, times=times,
                   source=source, notes=notes, kinds=["marker"] * J)
 
@@ -197,7 +205,7 @@ def _time_rate(path, keys, line: int, notes: list[str]) -> float:
                "the file holds one row" if len(keys) < 2 else
                "its Frame and Time columns do not increase from the first row to the last")
         raise UnreadableFileError(path, f"FREQUENCY is EXT (external timebase) and {why}: no "
-                                        "frame rate to read", line=line)
+                                        "frame rate to read (give it with --fps)", line=line)
     rate = tt.positive_rate(path, f"{frames[0] / frames[1]:.9g}", line,
                             "FREQUENCY EXT: the Frame and Time columns' rate")
     notes.append(f"FREQUENCY is EXT (external timebase): {rate:g} Hz taken from the Frame "

@@ -10,9 +10,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from click.testing import CliRunner
 from conftest import SAMPLE_DATA, need, shared_files
 
 from mocapfix import formats
+from mocapfix.cli import main
 from mocapfix.core.errors import UnreadableFileError
 from mocapfix.core.motion import Motion
 
@@ -382,3 +384,13 @@ def test_qtm_frequency_ext_without_frame_and_time_is_named(tmp_path):
     assert "FREQUENCY is EXT (external timebase) and the file has no Frame and Time columns" \
         in str(info.value)
     assert formats.read(path, fps=240).fps == 240.0
+    assert "(give it with --fps)" in str(info.value)
+    # the command line's --fps is the rate of a file that stores none: this one
+    given = formats.read(path, default_fps=240)
+    assert given.fps == 240.0 and any("240 Hz (--fps) used" in n for n in given.notes)
+    assert not any("not used" in n for n in given.notes)
+    r = CliRunner().invoke(main, ["info", str(path), "--fps", "240"])
+    assert r.exit_code == 0 and "240 fps" in r.output, r.output
+    # ... and leaves a stored rate alone, saying so
+    kept = formats.read(VENDOR / "qtm_old_doc.tsv", default_fps=100)
+    assert kept.fps == 240.0 and any("--fps 100 not used" in n for n in kept.notes)
