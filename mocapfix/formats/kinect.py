@@ -414,7 +414,7 @@ def _header_at(content: list[str]) -> tuple[int, str] | None:
     preamble is kept as it is, like any line the reader does not use."""
     for k, line in enumerate(content[:MAX_PREAMBLE + 1]):
         sep = _header_sep(line)
-        fields = line.split(sep) if sep != " " else line.split()
+        fields = _splitter(sep)(line)
         if k and all(_is_number(f) for f in _strip_trailing_empty(fields)):
             return None
         layout = _header_layout(fields)
@@ -940,7 +940,7 @@ def _data_rows(path, text, idx, sep, n_columns, notes, groups, label=None):
     """:func:`_parse_rows` of a headed layout's data lines (a trailing empty field past
     the header's columns dropped), then :func:`_check_counts`."""
     def split(line):
-        r = line.split(sep) if sep != " " else line.split()
+        r = _splitter(sep)(line)
         return r[:-1] if len(r) == n_columns + 1 and not r[-1].strip() else r
 
     counts, parsed, labels = _parse_rows(path, text, idx, split, n_columns, groups,
@@ -954,7 +954,7 @@ def _read_wide(path, text, idx, notes, layout, fps, units) -> _Parsed:
     header_i, data_idx = int(idx[0]), idx[1:]
     header = text.line(header_i)
     sep = _header_sep(header)
-    columns = [_clean_header(c) for c in (header.split(sep) if sep != " " else header.split())]
+    columns = [_clean_header(c) for c in _splitter(sep)(header)]
     joints, time_col, tags = _wide_columns(columns)
     for joint, roles in joints.items():
         lacking = {"x", "y", "z"} - set(roles)
@@ -1006,6 +1006,20 @@ def _read_wide(path, text, idx, notes, layout, fps, units) -> _Parsed:
         units=unit, skeleton=skeleton, skip_lines=skipped)
 
 
+def _splitter(sep: str):
+    """The fields of a line of a file separated by ``sep`` (``" "``: any run of blanks)."""
+    return str.split if sep == " " else (lambda line: line.split(sep))
+
+
+def _column_cells(text: TextLines, idx, sep, cols: tuple[int, ...]):
+    """The cells of the columns ``cols`` of the lines ``idx`` (a tuple a line), blanks and
+    quotes stripped, a list per :data:`CHUNK` lines (a long file is not held as lines)."""
+    split = _splitter(sep)
+    for a in range(0, len(idx), CHUNK):
+        rows = (split(line) for line in text.lines_at(idx[a:a + CHUNK]))
+        yield [tuple(cells[c].strip().strip('"') for c in cols) for cells in rows]
+
+
 def _refuse_bodies_sharing_a_time(path, text: TextLines, idx, sep, columns, key_col: int):
     """Refuse a file whose body/user column (``_BODY_NAMES``) holds two bodies at one
     time stamp or frame: one row per body per frame (Nuitrack's CSV recorder, one row per
@@ -1015,13 +1029,8 @@ def _refuse_bodies_sharing_a_time(path, text: TextLines, idx, sep, columns, key_
     if not body_cols:
         return
     col = body_cols[0]
-    split = (lambda line: line.split(sep)) if sep != " " else str.split
-    keys, bodies = [], []
-    for a in range(0, len(idx), CHUNK):
-        for line in text.lines_at(idx[a:a + CHUNK]):
-            cells = split(line)
-            keys.append(cells[key_col].strip().strip('"'))
-            bodies.append(cells[col].strip().strip('"'))
+    pairs = [pair for chunk in _column_cells(text, idx, sep, (key_col, col)) for pair in chunk]
+    keys, bodies = [k for k, _ in pairs], [b for _, b in pairs]
     if len(set(bodies)) in (1, len(bodies)):
         return
     seen: dict[str, str] = {}
@@ -1080,13 +1089,14 @@ _DATE_TIME = re.compile(r"^\d{4}-\d\d-\d\d[ T]\d\d:\d\d(:\d\d(\.\d+)?)?$")
 def _date_times(text: TextLines, idx: np.ndarray, sep, col: int) -> np.ndarray | None:
     """Seconds since the first row's stamp of a time column of ISO dates and times, or
     None when a cell of it is not one."""
-    split = (lambda line: line.split(sep)) if sep != " " else str.split
     stamps = np.empty(len(idx), "datetime64[us]")
-    for a in range(0, len(idx), CHUNK):
-        cells = [split(line)[col].strip().strip('"') for line in text.lines_at(idx[a:a + CHUNK])]
+    a = 0
+    for chunk in _column_cells(text, idx, sep, (col,)):
+        cells = [c for c, in chunk]
         if not all(_DATE_TIME.match(c) for c in cells):
             return None
         stamps[a:a + len(cells)] = np.array(cells, dtype="datetime64[us]")
+        a += len(cells)
     return (stamps - stamps[0]) / np.timedelta64(1, "us") * 1e-6
 
 
@@ -1139,7 +1149,7 @@ def _read_long(path, text, idx, notes, layout, fps, units) -> _Parsed:
     header_i, data_idx = int(idx[0]), idx[1:]
     header = text.line(header_i)
     sep = _header_sep(header)
-    columns = [_clean_header(c) for c in (header.split(sep) if sep != " " else header.split())]
+    columns = [_clean_header(c) for c in _splitter(sep)(header)]
     roles = _long_columns(columns)
     if not len(data_idx):
         raise UnreadableFileError(path, "header but no data rows")
@@ -1208,7 +1218,7 @@ def _read_long(path, text, idx, notes, layout, fps, units) -> _Parsed:
     last_line = np.full(T, -1, dtype=np.intp)
     np.maximum.at(last_line, frame_of_row, np.asarray(data_idx))
     _, first_row = np.unique(keys, return_index=True)
-    split = (lambda line: line.split(sep)) if sep != " " else str.split
+    split = _splitter(sep)
     frame_tokens = [split(line)[key_col].strip() for line in text.lines_at(data_idx[first_row])]
     return _Parsed(
         names=names, coords=coords,
