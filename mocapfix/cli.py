@@ -12,17 +12,18 @@ import sys
 import click
 
 from mocapfix import __version__
+from mocapfix.cli_options import (EXIT_OK, EXIT_SOME_FAILED, EXIT_UNREADABLE, EXIT_USAGE,
+                                  error_line)
 from mocapfix.core.errors import (MocapfixError, UnreadableFileError, name_the_file, one_line,
                                   printable)
 
-EXIT_OK, EXIT_SOME_FAILED, EXIT_USAGE, EXIT_UNREADABLE = 0, 1, 2, 3
 EXIT_INTERRUPTED = 130          # Ctrl-C (SIGINT): 128 + 2, as shells report it
 
 
 def _fail(message: str, debug: bool, exc: BaseException | None = None, code: int = EXIT_USAGE):
     if debug and exc is not None:
         raise exc
-    click.echo(printable(f"mocapfix: error: {one_line(message)}"), err=True)
+    error_line(message)
     sys.exit(code)
 
 

@@ -1,12 +1,23 @@
 """Command-line options shared by the batch commands (``clean``, ``check``,
 ``train-dictionary`` in :mod:`mocapfix.cli`, ``bench`` in :mod:`mocapfix.bench.cli`): where
-the work runs. A module of its own so that ``bench_cli`` can use them without importing
-``cli`` (which registers ``bench``)."""
+the work runs, and the exit codes and error line they share. A module of its own so that
+``bench_cli`` can use them without importing ``cli`` (which registers ``bench``)."""
 from __future__ import annotations
 
 import math
 
 import click
+
+from mocapfix.core.errors import one_line, printable
+
+#: docs/commands.md "Exit codes"
+EXIT_OK, EXIT_SOME_FAILED, EXIT_USAGE, EXIT_UNREADABLE = 0, 1, 2, 3
+
+
+def error_line(message) -> None:
+    """``mocapfix: error: MESSAGE`` on stderr, one line (a line break or control character
+    in a file name shown escaped)."""
+    click.echo(printable(f"mocapfix: error: {one_line(message)}"), err=True)
 
 
 _executor_options = [

@@ -1,5 +1,6 @@
 """The ``mocapfix bench`` command (registered by :mod:`mocapfix.cli` with
-``main.add_command(bench)``). Thin: parses options and calls :func:`mocapfix.bench.run`."""
+``main.add_command(bench)``). Thin: parses options and calls :func:`mocapfix.bench.run`
+(:func:`mocapfix.bench.kinect.run` for the kinect protocol)."""
 from __future__ import annotations
 
 import os
@@ -7,10 +8,9 @@ import sys
 
 import click
 
-from mocapfix.cli_options import GivenPath, executor_spec, executors
-from mocapfix.core.errors import MocapfixError
-
-EXIT_USAGE = 2
+from mocapfix.cli_options import (EXIT_SOME_FAILED, EXIT_UNREADABLE, EXIT_USAGE, GivenPath,
+                                  error_line, executor_spec, executors)
+from mocapfix.core.errors import MocapfixError, UnreadableFileError
 
 
 def _split(value: str | None) -> list[str] | None:
@@ -27,8 +27,18 @@ def _debug(ctx) -> bool:
     return bool(isinstance(root.obj, dict) and root.obj.get("debug"))
 
 
+def _fail(ctx, exc: Exception, unread=()):
+    """The files left out, then ``exc``, each as an error line; exit 2 (``--debug``: raise)."""
+    for u in unread:
+        error_line(u["error"])
+    if _debug(ctx):
+        raise exc
+    error_line(str(exc))
+    sys.exit(EXIT_USAGE)
+
+
 @click.command("bench")
-@click.argument("clean_files", nargs=-1, required=True, type=GivenPath(dir_okay=False))
+@click.argument("clean_files", nargs=-1, required=True, type=GivenPath())
 @click.option("--protocol", required=True,
               type=click.Choice(["feng2015", "yang2019", "feng2014", "occlusion", "kinect", "rotations",
                                  "harm"]),
@@ -65,6 +75,9 @@ def bench(ctx, clean_files, protocol, methods, configs, seeds, settings, json_ou
     from mocapfix.core.fileio import atomic_write_text, is_stream
 
     try:                      # before the work: a long run must not end on an unwritable path
+        for f in clean_files:   # a misspelt path, as clean, check and train-dictionary say
+            if not os.path.exists(f):
+                raise UnreadableFileError(f, "no such file")
         given = [c.strip() for c in (configs or "").split(",") if c.strip()]
         for option, path in (("--json", json_out), ("--markdown", md_out)):
             if path:
@@ -74,43 +87,59 @@ def bench(ctx, clean_files, protocol, methods, configs, seeds, settings, json_ou
             # the Markdown replaced the JSON without a word
             raise MocapfixError(f"--json and --markdown both name {json_out}; give two files")
     except MocapfixError as exc:
-        if _debug(ctx):
-            raise
-        click.echo(f"mocapfix: error: {exc}", err=True)
-        sys.exit(EXIT_USAGE)
+        _fail(ctx, exc)
     once = {}
     for f in clean_files:       # a file named twice counted twice in every mean
         once.setdefault(os.path.realpath(f), f)
     if len(once) < len(clean_files) and not quiet:
         click.echo(f"bench: note: {len(clean_files) - len(once)} file(s) given more than once "
                    "(benchmarked once)", err=True)
-    clean_files = tuple(once.values())
+    clean_files = list(once.values())
+    progress = None if quiet else (lambda msg: click.echo(f"bench: {msg}", err=True))
+    unread: list[dict] = []     # files that cannot be read: named, left out, exit 1
     if protocol == "kinect":  # CMU captures made into Kinect v2 CSVs: its own runner
-        from mocapfix.bench.kinect import main as kinect_main
+        from mocapfix.bench import kinect as bench_kinect
 
         if (jobs > 1 or scheduler or dask_workers) and not quiet:
             click.echo("bench: note: the kinect protocol runs in this process (-j, "
                        "--dask-workers and --scheduler are ignored)", err=True)
-        sys.exit(kinect_main(ctx, clean_files, configs, seeds, settings, json_out, md_out, quiet))
+        try:
+            result = bench_kinect.run(clean_files, configs=_split(configs) or (), seeds=seeds,
+                                      scenarios=_split(settings), progress=progress,
+                                      unread=unread)
+        except (MocapfixError, ValueError) as exc:
+            _fail(ctx, exc, unread)
+        tables = (lambda: "## `kinect`\n\n" + (bench_kinect.__doc__ or "").split("\n\n")[0]
+                  + "\n\n" + result.to_markdown())
+        to_json = result.to_json
+    else:
+        try:
+            spec = executor_spec(jobs, scheduler, dask_workers)
+            method_list, notes = bench_lib.resolve_methods(_split(methods), _split(configs))
+            for n in notes:
+                if not quiet:
+                    click.echo(f"bench: note: {n}", err=True)
+            result = bench_lib.run(clean_files, protocol, method_list, seeds=seeds,
+                                   settings=_split(settings), notes=notes, progress=progress,
+                                   spec=spec, unread=unread)
+        except MocapfixError as exc:
+            _fail(ctx, exc, unread)
+        tables = (lambda: result.to_markdown(per_file=per_file))
+        to_json = (lambda: result.to_json(per_file=per_file))
+    for u in unread:
+        error_line(u["error"])
+    if not result.files:        # nothing benchmarked: no table, no file that claims one
+        error_line("no file could be read: nothing benchmarked, nothing written")
+        sys.exit(EXIT_UNREADABLE)
+    markdown = tables()
     try:
-        spec = executor_spec(jobs, scheduler, dask_workers)
-        method_list, notes = bench_lib.resolve_methods(_split(methods), _split(configs))
-        progress = None if quiet else (lambda msg: click.echo(f"bench: {msg}", err=True))
-        for n in notes:
-            if not quiet:
-                click.echo(f"bench: note: {n}", err=True)
-        result = bench_lib.run(list(clean_files), protocol, method_list, seeds=seeds,
-                               settings=_split(settings), notes=notes, progress=progress,
-                               spec=spec)
-        markdown = result.to_markdown(per_file=per_file)
         if json_out:
-            atomic_write_text(json_out, result.to_json(per_file=per_file) + "\n")
+            atomic_write_text(json_out, to_json() + "\n")
         if md_out:
             atomic_write_text(md_out, markdown)
     except MocapfixError as exc:
-        if _debug(ctx):
-            raise
-        click.echo(f"mocapfix: error: {exc}", err=True)
-        sys.exit(EXIT_USAGE)
+        _fail(ctx, exc)
     if not quiet:
         click.echo(markdown)
+    if unread:
+        sys.exit(EXIT_SOME_FAILED)

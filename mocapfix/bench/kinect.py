@@ -55,6 +55,7 @@ How a run goes (one clean file, one scenario, one seed):
 """
 from __future__ import annotations
 
+import json
 import tempfile
 import time
 from dataclasses import dataclass, field
@@ -410,6 +411,11 @@ class KinectBenchResult:
             out.append(f"- note: {n}")
         return "\n".join(out) + "\n"
 
+    def to_json(self) -> str:
+        return json.dumps({"protocol": "kinect", "files": self.files, "seeds": self.seeds,
+                           "notes": self.notes, "summary": self.summary(), "runs": self.runs},
+                          indent=1)
+
 
 def _baseline_outputs(motion: Motion, times: np.ndarray, truth, bones) -> dict:
     pos = interpolate_missing(motion.positions, times)
@@ -432,10 +438,11 @@ def _baseline_outputs(motion: Motion, times: np.ndarray, truth, bones) -> dict:
 
 
 def run(files, configs=(), seeds=3, scenarios=None, max_frames: int = 450, progress=None,
-        pipelines: dict | None = None) -> KinectBenchResult:
+        pipelines: dict | None = None, unread: list | None = None) -> KinectBenchResult:
     """Run the protocol (module docstring) on CMU ``files`` with the baselines and the
-    YAML ``configs`` (paths) or ``pipelines`` ({name: Pipeline})."""
-    from mocapfix import formats
+    YAML ``configs`` (paths) or ``pipelines`` ({name: Pipeline}). ``unread``: as
+    :func:`mocapfix.bench.run`'s."""
+    from mocapfix.bench.run import left_out, read_files
     from mocapfix.config import load_config
 
     scenarios = list(scenarios or SCENARIOS)
@@ -445,10 +452,10 @@ def run(files, configs=(), seeds=3, scenarios=None, max_frames: int = 450, progr
     seed_list = list(range(seeds)) if isinstance(seeds, int) else list(seeds)
     methods = {f"config:{Path(p).name.rsplit('.', 1)[0]}": load_config(p) for p in configs}
     methods.update(pipelines or {})
-    result = KinectBenchResult([str(f) for f in files], seed_list, scenarios,
-                               list(BASELINE_NAMES) + list(methods))
+    sources = read_files(files, unread=unread)
+    result = KinectBenchResult([label for label, _ in sources], seed_list, scenarios,
+                               list(BASELINE_NAMES) + list(methods), notes=left_out(unread or []))
     bones = kl.skeleton_for("kinect_v2").bone_array
-    sources = [(str(f), formats.read(f)) for f in files]
     for label, src in sources:      # refuse a file before any work, naming it
         try:
             kinect_truth(src, np.random.default_rng(0), max_frames)
@@ -489,34 +496,3 @@ def run(files, configs=(), seeds=3, scenarios=None, max_frames: int = 450, progr
                     result.runs += runs
     return result
 
-
-def main(ctx, clean_files, configs, seeds, settings, json_out, md_out, quiet) -> int:
-    """``mocapfix bench --protocol kinect`` (called by :mod:`mocapfix.bench.cli`)."""
-    import json
-
-    import click
-
-    from mocapfix.core.errors import MocapfixError
-    from mocapfix.core.fileio import atomic_write_text
-
-    split = (lambda v: [x.strip() for x in v.split(",") if x.strip()] if v else None)
-    try:
-        result = run(list(clean_files), configs=split(configs) or (), seeds=seeds,
-                     scenarios=split(settings),
-                     progress=None if quiet else (lambda m: click.echo(f"bench: {m}", err=True)))
-    except (MocapfixError, ValueError) as exc:
-        root = ctx.find_root()
-        if isinstance(root.obj, dict) and root.obj.get("debug"):
-            raise
-        click.echo(f"mocapfix: error: {exc}", err=True)
-        return 2
-    markdown = "## `kinect`\n\n" + (__doc__ or "").split("\n\n")[0] + "\n\n" + result.to_markdown()
-    if json_out:
-        atomic_write_text(json_out, json.dumps({"protocol": "kinect", "files": result.files,
-                                                "seeds": result.seeds, "summary": result.summary(),
-                                                "runs": result.runs}, indent=1) + "\n")
-    if md_out:
-        atomic_write_text(md_out, markdown)
-    if not quiet:
-        click.echo(markdown)
-    return 0

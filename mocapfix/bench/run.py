@@ -56,7 +56,7 @@ import numpy as np
 from mocapfix.bench import corrupt
 from mocapfix.bench import harm as bench_harm
 from mocapfix.bench.tasks import method_in_worker, run_blocks
-from mocapfix.core.errors import ConfigError, MocapfixError
+from mocapfix.core.errors import ConfigError, MocapfixError, UnreadableFileError
 from mocapfix.batch.executors import ExecutorSpec
 from mocapfix.core.motion import Motion
 from mocapfix.pipeline.steps import Pipeline
@@ -395,10 +395,41 @@ def _json_default(obj):
     raise TypeError(type(obj))
 
 
+def read_files(files, read_options: dict | None = None,
+               unread: list | None = None) -> list[tuple[str, Motion]]:
+    """``(label, motion)`` of each of ``files``: a path read by :func:`mocapfix.formats.read`
+    with ``read_options`` (labelled by the path as given), or a Motion. A file that cannot
+    be read (malformed, truncated, a folder, a FIFO or device) raises the
+    :class:`UnreadableFileError` naming it; with an ``unread`` list it is appended there
+    instead, as ``{"path", "error"}`` (the message), and left out."""
+    from mocapfix import formats
+    from mocapfix.batch.discovery import refuse_special_file
+
+    out = []
+    for f in files:
+        if isinstance(f, Motion):
+            out.append((f.path or "<motion>", f))
+            continue
+        try:
+            refuse_special_file(f)          # reading a FIFO waited for a writer forever
+            out.append((str(f), formats.read(f, **(read_options or {}))))
+        except UnreadableFileError as exc:
+            if unread is None:
+                raise
+            unread.append({"path": str(f), "error": str(exc)})
+    return out
+
+
+def left_out(unread: list) -> list[str]:
+    """The notes naming the files :func:`read_files` left out, and why."""
+    return [f"{u['error']} (left out of the benchmark)" for u in unread]
+
+
 def run(files, protocol: str, methods: list[Method], seeds: int | list[int] = 3,
         settings: list[str] | None = None, notes: list[str] | None = None,
         progress=None, read_options: dict | None = None,
-        method_budget_s: float | None = None, jobs: int = 1, spec=None) -> BenchResult:
+        method_budget_s: float | None = None, jobs: int = 1, spec=None,
+        unread: list | None = None) -> BenchResult:
     """Benchmark ``methods`` on ``files`` (paths or Motions) under ``protocol``.
 
     ``seeds``: a count (seeds 0 … N−1) or a list of seeds. ``settings``: a subset of the
@@ -413,9 +444,10 @@ def run(files, protocol: str, methods: list[Method], seeds: int | list[int] = 3,
     Where: ``spec`` (:class:`mocapfix.batch.executors.ExecutorSpec`: local processes or Dask),
     else ``jobs`` local processes, one task per (seed, setting, file) block
     (:mod:`mocapfix.bench.tasks`); the runs come back in the order above whatever ran
-    them, so only the timing fields depend on the executor."""
-    from mocapfix import formats
+    them, so only the timing fields depend on the executor.
 
+    ``unread``: an empty list that takes the files that cannot be read (:func:`read_files`);
+    they are left out, each named in a note, and with none read the result holds no run."""
     if protocol not in corrupt.PROTOCOLS:
         raise ConfigError(f"unknown protocol {protocol!r} (known: {', '.join(corrupt.PROTOCOLS)})")
     all_settings = list(corrupt.PROTOCOLS[protocol])
@@ -437,9 +469,9 @@ def run(files, protocol: str, methods: list[Method], seeds: int | list[int] = 3,
     result = BenchResult(protocol, [], seed_list, settings, [m.describe() for m in methods],
                          list(notes or []))
     motions = []
-    for f in files:
-        motion = f if isinstance(f, Motion) else formats.read(f, **(read_options or {}))
-        label = str(f) if not isinstance(f, Motion) else (motion.path or "<motion>")
+    read = read_files(files, read_options, unread)
+    result.notes += left_out(unread or [])
+    for label, motion in read:
         motion, dropped = without_unlabelled(motion)
         if dropped:
             result.notes.append(f"{label}: {len(dropped)} unlabelled trajectories left out of "
@@ -450,6 +482,8 @@ def run(files, protocol: str, methods: list[Method], seeds: int | list[int] = 3,
             raise MocapfixError(f"{label}: no sample present, nothing to benchmark")
         result.files.append(label)
         motions.append((label, motion))
+    if not motions:
+        return result
     order = sorted(settings, key=lambda s: (PRIORITY.get(protocol, []).index(s)
                                             if s in PRIORITY.get(protocol, []) else 99,
                                             settings.index(s)))

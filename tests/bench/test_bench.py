@@ -357,3 +357,54 @@ def test_a_file_named_twice_is_benchmarked_once(tmp_path):
     assert "2 file(s) given more than once (benchmarked once)" in twice.output
     runs = [json.loads((tmp_path / n).read_text())["runs"] for n in ("1.json", "2.json")]
     assert len(runs[1]) == len(runs[0]) > 0
+
+
+def _unreadable(tmp_path):
+    """A truncated C3D, a text file of no format and a folder, in ``tmp_path``."""
+    cut = tmp_path / "cut.c3d"
+    cut.write_bytes((SAMPLE / "walk_markers.c3d").read_bytes()[:3000])
+    garbage = tmp_path / "garbage.bvh"
+    garbage.write_text("not a motion file\n")
+    folder = tmp_path / "folder.c3d"
+    folder.mkdir()
+    return [cut, garbage, folder]
+
+
+_QUICK = ["--protocol", "occlusion", "--methods", "none", "--seeds", "1", "--settings", "noise",
+          "-q"]
+
+
+def test_an_unreadable_file_is_named_and_left_out_the_others_benchmarked(tmp_path):
+    # one truncated file stopped the whole bench before any work (exit 2)
+    good = SAMPLE / "walk_markers.c3d"
+    bad = _unreadable(tmp_path)
+    out_json, out_md = tmp_path / "b.json", tmp_path / "b.md"
+    r = CliRunner().invoke(main, ["bench", str(bad[0]), str(good), *map(str, bad[1:]), *_QUICK,
+                                  "--json", str(out_json), "--markdown", str(out_md)])
+    no_traceback(r)
+    assert r.exit_code == 1, r.output
+    for f in bad:
+        lines = [line for line in r.stderr.splitlines() if line.startswith(f"mocapfix: error: {f}:")]
+        assert len(lines) == 1, r.stderr
+    data = json.loads(out_json.read_text())
+    assert data["files"] == [str(good)]
+    assert data["runs"] and {run["file"] for run in data["runs"]} == {str(good)}
+    left_out = [n for n in data["notes"] if n.endswith("(left out of the benchmark)")]
+    assert [n.split(":")[0] for n in left_out] == list(map(str, bad))
+    assert f"- note: {bad[2]}: is a directory, not a file (left out of the benchmark)" \
+        in out_md.read_text()
+
+
+def test_bench_with_no_readable_file_writes_nothing(tmp_path):
+    out_json = tmp_path / "b.json"
+    r = CliRunner().invoke(main, ["bench", *map(str, _unreadable(tmp_path)), *_QUICK,
+                                  "--json", str(out_json)])
+    no_traceback(r)
+    assert r.exit_code == 3, r.output
+    assert "no file could be read: nothing benchmarked, nothing written" in r.stderr
+    assert not out_json.exists()
+    # a path that does not exist is a usage error, before any work, as in clean and check
+    r = CliRunner().invoke(main, ["bench", str(SAMPLE / "walk_markers.c3d"),
+                                  str(tmp_path / "missing.c3d"), *_QUICK, "--json", str(out_json)])
+    assert r.exit_code == 2 and f"mocapfix: error: {tmp_path / 'missing.c3d'}: no such file" in r.stderr
+    assert not out_json.exists()

@@ -2,6 +2,7 @@
 real-time baselines (known answers)."""
 from __future__ import annotations
 
+import json
 import shutil
 
 import numpy as np
@@ -122,3 +123,31 @@ def test_bench_kinect_on_short_takes_names_the_file_or_runs(tmp_path):
     no_traceback(r)
     assert r.exit_code == 2, r.output
     assert f"{short}: 20 frames at 30 fps; the kinect protocol needs at least 30" in r.output
+
+
+def test_bench_kinect_names_an_unreadable_file_and_benchmarks_the_others(tmp_path):
+    # as the other protocols: one unreadable file stopped the whole bench (exit 2)
+    shutil.copy(shared("asfamc/05.asf"), tmp_path / "05.asf")
+    ok = cut_amc(shared("asfamc/05_01.amc"), tmp_path / "05_90.amc", 150)
+    cut = tmp_path / "05_92.amc"
+    cut.write_text(ok.read_text()[:5000])          # ends mid-frame
+    garbage = tmp_path / "garbage.bvh"
+    garbage.write_text("not a motion file\n")
+    out_json = tmp_path / "k.json"
+    args = ["--protocol", "kinect", "--seeds", "1", "--settings", "jitter", "-q",
+            "--json", str(out_json)]
+    r = CliRunner().invoke(main, ["bench", str(cut), str(ok), str(garbage), *args])
+    no_traceback(r)
+    assert r.exit_code == 1, r.output
+    for f in (cut, garbage):
+        lines = [line for line in r.stderr.splitlines() if line.startswith(f"mocapfix: error: {f}:")]
+        assert len(lines) == 1, r.stderr
+    data = json.loads(out_json.read_text())
+    assert data["files"] == [str(ok)] and {run["file"] for run in data["runs"]} == {str(ok)}
+    assert [n.split(":")[0] for n in data["notes"]
+            if n.endswith("(left out of the benchmark)")] == [str(cut), str(garbage)]
+    out_json.unlink()
+    r = CliRunner().invoke(main, ["bench", str(cut), str(garbage), *args])
+    no_traceback(r)
+    assert r.exit_code == 3, r.output
+    assert not out_json.exists()
