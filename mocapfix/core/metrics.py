@@ -57,28 +57,39 @@ def bone_length_variation(positions, bones) -> np.ndarray:
 ACCELERATION_CHUNK = 16384
 
 
+def add_rows(total: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """``total`` plus the sum of ``rows`` over their first axis, added in order: a sum
+    over frames taken a chunk at a time this way is the sum ``np.sum(axis=0)`` gives over
+    the whole array, bit for bit (that adds row after row), without the whole array."""
+    both = np.empty((len(rows) + 1, *rows.shape[1:]))
+    both[0], both[1:] = total, rows
+    return np.sum(both, axis=0)
+
+
 def rms_acceleration(positions: np.ndarray, fps: float) -> np.ndarray:
     """RMS of the second difference per joint (J,), in units/s² — a jitter measure.
 
-    The squared accelerations are summed per coordinate a chunk of frames at a time into
-    one (T − 2, J) array, and NaN made 0 there in place: on a long take the whole-take
-    temporaries of each coordinate's differences and of ``np.nansum``'s copy were four
-    times that array. Every value, and the sum over frames (one reduction of that array,
-    as ``np.nansum`` makes), is the same bit for bit."""
+    The squared accelerations are worked out a chunk of frames at a time and added to a
+    running sum per joint, NaN left out: on a long take a (T − 2, J) array of them and
+    ``np.nansum``'s copy of it were the peak of the report. The running sum adds the
+    frames in order, as a sum over the frames of the whole array does, so every result
+    is the same bit for bit."""
     T = positions.shape[0]
-    power = np.empty((max(T - 2, 0), *positions.shape[1:-1]))
-    for a in range(0, len(power), ACCELERATION_CHUNK):
-        b = min(a + ACCELERATION_CHUNK, len(power))
+    total = np.zeros(positions.shape[1:-1])
+    counted = np.zeros(positions.shape[1:-1], dtype=np.intp)
+    for a in range(0, max(T - 2, 0), ACCELERATION_CHUNK):
+        b = min(a + ACCELERATION_CHUNK, T - 2)
         part = positions[a:b + 2]
+        power = np.empty((b - a, *positions.shape[1:-1]))
         for c in range(positions.shape[-1]):
             square = (np.diff(part[..., c], n=2, axis=0) * fps * fps) ** 2
             if c == 0:
-                power[a:b] = square
+                power[:] = square
             else:
-                power[a:b] += square
-    counted = np.isfinite(power).sum(axis=0)
-    np.copyto(power, 0.0, where=np.isnan(power))
-    total = np.sum(power, axis=0)
+                power += square
+        counted += np.isfinite(power).sum(axis=0)
+        np.copyto(power, 0.0, where=np.isnan(power))
+        total = add_rows(total, power)
     with np.errstate(invalid="ignore", divide="ignore"):
         return np.sqrt(np.where(counted > 0, total / np.maximum(counted, 1), np.nan))
 

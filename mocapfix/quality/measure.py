@@ -30,7 +30,7 @@ from mocapfix.cleaners.base import REJECTED_FILLS
 from mocapfix.solvers.spikes import hampel_flags
 from mocapfix.solvers.fill_error import FillIndex
 from mocapfix.core.gaps import LONG_FILL_S, runs, take_frames
-from mocapfix.core.metrics import bone_lengths, rms_acceleration
+from mocapfix.core.metrics import add_rows, rms_acceleration
 from mocapfix.core.motion import Motion, missing_samples
 from mocapfix.pipeline.selection import DEFAULT_POLICY, not_cleaned, take
 from mocapfix.pipeline.unlabelled import Unlabelled, is_unlabelled
@@ -82,18 +82,15 @@ def bones_of(motion: Motion) -> np.ndarray:
 
 
 def bone_variation(positions: np.ndarray, bones: np.ndarray) -> np.ndarray:
-    """std/mean of each bone's length (B,), NaN where a bone is never seen."""
-    if not len(bones):
-        return np.zeros(0)
-    lengths = bone_lengths(positions, bones)
-    seen = np.isfinite(lengths).sum(axis=0)
+    """std/mean of each bone's length (B,), NaN where a bone is seen on fewer than two
+    frames. One bone's lengths over the take at a time: the (T, B) lengths and
+    ``np.nanstd``'s temporaries of them were the peak of a long take's report."""
     out = np.full(len(bones), np.nan)
-    ok = seen > 1
-    if ok.any():
-        # every bone seen (the usual case): the lengths as they are, not a copy of them
-        seen_lengths = lengths if ok.all() else lengths[:, ok]
-        with np.errstate(invalid="ignore", divide="ignore"):
-            out[ok] = np.nanstd(seen_lengths, axis=0) / np.nanmean(seen_lengths, axis=0)
+    for b, (parent, child) in enumerate(np.asarray(bones, dtype=np.intp).reshape(-1, 2).tolist()):
+        lengths = np.linalg.norm(positions[:, parent] - positions[:, child], axis=-1)
+        if np.count_nonzero(np.isfinite(lengths)) > 1:
+            with np.errstate(invalid="ignore", divide="ignore"):
+                out[b] = np.nanstd(lengths) / np.nanmean(lengths)
     return out
 
 
@@ -340,14 +337,14 @@ def uncertainty(before: Motion, after: Motion, frames: slice = slice(None)) -> n
     rows = range(*frames.indices(miss_b.shape[0]))
     conf = after.confidence
     if conf is None or conf.shape != miss_b.shape:
-        part = miss_b[frames].astype(np.float64)
-    else:
-        part = np.empty((len(rows), miss_b.shape[1]))
-        for a in range(0, len(rows), MEASURE_CHUNK):
-            b = min(a + MEASURE_CHUNK, len(rows))
-            taken = slice(rows[a], rows[b - 1] + 1) if rows.step == 1 else rows[a:b]
-            part[a:b] = miss_b[taken] * _uncertain_weight(after, taken)
-    return part.sum(axis=0) / max(part.shape[0], 1)
+        # whole numbers: the count is the sum of the 0/1 weights, exactly
+        return np.count_nonzero(miss_b[frames], axis=0) / max(len(rows), 1)
+    total = np.zeros(miss_b.shape[1])
+    for a in range(0, len(rows), MEASURE_CHUNK):
+        b = min(a + MEASURE_CHUNK, len(rows))
+        taken = slice(rows[a], rows[b - 1] + 1) if rows.step == 1 else rows[a:b]
+        total = add_rows(total, miss_b[taken] * _uncertain_weight(after, taken))
+    return total / max(len(rows), 1)
 
 
 #: frames of a take weighed at a time (:func:`uncertainty`)
@@ -563,9 +560,23 @@ def measure_cleaning(result: CleanResult) -> dict:
                          "variation_before": finite(vb), "variation_after": finite(va)}
                         for (a, b), vb, va in zip(bones, var_b, var_a)]
     if result.writeback_residual is not None:
-        res = result.writeback_residual * mm
-        file["writeback_residual_mm"] = {"mean": finite(np.nanmean(res)), "max": finite(np.nanmax(res))}
+        file["writeback_residual_mm"] = _mean_and_max(result.writeback_residual, mm)
     return out
+
+
+def _mean_and_max(values: np.ndarray, scale: float) -> dict:
+    """``{"mean", "max"}`` of ``values × scale`` less its NaN entries, a chunk of frames
+    at a time (a whole-take copy of a long take's residuals, and ``np.nanmean``'s copy of
+    that, were the peak of its report)."""
+    total, count, peak = 0.0, 0, -np.inf
+    for a in range(0, len(values), MEASURE_CHUNK):
+        part = values[a:a + MEASURE_CHUNK] * scale
+        seen = ~np.isnan(part)
+        total += float(part[seen].sum())
+        count += int(seen.sum())
+        peak = max(peak, float(part[seen].max())) if seen.any() else peak
+    return {"mean": finite(total / count) if count else None,
+            "max": finite(peak) if count else None}
 
 
 def _judged_wrong(record, names) -> dict:
