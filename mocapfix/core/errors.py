@@ -1,8 +1,9 @@
 """One exception family for everything mocapfix refuses.
 
 Every message names the file (and line or frame where known) and the cause, so the
-CLI can print it as one line. The CLI maps ``UnreadableFileError`` and ``ConfigError``
-to exit code 2.
+CLI can print it as one line. The exit codes each command gives for them are in
+docs/commands.md ("Exit codes"): a ``ConfigError`` is a usage error (2); a file that
+cannot be read fails that file (``clean``: 1, the others go on; ``check``, ``info``: 3).
 """
 from __future__ import annotations
 

@@ -11,6 +11,7 @@ import os
 import re
 import stat
 import tempfile
+import threading
 from pathlib import Path
 
 
@@ -262,7 +263,10 @@ def read_input_bytes(path) -> bytes:
 
     path = Path(path)
     try:
-        data = path.read_bytes()
+        with open(path, "rb") as fh:
+            before = os.fstat(fh.fileno())
+            data = fh.read()
+            after = os.fstat(fh.fileno())
     except FileNotFoundError:
         raise UnreadableFileError(path, "no such file") from None
     except IsADirectoryError:
@@ -271,7 +275,39 @@ def read_input_bytes(path) -> bytes:
         raise UnreadableFileError(path, f"cannot open: {exc.strerror or exc}") from None
     if not data.strip():
         raise UnreadableFileError(path, "file is empty")
+    if _stat_key(before) == _stat_key(after) and before.st_size == len(data):
+        with _READ_STATS_LOCK:
+            _READ_STATS[id(data)] = (str(path), before)
+            while len(_READ_STATS) > _READ_STATS_KEPT:
+                del _READ_STATS[next(iter(_READ_STATS))]
     return data
+
+
+#: the file status of the last inputs read, by the id of the bytes read
+#: (:func:`read_identity`); the oldest are forgotten
+_READ_STATS: dict = {}
+_READ_STATS_KEPT = 64
+_READ_STATS_LOCK = threading.Lock()
+
+
+def _stat_key(st: os.stat_result) -> tuple:
+    return st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns
+
+
+def read_identity(data: bytes, path) -> os.stat_result | None:
+    """The status of the file ``path`` as :func:`read_input_bytes` read ``data`` from it,
+    when it did (its size and modification time the same before and after the read) and
+    the file at ``path`` is still that file now; else None (the file cannot be shown to
+    hold ``data``)."""
+    with _READ_STATS_LOCK:
+        path_was, st = _READ_STATS.pop(id(data), (None, None))
+    if st is None or path_was != str(path):
+        return None
+    try:
+        now = os.stat(path)
+    except OSError:
+        return None
+    return st if _stat_key(now) == _stat_key(st) else None
 
 
 def file_sha256(path) -> str:

@@ -202,8 +202,10 @@ def share_values_read(motion: Motion) -> None:
     channel values a BVH or AMC source keeps to tell the writer which lines changed (a
     copy of ``motion.channels`` as read, so that an edit of the motion's own array in
     place is written) become ``motion.channels`` itself, made read-only: one whole-take
-    array fewer (20 bytes a sample for a CMU BVH). Any other motion, or one whose
-    channels are no longer the values read, is left as it is."""
+    array fewer (20 bytes a sample for a CMU BVH); a Kinect source's coordinates, the
+    same with ``motion.positions`` (:func:`_share_coordinates_read`). Any other motion,
+    or one whose arrays are no longer the values read, is left as it is."""
+    _share_coordinates_read(motion)
     values = getattr(motion.source, "values", None)
     channels = motion.channels
     if (not isinstance(values, np.ndarray) or channels is None or values is channels
@@ -212,6 +214,32 @@ def share_values_read(motion: Motion) -> None:
         return
     values.flags.writeable = False
     motion.channels = values
+
+
+def _share_coordinates_read(motion: Motion) -> None:
+    """A Kinect source's coordinates as written (``original``: the writer compares the
+    samples seen in the file with them, to rewrite only those that moved) become the
+    motion's positions, made read-only, when the two agree on every sample seen (they
+    differ only where the reader made a sample missing, where the writer does not look):
+    one whole-take array fewer (24 bytes a sample). :func:`share_values_read`'s rule."""
+    source, positions = motion.source, motion.positions
+    original = getattr(source, "original", None)
+    if (motion.format != "kinect" or not isinstance(original, np.ndarray)
+            or original is positions or original.shape != positions.shape
+            or original.dtype != positions.dtype
+            or source.missing.shape != positions.shape[:2]):
+        return
+    for a in range(0, len(positions), SHARE_CHUNK):     # no whole-take temporaries
+        seen = ~source.missing[a:a + SHARE_CHUNK]
+        if not (np.array_equal(original[a:a + SHARE_CHUNK][seen], positions[a:a + SHARE_CHUNK][seen])
+                and np.isnan(positions[a:a + SHARE_CHUNK][~seen]).all()):
+            return
+    positions.flags.writeable = False
+    source.original = positions
+
+
+#: frames compared at a time by :func:`_share_coordinates_read`
+SHARE_CHUNK = 16384
 
 
 def storable(motion: Motion, name: str | None = None) -> Motion:

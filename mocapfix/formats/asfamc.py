@@ -70,6 +70,7 @@ import numpy as np
 
 from mocapfix.core.errors import MAX_FIELD, UnreadableFileError, UnsupportedFeatureError, WriteError
 from mocapfix.core.fileio import atomic_write_bytes, atomic_write_pieces, read_input_bytes, refuse_stream
+from mocapfix.formats.filebytes import keep, runs_of
 from mocapfix.formats.textenc import UTF8_BOM, refuse_long_fields, refuse_wide_text
 from mocapfix.core.kinematics import Rig, euler_to_matrix, positions_in_chunks
 from mocapfix.core.motion import Motion, Skeleton
@@ -164,7 +165,8 @@ class AsfAmcSource:
 class _AmcLines:
     """The lines of an AMC file from line ``first`` on, as ``text.split("\\n")`` gives them
     ('\\r' kept), held as the file's bytes and the offset of each line (latin-1: one
-    character per byte), decoded one at a time: no Python object per line."""
+    character per byte), decoded one at a time: no Python object per line. A large
+    file's bytes are read again from it when written (:mod:`mocapfix.formats.filebytes`)."""
 
     def __init__(self, data: bytes, starts: np.ndarray, first: int = 0):
         self.data, self.starts, self.first = data, starts, first
@@ -809,6 +811,8 @@ def read(path, fps: float | None = None, **options) -> Motion:
     asf = parse_asf(asf_path, asf_bytes)
     source = parse_amc(path, amc_bytes, asf)
     source.asf_path, source.asf_bytes = str(asf_path), asf_bytes
+    if source.body is not None:
+        source.body.data = keep(path, source.body.data)
     notes = list(asf.notes) + source.notes
     if source.flags["degrees"] is None:
         notes.append(f"AMC has no :DEGREES/:RADIANS line; angles read in the ASF unit ({asf.angle_unit})")
@@ -1039,15 +1043,15 @@ def _amc_pieces(source: AsfAmcSource, channels: np.ndarray):
 
 def _patched_pieces(source: AsfAmcSource, channels: np.ndarray):
     """The source's bytes, with only the bone lines holding changed values re-written."""
-    body, data = source.body, memoryview(source.body.data)   # slices of it are not copies
+    body = source.body
     done = 0                                       # offset of the source written so far
     for a in range(0, len(channels), _CHUNK):
         for i, line in _patched_lines(source, channels[a:a + _CHUNK], a):
             start, end = body.span(i)
-            yield data[done:start]
+            yield from runs_of(body.data, done, start)
             yield line.encode("latin-1")
             done = end
-    yield data[done:]
+    yield from runs_of(body.data, done, len(body.data))
 
 
 def _patched_lines(source: AsfAmcSource, channels: np.ndarray, first: int):

@@ -76,6 +76,7 @@ import numpy as np
 
 from mocapfix.core.errors import MAX_FIELD, UnreadableFileError, WriteError, excerpt
 from mocapfix.core.fileio import atomic_write_pieces, read_input_bytes
+from mocapfix.formats.filebytes import keep, runs_of
 from mocapfix.formats.textenc import refuse_wide_text
 from mocapfix.core.kinematics import Rig, positions_in_chunks
 from mocapfix.core.motion import Motion, Skeleton
@@ -126,7 +127,8 @@ class BvhSource:
     ``head`` is the file from its first byte to the end of the line before ``Frames:``
     (hierarchy, ``MOTION`` line, any blank lines). Frame ``i``'s raw text, including blank
     lines before it and its line ending, is ``data[frame_ends[i - 1]:frame_ends[i]]``
-    (frame 0 from ``frames_start``): the file is held once, not a bytes object per line;
+    (frame 0 from ``frames_start``): the file is held once, not a bytes object per line
+    (a large file not at all: read again when written, :mod:`mocapfix.formats.filebytes`);
     ``values`` the numbers read from them. ``tail`` is the whitespace after the last frame.
     """
 
@@ -719,7 +721,7 @@ def read(path, fps: float | None = None, allow_truncated: bool = False, **option
         head=parts["head"],
         frames_line=parts["frames_line"],
         frame_time_line=parts["frame_time_line"],
-        data=parts["data"],
+        data=keep(path, parts["data"]),
         frames_start=parts["frames_start"],
         frame_ends=parts["frame_ends"],
         values=values.copy(),
@@ -856,18 +858,17 @@ def _frame_pieces(source: BvhSource, channels: np.ndarray):
                 line += source.newline
         return line
 
-    data = memoryview(source.data)                # slices of it are not copies
     done = 0                                      # frames written so far
     for i in special.tolist():
         if i > done:
-            yield data[source.frame_start(done):int(source.frame_ends[i - 1])]
+            yield from runs_of(source.data, source.frame_start(done), int(source.frame_ends[i - 1]))
         line = source.frame_line(i)
         if not np.array_equal(channels[i], source.values[i]):
             line = _rewrite_line(line, channels[i], source.values[i])
         yield finished(i, line)
         done = i + 1
     if done < common:
-        yield data[source.frame_start(done):int(source.frame_ends[common - 1])]
+        yield from runs_of(source.data, source.frame_start(done), int(source.frame_ends[common - 1]))
     for i in range(n_old, T):
         line = (_rewrite_line(source.frame_line(n_old - 1), channels[i], None) if n_old
                 else _fresh_line(channels[i], source.newline))

@@ -65,6 +65,7 @@ import numpy as np
 
 from mocapfix.core.errors import UnreadableFileError, WriteError
 from mocapfix.core.fileio import atomic_open, read_input_bytes
+from mocapfix.formats.filebytes import FileBytes, keep
 from mocapfix.formats.c3d_params import (MAX_DIM, group_record as _group_record, param_data_offset,
                                          param_record as _param_record, string_param as _string_param,
                                          string_value, with_group)
@@ -310,6 +311,8 @@ class C3DSource:
     (:meth:`positions_of`), ``residual`` (T, P, in length units, -1 if flagged invalid)
     and ``camera_mask`` (T, P, uint8) are decoded from ``points`` when asked for, not
     held: on a long take they were 33 bytes a sample beside the motion's own positions.
+    For a large file ``points`` and ``analog`` are :class:`_StoredRecords`, read again
+    from the file a chunk of frames at a time (:mod:`mocapfix.formats.filebytes`).
     """
 
     processor: int
@@ -494,6 +497,11 @@ def _read_bytes(path, data: bytes, fps):
     else:
         prefix[param_start - BLOCK + 3] = PROCESSOR_INTEL
 
+    kept = keep(path, data)
+    if isinstance(kept, FileBytes):       # a large file: its records are read again when written
+        record = _record_dtype(n_points, analog_words, storage, processor, unsigned)
+        points, analog = (_StoredRecords(kept, data_offset, record, n_frames, part, storage,
+                                         processor) for part in ("p", "a"))
     source = C3DSource(
         processor=processor, header=header, original_header=data[:BLOCK], parameters=parameters,
         data_offset=data_offset, storage=storage, scale=abs(scale), points=points, analog=analog,
@@ -651,27 +659,74 @@ def _frame_count(path, get, h, frame_bytes, available_bytes, notes) -> int:
     return int(held)
 
 
-def _read_data(data, offset, n_frames, n_points, analog_words, storage, processor, unsigned):
-    """Point records (T, P, 4) and analog words (T, A), Intel-encoded, one frombuffer each."""
+def _record_dtype(n_points, analog_words, storage, processor, unsigned) -> np.dtype:
+    """One frame's record as the file stores it: point words (P, 4) then analog words."""
     if storage == "float":
         base = "f4"
-        order = ">" if processor == PROCESSOR_MIPS else "<"
         analog_base = "f4"
     else:
         base = "i2"
-        order = ">" if processor == PROCESSOR_MIPS else "<"
         analog_base = "u2" if unsigned else "i2"
+    order = ">" if processor == PROCESSOR_MIPS else "<"
     if processor == PROCESSOR_DEC and storage == "float":
         base = analog_base = "u4"
-    record = np.dtype([("p", order + base, (n_points, 4)), ("a", order + analog_base, (analog_words,))])
-    frames = np.frombuffer(data, dtype=record, count=n_frames, offset=offset)
-    points, analog = frames["p"], frames["a"]
+    return np.dtype([("p", order + base, (n_points, 4)), ("a", order + analog_base, (analog_words,))])
+
+
+def _intel(words: np.ndarray, storage: str, processor: int) -> np.ndarray:
+    """Words of records as stored, Intel-encoded (a contiguous copy)."""
     if processor == PROCESSOR_DEC and storage == "float":
-        points = dec_to_float(points.tobytes()).astype("<f4").reshape(points.shape)
-        analog = dec_to_float(analog.tobytes()).astype("<f4").reshape(analog.shape)
-    points = np.ascontiguousarray(points.astype(points.dtype.newbyteorder("<")))
-    analog = np.ascontiguousarray(analog.astype(analog.dtype.newbyteorder("<")))
-    return points, analog
+        words = dec_to_float(words.tobytes()).astype("<f4").reshape(words.shape)
+    return np.ascontiguousarray(words.astype(words.dtype.newbyteorder("<")))
+
+
+def _read_data(data, offset, n_frames, n_points, analog_words, storage, processor, unsigned):
+    """Point records (T, P, 4) and analog words (T, A), Intel-encoded, one frombuffer each."""
+    record = _record_dtype(n_points, analog_words, storage, processor, unsigned)
+    frames = np.frombuffer(data, dtype=record, count=n_frames, offset=offset)
+    return _intel(frames["p"], storage, processor), _intel(frames["a"], storage, processor)
+
+
+class _StoredRecords:
+    """The point records (``part="p"``) or analog words (``"a"``) of a large file, read
+    again from it when asked for (:mod:`mocapfix.formats.filebytes`): ``[frames]`` (a
+    slice) gives those frames' words as :func:`_read_data` gave them, ``np.asarray`` all
+    of them; ``shape``, ``dtype`` and ``size`` as of that array. The writer reads
+    CHUNK frames at a time."""
+
+    def __init__(self, data, offset: int, record: np.dtype, n_frames: int, part: str,
+                 storage: str, processor: int):
+        self.data, self.offset, self.record, self.part = data, offset, record, part
+        self.storage, self.processor = storage, processor
+        field = record.fields[part][0]
+        self.shape = (n_frames, *field.shape)
+        dec_float = processor == PROCESSOR_DEC and storage == "float"
+        self.dtype = np.dtype("<f4") if dec_float else field.base.newbyteorder("<")
+        self.size = int(np.prod(self.shape))
+        self.ndim = len(self.shape)
+
+    def __len__(self) -> int:
+        return self.shape[0]
+
+    def __getitem__(self, frames):
+        if not isinstance(frames, slice):
+            return np.asarray(self)[frames]
+        a, b, step = frames.indices(self.shape[0])
+        if step != 1:
+            return self[a:b][::step]
+        n = max(b - a, 0)
+        raw = self.data[self.offset + a * self.record.itemsize:
+                        self.offset + (a + n) * self.record.itemsize]
+        with np.errstate(invalid="ignore", over="ignore"):
+            return _intel(np.frombuffer(raw, dtype=self.record, count=n)[self.part],
+                          self.storage, self.processor)
+
+    def __array__(self, dtype=None, copy=None):
+        whole = self[0:self.shape[0]]
+        return whole if dtype is None else whole.astype(dtype)
+
+    def astype(self, dtype):
+        return np.asarray(self).astype(dtype)
 
 
 def _residual_words(points: np.ndarray, storage: str) -> np.ndarray:

@@ -519,6 +519,7 @@ def read(path, fps: float | None = None, units: str | None = None,
             raise UnreadableFileError(path, f"fps must be a positive number, got {rate}")
     given = fps if fps is not None else default_fps
     parts = reader(path, text, idx, notes, layout=layout, fps=given, units=units)
+    text.keep(path)                 # parsed: a large file's bytes go before the take is built
     if not MIN_FRAME_RATE_HZ <= parts.file_fps <= MAX_FRAME_RATE_HZ:
         # time stamps 1e300 apart gave "90 frames at 0 fps", and cleaning overflowed
         # (internal error OverflowError); the BVH reader refuses such rates too

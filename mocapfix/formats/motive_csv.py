@@ -135,6 +135,7 @@ def read(path, fps: float | None = None, units: str | None = None, **options) ->
         notes.append(f"columns kept as read (not cleaned): {', '.join(others)}")
     rate = float(fps) if fps is not None else rate
     marker_names = [names[c] for c in x_fields]
+    text.keep(path)                 # parsed: a large file is read again when written
     source = tt.TableSource(
         layout=LAYOUT, text=text, sep=",", names=marker_names,
         row_line=np.arange(first, stop), x_field=x, original=positions.copy(),

@@ -123,6 +123,7 @@ def read(path, fps: float | None = None, units: str | None = None, **options) ->
     positions = tt.markers(flat, notes)
     frames = tt.key_column(path, frames, first, "Frame number")
     rate = float(fps) if fps is not None else rate
+    text.keep(path)                 # parsed: a large file is read again when written
     source = tt.TableSource(
         layout=LAYOUT, text=text, sep=",", names=names,
         row_line=np.arange(first, stop), x_field=2 + 3 * np.arange(J),

@@ -165,6 +165,7 @@ def read(path, fps: float | None = None, units: str | None = None,
         rate = _time_rate(path, keys if lead else None, rate_line + 1, notes)
     if not lead:
         times = np.arange(T) / rate
+    text.keep(path)                 # parsed: a large file is read again when written
     source = tt.TableSource(
         layout=LAYOUT, text=text, sep="\t", names=names,
         row_line=np.arange(first, stop), x_field=lead + 3 * np.arange(J),

@@ -7,6 +7,8 @@ file one per field (a 500,000-frame Kinect CSV: 50 million objects, gigabytes). 
 file is one ``bytes`` object and two int64 arrays (start and end of each line); lines are
 decoded one block at a time when a reader parses them, and the writer copies the runs of
 unchanged lines as byte slices between the lines it rewrites, straight to the output file.
+Once the reader is done (:meth:`TextLines.keep`), a large file's bytes are let go and read
+again from the file when written (:mod:`mocapfix.formats.filebytes`).
 
 Lines are what ``text.split("\\n")`` gives after the UTF-8 byte-order mark: a ``\\r``
 before the ``\\n`` is the line's ending, not its text, and an empty piece after a final
@@ -17,6 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 from mocapfix.core.errors import MAX_FIELD, UnreadableFileError
+from mocapfix.formats.filebytes import FileBytes, keep, runs_of
 from mocapfix.formats.textenc import UTF8_BOM, longest_field_bytes, refuse_long_fields
 
 #: bytes of the file decoded at a time (cut at a line end, so never inside a character)
@@ -98,9 +101,19 @@ class TextLines:
         return self.raw[self.starts[i]:self.stops[i]].decode("utf-8")
 
     def lines_at(self, indices) -> list[str]:
-        raw, starts, stops = self.raw, self.starts, self.stops
-        return [raw[s:e].decode("utf-8") for s, e in zip(starts[indices].tolist(),
-                                                         stops[indices].tolist())]
+        raw, starts, stops = self.raw, self.starts[indices], self.stops[indices]
+        if isinstance(raw, FileBytes) and len(starts):
+            # one read of the stretch that holds them, when they lie close together
+            a, b = int(starts.min()), int(stops.max())
+            if b - a <= max(BLOCK, 4 * int((stops - starts).sum())):
+                raw, starts, stops = raw[a:b], starts - a, stops - a
+        return [raw[s:e].decode("utf-8") for s, e in zip(starts.tolist(), stops.tolist())]
+
+    def keep(self, path) -> None:
+        """After the reader is done with the text: the bytes kept as
+        :func:`mocapfix.formats.filebytes.keep` keeps them (a large file is read again
+        when written, not held)."""
+        self.raw = keep(path, self.raw)
 
     def end(self, i: int) -> int:
         """Offset just past line ``i``'s ending."""
@@ -129,7 +142,7 @@ class TextLines:
         (the line keeps its own); ``deleted``: lines left out with their endings;
         ``inserted``: line -> texts written after it, each with the file's first ending
         (and one before them when what was written last has none)."""
-        raw, starts, stops = memoryview(self.raw), self.starts, self.stops   # slices: no copies
+        raw, starts, stops = self.raw, self.starts, self.stops
         inserted = inserted or {}
         dropped = set(deleted)
         marks = sorted(dropped | set(inserted))
@@ -138,17 +151,18 @@ class TextLines:
 
         def upto(stop):
             if stop <= at[0]:
-                return b""
-            piece = raw[at[0]:stop]
-            at[0], at[1] = stop, piece[-1] in (10, 13)
-            return piece
+                return
+            start, at[0] = at[0], stop
+            for piece in runs_of(raw, start, stop):
+                yield piece
+            at[1] = piece[-1] in (10, 13)
 
         def marked(i):
             if i in dropped:
-                yield upto(int(starts[i]))
+                yield from upto(int(starts[i]))
                 at[0] = self.end(i)
             else:
-                yield upto(self.end(i))
+                yield from upto(self.end(i))
             for text in inserted.get(i, ()):
                 if not at[1]:
                     yield eol
@@ -162,7 +176,7 @@ class TextLines:
                 k += 1
             if i in dropped:
                 continue
-            yield upto(int(starts[i]))
+            yield from upto(int(starts[i]))
             piece = text.encode("utf-8")
             if piece:
                 at[1] = piece[-1] in (10, 13)
@@ -171,4 +185,4 @@ class TextLines:
         while k < len(marks):
             yield from marked(marks[k])
             k += 1
-        yield upto(len(raw))
+        yield from upto(len(raw))

@@ -945,3 +945,32 @@ def test_a_row_number_column_named_id_is_not_a_body(tmp_path):
     motion = formats.read(_write(tmp_path, "rows.csv", "\n".join(rows) + "\n"))
     assert motion.n_frames == 4
     assert any("1 repeated frames" in n for n in motion.notes)
+
+
+@pytest.mark.parametrize("name", ["kv2_laban_Ges01_wavehand.csv", "kv1_utkinect_joints_s01_e01.txt",
+                                  "kv2_laban_KinectReader_joints.csv"])
+def test_coordinates_shared_with_the_motion_read_write_the_same_bytes(name, tmp_path):
+    """``formats.share_values_read`` (what ``clean`` does after reading): the source's
+    coordinates as written become the motion's positions, read-only, and the motion and
+    its cleaned take write the same bytes as without the sharing; a motion whose positions
+    were edited before is left unshared."""
+    import mocapfix
+
+    path = shared(f"kinect/{name}")
+    shared_motion, own = formats.read(path), formats.read(path)
+    formats.share_values_read(shared_motion)
+    assert shared_motion.source.original is shared_motion.positions
+    assert not shared_motion.positions.flags.writeable
+    with pytest.raises(ValueError):
+        shared_motion.positions[0, 0, 0] = 1.0
+    assert own.source.original is not own.positions
+    for k, (a, b) in enumerate([(shared_motion, own),
+                                (mocapfix.clean(shared_motion)[0], mocapfix.clean(own)[0])]):
+        written = [formats.write(m, tmp_path / f"{k}{side}" / name)[0].read_bytes()
+                   for m, side in ((a, "shared"), (b, "own"))]
+        assert written[0] == written[1]
+    edited = formats.read(path)
+    seen = np.flatnonzero(~edited.source.missing.ravel())[0]
+    edited.positions.reshape(-1, 3)[seen] += 0.01
+    formats.share_values_read(edited)
+    assert edited.source.original is not edited.positions and edited.positions.flags.writeable

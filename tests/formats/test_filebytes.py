@@ -1,0 +1,174 @@
+"""A large input file is not held after it is read: its writer reads the unchanged lines
+(a C3D: the records) again from the file (issue 39; :mod:`mocapfix.formats.filebytes`).
+
+The real files are small, so the threshold is set to 0 here: every BVH, AMC, Kinect and
+C3D file of the shared data is then kept on disk, and what is written from it (the
+motion as read, and the take cleaned with the default config) must be byte for byte
+what is written from the bytes held in memory. A file changed, truncated, replaced or removed
+after the read is an error naming it at the write, and nothing is left behind."""
+from __future__ import annotations
+
+import os
+import pickle
+import shutil
+
+import numpy as np
+import pytest
+from conftest import need, shared, shared_files
+
+import mocapfix
+from mocapfix import formats
+from mocapfix.core.errors import MocapfixError, UnreadableFileError
+from mocapfix.core.fileio import read_input_bytes
+from mocapfix.formats import filebytes
+from mocapfix.formats.c3d import C3DSource, _StoredRecords
+from mocapfix.formats.filebytes import FileBytes
+
+FILES = (shared_files("bvh") + shared_files("asfamc", "*.amc") + shared_files("kinect")
+         + shared_files("c3d"))
+
+
+def _held(motion):
+    """What the motion's source keeps of the file's bytes."""
+    src = motion.source
+    if isinstance(src, C3DSource):
+        return src.points
+    for holder, name in ((src, "data"), (getattr(src, "body", None), "data"),
+                         (getattr(src, "text", None), "raw")):
+        if holder is not None and hasattr(holder, name):
+            return getattr(holder, name)
+    raise AssertionError(f"no bytes kept by {type(src).__name__}")
+
+
+def _write(motion, folder, name):
+    out = folder / name
+    formats.write(motion, out)
+    return out.read_bytes()
+
+
+@pytest.mark.parametrize("path", FILES)
+def test_a_file_read_again_is_written_as_the_file_held(path, tmp_path, monkeypatch):
+    path = need(path)
+    held = formats.read(path)
+    held_clean, _ = mocapfix.clean(held)
+    monkeypatch.setattr(filebytes, "HELD_MAX", 0)
+    again = formats.read(path)
+    assert isinstance(_held(again), (FileBytes, _StoredRecords))
+    assert isinstance(_held(held), (bytes, np.ndarray))
+    if isinstance(again.source, C3DSource):
+        for name in ("points", "analog", "residual", "camera_mask", "analog_frames"):
+            a, b = getattr(held.source, name), np.asarray(getattr(again.source, name))
+            assert a.dtype == b.dtype and np.array_equal(a, b, equal_nan=True), name
+    # the cleaned take written over the file kept on disk: the writer's edit paths
+    again_clean = held_clean.replace(source=again.source)
+    for k, (a, b) in enumerate(((held, again), (held_clean, again_clean))):
+        assert _write(a, tmp_path / f"held{k}", path.name) == \
+            _write(b, tmp_path / f"again{k}", path.name)
+    if path.suffix in (".bvh", ".csv", ".txt"):    # an AMC's header line, a C3D's
+        # parameter section (Intel-encoded, its fills listed) are written by the writer
+        assert (tmp_path / "again0" / path.name).read_bytes() == path.read_bytes()
+
+
+def _copy(tmp_path, name="131_01.bvh"):
+    src = shared("bvh/cmu_cgspeed_131_01.bvh")
+    path = tmp_path / name
+    shutil.copyfile(src, path)
+    return path
+
+
+def _changed_sample(motion):
+    channels = motion.channels.copy()
+    channels[len(channels) // 2, 3] += 1.0
+    return motion.replace(channels=channels)
+
+
+@pytest.mark.parametrize("change", ["edited", "truncated", "replaced", "removed", "c3d truncated"])
+def test_a_file_changed_after_the_read_is_an_error_at_the_write(change, tmp_path, monkeypatch):
+    monkeypatch.setattr(filebytes, "HELD_MAX", 0)
+    if change.startswith("c3d"):
+        path = tmp_path / "take.c3d"
+        shutil.copyfile(shared("c3d/cmu_85_02.c3d"), path)
+        motion = formats.read(path)
+        positions = motion.positions.copy()
+        positions[10, 0] += 1.0
+        motion = motion.replace(positions=positions)
+    else:
+        path = _copy(tmp_path)
+        motion = _changed_sample(formats.read(path))
+    data = path.read_bytes()
+    if change == "edited":          # same size, one digit changed, a later time
+        at = data.rindex(b"0")
+        path.write_bytes(data[:at] + b"1" + data[at + 1:])
+        os.utime(path, ns=(os.stat(path).st_atime_ns, os.stat(path).st_mtime_ns + 10**9))
+    elif change.endswith("truncated"):
+        path.write_bytes(data[: len(data) // 2])
+    elif change == "replaced":
+        other = tmp_path / "other.bvh"
+        other.write_bytes(data)
+        os.replace(other, path)
+    else:
+        path.unlink()
+    out = tmp_path / "out" / f"take{path.suffix}"
+    with pytest.raises(UnreadableFileError) as caught:
+        formats.write(motion, out)
+    assert str(path) in str(caught.value) and "changed or moved since it was read" in str(caught.value)
+    assert not out.parent.exists() or not any(out.parent.iterdir())
+
+
+def test_the_cli_names_the_changed_input_and_writes_nothing(tmp_path, monkeypatch):
+    """Through clean_file: the failure is the input's, and no output or report is left."""
+    from mocapfix.cleaning import clean_file
+    from mocapfix.config import load_config
+    from mocapfix.core.presets import resolve_config
+
+    monkeypatch.setattr(filebytes, "HELD_MAX", 0)
+    path = _copy(tmp_path)
+    real_read = formats.read
+
+    def read_then_edit(p, *args, **kwargs):
+        motion = real_read(p, *args, **kwargs)
+        with open(p, "ab") as fh:   # another program appends while the take is cleaned
+            fh.write(b"\n")
+        return motion
+
+    monkeypatch.setattr(formats, "read", read_then_edit)
+    out = tmp_path / "out" / "take.bvh"
+    with pytest.raises(MocapfixError, match="changed or moved since it was read"):
+        clean_file(path, out, load_config(resolve_config("default")))
+    assert not out.parent.exists() or not any(out.parent.iterdir())
+
+
+@pytest.mark.parametrize("pread", [True, False], ids=["pread", "seek and read"])
+def test_file_bytes_slices_as_bytes_do(pread, tmp_path, monkeypatch):
+    if not pread:                                 # as on Windows, which has no os.pread
+        monkeypatch.delattr(os, "pread", raising=False)
+    path = tmp_path / "f.txt"
+    rng = np.random.default_rng(0)
+    data = bytes(rng.integers(0, 256, 3 * filebytes.BLOCK + 17, dtype=np.uint8))
+    path.write_bytes(data)
+    kept = FileBytes(path, os.stat(path))
+    assert len(kept) == len(data)
+    for a, b in ((0, 10), (5, 5), (len(data) - 3, len(data) + 50), (-20, None), (None, 7),
+                 (filebytes.BLOCK - 1, 2 * filebytes.BLOCK + 1)):
+        assert kept[a:b] == data[a:b]
+    assert b"".join(filebytes.runs_of(kept, 3, len(data) - 2)) == data[3:-2]
+    assert b"".join(bytes(p) for p in filebytes.runs_of(data, 3, len(data) - 2)) == data[3:-2]
+    with pytest.raises(TypeError):
+        kept[3]
+    copy = pickle.loads(pickle.dumps(kept))       # a batch worker's copy opens its own
+    assert copy[100:200] == data[100:200]
+    kept.close()
+
+
+def test_only_a_large_file_read_unchanged_is_kept_on_disk(tmp_path, monkeypatch):
+    path = tmp_path / "f.txt"
+    path.write_bytes(b"x" * 1000)
+    data = read_input_bytes(path)
+    assert filebytes.keep(path, data) is data               # under HELD_MAX: held
+    monkeypatch.setattr(filebytes, "HELD_MAX", 100)
+    assert isinstance(filebytes.keep(path, read_input_bytes(path)), FileBytes)
+    assert filebytes.keep(path, b"x" * 1000) == b"x" * 1000  # not read by read_input_bytes
+    data = read_input_bytes(path)
+    path.write_bytes(b"y" * 1000)                            # changed before the reader kept it
+    os.utime(path, ns=(0, os.stat(path).st_mtime_ns + 10**9))
+    assert filebytes.keep(path, data) is data
