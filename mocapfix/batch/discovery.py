@@ -22,6 +22,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from mocapfix.core.errors import ConfigError, UnreadableFileError
+from mocapfix.core.fileio import regular_file_problem
 from mocapfix.formats import MOTION_SUFFIXES, TEXT_SUFFIXES
 
 _SKIP_SUFFIXES = (".report.json", ".report.md", ".report.html")
@@ -51,30 +52,6 @@ class Discovery:
 #: fields of a row of numbers: separated by commas, semicolons, tabs or spaces
 _FIELDS = re.compile(r"[,;\t ]+")
 _NUMBER = re.compile(r"[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?")
-
-
-def _special_kind(mode: int) -> str | None:
-    for test, name in ((stat.S_ISFIFO, "a FIFO"), (stat.S_ISSOCK, "a socket"),
-                       (stat.S_ISCHR, "a character device"), (stat.S_ISBLK, "a block device")):
-        if test(mode):
-            return name
-    return None if stat.S_ISREG(mode) else "not a regular file"
-
-
-def regular_file_problem(path: Path) -> str | None:
-    """Why ``path`` is not a readable regular file (None if it is). Never opens it, so a
-    FIFO cannot block; a symlink loop or a dangling link is named."""
-    try:
-        st = os.stat(path)
-    except OSError as exc:
-        if exc.errno == errno.ELOOP:
-            return "symlink loop"
-        if path.is_symlink():
-            return "broken symlink"
-        return exc.strerror or str(exc)
-    if stat.S_ISDIR(st.st_mode):
-        return None
-    return _special_kind(st.st_mode)
 
 
 def refuse_special_file(path) -> None:

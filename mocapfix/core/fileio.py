@@ -317,3 +317,29 @@ def file_sha256(path) -> str:
         for block in iter(lambda: fh.read(1 << 20), b""):
             h.update(block)
     return h.hexdigest()
+
+
+def _special_kind(mode: int) -> str | None:
+    for test, name in ((stat.S_ISFIFO, "a FIFO"), (stat.S_ISSOCK, "a socket"),
+                       (stat.S_ISCHR, "a character device"), (stat.S_ISBLK, "a block device")):
+        if test(mode):
+            return name
+    return None if stat.S_ISREG(mode) else "not a regular file"
+
+
+def regular_file_problem(path: Path) -> str | None:
+    """Why ``path`` is not a readable regular file (None if it is, or a folder: the
+    callers tell folders apart). Never opens it, so a FIFO cannot block; a symlink loop
+    or a dangling link is named."""
+    path = Path(path)
+    try:
+        st = os.stat(path)
+    except OSError as exc:
+        if exc.errno == errno.ELOOP:
+            return "symlink loop"
+        if path.is_symlink():
+            return "broken symlink"
+        return exc.strerror or str(exc)
+    if stat.S_ISDIR(st.st_mode):
+        return None
+    return _special_kind(st.st_mode)

@@ -69,7 +69,8 @@ from pathlib import Path
 import numpy as np
 
 from mocapfix.core.errors import MAX_FIELD, UnreadableFileError, UnsupportedFeatureError, WriteError
-from mocapfix.core.fileio import atomic_write_bytes, atomic_write_pieces, read_input_bytes, refuse_stream
+from mocapfix.core.fileio import (atomic_write_bytes, atomic_write_pieces, read_input_bytes,
+                                  refuse_stream, regular_file_problem)
 from mocapfix.formats.filebytes import keep, runs_of
 from mocapfix.formats.textenc import UTF8_BOM, refuse_long_fields, refuse_wide_text
 from mocapfix.core.kinematics import Rig, euler_to_matrix, positions_in_chunks
@@ -795,6 +796,15 @@ def find_asf(amc_path: Path, asf_option=None) -> Path:
     in_folder = asf_files()
     tried = " or ".join(f"{s}.asf" for s in dict.fromkeys(stems))
     why = f"{len(in_folder)} .asf files there" if in_folder else "no .asf file there"
+    # a name that is there but is no file (a FIFO, a folder, a broken link) is said to be
+    odd: dict = {}                  # by inode: one entry on a case-insensitive file system
+    for name in dict.fromkeys(s + suffix for s in stems for suffix in (".asf", ".ASF", ".Asf")):
+        path = folder / name
+        if os.path.lexists(path) and not path.is_file():
+            kind = "a folder" if path.is_dir() else regular_file_problem(path)
+            odd.setdefault(os.lstat(path).st_ino, f"{name} ({kind})")
+    if odd:
+        why = f"found but not a file: {', '.join(odd.values())}"
     raise UnreadableFileError(
         amc_path, f"cannot find the ASF skeleton: no {tried} in {folder} ({why}); put the "
                   f"skeleton beside the AMC as {stems[-1]}.asf (from Python: read(..., asf=PATH))")

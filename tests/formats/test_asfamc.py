@@ -527,6 +527,25 @@ def test_missing_asf_is_refused_naming_the_amc(tmp_path):
     assert "put the skeleton beside the AMC as 05.asf" in str(err.value)
 
 
+@pytest.mark.parametrize("kind", ["a FIFO", "a folder", "broken symlink"])
+def test_an_asf_name_that_is_no_file_is_said_to_be_so(kind, tmp_path):
+    """A FIFO, a folder or a dangling link where the skeleton should be: the message says
+    what is there (it said "no .asf file there"), and reading never blocks on the FIFO."""
+    import os
+
+    amc, asf = cmu_copy(tmp_path)
+    asf.unlink()
+    if kind == "a FIFO":
+        os.mkfifo(asf)
+    elif kind == "a folder":
+        asf.mkdir()
+    else:
+        asf.symlink_to(tmp_path / "gone.asf")
+    with hang_guard(), pytest.raises(UnreadableFileError) as err:
+        formats.read(amc)
+    assert f"found but not a file: {asf.name} ({kind})" in str(err.value)
+
+
 def test_hierarchy_bone_missing_from_bonedata_is_refused(tmp_path):
     amc, asf = cmu_copy(tmp_path)
     asf.write_bytes(asf.read_bytes().replace(b"lhand lfingers", b"lhand lfingers lpinky"))
