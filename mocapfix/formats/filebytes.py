@@ -56,6 +56,7 @@ class FileBytes:
 
     def __init__(self, path, st: os.stat_result):
         self.path = str(path)
+        self._where = os.path.abspath(path)     # the same file after a change of directory
         self.identity = _identity(st)
         self._fd: int | None = None
 
@@ -88,7 +89,7 @@ class FileBytes:
         """The open file, checked to be the one read (opened on first use)."""
         if self._fd is None:
             try:
-                self._fd = os.open(self.path, os.O_RDONLY | getattr(os, "O_BINARY", 0)
+                self._fd = os.open(self._where, os.O_RDONLY | getattr(os, "O_BINARY", 0)
                                    | getattr(os, "O_CLOEXEC", 0))
             except OSError as exc:
                 raise self._changed(exc.strerror or str(exc)) from None
@@ -114,10 +115,11 @@ class FileBytes:
             pass
 
     def __getstate__(self):
-        return {"path": self.path, "identity": self.identity}
+        return {"path": self.path, "where": self._where, "identity": self.identity}
 
     def __setstate__(self, state):
-        self.path, self.identity, self._fd = state["path"], state["identity"], None
+        self.path, self._where, self.identity = state["path"], state["where"], state["identity"]
+        self._fd = None
 
 
 def keep(path, data):

@@ -158,6 +158,10 @@ def test_file_bytes_slices_as_bytes_do(pread, tmp_path, monkeypatch):
     copy = pickle.loads(pickle.dumps(kept))       # a batch worker's copy opens its own
     assert copy[100:200] == data[100:200]
     kept.close()
+    monkeypatch.chdir(tmp_path)
+    relative = FileBytes("f.txt", os.stat("f.txt"))
+    monkeypatch.chdir("/")                        # a notebook that changed directory
+    assert relative[5:9] == data[5:9]
 
 
 def test_only_a_large_file_read_unchanged_is_kept_on_disk(tmp_path, monkeypatch):
