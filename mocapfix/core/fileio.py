@@ -275,7 +275,7 @@ def read_input_bytes(path) -> bytes:
         raise UnreadableFileError(path, f"cannot open: {exc.strerror or exc}") from None
     if not data.strip():
         raise UnreadableFileError(path, "file is empty")
-    if _stat_key(before) == _stat_key(after) and before.st_size == len(data):
+    if stat_identity(before) == stat_identity(after) and before.st_size == len(data):
         with _READ_STATS_LOCK:
             _READ_STATS[id(data)] = (str(path), before)
             while len(_READ_STATS) > _READ_STATS_KEPT:
@@ -290,7 +290,9 @@ _READ_STATS_KEPT = 64
 _READ_STATS_LOCK = threading.Lock()
 
 
-def _stat_key(st: os.stat_result) -> tuple:
+def stat_identity(st: os.stat_result) -> tuple:
+    """What tells one state of a file from another: device, inode, size and modification
+    time (ns)."""
     return st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns
 
 
@@ -307,7 +309,7 @@ def read_identity(data: bytes, path) -> os.stat_result | None:
         now = os.stat(path)
     except OSError:
         return None
-    return st if _stat_key(now) == _stat_key(st) else None
+    return st if stat_identity(now) == stat_identity(st) else None
 
 
 def file_sha256(path) -> str:

@@ -25,7 +25,7 @@ import threading
 from pathlib import Path
 
 from mocapfix.core.errors import UnreadableFileError
-from mocapfix.core.fileio import read_identity
+from mocapfix.core.fileio import read_identity, stat_identity
 
 #: a file larger than this (bytes) is read again by its writer, not held in memory
 HELD_MAX = 64 << 20
@@ -46,10 +46,6 @@ def _pread(fd: int, n: int, at: int) -> bytes:
         return os.read(fd, n)
 
 
-def _identity(st: os.stat_result) -> tuple:
-    return st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns
-
-
 class FileBytes:
     """The bytes of the file at ``path`` as they were read (``identity``: its
     :func:`os.stat` then): ``len()`` and slices (``data[a:b]``, bytes) as of ``bytes``."""
@@ -57,7 +53,7 @@ class FileBytes:
     def __init__(self, path, st: os.stat_result):
         self.path = str(path)
         self._where = os.path.abspath(path)     # the same file after a change of directory
-        self.identity = _identity(st)
+        self.identity = stat_identity(st)
         self._fd: int | None = None
 
     def __len__(self) -> int:
@@ -93,7 +89,7 @@ class FileBytes:
                                    | getattr(os, "O_CLOEXEC", 0))
             except OSError as exc:
                 raise self._changed(exc.strerror or str(exc)) from None
-        if _identity(os.fstat(self._fd)) != self.identity:
+        if stat_identity(os.fstat(self._fd)) != self.identity:
             self.close()
             raise self._changed("it is not the file that was read")
         return self._fd
