@@ -96,7 +96,7 @@ def bench(ctx, clean_files, protocol, methods, configs, seeds, settings, json_ou
                    "(benchmarked once)", err=True)
     clean_files = list(once.values())
     progress = None if quiet else (lambda msg: click.echo(f"bench: {msg}", err=True))
-    unread: list[dict] = []     # files that cannot be read: named, left out, exit 1
+    unread: list[dict] = []     # files that cannot be read or used: named, left out, exit 1
     if protocol == "kinect":  # CMU captures made into Kinect v2 CSVs: its own runner
         from mocapfix.bench import kinect as bench_kinect
 
@@ -129,7 +129,7 @@ def bench(ctx, clean_files, protocol, methods, configs, seeds, settings, json_ou
     for u in unread:
         error_line(u["error"])
     if not result.files:        # nothing benchmarked: no table, no file that claims one
-        error_line("no file could be read: nothing benchmarked, nothing written")
+        error_line("no file could be read and used: nothing benchmarked, nothing written")
         sys.exit(EXIT_UNREADABLE)
     markdown = tables()
     try:

@@ -81,10 +81,17 @@ def marker_swap(motion: Motion, rng: np.random.Generator, min_s: float = 0.3, ma
 OCCLUSION_SCENARIOS = ("gaps", "noise", "mixed", "swap")
 
 
+def _occlusion_refusal(motion: Motion) -> str | None:
+    if len(motion.positions) < 4:   # an interior gap or swap needs frames on both sides
+        return f"{len(motion.positions)} frames; the occlusion protocol needs at least 4"
+    return None
+
+
 def occlusion(motion: Motion, scenario: str, seed: int = 0):
     """One scenario of the ``occlusion`` protocol; returns (corrupted motion, mask)."""
-    if len(motion.positions) < 4:   # an interior gap or swap needs frames on both sides
-        raise ValueError(f"{len(motion.positions)} frames; the occlusion protocol needs at least 4")
+    why = _occlusion_refusal(motion)
+    if why:
+        raise ValueError(why)
     rng = np.random.default_rng(seed)
     if scenario == "gaps":
         return occlusion_gaps(motion, rng)
@@ -292,10 +299,11 @@ def regular_gaps(motion: Motion, rng: np.random.Generator, fraction: float = 0.3
     tests gaps at the end of the capture) when J >= 2 × ``markers``, and the fraction is
     capped at ``markers / J`` (24 % on a 41-marker set). Samples already missing in the
     clean motion stay missing but are not counted as corrupted."""
+    why = _regular_gaps_refusal(motion, markers)
+    if why:
+        raise ValueError(why)
     pos = motion.positions.copy()
     T, J, _ = pos.shape
-    if markers > J:
-        raise ValueError(f"regular gaps need at least {markers} markers, the motion has {J}")
     starts = np.arange(0, T, frames)
     lengths = np.minimum(starts + frames, T) - starts
     order = rng.permutation(len(starts))
@@ -319,6 +327,12 @@ def regular_gaps(motion: Motion, rng: np.random.Generator, fraction: float = 0.3
     return motion.replace(positions=pos), mask
 
 
+def _regular_gaps_refusal(motion: Motion, markers: int) -> str | None:
+    if markers > motion.n_joints:
+        return f"regular gaps need at least {markers} markers, the motion has {motion.n_joints}"
+    return None
+
+
 def _feng2015(motion, rng, snr_db=None, outliers=None):
     touched = np.zeros(motion.positions.shape[:2], dtype=bool)
     if snr_db is not None:
@@ -330,11 +344,15 @@ def _feng2015(motion, rng, snr_db=None, outliers=None):
     return motion, touched
 
 
+#: Feng et al. 2014's regular gaps: the markers missing in each incomplete frame
+FENG2014_GAP_MARKERS = 10
+
+
 def _feng2014(motion, rng, kind):
     if kind == "random-missing":
         return random_missing(motion, rng, 0.40)
     if kind == "regular-gaps":
-        return regular_gaps(motion, rng, 0.30, 10, 60)
+        return regular_gaps(motion, rng, 0.30, FENG2014_GAP_MARKERS, 60)
     if kind == "noise":
         return gaussian_on_fraction(motion, rng, 0.30, 2.0)
     if kind == "mixed":
@@ -367,6 +385,21 @@ PROTOCOLS: dict[str, dict[str, dict]] = {
     # Nothing: the file as read (mocapfix.bench.harm scores what a method changes).
     "harm": {"as-read": {}},
 }
+
+
+def refusal(motion: Motion, protocol: str, setting: str) -> str | None:
+    """Why one setting of one protocol cannot corrupt ``motion`` (what
+    :func:`apply_protocol` would raise), or None: ``mocapfix bench`` asks it of every file
+    before any work and leaves out a file it cannot use."""
+    if protocol == "occlusion":
+        return _occlusion_refusal(motion)
+    if protocol == "feng2014" and PROTOCOLS[protocol][setting]["kind"] == "regular-gaps":
+        return _regular_gaps_refusal(motion, FENG2014_GAP_MARKERS)
+    if protocol == "rotations":
+        from mocapfix.bench import rotations as bench_rotations
+
+        return bench_rotations.refusal(motion)
+    return None
 
 
 def apply_protocol(motion: Motion, protocol: str, setting: str, seed: int = 0):

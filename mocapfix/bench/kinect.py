@@ -441,7 +441,8 @@ def run(files, configs=(), seeds=3, scenarios=None, max_frames: int = 450, progr
         pipelines: dict | None = None, unread: list | None = None) -> KinectBenchResult:
     """Run the protocol (module docstring) on CMU ``files`` with the baselines and the
     YAML ``configs`` (paths) or ``pipelines`` ({name: Pipeline}). ``unread``: as
-    :func:`mocapfix.bench.run`'s."""
+    :func:`mocapfix.bench.run`'s (a file the protocol cannot use: not a CMU skeleton, under
+    :data:`MIN_FRAMES` frames, joints missing)."""
     from mocapfix.bench.run import left_out, read_files
     from mocapfix.config import load_config
 
@@ -452,15 +453,15 @@ def run(files, configs=(), seeds=3, scenarios=None, max_frames: int = 450, progr
     seed_list = list(range(seeds)) if isinstance(seeds, int) else list(seeds)
     methods = {f"config:{Path(p).name.rsplit('.', 1)[0]}": load_config(p) for p in configs}
     methods.update(pipelines or {})
-    sources = read_files(files, unread=unread)
+
+    def take(label, src):           # a file whose truth cannot be made: why, before any work
+        kinect_truth(src, np.random.default_rng(0), max_frames)
+        return src
+
+    sources = read_files(files, unread=unread, take=take)
     result = KinectBenchResult([label for label, _ in sources], seed_list, scenarios,
                                list(BASELINE_NAMES) + list(methods), notes=left_out(unread or []))
     bones = kl.skeleton_for("kinect_v2").bone_array
-    for label, src in sources:      # refuse a file before any work, naming it
-        try:
-            kinect_truth(src, np.random.default_rng(0), max_frames)
-        except ValueError as exc:
-            raise ValueError(f"{label}: {exc}") from None
     with tempfile.TemporaryDirectory(prefix="mocapfix-kbench-") as tmp:
         for seed in seed_list:
             for fi, (label, src) in enumerate(sources):

@@ -41,11 +41,19 @@ def rotation_columns(rig) -> list[int]:
     return [c for cols in rig.rot_columns for c in cols]
 
 
+def refusal(motion: Motion) -> str | None:
+    """Why the protocol cannot corrupt ``motion`` (None: it can)."""
+    if motion.rig is None or motion.channels is None:
+        return "the rotations protocol needs rotation channels (BVH or ASF/AMC)"
+    return None
+
+
 def corrupt(motion: Motion, setting: str, seed: int = 0):
     """(corrupted motion with channels and positions, (T, J) mask of joints whose channels
     were changed)."""
-    if motion.rig is None or motion.channels is None:
-        raise ValueError("the rotations protocol needs rotation channels (BVH or ASF/AMC)")
+    why = refusal(motion)
+    if why:
+        raise ValueError(why)
     if setting not in SETTINGS:
         raise ValueError(f"unknown rotations setting {setting!r} (known: {', '.join(SETTINGS)})")
     rng = np.random.default_rng(seed)

@@ -56,7 +56,7 @@ import numpy as np
 from mocapfix.bench import corrupt
 from mocapfix.bench import harm as bench_harm
 from mocapfix.bench.tasks import method_in_worker, run_blocks
-from mocapfix.core.errors import ConfigError, MocapfixError, UnreadableFileError
+from mocapfix.core.errors import ConfigError, MocapfixError, UnreadableFileError, name_the_file
 from mocapfix.batch.executors import ExecutorSpec
 from mocapfix.core.motion import Motion
 from mocapfix.pipeline.steps import Pipeline
@@ -395,28 +395,40 @@ def _json_default(obj):
     raise TypeError(type(obj))
 
 
-def read_files(files, read_options: dict | None = None,
-               unread: list | None = None) -> list[tuple[str, Motion]]:
+def read_files(files, read_options: dict | None = None, unread: list | None = None,
+               take=None) -> list[tuple[str, Motion]]:
     """``(label, motion)`` of each of ``files``: a path read by :func:`mocapfix.formats.read`
     with ``read_options`` (labelled by the path as given), or a Motion. A file that cannot
     be read (malformed, truncated, a folder, a FIFO or device) raises the
     :class:`UnreadableFileError` naming it; with an ``unread`` list it is appended there
-    instead, as ``{"path", "error"}`` (the message), and left out."""
+    instead, as ``{"path", "error"}`` (the message), and left out.
+
+    ``take(label, motion)``: the motion the benchmark uses, or a ValueError saying why the
+    protocol cannot use it (too short, no rotation channels, no sample): such a file is
+    refused as one that cannot be read, ``<file>: <why>`` (a :class:`MocapfixError`)."""
     from mocapfix import formats
     from mocapfix.batch.discovery import refuse_special_file
 
     out = []
     for f in files:
-        if isinstance(f, Motion):
-            out.append((f.path or "<motion>", f))
-            continue
+        label = (f.path or "<motion>") if isinstance(f, Motion) else str(f)
         try:
-            refuse_special_file(f)          # reading a FIFO waited for a writer forever
-            out.append((str(f), formats.read(f, **(read_options or {}))))
+            if isinstance(f, Motion):
+                motion = f
+            else:
+                refuse_special_file(f)          # reading a FIFO waited for a writer forever
+                motion = formats.read(f, **(read_options or {}))
         except UnreadableFileError as exc:
-            if unread is None:
-                raise
-            unread.append({"path": str(f), "error": str(exc)})
+            refused = exc
+        else:
+            try:
+                out.append((label, take(label, motion) if take else motion))
+                continue
+            except ValueError as exc:           # read, but the protocol cannot use it
+                refused = MocapfixError(name_the_file(label, exc))
+        if unread is None:
+            raise refused
+        unread.append({"path": label, "error": str(refused)})
     return out
 
 
@@ -446,8 +458,10 @@ def run(files, protocol: str, methods: list[Method], seeds: int | list[int] = 3,
     (:mod:`mocapfix.bench.tasks`); the runs come back in the order above whatever ran
     them, so only the timing fields depend on the executor.
 
-    ``unread``: an empty list that takes the files that cannot be read (:func:`read_files`);
-    they are left out, each named in a note, and with none read the result holds no run."""
+    ``unread``: an empty list that takes the files that cannot be read, or that the
+    protocol cannot use (:func:`read_files`, :func:`mocapfix.bench.corrupt.refusal`; without
+    it such a file raises); they are left out, each named in a note, and with none left the
+    result holds no run."""
     if protocol not in corrupt.PROTOCOLS:
         raise ConfigError(f"unknown protocol {protocol!r} (known: {', '.join(corrupt.PROTOCOLS)})")
     all_settings = list(corrupt.PROTOCOLS[protocol])
@@ -468,20 +482,26 @@ def run(files, protocol: str, methods: list[Method], seeds: int | list[int] = 3,
                               "tune on in the harm protocol")
     result = BenchResult(protocol, [], seed_list, settings, [m.describe() for m in methods],
                          list(notes or []))
-    motions = []
-    read = read_files(files, read_options, unread)
-    result.notes += left_out(unread or [])
-    for label, motion in read:
+    unlabelled = []
+
+    def take(label, motion):        # the truth of a file, or why the protocol cannot use it
         motion, dropped = without_unlabelled(motion)
-        if dropped:
-            result.notes.append(f"{label}: {len(dropped)} unlabelled trajectories left out of "
-                                f"the truth ({', '.join(dropped[:8])}"
-                                f"{', …' if len(dropped) > 8 else ''}): no pipeline cleans them "
-                                "by default")
         if np.isnan(motion.positions).all():
-            raise MocapfixError(f"{label}: no sample present, nothing to benchmark")
-        result.files.append(label)
-        motions.append((label, motion))
+            raise ValueError("no sample present, nothing to benchmark")
+        for s in settings:
+            why = corrupt.refusal(motion, protocol, s)
+            if why:
+                raise ValueError(f"{protocol}/{s}: {why}")
+        if dropped:
+            unlabelled.append(f"{label}: {len(dropped)} unlabelled trajectories left out of "
+                              f"the truth ({', '.join(dropped[:8])}"
+                              f"{', …' if len(dropped) > 8 else ''}): no pipeline cleans them "
+                              "by default")
+        return motion
+
+    motions = read_files(files, read_options, unread, take)
+    result.notes += left_out(unread or []) + unlabelled
+    result.files = [label for label, _ in motions]
     if not motions:
         return result
     order = sorted(settings, key=lambda s: (PRIORITY.get(protocol, []).index(s)

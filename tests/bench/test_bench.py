@@ -338,7 +338,7 @@ def test_bench_occlusion_on_a_three_frame_take_says_why(tmp_path):
     r = CliRunner().invoke(main, ["bench", str(short), "--protocol", "occlusion", "--seeds", "1",
                                   "--methods", "fill", "-q"])
     no_traceback(r)
-    assert r.exit_code == 2, r.output
+    assert r.exit_code == 3, r.output          # the only file, left out: nothing benchmarked
     assert "low >= high" not in r.output
     assert f"{short}: occlusion/" in r.output and "3 frames; the occlusion protocol needs at least 4" in r.output
 
@@ -401,10 +401,62 @@ def test_bench_with_no_readable_file_writes_nothing(tmp_path):
                                   "--json", str(out_json)])
     no_traceback(r)
     assert r.exit_code == 3, r.output
-    assert "no file could be read: nothing benchmarked, nothing written" in r.stderr
+    assert "no file could be read and used: nothing benchmarked, nothing written" in r.stderr
     assert not out_json.exists()
     # a path that does not exist is a usage error, before any work, as in clean and check
     r = CliRunner().invoke(main, ["bench", str(SAMPLE / "walk_markers.c3d"),
                                   str(tmp_path / "missing.c3d"), *_QUICK, "--json", str(out_json)])
     assert r.exit_code == 2 and f"mocapfix: error: {tmp_path / 'missing.c3d'}: no such file" in r.stderr
     assert not out_json.exists()
+
+
+def _three_frames(tmp_path):
+    shutil.copy(SAMPLE / "walker.asf", tmp_path / "walker.asf")
+    return cut_amc(SAMPLE / "walker_01.amc", tmp_path / "walker_02.amc", 3)
+
+
+def _eight_markers(tmp_path):
+    from mocapfix import formats
+    from mocapfix.pipeline.selection import take
+
+    c3d = formats.read(SAMPLE / "walk_markers.c3d")
+    return formats.write(take(c3d, np.arange(c3d.n_joints) < 8), tmp_path / "eight.c3d")[0]
+
+
+def _no_sample(tmp_path):
+    from mocapfix import formats
+
+    c3d = formats.read(SAMPLE / "walk_markers.c3d")
+    return formats.write(c3d.replace(positions=np.full_like(c3d.positions, np.nan)),
+                         tmp_path / "dark.c3d")[0]
+
+
+@pytest.mark.parametrize("protocol,setting,unusable,cause", [
+    ("occlusion", "noise", _three_frames,
+     "occlusion/noise: 3 frames; the occlusion protocol needs at least 4"),
+    ("rotations", "jitter", lambda tmp_path: SAMPLE / "walk_markers.c3d",
+     "rotations/jitter: the rotations protocol needs rotation channels (BVH or ASF/AMC)"),
+    ("feng2014", "regular-gaps", _eight_markers,
+     "feng2014/regular-gaps: regular gaps need at least 10 markers, the motion has 8"),
+    ("harm", "as-read", _no_sample, "no sample present, nothing to benchmark"),
+], ids=["too-short", "no-channels", "too-few-markers", "no-sample"])
+def test_a_file_the_protocol_cannot_use_is_named_and_left_out(tmp_path, protocol, setting,
+                                                             unusable, cause):
+    # a readable file the protocol cannot use stopped the whole bench (exit 2)
+    good, bad = SAMPLE / "walk.bvh", unusable(tmp_path)
+    out_json = tmp_path / "b.json"
+    args = ["--protocol", protocol, "--settings", setting, "--methods", "none", "--seeds", "1",
+            "-q", "--json", str(out_json)]
+    r = CliRunner().invoke(main, ["bench", str(bad), str(good), *args])
+    no_traceback(r)
+    assert r.exit_code == 1, r.output
+    assert r.stderr.splitlines() == [f"mocapfix: error: {bad}: {cause}"]
+    data = json.loads(out_json.read_text())
+    assert data["files"] == [str(good)]
+    assert data["runs"] and {run["file"] for run in data["runs"]} == {str(good)}
+    assert f"{bad}: {cause} (left out of the benchmark)" in data["notes"]
+    out_json.unlink()
+    r = CliRunner().invoke(main, ["bench", str(bad), *args])      # no file usable
+    no_traceback(r)
+    assert r.exit_code == 3, r.output
+    assert f"mocapfix: error: {bad}: {cause}" in r.stderr and not out_json.exists()

@@ -15,7 +15,7 @@ from mocapfix.cli import main
 from mocapfix.formats import kinect as kf
 from mocapfix.solvers.realtime import holt_joint_filter, one_euro
 
-from conftest import cut_amc, no_traceback, shared
+from conftest import SAMPLE_DATA, cut_amc, no_traceback, shared
 
 
 def _truth(seed=0):
@@ -121,33 +121,42 @@ def test_bench_kinect_on_short_takes_names_the_file_or_runs(tmp_path):
     assert r.exit_code == 0, r.output
     r = CliRunner().invoke(main, ["bench", str(ok), str(short), "--protocol", "kinect", "-q"])
     no_traceback(r)
-    assert r.exit_code == 2, r.output
+    assert r.exit_code == 1, r.output          # the short take left out, the other benchmarked
     assert f"{short}: 20 frames at 30 fps; the kinect protocol needs at least 30" in r.output
 
 
-def test_bench_kinect_names_an_unreadable_file_and_benchmarks_the_others(tmp_path):
-    # as the other protocols: one unreadable file stopped the whole bench (exit 2)
+def test_bench_kinect_names_a_file_it_cannot_read_or_use_and_benchmarks_the_others(tmp_path):
+    # as the other protocols: one unreadable file stopped the whole bench (exit 2), and so
+    # did a readable one the protocol cannot use: a take under 1 s, not of a CMU skeleton
     shutil.copy(shared("asfamc/05.asf"), tmp_path / "05.asf")
     ok = cut_amc(shared("asfamc/05_01.amc"), tmp_path / "05_90.amc", 150)
+    short = cut_amc(shared("asfamc/05_01.amc"), tmp_path / "05_91.amc", 80)
     cut = tmp_path / "05_92.amc"
     cut.write_text(ok.read_text()[:5000])          # ends mid-frame
     garbage = tmp_path / "garbage.bvh"
     garbage.write_text("not a motion file\n")
+    other = SAMPLE_DATA / "walk.bvh"
     out_json = tmp_path / "k.json"
     args = ["--protocol", "kinect", "--seeds", "1", "--settings", "jitter", "-q",
             "--json", str(out_json)]
-    r = CliRunner().invoke(main, ["bench", str(cut), str(ok), str(garbage), *args])
+    left = [cut, short, garbage, other]
+    r = CliRunner().invoke(main, ["bench", str(cut), str(short), str(ok), str(garbage), str(other),
+                                  *args])
     no_traceback(r)
     assert r.exit_code == 1, r.output
-    for f in (cut, garbage):
+    for f in left:
         lines = [line for line in r.stderr.splitlines() if line.startswith(f"mocapfix: error: {f}:")]
         assert len(lines) == 1, r.stderr
+    assert (f"mocapfix: error: {short}: 20 frames at 30 fps; the kinect protocol needs at least "
+            "30 (1 s of motion)") in r.stderr
+    assert (f"mocapfix: error: {other}: not a CMU skeleton: no joint(s) Chest2, lhand, rhand, "
+            "lowerneck, LFingers_End, LThumb_End, RFingers_End, RThumb_End") in r.stderr
     data = json.loads(out_json.read_text())
     assert data["files"] == [str(ok)] and {run["file"] for run in data["runs"]} == {str(ok)}
     assert [n.split(":")[0] for n in data["notes"]
-            if n.endswith("(left out of the benchmark)")] == [str(cut), str(garbage)]
+            if n.endswith("(left out of the benchmark)")] == list(map(str, left))
     out_json.unlink()
-    r = CliRunner().invoke(main, ["bench", str(cut), str(garbage), *args])
+    r = CliRunner().invoke(main, ["bench", *map(str, left), *args])
     no_traceback(r)
     assert r.exit_code == 3, r.output
     assert not out_json.exists()
