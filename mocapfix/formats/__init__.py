@@ -231,8 +231,7 @@ def _share_coordinates_read(motion: Motion) -> None:
         return
     for a in range(0, len(positions), SHARE_CHUNK):     # no whole-take temporaries
         seen = ~source.missing[a:a + SHARE_CHUNK]
-        if not (np.array_equal(original[a:a + SHARE_CHUNK][seen], positions[a:a + SHARE_CHUNK][seen])
-                and np.isnan(positions[a:a + SHARE_CHUNK][~seen]).all()):
+        if not np.array_equal(original[a:a + SHARE_CHUNK][seen], positions[a:a + SHARE_CHUNK][seen]):
             return
     positions.flags.writeable = False
     source.original = positions
@@ -294,4 +293,3 @@ def write(motion: Motion, path, format: str | None = None, **options) -> list[Pa
     if name not in FORMATS:
         raise WriteError(path, f"cannot tell the output format from suffix {path.suffix!r}")
     return module(name).write(motion, path, **options)
-

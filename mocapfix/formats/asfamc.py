@@ -796,9 +796,9 @@ def find_asf(amc_path: Path, asf_option=None) -> Path:
     in_folder = asf_files()
     tried = " or ".join(f"{s}.asf" for s in dict.fromkeys(stems))
     why = f"{len(in_folder)} .asf files there" if in_folder else "no .asf file there"
-    # a name that is there but is no file (a FIFO, a folder, a broken link) is said to be
+    # a name looked for that is there but is no file (a FIFO, a folder, a broken link)
     odd: dict = {}                  # by inode: one entry on a case-insensitive file system
-    for name in dict.fromkeys(s + suffix for s in stems for suffix in (".asf", ".ASF", ".Asf")):
+    for name in _asf_names(amc_path.name):
         path = folder / name
         if os.path.lexists(path) and not path.is_file():
             kind = "a folder" if path.is_dir() else regular_file_problem(path)
@@ -1008,13 +1008,19 @@ def _asf_for(amc_name: str, has, listing) -> str | None:
     name, then its subject's (the part before the first ``_``), in three letter cases,
     else the only ``.asf`` of the folder. ``has(name)``: whether the folder holds that
     file; ``listing()``: the names there (asked only for the last rule)."""
-    stem = Path(amc_name).stem
-    for base in (stem, stem.split("_", 1)[0]):
-        for suffix in (".asf", ".ASF", ".Asf"):
-            if has(base + suffix):
-                return base + suffix
+    for name in _asf_names(amc_name):
+        if has(name):
+            return name
     asfs = [n for n in listing() if n.lower().endswith(".asf")]
     return asfs[0] if len(asfs) == 1 else None
+
+
+def _asf_names(amc_name: str) -> list[str]:
+    """The names an AMC's ASF is looked for under, in order: the AMC's own name, then its
+    subject's (the part before the first ``_``), each in three letter cases."""
+    stem = Path(amc_name).stem
+    return list(dict.fromkeys(base + suffix for base in (stem, stem.split("_", 1)[0])
+                              for suffix in (".asf", ".ASF", ".Asf")))
 
 
 def file_names(folder: Path) -> set:
