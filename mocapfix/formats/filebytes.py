@@ -96,8 +96,9 @@ class FileBytes:
 
     def _changed(self, why: str) -> UnreadableFileError:
         return UnreadableFileError(self.path, f"changed or moved since it was read ({why}); "
-                                   "its lines are copied from it when the motion is written: "
-                                   "read it again")
+                                   "what the cleaning left unchanged is copied from a file "
+                                   "this large when the output is written: leave it as it "
+                                   "is until then, and run again (from Python: read it again)")
 
     def close(self) -> None:
         if self._fd is not None:
