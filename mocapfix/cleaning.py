@@ -60,8 +60,8 @@ def clean_motion(motion: Motion, pipeline: Pipeline, to: str | None = None,
         cleaned.notes = [*cleaned.notes, cuts_note(at if held is None else held.kept[at])]
     if held is not None:
         cleaned, records, residual = held.expand(motion, cleaned, records, residual)
-    if to is not None and to != motion.format:
-        cleaned = cleaned.replace(notes=[*cleaned.notes, *formats.losses(cleaned, to)])
+    if to is not None and to != motion.format:   # in place, as the cuts' note
+        cleaned.notes = [*cleaned.notes, *formats.losses(cleaned, to)]
     cleaned = formats.storable(cleaned, to)
     return CleanResult(motion, cleaned, records, residual, time.perf_counter() - started, why)
 

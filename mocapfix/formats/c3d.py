@@ -1312,7 +1312,7 @@ def _encode_xyz(values: np.ndarray, source: C3DSource, path) -> np.ndarray:
 
 
 # -- fresh file (no C3D source, or frames/markers changed) -------------------------------
-def _fresh_file(motion: Motion, path) -> list:
+def _fresh_file(motion: Motion, path):
     positions = np.asarray(motion.positions, dtype=np.float64)
     n_frames, n_points = positions.shape[:2]
     if n_frames == 0 or n_points == 0:
@@ -1320,8 +1320,7 @@ def _fresh_file(motion: Motion, path) -> list:
     if n_points > 65535 or any(len(n.encode("latin-1", "replace")) > 255 for n in motion.names):
         raise WriteError(path, "too many markers (> 65535) or a label longer than 255 characters")
     unit = motion.units if motion.units in METRES_PER_UNIT else "mm"
-    if unit != motion.units:
-        positions = positions * (motion.metres_per_unit / METRES_PER_UNIT["mm"])
+    scale = None if unit == motion.units else motion.metres_per_unit / METRES_PER_UNIT["mm"]
     rate = float(motion.fps)
     records = [_group_record("POINT", 1, "3-D point parameters")]
     f32 = lambda v: struct.pack("<f", v)  # noqa: E731
@@ -1354,8 +1353,17 @@ def _fresh_file(motion: Motion, path) -> list:
     # one analog sample per frame with zero channels keeps ANALOG:RATE / POINT:RATE = 1
     struct.pack_into("<BBHHHHHfHHf", header, 0, 2, 0x50, n_points, 0, 1, min(n_frames, 65535),
                      0, -1.0, data_block, 1, rate)
-    missing = ~np.isfinite(positions).all(axis=2)
-    points = np.zeros((n_frames, n_points, 4), dtype="<f4")
-    points[..., :3] = np.where(missing[..., None], 0.0, positions)
-    points[..., 3] = np.where(missing, -1.0, 0.0)
-    return [bytes(header), section, points.data, b"\0" * (-points.nbytes % BLOCK)]
+    return chain([bytes(header), section], _fresh_records(positions, scale),
+                 [b"\0" * (-(n_frames * n_points * 16) % BLOCK)])
+
+
+def _fresh_records(positions: np.ndarray, scale: float | None):
+    """The point records (float, residual 0; a missing sample (0, 0, 0) with residual −1)
+    of a fresh file, CHUNK frames a piece (never a whole-take copy of the take)."""
+    for frames in _chunks(len(positions)):
+        part = positions[frames] if scale is None else positions[frames] * scale
+        missing = ~np.isfinite(part).all(axis=2)
+        points = np.zeros((*part.shape[:2], 4), dtype="<f4")
+        points[..., :3] = np.where(missing[..., None], 0.0, part)
+        points[..., 3] = np.where(missing, -1.0, 0.0)
+        yield points.tobytes()

@@ -505,6 +505,25 @@ def test_fresh_file_from_a_motion_without_source(tmp_path):
     np.testing.assert_allclose(points[0, :, :3], positions[0], rtol=1e-6)
 
 
+@pytest.mark.parametrize("units", ["mm", "unknown"])
+def test_a_fresh_file_written_a_chunk_of_frames_at_a_time_is_the_same(units, tmp_path, monkeypatch):
+    """The records of a fresh file are written CHUNK frames a piece: chunks of 7 frames,
+    a gap across a chunk's edge and a unit the file cannot name (converted to mm) give the
+    bytes one chunk gives, and the file reads back as written."""
+    rng = np.random.default_rng(2)
+    positions = rng.normal(size=(30, 4, 3)) * 100
+    positions[5:9, 1] = np.nan
+    motion = Motion(positions=positions, names=["a", "b", "c", "d"], fps=60.0, units=units,
+                    metres_per_unit=0.0254 / 0.45 if units == "unknown" else 0.001)
+    C.write(motion, tmp_path / "one.c3d")
+    monkeypatch.setattr(C, "CHUNK", 7)
+    C.write(motion, tmp_path / "chunks.c3d")
+    assert (tmp_path / "one.c3d").read_bytes() == (tmp_path / "chunks.c3d").read_bytes()
+    again = C.read(tmp_path / "chunks.c3d")
+    expected = positions * (motion.metres_per_unit / 0.001)
+    np.testing.assert_allclose(again.positions, expected.astype(np.float32), rtol=1e-6, equal_nan=True)
+
+
 def test_read_does_not_modify_or_hang_on_huge_declared_counts(tmp_path):
     records = np.ones((2, 2, 4), np.float32)
     data = bytearray(build_c3d(records, "float", -1.0, 50.0, [[b"A", b"B"]]))
