@@ -230,8 +230,9 @@ def _share_coordinates_read(motion: Motion) -> None:
             or source.missing.shape != positions.shape[:2]):
         return
     for a in range(0, len(positions), SHARE_CHUNK):     # no whole-take temporaries
-        seen = ~source.missing[a:a + SHARE_CHUNK]
-        if not np.array_equal(original[a:a + SHARE_CHUNK][seen], positions[a:a + SHARE_CHUNK][seen]):
+        rows = slice(a, a + SHARE_CHUNK)
+        seen = ~source.missing[rows]
+        if not np.array_equal(original[rows][seen], positions[rows][seen]):
             return
     positions.flags.writeable = False
     source.original = positions

@@ -861,14 +861,16 @@ def _frame_pieces(source: BvhSource, channels: np.ndarray):
     done = 0                                      # frames written so far
     for i in special.tolist():
         if i > done:
-            yield from runs_of(source.data, source.frame_start(done), int(source.frame_ends[i - 1]))
+            yield from runs_of(source.data, source.frame_start(done),
+                               int(source.frame_ends[i - 1]))
         line = source.frame_line(i)
         if not np.array_equal(channels[i], source.values[i]):
             line = _rewrite_line(line, channels[i], source.values[i])
         yield finished(i, line)
         done = i + 1
     if done < common:
-        yield from runs_of(source.data, source.frame_start(done), int(source.frame_ends[common - 1]))
+        yield from runs_of(source.data, source.frame_start(done),
+                           int(source.frame_ends[common - 1]))
     for i in range(n_old, T):
         line = (_rewrite_line(source.frame_line(n_old - 1), channels[i], None) if n_old
                 else _fresh_line(channels[i], source.newline))

@@ -703,17 +703,14 @@ class _StoredRecords:
         dec_float = processor == PROCESSOR_DEC and storage == "float"
         self.dtype = np.dtype("<f4") if dec_float else field.base.newbyteorder("<")
         self.size = int(np.prod(self.shape))
-        self.ndim = len(self.shape)
 
     def __len__(self) -> int:
         return self.shape[0]
 
     def __getitem__(self, frames):
-        if not isinstance(frames, slice):
+        if not isinstance(frames, slice) or frames.step not in (None, 1):
             return np.asarray(self)[frames]
-        a, b, step = frames.indices(self.shape[0])
-        if step != 1:
-            return self[a:b][::step]
+        a, b, _ = frames.indices(self.shape[0])
         n = max(b - a, 0)
         raw = self.data[self.offset + a * self.record.itemsize:
                         self.offset + (a + n) * self.record.itemsize]

@@ -30,7 +30,7 @@ from mocapfix.cleaners.base import REJECTED_FILLS
 from mocapfix.solvers.spikes import hampel_flags
 from mocapfix.solvers.fill_error import FillIndex
 from mocapfix.core.gaps import LONG_FILL_S, runs, take_frames
-from mocapfix.core.metrics import add_rows, rms_acceleration
+from mocapfix.core.metrics import add_rows, bone_lengths, rms_acceleration
 from mocapfix.core.motion import Motion, missing_samples
 from mocapfix.pipeline.selection import DEFAULT_POLICY, not_cleaned, take
 from mocapfix.pipeline.unlabelled import Unlabelled, is_unlabelled
@@ -87,7 +87,7 @@ def bone_variation(positions: np.ndarray, bones: np.ndarray) -> np.ndarray:
     ``np.nanstd``'s temporaries of them were the peak of a long take's report."""
     out = np.full(len(bones), np.nan)
     for b, (parent, child) in enumerate(np.asarray(bones, dtype=np.intp).reshape(-1, 2).tolist()):
-        lengths = np.linalg.norm(positions[:, parent] - positions[:, child], axis=-1)
+        lengths = bone_lengths(positions, [(parent, child)])[:, 0]
         if np.count_nonzero(np.isfinite(lengths)) > 1:
             with np.errstate(invalid="ignore", divide="ignore"):
                 out[b] = np.nanstd(lengths) / np.nanmean(lengths)
