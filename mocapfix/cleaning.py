@@ -60,10 +60,11 @@ def clean_motion(motion: Motion, pipeline: Pipeline, to: str | None = None,
         cleaned.notes = [*cleaned.notes, cuts_note(at if held is None else held.kept[at])]
     if held is not None:
         cleaned, records, residual = held.expand(motion, cleaned, records, residual)
-    if to is not None and to != motion.format:   # in place, as the cuts' note
-        cleaned.notes = [*cleaned.notes, *formats.losses(cleaned, to)]
+    losses = [] if to is None or to == motion.format else formats.losses(cleaned, to)
+    cleaned.notes = [*cleaned.notes, *losses]       # in place, as the cuts' note
     cleaned = formats.storable(cleaned, to)
-    return CleanResult(motion, cleaned, records, residual, time.perf_counter() - started, why)
+    return CleanResult(motion, cleaned, records, residual, time.perf_counter() - started, why,
+                       losses)
 
 
 def _clean_span(motion: Motion, pipeline: Pipeline, why: list, points: np.ndarray | None = None):
@@ -262,6 +263,6 @@ def clean_file(source: Path, output: Path, pipeline: Pipeline, reports=("json",)
         or f.get("reasons", []),
         "worst": [[j["name"], j["status"]] for j in ranked(report)[:3] if j["status"] != "OK"],
         **({"steps_not_run": f["steps_not_run"]} if f.get("steps_not_run") else {}),
-        **({"format": to, "not_carried": [n for n in result.cleaned.notes if n not in motion.notes]}
+        **({"format": to, "not_carried": result.not_carried}
            if to and to != motion.format else {}),
     }

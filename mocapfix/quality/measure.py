@@ -20,7 +20,7 @@ Lengths are in mm, times in s, accelerations in m/s², whatever the file's units
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -58,6 +58,9 @@ class CleanResult:
     seconds: float = 0.0
     #: per point, why the pipeline left it alone (None: cleaned); see selection.not_cleaned
     not_cleaned: list | None = None
+    #: what the output format cannot carry (:func:`mocapfix.formats.losses`), when the
+    #: take is written in another format than it was read from
+    not_carried: list = field(default_factory=list)
 
 
 def bones_of(motion: Motion) -> np.ndarray:

@@ -139,3 +139,21 @@ def test_a_trc_is_cleaned_as_its_c3d_is(tmp_path):
     ca, cb = formats.read(tmp_path / "a" / "c3dorg_s28_dynamic.C3D"), formats.read(tmp_path / "b" / "c3dorg_s28_dynamic.trc")
     assert np.array_equal(ca.missing, cb.missing)
     assert np.nanmax(np.abs(ca.positions - cb.positions)) < 0.01      # mm: float32 and %.5f
+
+
+def test_only_what_the_format_cannot_carry_is_listed_as_not_carried(tmp_path):
+    """A take whose clean adds notes of its own (two CMU takes joined: "the take jumps as a
+    whole") lists under "not carried into c3d" only what C3D cannot hold; the cleaning's
+    notes stay in the report, not in those lines."""
+    a, b = (formats.read(shared(f"bvh/cmu_cgspeed_131_0{k}.bvh")) for k in (1, 3))
+    joined = a.replace(channels=np.concatenate([a.channels[:600], b.channels[:600]]),
+                       positions=np.concatenate([a.positions[:600], b.positions[:600]]))
+    take = tmp_path / "in" / "joined.bvh"
+    formats.write(joined, take)
+    r = CliRunner().invoke(main, ["convert", str(take), "-o", str(tmp_path / "o"), "--to", "c3d",
+                                  "--report", "json"])
+    assert r.exit_code == 0, r.output
+    carried = [line for line in r.output.splitlines() if "not carried into c3d" in line]
+    assert carried and all("joint rotations" in line for line in carried), r.output
+    notes = json.loads((tmp_path / "o" / "joined.c3d.report.json").read_text())["file"]["notes"]
+    assert any("jumps as a whole" in n for n in notes) and any("joint rotations" in n for n in notes)
