@@ -237,6 +237,25 @@ def test_grnn_is_the_gaussian_weighted_mean_of_the_training_targets():
                                rtol=1e-9, atol=1e-9)
 
 
+def test_kth_smallest_of_each_row_counts_repeated_values_once_each():
+    # the GRNN spread's 5th-neighbour distances: row [3, 1, 1, 2, 1, 0] sorted is
+    # 0, 1, 1, 1, 2, 3 -> index 4 is 2 (a tie counts once per copy), in a small array (a
+    # partition) and in one of 200 such rows side by side with others (struck out one at
+    # a time); and on random rows with ties and a first column of zeros (a point's
+    # distance to itself), small and large, what a sort gives for every k
+    row = np.array([3.0, 1, 1, 2, 1, 0])
+    assert kernels._kth_smallest(row[None].copy(), 4).tolist() == [2.0]
+    wide = np.hstack([np.tile(row, (200, 1)), np.full((200, 60), 9.0)])
+    assert wide.size >= 8000 and (kernels._kth_smallest(wide, 4) == 2.0).all()
+    rng = np.random.default_rng(0)
+    for shape in ((50, 30), (200, 600)):
+        rows = np.round(rng.uniform(0, 4, size=shape), 0)
+        rows[:, 0] = 0.0
+        for k in range(8):
+            np.testing.assert_array_equal(kernels._kth_smallest(rows.copy(), k),
+                                          np.sort(rows, axis=1)[:, k])
+
+
 @pytest.mark.slow
 def test_gaps_no_other_marker_is_seen_through_get_no_members_and_a_reason(monkeypatch):
     """PhoeniX dance with interior gaps in six markers and its last 60 frames empty (every
