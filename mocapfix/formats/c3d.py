@@ -456,23 +456,27 @@ def _read_bytes(path, data: bytes, fps):
 
     analog_fmt = get("ANALOG:FORMAT")
     unsigned = analog_fmt is not None and "UNSIGNED" in "".join(analog_fmt.value).upper()
-    with np.errstate(invalid="ignore", over="ignore"):  # garbage may hold signalling NaNs
-        points, analog = _read_data(data, data_offset, n_frames, n_points, analog_words, storage,
-                                    processor, unsigned)
-        positions, missing = _decode_points(points, storage, abs(scale), notes)
-    tail = data[data_offset + n_frames * frame_bytes:]
-
-    names = _labels(get, parameters, n_points, notes)
-    units, metres = _units(get("POINT:UNITS"), notes)
+    label_notes: list[str] = []         # after the records' notes, as they are reported
+    names = _labels(get, parameters, n_points, label_notes)
+    units, metres = _units(get("POINT:UNITS"), label_notes)
     kinds = point_kinds(get, names)
-    if kinds is not None:
-        # a model output of exactly (0, 0, 0) is a value (no ground reaction in swing),
-        # not a gap: only the residual flag and NaN make it missing
-        model = np.array([k != "marker" for k in kinds])
-        zero = (model[None, :] & (points[..., :3] == 0).all(axis=2)
-                & (_residual_words(points, storage) >= 0))
-        positions[zero] = 0.0
-        missing = missing & ~zero
+    # a model output of exactly (0, 0, 0) is a value (no ground reaction in swing), not a
+    # gap: only the residual flag and NaN make it missing
+    model = None if kinds is None else np.array([k != "marker" for k in kinds])
+    record = _record_dtype(n_points, analog_words, storage, processor, unsigned)
+    kept = keep(path, data)
+    with np.errstate(invalid="ignore", over="ignore"):  # garbage may hold signalling NaNs
+        if isinstance(kept, FileBytes):     # a large file: its records are read again when written
+            positions, missing = _decode_stored(data, data_offset, record, n_frames, storage,
+                                                abs(scale), processor, model, notes)
+            points, analog = (_StoredRecords(kept, data_offset, record, n_frames, part, storage,
+                                             processor) for part in ("p", "a"))
+        else:
+            points, analog = _read_data(data, data_offset, n_frames, n_points, analog_words,
+                                        storage, processor, unsigned)
+            positions, missing = _decode_points(points, storage, abs(scale), notes, model)
+    tail = data[data_offset + n_frames * frame_bytes:]
+    notes += label_notes
 
     if fps is not None:
         if rate is not None and not np.isclose(fps, rate):
@@ -497,11 +501,6 @@ def _read_bytes(path, data: bytes, fps):
     else:
         prefix[param_start - BLOCK + 3] = PROCESSOR_INTEL
 
-    kept = keep(path, data)
-    if isinstance(kept, FileBytes):       # a large file: its records are read again when written
-        record = _record_dtype(n_points, analog_words, storage, processor, unsigned)
-        points, analog = (_StoredRecords(kept, data_offset, record, n_frames, part, storage,
-                                         processor) for part in ("p", "a"))
     source = C3DSource(
         processor=processor, header=header, original_header=data[:BLOCK], parameters=parameters,
         data_offset=data_offset, storage=storage, scale=abs(scale), points=points, analog=analog,
@@ -736,21 +735,58 @@ def _residual_words(points: np.ndarray, storage: str) -> np.ndarray:
     return fourth.astype(np.int32)
 
 
-def _decode_points(points, storage, scale, notes):
+def _decode_points(points, storage, scale, notes, model=None):
     """Positions (NaN where missing) and the missing mask of the records ``points``: a
     sample is missing when its residual word is negative, a coordinate is not finite, or
-    it is exactly (0, 0, 0) (a vendor's gap)."""
+    it is exactly (0, 0, 0) (a vendor's gap) — unless it is a model output (``model``:
+    (P,) bool, or None), whose (0, 0, 0) with a valid residual is a value."""
+    positions, missing, counts = _decoded(points, storage, scale, model)
+    _decode_notes(*counts, notes)
+    return positions, missing
+
+
+def _decoded(points, storage, scale, model):
+    """:func:`_decode_points` without the notes: positions, mask and the counts of
+    non-finite and (0, 0, 0) samples that the notes report."""
     xyz = _coordinates(points, storage, scale)
     flagged = _residual_words(points, storage) < 0
     non_finite = ~np.isfinite(xyz).all(axis=2)
     zeros = (xyz == 0).all(axis=2) & ~flagged & ~non_finite
     missing = flagged | non_finite | zeros
-    if non_finite.any():
-        notes.append(f"{int(non_finite.sum())} samples with NaN/inf coordinates treated as missing")
-    if zeros.any():
-        notes.append(f"{int(zeros.sum())} samples at exactly (0,0,0) without the residual -1 flag "
+    positions = _positions_from(xyz, missing)
+    if model is not None:
+        zero = model[None, :] & (points[..., :3] == 0).all(axis=2) & ~flagged
+        positions[zero] = 0.0
+        missing &= ~zero
+    return positions, missing, (int(non_finite.sum()), int(zeros.sum()))
+
+
+def _decode_notes(non_finite: int, zeros: int, notes: list[str]) -> None:
+    if non_finite:
+        notes.append(f"{non_finite} samples with NaN/inf coordinates treated as missing")
+    if zeros:
+        notes.append(f"{zeros} samples at exactly (0,0,0) without the residual -1 flag "
                      "treated as missing")
-    return _positions_from(xyz, missing), missing
+
+
+def _decode_stored(data, offset, record, n_frames, storage, scale, processor, model, notes):
+    """:func:`_decode_points` of the point records in ``data`` from ``offset`` (``record``
+    per frame), CHUNK frames at a time: a large file's reader holds the positions and the
+    mask, not also an Intel copy of every record and whole-take temporaries of them (its
+    records are read again when written: :class:`_StoredRecords`)."""
+    n_points = record.fields["p"][0].shape[0]
+    positions = np.empty((n_frames, n_points, 3))
+    missing = np.empty((n_frames, n_points), dtype=bool)
+    non_finite = zeros = 0
+    for frames in _chunks(n_frames):
+        n = frames.stop - frames.start
+        words = _intel(np.frombuffer(data, dtype=record, count=n,
+                                     offset=offset + frames.start * record.itemsize)["p"],
+                       storage, processor)
+        positions[frames], missing[frames], (a, b) = _decoded(words, storage, scale, model)
+        non_finite, zeros = non_finite + a, zeros + b
+    _decode_notes(non_finite, zeros, notes)
+    return positions, missing
 
 
 def _coordinates(points, storage, scale) -> np.ndarray:

@@ -149,7 +149,11 @@ class Layer:
 
     def __init__(self, motion: Motion, label: str, role: str = "motion"):
         self.keep = _markers(motion)
-        self.metres = motion.positions[:, self.keep] * float(motion.metres_per_unit or 1.0)
+        # a long take is drawn every k-th frame: its points are taken and scaled to metres
+        # then (:meth:`metres_at`), not copied whole first (a 500,000-frame take: 0.8 GB)
+        self._positions = motion.positions
+        self._to_metres = float(motion.metres_per_unit or 1.0)
+        self.frames = motion.positions.shape[0]
         self.names = [str(motion.names[j]) for j in self.keep]
         self.bones = _bones(motion, self.keep)
         self.fps = float(motion.fps) if motion.fps and motion.fps > 0 else 30.0
@@ -160,8 +164,16 @@ class Layer:
         self.flag_kinds: list[str] = []
         #: Kinect tracking state / confidence (Inferred = 0.5): drawn as rings below 1
         conf = motion.confidence
-        self.confidence = (None if motion.format != "kinect" or conf is None
-                           or not (conf[:, self.keep] < 1).any() else conf[:, self.keep])
+        self._confidence = (None if motion.format != "kinect" or conf is None
+                            or not (conf[:, self.keep] < 1).any() else conf)
+
+    def metres_at(self, stride: int) -> np.ndarray:
+        """(frames, markers, 3) positions in metres of every ``stride``-th frame."""
+        return self._positions[::stride][:, self.keep] * self._to_metres
+
+    def confidence_at(self, stride: int) -> np.ndarray | None:
+        """The drawn points' confidence on every ``stride``-th frame (None: not drawn)."""
+        return None if self._confidence is None else self._confidence[::stride][:, self.keep]
 
 
 def _as_differences(codes: np.ndarray, base: np.ndarray) -> tuple[dict, int] | None:
@@ -190,7 +202,7 @@ def _encode(layers: list[Layer], stride: int) -> tuple[list[dict], int]:
     its differences from it when that is smaller."""
     out, size = [], 0
     for n, layer in enumerate(layers):
-        pos = layer.metres[::stride]
+        pos = layer.metres_at(stride)
         entry = {"label": layer.label, "role": layer.role, "names": layer.names,
                  "bones": layer.bones, "fps": layer.fps / stride, "frames": int(pos.shape[0]),
                  "stride": stride, "fills": layer.fills, "flags": layer.flags,
@@ -200,16 +212,18 @@ def _encode(layers: list[Layer], stride: int) -> tuple[list[dict], int]:
             partner = layers[n + 1]
         elif layer.role == "after" and n > 0 and layers[n - 1].role == "before":
             partner = layers[n - 1]
-        origin, step = _box(pos, *([] if partner is None else [partner.metres[::stride]]))
+        other = None if partner is None else partner.metres_at(stride)
+        origin, step = _box(pos, *([] if other is None else [other]))
         codes = quantise(pos, origin, step)
         entry.update(origin=origin.tolist(), step=step.tolist())
-        if layer.confidence is not None:
-            level = np.rint(np.clip(np.nan_to_num(layer.confidence[::stride]), 0, 1) * 255)
+        confidence = layer.confidence_at(stride)
+        if confidence is not None:
+            level = np.rint(np.clip(np.nan_to_num(confidence), 0, 1) * 255)
             entry["confidence"] = _b64(level.astype("u1"))
             size += _b64_len(level.size)
         stored = None
         if partner is not None and layer.role == "before":
-            stored = _as_differences(codes, quantise(partner.metres[::stride], origin, step))
+            stored = _as_differences(codes, quantise(other, origin, step))
         if stored is not None:
             entry.update(base=n + 1, **stored[0])
             size += stored[1]
@@ -224,16 +238,15 @@ def payload(layers: list[Layer], budget: int = DEFAULT_BUDGET) -> dict:
     """What the page reads: the layers at the smallest frame stride whose positions fit
     in ``budget`` bytes of text, the up axis and the budget."""
     # a lower bound: the layers stored whole (a "before" may shrink to its differences)
-    whole = sum(_b64_len(l.metres.shape[0] * l.metres.shape[1] * 6) for l in layers
-                if l.role != "before")
+    whole = sum(_b64_len(l.frames * len(l.keep) * 6) for l in layers if l.role != "before")
     stride = max(1, math.ceil(whole / budget))
     while True:
         encoded, size = _encode(layers, stride)
-        if size <= budget or all(l.metres.shape[0] <= stride for l in layers):
+        if size <= budget or all(l.frames <= stride for l in layers):
             break
         stride += 1
-    main = layers[-1].metres
-    return {"layers": encoded, "up": up_axis(main[::max(1, main.shape[0] // 500)]),
+    main = layers[-1]
+    return {"layers": encoded, "up": up_axis(main.metres_at(max(1, main.frames // 500))),
             "stride": stride, "budget": budget, "bytes": size}
 
 

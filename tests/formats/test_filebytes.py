@@ -20,7 +20,7 @@ import mocapfix
 from mocapfix import formats
 from mocapfix.core.errors import MocapfixError, UnreadableFileError
 from mocapfix.core.fileio import read_input_bytes
-from mocapfix.formats import filebytes
+from mocapfix.formats import c3d, filebytes
 from mocapfix.formats.c3d import C3DSource, _StoredRecords
 from mocapfix.formats.filebytes import FileBytes
 
@@ -52,9 +52,14 @@ def test_a_file_read_again_is_written_as_the_file_held(path, tmp_path, monkeypat
     held = formats.read(path)
     held_clean, _ = mocapfix.clean(held)
     monkeypatch.setattr(filebytes, "HELD_MAX", 0)
+    monkeypatch.setattr(c3d, "CHUNK", 7)    # a large C3D's records decoded in many chunks
     again = formats.read(path)
     assert isinstance(_held(again), (FileBytes, _StoredRecords))
     assert isinstance(_held(held), (bytes, np.ndarray))
+    np.testing.assert_array_equal(again.positions, held.positions)
+    assert again.notes == held.notes
+    if held.confidence is not None:
+        np.testing.assert_array_equal(again.confidence, held.confidence)
     if isinstance(again.source, C3DSource):
         for name in ("points", "analog", "residual", "camera_mask", "analog_frames"):
             a, b = getattr(held.source, name), np.asarray(getattr(again.source, name))
