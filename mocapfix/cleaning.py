@@ -13,6 +13,7 @@ import numpy as np
 from mocapfix import formats
 from mocapfix.core.errors import UnreadableFileError
 from mocapfix.core.fileio import NAME_MAX, atomic_write_text, is_stream, refuse_stream
+from mocapfix.core.memory import release_freed_memory
 from mocapfix.core.motion import Motion
 from mocapfix.pipeline.held import HeldFrames
 from mocapfix.pipeline.steps import Pipeline, StepRecord, written_fill_errors
@@ -147,6 +148,9 @@ def _clean_windowed(motion: Motion, pipeline: Pipeline, why: list, plan: Pieces,
         # pasted: the window's output and records go before the next window is cleaned
         # (held, they were one more window's arrays beside its working memory)
         del part, records, res
+    # the windows' working memory, freed but kept by the heaps of the threads that used it,
+    # goes back to the system before the records and the report are made beside the take
+    release_freed_memory()
     records = []
     for (step, cleaner, first_info), mask, info in zip(heads, masks, infos):
         skipped = {s for _, _, s in info}

@@ -7,8 +7,9 @@ of a few MB in every iteration then pay a page fault per 4 KB on every step.
 :func:`retain_freed_memory` sets ``M_MMAP_THRESHOLD`` (256 MB) and ``M_TRIM_THRESHOLD``
 (1 GB; 32 MB where an older glibc refuses more) with glibc's ``mallopt``;
 :func:`release_freed_memory` (``malloc_trim``) returns what is free after each file of a
-batch. Both do nothing on other C libraries (macOS, Windows, musl) and in processes that
-did not ask: the CLI and the process-pool workers mocapfix starts call
+batch, and after the last window of a take cleaned in windows (before its report). Both
+do nothing on other C libraries (macOS, Windows, musl) and in processes that did not ask:
+the CLI and the process-pool workers mocapfix starts call
 :func:`retain_freed_memory`; importing mocapfix changes nothing in the calling process,
 and Dask workers (not ours) are left as they are. Written here because no maintained
 package exposes ``mallopt``; ``ctypes`` reaches it. The measurements behind the policy:
@@ -60,7 +61,8 @@ def retain_freed_memory() -> bool:
 
 
 def release_freed_memory() -> None:
-    """Return the free heap to the system (after a file), if this process retains it."""
+    """Return the free heap to the system (after a file, and after the windows of a take
+    cleaned in windows), if this process retains it."""
     if _RETAINED[0]:
         libc = _libc()
         if libc is not None:

@@ -114,13 +114,21 @@ def test_local_steps_give_the_whole_take_result():
     assert any("cleaned in 6 windows" in n for n in b["file"]["notes"])
 
 
-def test_budget_decides_the_windows():
+def test_budget_decides_the_windows(monkeypatch):
+    # a take cleaned in windows hands the windows' freed memory back once, after the last
+    # window (before the records and the report are made); a take cleaned whole does not
+    import mocapfix.cleaning
+
+    released = []
+    monkeypatch.setattr(mocapfix.cleaning, "release_freed_memory", lambda: released.append(1))
     motion = _smooth_take(T=30_000, J=10)
     pipeline = loads_config("version: 1\nmemory_budget: 64 MB\npipeline:\n  - cleaner: fill\n")
     result = clean_motion(motion, pipeline)
     assert any(n.startswith("cleaned in ") for n in result.cleaned.notes)
+    assert released == [1]
     roomy = loads_config("version: 1\nmemory_budget: 4 GB\npipeline:\n  - cleaner: fill\n")
     assert not any(n.startswith("cleaned in ") for n in clean_motion(motion, roomy).cleaned.notes)
+    assert released == [1]
 
 
 def test_default_in_windows_on_a_real_capture():
