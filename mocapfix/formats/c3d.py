@@ -65,7 +65,7 @@ import numpy as np
 
 from mocapfix.core.errors import UnreadableFileError, WriteError
 from mocapfix.core.fileio import atomic_open, read_input_bytes
-from mocapfix.formats.filebytes import FileBytes, keep
+from mocapfix.formats.filebytes import FileBytes, FileView, keep, large_file
 from mocapfix.formats.c3d_params import (MAX_DIM, group_record as _group_record, param_data_offset,
                                          param_record as _param_record, string_param as _string_param,
                                          string_value, with_group)
@@ -393,13 +393,35 @@ def sniff(head: bytes) -> bool:
 def read(path, fps: float | None = None, **options) -> Motion:
     """Read a C3D file. ``fps`` overrides the file's rate (noted when they disagree)."""
     path = Path(path)
-    data = read_input_bytes(path)
     try:
+        data = _large(path) or read_input_bytes(path)
         return _read_bytes(path, data, fps)
     except UnreadableFileError:
         raise
     except (struct.error, ValueError, IndexError, UnicodeDecodeError, OverflowError) as exc:
         raise UnreadableFileError(path, f"malformed C3D file ({type(exc).__name__}: {exc})") from None
+
+
+def _large(path) -> FileView | None:
+    """A C3D over :data:`~mocapfix.formats.filebytes.HELD_MAX` bytes as a
+    :class:`~mocapfix.formats.filebytes.FileView` holding its header and parameter section
+    (up to the data section's block, or the section's declared end if later): its records
+    are decoded from the file a chunk at a time and read again when written, the file is
+    never held whole. None for a smaller file, or one whose first blocks do not lay out a
+    C3D (read whole, the reader then says what is wrong)."""
+    file = large_file(path)
+    if file is None:
+        return None
+    first = file[0:BLOCK]
+    if len(first) < BLOCK or first[0] < 2:
+        return None
+    param_start = (first[0] - 1) * BLOCK
+    section = file[param_start:param_start + 4]
+    if len(section) < 4 or section[3] not in PROCESSOR_NAMES:
+        return None
+    data_block = _unpack_header(header_to_intel(first, section[3]))["data_block"]
+    end = max(param_start + 4, param_start + section[2] * BLOCK, (data_block - 1) * BLOCK)
+    return FileView(file, min(end, len(file)))
 
 
 def _read_bytes(path, data: bytes, fps):
@@ -432,7 +454,8 @@ def _read_bytes(path, data: bytes, fps):
         stop = min(param_start + n_param_blocks * BLOCK, len(data))
         if param_start + 4 < (h["data_block"] - 1) * BLOCK <= len(data):
             stop = (h["data_block"] - 1) * BLOCK
-        parameters = parse_parameters(path, data, param_start, stop, processor)
+        parameters = parse_parameters(path, data.head if isinstance(data, FileView) else data,
+                                      param_start, stop, processor)
         notes += [f"parameter section: {p}" for p in parameters.problems]
     get = (lambda key: None) if parameters is None else parameters.get
 
@@ -770,19 +793,20 @@ def _decode_notes(non_finite: int, zeros: int, notes: list[str]) -> None:
 
 
 def _decode_stored(data, offset, record, n_frames, storage, scale, processor, model, notes):
-    """:func:`_decode_points` of the point records in ``data`` from ``offset`` (``record``
-    per frame), CHUNK frames at a time: a large file's reader holds the positions and the
-    mask, not also an Intel copy of every record and whole-take temporaries of them (its
+    """:func:`_decode_points` of the point records in ``data`` (bytes or a
+    :class:`~mocapfix.formats.filebytes.FileView`) from ``offset`` (``record`` per frame),
+    CHUNK frames at a time: a large file's reader holds the positions and the mask, not
+    the file, an Intel copy of every record or whole-take temporaries of them (its
     records are read again when written: :class:`_StoredRecords`)."""
     n_points = record.fields["p"][0].shape[0]
     positions = np.empty((n_frames, n_points, 3))
     missing = np.empty((n_frames, n_points), dtype=bool)
     non_finite = zeros = 0
+    size = record.itemsize
     for frames in _chunks(n_frames):
         n = frames.stop - frames.start
-        words = _intel(np.frombuffer(data, dtype=record, count=n,
-                                     offset=offset + frames.start * record.itemsize)["p"],
-                       storage, processor)
+        raw = data[offset + frames.start * size:offset + frames.stop * size]
+        words = _intel(np.frombuffer(raw, dtype=record, count=n)["p"], storage, processor)
         positions[frames], missing[frames], (a, b) = _decoded(words, storage, scale, model)
         non_finite, zeros = non_finite + a, zeros + b
     _decode_notes(non_finite, zeros, notes)

@@ -21,6 +21,7 @@ would re-read pages as well, but a file truncated under a mapping kills the proc
 from __future__ import annotations
 
 import os
+import stat
 import threading
 from pathlib import Path
 
@@ -119,10 +120,50 @@ class FileBytes:
         self._fd = None
 
 
+class FileView:
+    """A large file as a binary reader uses it: its first ``head`` bytes held (a header and
+    a parameter section, read whole), every other range read from the file when sliced
+    (:class:`FileBytes`, checked to be the file first seen): ``len()``, ``view[i]`` and
+    ``view[a:b]`` as of ``bytes``. ``view.head`` is those bytes, for parsers that need a
+    buffer (``struct.unpack_from``)."""
+
+    def __init__(self, file: FileBytes, head: int):
+        self.file = file
+        self.head = file[0:head]
+
+    def __len__(self) -> int:
+        return len(self.file)
+
+    def __getitem__(self, key):
+        if isinstance(key, slice):
+            a, b, _ = key.indices(len(self))
+            return self.head[key] if b <= len(self.head) else self.file[key]
+        i = key + len(self) if key < 0 else key
+        if not 0 <= i < len(self):
+            raise IndexError("FileView index out of range")
+        return self.head[i] if i < len(self.head) else self.file[i:i + 1][0]
+
+
+def large_file(path) -> FileBytes | None:
+    """The regular file at ``path`` as a :class:`FileBytes` when it is larger than
+    :data:`HELD_MAX` (its identity as it is now), else None (and None when it cannot be
+    looked at: the reader's own read says why)."""
+    try:
+        st = os.stat(path)
+    except OSError:
+        return None
+    if not stat.S_ISREG(st.st_mode) or st.st_size <= HELD_MAX:
+        return None
+    return FileBytes(path, st)
+
+
 def keep(path, data):
     """What a reader keeps of ``data``, the bytes it read from ``path``: ``data`` itself
     when it is at most :data:`HELD_MAX` bytes, or when the file cannot be shown to be
-    the one read (:func:`mocapfix.core.fileio.read_identity`); else a :class:`FileBytes`."""
+    the one read (:func:`mocapfix.core.fileio.read_identity`); else a :class:`FileBytes`
+    (a :class:`FileView`'s own)."""
+    if isinstance(data, FileView):
+        return data.file
     if not isinstance(data, bytes) or len(data) <= HELD_MAX:
         return data
     st = read_identity(data, Path(path))

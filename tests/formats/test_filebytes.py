@@ -169,6 +169,41 @@ def test_file_bytes_slices_as_bytes_do(pread, tmp_path, monkeypatch):
     assert relative[5:9] == data[5:9]
 
 
+def test_file_view_indexes_and_slices_as_bytes_do(tmp_path, monkeypatch):
+    # a head of 1,000 bytes held, the rest read from the file: every index and slice,
+    # inside the head, across its end and beyond it, as the bytes give them
+    path = tmp_path / "f.bin"
+    data = bytes(np.random.default_rng(1).integers(0, 256, 5000, dtype=np.uint8))
+    path.write_bytes(data)
+    view = filebytes.FileView(FileBytes(path, os.stat(path)), 1000)
+    assert len(view) == len(data) and view.head == data[:1000]
+    for i in (0, 999, 1000, 4999, -1, -4000):
+        assert view[i] == data[i]
+    for a, b in ((0, 10), (990, 1010), (1000, 1000), (2000, 6000), (-30, None), (None, None)):
+        assert view[a:b] == data[a:b]
+    with pytest.raises(IndexError):
+        view[5000]
+    assert filebytes.keep(path, view) is view.file
+    monkeypatch.setattr(filebytes, "HELD_MAX", 4999)
+    assert isinstance(filebytes.large_file(path), FileBytes)
+    monkeypatch.setattr(filebytes, "HELD_MAX", 5000)
+    assert filebytes.large_file(path) is None and filebytes.large_file(tmp_path) is None
+
+
+def test_a_large_c3d_is_never_read_whole(tmp_path, monkeypatch):
+    # its header and parameter section are read, its records a chunk at a time (for the
+    # positions) and again when written; the same motion as a file read whole
+    path = need(shared("c3d/cmu_85_02.c3d"))
+    held = formats.read(path)
+    whole = []
+    monkeypatch.setattr(c3d, "read_input_bytes", lambda p: whole.append(p) or b"")
+    monkeypatch.setattr(filebytes, "HELD_MAX", 0)
+    again = formats.read(path)
+    assert not whole
+    np.testing.assert_array_equal(again.positions, held.positions)
+    assert again.names == held.names and again.notes == held.notes
+
+
 def test_only_a_large_file_read_unchanged_is_kept_on_disk(tmp_path, monkeypatch):
     path = tmp_path / "f.txt"
     path.write_bytes(b"x" * 1000)
