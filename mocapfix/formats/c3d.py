@@ -424,7 +424,7 @@ def _large(path) -> FileView | None:
     return FileView(file, min(end, len(file)))
 
 
-def _read_bytes(path, data: bytes, fps):
+def _read_bytes(path, data: bytes | FileView, fps):
     notes: list[str] = []
     if len(data) == 0:
         raise UnreadableFileError(path, "file is empty")

@@ -136,8 +136,10 @@ class FileView:
 
     def __getitem__(self, key):
         if isinstance(key, slice):
+            if key.step not in (None, 1):
+                raise TypeError("FileView takes slices with no step")
             a, b, _ = key.indices(len(self))
-            return self.head[key] if b <= len(self.head) else self.file[key]
+            return self.head[a:b] if b <= len(self.head) else self.file[a:b]
         i = key + len(self) if key < 0 else key
         if not 0 <= i < len(self):
             raise IndexError("FileView index out of range")

@@ -179,7 +179,8 @@ def test_file_view_indexes_and_slices_as_bytes_do(tmp_path, monkeypatch):
     assert len(view) == len(data) and view.head == data[:1000]
     for i in (0, 999, 1000, 4999, -1, -4000):
         assert view[i] == data[i]
-    for a, b in ((0, 10), (990, 1010), (1000, 1000), (2000, 6000), (-30, None), (None, None)):
+    for a, b in ((0, 10), (990, 1010), (1000, 1000), (2000, 6000), (-30, None), (None, None),
+                 (-4990, 10), (-4995, -4990), (20, 5)):
         assert view[a:b] == data[a:b]
     with pytest.raises(IndexError):
         view[5000]
