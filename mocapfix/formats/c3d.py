@@ -713,8 +713,8 @@ class _StoredRecords:
     """The point records (``part="p"``) or analog words (``"a"``) of a large file, read
     again from it when asked for (:mod:`mocapfix.formats.filebytes`): ``[frames]`` (a
     slice) gives those frames' words as :func:`_read_data` gave them, ``np.asarray`` all
-    of them; ``shape``, ``dtype`` and ``size`` as of that array. The writer reads
-    CHUNK frames at a time."""
+    of them; ``shape``, ``ndim``, ``dtype`` and ``size`` as of that array (``info`` reads
+    the analog words' shape). The writer reads CHUNK frames at a time."""
 
     def __init__(self, data, offset: int, record: np.dtype, n_frames: int, part: str,
                  storage: str, processor: int):
@@ -725,6 +725,7 @@ class _StoredRecords:
         dec_float = processor == PROCESSOR_DEC and storage == "float"
         self.dtype = np.dtype("<f4") if dec_float else field.base.newbyteorder("<")
         self.size = int(np.prod(self.shape))
+        self.ndim = len(self.shape)
 
     def __len__(self) -> int:
         return self.shape[0]

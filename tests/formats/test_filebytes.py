@@ -23,6 +23,7 @@ from mocapfix.core.fileio import read_input_bytes
 from mocapfix.formats import c3d, filebytes
 from mocapfix.formats.c3d import C3DSource, _StoredRecords
 from mocapfix.formats.filebytes import FileBytes
+from mocapfix.quality.info import summarise
 
 FILES = (shared_files("bvh") + shared_files("asfamc", "*.amc") + shared_files("kinect")
          + shared_files("c3d"))
@@ -58,6 +59,7 @@ def test_a_file_read_again_is_written_as_the_file_held(path, tmp_path, monkeypat
     assert isinstance(_held(held), (bytes, np.ndarray))
     np.testing.assert_array_equal(again.positions, held.positions)
     assert again.notes == held.notes
+    assert summarise(again) == summarise(held)          # what `mocapfix info` prints
     if held.confidence is not None:
         np.testing.assert_array_equal(again.confidence, held.confidence)
     if isinstance(again.source, C3DSource):
