@@ -261,7 +261,10 @@ def to_html(layers: list[Layer], title: str, budget: int = DEFAULT_BUDGET) -> st
     """The page: template + script + data, all inline, in at most ``budget`` bytes when
     the names alone leave room for one frame."""
     page, script = _template("viewer.html"), _template("viewer.js")
-    text = _json_for_script([[l.names, l.bones, l.fills, l.label] for l in layers])
+    # what does not shrink with the frame stride: the names, bones, fills and the runs
+    # judged wrong (a long take's report can list megabytes of them)
+    text = _json_for_script([[l.names, l.bones, l.fills, l.flags, l.flag_kinds, l.label]
+                             for l in layers])
     fixed = len(page) + len(script) + len(text) + 6 * len(title) + 2048
     data = payload(layers, max(budget - fixed, 1))
     data["budget"] = budget

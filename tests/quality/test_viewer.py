@@ -134,6 +134,20 @@ def test_a_smaller_budget_keeps_every_kth_frame_and_holds():
     assert entry["fps"] == pytest.approx(120.0 / data["stride"])
 
 
+def test_the_runs_judged_wrong_count_in_the_budget():
+    # a long take's report lists tens of thousands of flagged runs: they do not shrink with
+    # the frame stride, so the frames drawn make room for them (the page of a 150,000-frame
+    # take's report was 4.8 MB for a 3 MB budget, 2.3 MB of it flags)
+    motion = _walk()
+    layer = viewer.Layer(motion, "after: walk", "after")
+    layer.flag_kinds = ["step 2 (trust)"]
+    layer.flags = [[j % 41, j % 4500, 1, 0] for j in range(150_000)]
+    page = viewer.to_html([layer], "walk", 3_000_000)
+    data = _data(page)
+    assert len(page.encode()) <= 3_000_000
+    assert data["stride"] > 1 and len(data["layers"][0]["flags"]) == 150_000
+
+
 HOSTILE = ["</script><script>alert(1)</script>", "<!--", "a&b", "q\"'`", "line\u2028sep\nnl",
            "{{DATA}}", "x" * 10_000]
 
