@@ -495,8 +495,7 @@ def _read_bytes(path, data: bytes | FileView, fps):
             points, analog = (_StoredRecords(kept, data_offset, record, n_frames, part, storage,
                                              processor) for part in ("p", "a"))
         else:
-            points, analog = _read_data(data, data_offset, n_frames, n_points, analog_words,
-                                        storage, processor, unsigned)
+            points, analog = _read_data(data, data_offset, n_frames, record, storage, processor)
             positions, missing = _decode_points(points, storage, abs(scale), notes, model)
     tail = data[data_offset + n_frames * frame_bytes:]
     notes += label_notes
@@ -702,9 +701,9 @@ def _intel(words: np.ndarray, storage: str, processor: int) -> np.ndarray:
     return np.ascontiguousarray(words.astype(words.dtype.newbyteorder("<")))
 
 
-def _read_data(data, offset, n_frames, n_points, analog_words, storage, processor, unsigned):
-    """Point records (T, P, 4) and analog words (T, A), Intel-encoded, one frombuffer each."""
-    record = _record_dtype(n_points, analog_words, storage, processor, unsigned)
+def _read_data(data, offset, n_frames, record, storage, processor):
+    """Point records (T, P, 4) and analog words (T, A) of ``record`` (:func:`_record_dtype`),
+    Intel-encoded, one frombuffer each."""
     frames = np.frombuffer(data, dtype=record, count=n_frames, offset=offset)
     return _intel(frames["p"], storage, processor), _intel(frames["a"], storage, processor)
 
