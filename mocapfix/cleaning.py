@@ -141,7 +141,9 @@ def _clean_windowed(motion: Motion, pipeline: Pipeline, why: list, plan: Pieces,
                                  for j, (a, b) in enumerate(zip(start.tolist(), stop.tolist())))
             if mask["distances"] is not None:
                 paste(mask["distances"], rec.moved, lo, start, stop)
-            if rec.replaced is not None:
+            # every step's record has a replaced mask, mostly empty: one pasted as it was
+            # touched a whole-take array per step (100 MB for a 500,000-frame C3D)
+            if rec.replaced is not None and rec.replaced.any():
                 if mask["replaced"] is None:
                     mask["replaced"] = np.zeros((T, J), bool)
                 paste(mask["replaced"], rec.replaced, lo, start, stop)

@@ -56,7 +56,8 @@ Why hand-written
     byte-identical round trips need. An AMC is held as its bytes with the offsets of its
     lines; its frames are tokenised and converted _CHUNK at a time, and written back as
     slices of the source between the rewritten bone lines, so that a long take costs its
-    arrays and the file's bytes, not a Python object per line or value.
+    arrays, not a Python object per line or value, nor the file's bytes when it is large
+    (read a block at a time from the file: :func:`_large`).
 """
 from __future__ import annotations
 
@@ -71,7 +72,7 @@ import numpy as np
 from mocapfix.core.errors import MAX_FIELD, UnreadableFileError, UnsupportedFeatureError, WriteError
 from mocapfix.core.fileio import (atomic_write_bytes, atomic_write_pieces, read_input_bytes,
                                   refuse_stream, regular_file_problem)
-from mocapfix.formats.filebytes import keep, runs_of
+from mocapfix.formats.filebytes import FileView, keep, large_file, runs_of
 from mocapfix.formats.textenc import UTF8_BOM, refuse_long_fields, refuse_wide_text
 from mocapfix.core.kinematics import Rig, euler_to_matrix, positions_in_chunks
 from mocapfix.core.motion import Motion, Skeleton
@@ -93,8 +94,16 @@ _INT_RE = re.compile(r"^\d{1,18}$")
 _BLOCK = 1 << 22
 _CHUNK = 4096
 _LONG_LINE = re.compile(rb"[^\n]{%d,}" % (MAX_FIELD + 1))
-#: a blank or comment line inside an AMC body (then the body is not one run of frame lines)
-_GAP = re.compile(rb"(^|\n)[ \t\r]*(#|\n)")
+#: a blank or comment line inside an AMC body (then the body is not one run of frame lines):
+#: after a line end, or (``_GAP_FIRST``) as the file's first line; blank as ``str.strip``
+#: has it (a line of a vertical tab or a no-break space alone is one)
+_BLANKS = rb"[ \t\r\x0b\x0c\x1c-\x1f\x85\xa0]*"
+_GAP = re.compile(rb"\n" + _BLANKS + rb"(#|\n)")
+_GAP_FIRST = re.compile(_BLANKS + rb"(#|\n)")
+#: bytes ``str.isspace`` takes for whitespace, one character per byte (latin-1)
+_SPACE = np.array([chr(i).isspace() for i in range(256)])
+#: bytes of a large AMC held while it is read (its header lines; :func:`_large`)
+_HEAD = 1 << 20
 
 
 # --------------------------------------------------------------------------- data
@@ -173,11 +182,18 @@ class _AmcLines:
         self.data, self.starts, self.first = data, starts, first
 
     @classmethod
-    def of(cls, data: bytes) -> _AmcLines:
-        view = np.frombuffer(data, np.uint8)
-        newlines = [a + np.flatnonzero(view[a:a + _BLOCK] == 10)
+    def of(cls, data) -> _AmcLines:
+        """The lines of ``data`` (bytes, or a large file's FileView: read _BLOCK bytes at a
+        time, never whole)."""
+        newlines = [a + np.flatnonzero(np.frombuffer(data[a:a + _BLOCK], np.uint8) == 10)
                     for a in range(0, len(data), _BLOCK)]
         return cls(data, np.concatenate([[0], *[n + 1 for n in newlines]]).astype(np.int64))
+
+    def longer_than(self, n: int) -> np.ndarray:
+        """Indices of the lines (from line 0 of the file) longer than ``n`` bytes, their
+        line end left out."""
+        ends = np.append(self.starts[1:] - 1, len(self.data))
+        return np.flatnonzero(ends - self.starts > n)
 
     def __len__(self) -> int:
         return len(self.starts) - self.first
@@ -216,19 +232,32 @@ def _decode(path: Path, data: bytes) -> str:
     return data.decode("latin-1")    # byte-exact round trip, never fails
 
 
-def _check_text(path: Path, data: bytes) -> None:
+def _check_text(path: Path, data, lines: _AmcLines | None = None) -> None:
     """Refuse an empty, UTF-16/32, binary file or one with a field over MAX_FIELD
-    characters (latin-1: one per byte; only the lines longer than that are split)."""
-    if not data.strip():
+    characters (latin-1: one per byte; only the lines longer than that are split).
+    ``lines``: the lines of ``data`` (bytes, or a large AMC's FileView), which then tell
+    the long ones; without them ``data`` is bytes, searched whole (an ASF)."""
+    if _blank(data):
         raise UnreadableFileError(path, "file is empty")
-    refuse_wide_text(path, data, Path(path).suffix.lstrip(".").upper() or "ASF/AMC")
-    if b"\x00" in data[:4096]:
+    head = data[:4096]
+    refuse_wide_text(path, head, Path(path).suffix.lstrip(".").upper() or "ASF/AMC")
+    if b"\x00" in head:
         raise UnreadableFileError(path, "binary data where ASF/AMC text was expected")
+    if lines is not None:
+        for k in lines.longer_than(MAX_FIELD).tolist():
+            a, b = lines.span(k)
+            refuse_long_fields(path, [data[a:b].decode("latin-1")], first_line=k)
+        return
     line, counted = 0, 0
     for match in _LONG_LINE.finditer(data):
         line += data.count(b"\n", counted, match.start())
         counted = match.start()
         refuse_long_fields(path, [match.group().decode("latin-1")], first_line=line)
+
+
+def _blank(data) -> bool:
+    """Whether ``data`` (bytes or a FileView) holds only whitespace, _BLOCK bytes at a time."""
+    return not any(data[a:a + _BLOCK].strip() for a in range(0, len(data), _BLOCK))
 
 
 def _floats(path, tokens: list[str], count: int, what: str, line: int) -> np.ndarray:
@@ -657,11 +686,12 @@ def _first_layout_break(path, body, content, layout, first_line: int) -> Unreada
     return UnreadableFileError(path, "frame blocks do not share one layout")
 
 
-def parse_amc(path, data: bytes, asf: AsfSkeleton) -> AsfAmcSource:
-    """The AMC ``data`` (checked by :func:`_check_text`) read against ``asf``: the frames
-    converted _CHUNK at a time into one array, the file kept as its bytes."""
+def parse_amc(path, data, asf: AsfSkeleton, lines: _AmcLines | None = None) -> AsfAmcSource:
+    """The AMC ``data`` (checked by :func:`_check_text`; bytes, or a large file's
+    FileView) read against ``asf``: the frames converted _CHUNK at a time into one array,
+    the file kept as its bytes. ``lines``: ``data``'s, when already found."""
     path = Path(path)
-    lines = _AmcLines.of(data)
+    lines = _AmcLines.of(data) if lines is None else lines
     first, flags = _amc_header(path, lines)
     header, body = [lines[i] for i in range(first)], lines.tail(first)
     content, contiguous = _content_lines(data, body)
@@ -747,21 +777,49 @@ def _frames_table(tokens: list[str], n: int, tokens_per_frame: int, columns, err
     return values.reshape(n, -1), np.array(frame_tokens).astype(np.int64)
 
 
-def _content_lines(data: bytes, body: _AmcLines):
+def _content_lines(data, body: _AmcLines):
     """Indices of the body lines that are neither blank nor comments, and whether they are
     simply all lines up to trailing blank ones (the usual case, checked with one regex
-    over the body's bytes, trailing whitespace left out)."""
+    over the body's bytes, trailing whitespace left out: :func:`_gap`)."""
     start = body.span(0)[0]
-    end = len(data)
-    while end > start and chr(data[end - 1]).isspace():
-        end -= 1
-    if not _GAP.search(data, max(start - 1, 0), end):
+    end = _end_of_text(data, start)
+    if not _gap(data, body, max(start - 1, 0), end):
         last = len(body)
         while last and not body[last - 1].strip():
             last -= 1
         return range(last), True
     return [i for i in range(len(body)) if (line := body[i]).strip()
             and not line.lstrip().startswith("#")], False
+
+
+def _end_of_text(data, start: int) -> int:
+    """The offset past the last byte of ``data[start:]`` that is not whitespace
+    (``str.isspace`` of its latin-1 character; ``start`` when there is none), read back
+    from the end a block at a time."""
+    end = len(data)
+    while end > start:
+        a = max(start, end - (1 << 16))
+        solid = np.flatnonzero(~_SPACE[np.frombuffer(data[a:end], np.uint8)])
+        if solid.size:
+            return a + int(solid[-1]) + 1
+        end = a
+    return start
+
+
+def _gap(data, lines: _AmcLines, lo: int, end: int) -> bool:
+    """Whether a blank or comment line starts in ``data[lo:end]`` and ends before ``end``
+    (``_GAP``; the file's first line too when ``lo`` is 0): searched _BLOCK bytes at a
+    time, each search cut at a line end (a match never crosses one)."""
+    if end <= lo:
+        return False
+    if lo == 0 and _GAP_FIRST.match(data[:min(end, int(lines.starts[1]) if len(lines.starts) > 1
+                                               else end)]):
+        return True
+    newlines = lines.starts[1:] - 1
+    at = np.searchsorted(newlines, np.arange(lo + _BLOCK, end, _BLOCK))
+    cuts = newlines[at[at < len(newlines)]]
+    bounds = [lo, *sorted({int(c) for c in cuts if lo < c < end}), end]
+    return any(_GAP.search(data[a:min(b + 1, end)]) for a, b in zip(bounds, bounds[1:]))
 
 
 def _token_columns(layout) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -814,12 +872,17 @@ def read(path, fps: float | None = None, **options) -> Motion:
     path = Path(path)
     if path.suffix.lower() == ".asf":
         return _read_rest_pose(path, fps)
-    amc_bytes = read_input_bytes(path)
-    _check_text(path, amc_bytes)
-    asf_path = find_asf(path, options.get("asf"))
-    asf_bytes = read_input_bytes(asf_path)
-    asf = parse_asf(asf_path, asf_bytes)
-    source = parse_amc(path, amc_bytes, asf)
+    amc = _large(path) or read_input_bytes(path)
+    try:
+        lines = _AmcLines.of(amc)
+        _check_text(path, amc, lines)
+        asf_path = find_asf(path, options.get("asf"))
+        asf_bytes = read_input_bytes(asf_path)
+        asf = parse_asf(asf_path, asf_bytes)
+        source = parse_amc(path, amc, asf, lines)
+    finally:
+        if isinstance(amc, FileView):
+            amc.file.close()        # opened again by the writer, which then sees a change
     source.asf_path, source.asf_bytes = str(asf_path), asf_bytes
     if source.body is not None:
         source.body.data = keep(path, source.body.data)
@@ -832,6 +895,15 @@ def read(path, fps: float | None = None, **options) -> Motion:
     if len(frames) > 1 and np.any(np.diff(frames) != 1):
         notes.append("AMC frame numbers are not consecutive; frames are taken as evenly spaced")
     return _motion(source, source.values.copy(), fps, notes)
+
+
+def _large(path) -> FileView | None:
+    """An AMC over :data:`~mocapfix.formats.filebytes.HELD_MAX` bytes as a
+    :class:`~mocapfix.formats.filebytes.FileView` holding its first :data:`_HEAD` bytes:
+    its lines are scanned and its frames converted from the file a block at a time,
+    never held whole (a 500,000-frame take's 440 MB); None for a smaller file."""
+    file = large_file(path)
+    return None if file is None else FileView(file, min(_HEAD, len(file)))
 
 
 def _read_rest_pose(path: Path, fps) -> Motion:

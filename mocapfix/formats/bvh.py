@@ -61,8 +61,9 @@ truncated file and is slow on long takes (docs/formats.md, "Why the readers are
 hand-written"). Here the hierarchy is parsed by a small tokenizer (an explicit stack, no
 recursion) and the motion block scanned as byte offsets (line ends, blank lines, token
 counts: numpy over blocks of the file) and converted CHUNK frames at a time into one array,
-so that a long take costs its arrays and the file's bytes, not a Python object per line or
-value; FK is the vectorised :class:`kinematics.Rig`.
+so that a long take costs its arrays, not a Python object per line or value, nor the
+file's bytes when it is large (read a block at a time from the file: :func:`_large`); FK
+is the vectorised :class:`kinematics.Rig`.
 """
 from __future__ import annotations
 
@@ -76,7 +77,7 @@ import numpy as np
 
 from mocapfix.core.errors import MAX_FIELD, UnreadableFileError, WriteError, excerpt
 from mocapfix.core.fileio import atomic_write_pieces, read_input_bytes
-from mocapfix.formats.filebytes import keep, runs_of
+from mocapfix.formats.filebytes import FileView, keep, large_file, runs_of
 from mocapfix.formats.textenc import refuse_wide_text
 from mocapfix.core.kinematics import Rig, positions_in_chunks
 from mocapfix.core.motion import Motion, Skeleton
@@ -403,43 +404,57 @@ _BLANK[list(b" \t\n\r\x0b\x0c")] = True
 BLOCK = 1 << 22
 #: frame lines converted at a time
 CHUNK = 4096
+#: bytes of a large file held while it is read (its hierarchy and MOTION line: :func:`_large`)
+HEAD = 1 << 20
 
 
 class _Lines:
     """The lines of ``data[start:]`` as ``bytes.splitlines(keepends=True)`` cuts them (LF,
     CRLF and a lone CR end a line), as offsets: ``ends[k]`` is past line k's ending; with
     per line the count of non-blank bytes (0: a blank line) and of whitespace-separated
-    tokens. Scanned BLOCK bytes at a time, without a Python object per line."""
+    tokens, and its ending (``endings``: 1 LF, 2 CRLF, 0 a lone CR or none). Scanned BLOCK
+    bytes at a time (``data`` bytes or a large file's
+    :class:`~mocapfix.formats.filebytes.FileView`, read a block at a time), without a
+    Python object per line."""
 
-    def __init__(self, data: bytes, start: int):
+    def __init__(self, data, start: int):
         self.data, self.start = data, start
-        view = np.frombuffer(data, np.uint8)
-        ends, solid, tokens = [], [], []
+        size = len(data)
+        ends, solid, tokens, endings = [], [], [], []
         solid_before = tokens_before = 0
-        previous_blank = True
-        for a in range(start, len(data), BLOCK):
-            b = min(a + BLOCK, len(data))
-            blk = view[a:b]
+        previous_blank, previous_cr = True, False
+        for a in range(start, size, BLOCK):
+            b = min(a + BLOCK, size)
+            # one byte past the block: whether a CR at its end is followed by a LF
+            more = np.frombuffer(data[a:min(b + 1, size)], np.uint8)
+            blk = more[:b - a]
             cr = np.flatnonzero(blk == 13)
-            lone = cr[(a + cr + 1 >= len(data)) | (view[np.minimum(a + cr + 1, len(data) - 1)] != 10)]
+            lone = cr[(cr + 1 >= len(more)) | (more[np.minimum(cr + 1, len(more) - 1)] != 10)]
             end = np.union1d(np.flatnonzero(blk == 10), lone) + 1
+            after_cr = np.concatenate([[previous_cr], blk[:-1] == 13])
+            ending = np.zeros(len(end), np.int8)
+            is_lf = blk[end - 1] == 10
+            ending[is_lf] = 1 + after_cr[end[is_lf] - 1]
             blank = _BLANK[blk]
             hard = np.flatnonzero(~blank)
             first = np.flatnonzero(~blank & np.concatenate([[previous_blank], blank[:-1]]))
             solid.append(solid_before + np.searchsorted(hard, end))
             tokens.append(tokens_before + np.searchsorted(first, end))
             ends.append(a + end)
+            endings.append(ending)
             solid_before += len(hard)
             tokens_before += len(first)
-            previous_blank = bool(blank[-1])
+            previous_blank, previous_cr = bool(blank[-1]), bool(blk[-1] == 13)
         last = [e[-1] for e in ends if e.size]
-        if len(data) > start and (not last or last[-1] != len(data)):   # no line end at the end
-            ends.append(np.array([len(data)]))
+        if size > start and (not last or last[-1] != size):   # no line end at the end
+            ends.append(np.array([size]))
             solid.append(np.array([solid_before]))
             tokens.append(np.array([tokens_before]))
+            endings.append(np.zeros(1, np.int8))
         self.ends = np.concatenate([[0], *ends])[1:].astype(np.int64)
         self.solid = np.diff(np.concatenate([[0], *solid]))
         self.tokens = np.diff(np.concatenate([[0], *tokens]))
+        self.endings = np.concatenate([np.zeros(0, np.int8), *endings])
 
     def __len__(self) -> int:
         return len(self.ends)
@@ -466,10 +481,11 @@ def _header_line(path, lines: _Lines, index: int, pattern, what: str, first_line
     return match, index + 1
 
 
-def _parse_motion(path, data: bytes, motion_start: int, n_channels: int,
+def _parse_motion(path, data, motion_start: int, n_channels: int,
                   allow_truncated: bool, notes: list[str]):
-    """Parse ``MOTION`` .. end of file. Returns (values (T, C), frame_time, source parts)."""
-    first_line = 1 + _count_lines(data, 0, motion_start)
+    """Parse ``MOTION`` .. end of file (``data``: bytes, or a large file's FileView).
+    Returns (values (T, C), frame_time, source parts)."""
+    first_line = 1 + _count_lines(data[:motion_start], 0, motion_start)
     lines = _Lines(data, motion_start)  # lines[0] is the MOTION line
     frames_match, index = _header_line(path, lines, 1, _FRAMES_LINE, "'Frames: N'", first_line)
     frames_at = index - 1
@@ -532,7 +548,7 @@ def _parse_motion(path, data: bytes, motion_start: int, n_channels: int,
         frames_line=lines[frames_at],
         frame_time_line=data[lines.begin(frames_at + 1):lines.begin(frame_time_at + 1)],
         data=data, frames_start=frames_start, frame_ends=ends,
-        tail=data[tail_start:],
+        tail=data[tail_start:], newline=_dominant_newline(lines.endings[at]),
     )
     return values, frame_time, source_parts
 
@@ -688,11 +704,12 @@ def read(path, fps: float | None = None, allow_truncated: bool = False, **option
     """Read a BVH file; see the module docstring. ``allow_truncated`` reads the complete
     frames of a truncated file (with a note) instead of refusing it."""
     path = Path(path)
-    data = read_input_bytes(path)
-    refuse_wide_text(path, data, "BVH")
+    data = _large(path) or read_input_bytes(path)
+    head = data.head if isinstance(data, FileView) else data
+    refuse_wide_text(path, head, "BVH")
     notes: list[str] = []
-    start = len(_BOM) if data.startswith(_BOM) else 0
-    motion_match = _MOTION_LINE.search(data, start)
+    start = len(_BOM) if head.startswith(_BOM) else 0
+    motion_match = _MOTION_LINE.search(head, start)
     hierarchy_end = motion_match.start() if motion_match else len(data)
     tokens = _Tokens(path, data[:hierarchy_end], start)
     joints = _parse_hierarchy(tokens)
@@ -700,8 +717,13 @@ def read(path, fps: float | None = None, allow_truncated: bool = False, **option
         raise UnreadableFileError(path, "no MOTION section after the hierarchy "
                                         "(file truncated?)", line=tokens.end_line)
     n_channels = sum(len(j.channels) for j in joints)
-    values, frame_time, parts = _parse_motion(path, data, motion_match.start(), n_channels,
-                                              allow_truncated, notes)
+    try:
+        values, frame_time, parts = _parse_motion(path, data, motion_match.start(), n_channels,
+                                                  allow_truncated, notes)
+    finally:
+        if isinstance(data, FileView):
+            # opened again by the writer, which then sees a file replaced since the read
+            data.file.close()
     names = _unique_names(joints, notes)
     rig, unknown = _build_rig(joints, names, n_channels)
     if unknown:
@@ -726,7 +748,7 @@ def read(path, fps: float | None = None, allow_truncated: bool = False, **option
         frame_ends=parts["frame_ends"],
         values=values.copy(),
         tail=parts["tail"],
-        newline=_dominant_newline(data, parts["frame_ends"]),
+        newline=parts["newline"],
         frame_time=frame_time,
         n_channels=n_channels,
         channel_names=[f"{j.name}.{c}" for j in joints for c in j.channels],
@@ -748,12 +770,28 @@ def read(path, fps: float | None = None, allow_truncated: bool = False, **option
     )
 
 
-def _dominant_newline(data: bytes, ends: np.ndarray) -> bytes:
-    """CRLF when more frame lines end with it than with a bare LF."""
-    view = np.frombuffer(data, np.uint8)
-    lf = view[ends - 1] == 10 if len(ends) else np.zeros(0, bool)
-    crlf = int(np.count_nonzero(lf & (ends >= 2) & (view[np.maximum(ends - 2, 0)] == 13)))
-    return b"\r\n" if crlf > int(np.count_nonzero(lf)) - crlf else b"\n"
+def _large(path) -> FileView | None:
+    """A BVH over :data:`~mocapfix.formats.filebytes.HELD_MAX` bytes as a
+    :class:`~mocapfix.formats.filebytes.FileView` holding its first :data:`HEAD` bytes,
+    when its ``MOTION`` line ends within them: the frame lines are then scanned and
+    converted from the file a block at a time, never held whole (a 500,000-frame take's
+    470 MB). None for a smaller file, or one whose hierarchy does not end there (read
+    whole: the reader then says what is wrong)."""
+    file = large_file(path)
+    if file is None:
+        return None
+    view = FileView(file, min(HEAD, len(file)))
+    start = len(_BOM) if view.head.startswith(_BOM) else 0
+    match = _MOTION_LINE.search(view.head, start)
+    # a match at the held bytes' very end may be a longer word in the file
+    return view if match is not None and match.end() < len(view.head) else None
+
+
+def _dominant_newline(endings: np.ndarray) -> bytes:
+    """CRLF when more frame lines end with it than with a bare LF (``endings``: the
+    lines' :attr:`_Lines.endings`)."""
+    crlf = int(np.count_nonzero(endings == 2))
+    return b"\r\n" if crlf > int(np.count_nonzero(endings == 1)) else b"\n"
 
 
 # ---------------------------------------------------------------------------------------

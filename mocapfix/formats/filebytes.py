@@ -121,11 +121,12 @@ class FileBytes:
 
 
 class FileView:
-    """A large file as a binary reader uses it: its first ``head`` bytes held (a header and
-    a parameter section, read whole), every other range read from the file when sliced
-    (:class:`FileBytes`, checked to be the file first seen): ``len()``, ``view[i]`` and
-    ``view[a:b]`` as of ``bytes``. ``view.head`` is those bytes, for parsers that need a
-    buffer (``struct.unpack_from``)."""
+    """A large file as a reader uses it without reading it whole: its first ``head`` bytes
+    held (a C3D's header and parameter section, a BVH's hierarchy, a text file's first
+    lines), every other range read from the file when sliced (:class:`FileBytes`, checked
+    to be the file first seen): ``len()``, ``view[i]`` and ``view[a:b]`` as of ``bytes``.
+    ``view.head`` is those bytes, for parsers that need a buffer (``struct.unpack_from``,
+    a regular expression)."""
 
     def __init__(self, file: FileBytes, head: int):
         self.file = file

@@ -494,7 +494,7 @@ def read(path, fps: float | None = None, units: str | None = None,
     rate alone. Each layout uses the rate it is given only where it would assume one, so
     one parse serves both cases."""
     path = Path(path)
-    text = TextLines.scan(path, read_input_bytes(path))
+    text = TextLines.scan(path, TextLines.open_large(path) or read_input_bytes(path))
     idx = np.flatnonzero(text.content)
     if not len(idx):
         raise UnreadableFileError(path, "file holds no data lines")

@@ -8,7 +8,10 @@ file is one ``bytes`` object and two int64 arrays (start and end of each line); 
 decoded one block at a time when a reader parses them, and the writer copies the runs of
 unchanged lines as byte slices between the lines it rewrites, straight to the output file.
 Once the reader is done (:meth:`TextLines.keep`), a large file's bytes are let go and read
-again from the file when written (:mod:`mocapfix.formats.filebytes`).
+again from the file when written (:mod:`mocapfix.formats.filebytes`). A reader may not
+hold a large file at all: given a :class:`~mocapfix.formats.filebytes.FileView`
+(:meth:`TextLines.open_large`; the Kinect reader), the file is scanned and its lines
+parsed a block at a time, read from the file.
 
 Lines are what ``text.split("\\n")`` gives after the UTF-8 byte-order mark: a ``\\r``
 before the ``\\n`` is the line's ending, not its text, and an empty piece after a final
@@ -19,67 +22,103 @@ from __future__ import annotations
 import numpy as np
 
 from mocapfix.core.errors import MAX_FIELD, UnreadableFileError
-from mocapfix.formats.filebytes import FileBytes, keep, runs_of
+from mocapfix.formats.filebytes import FileBytes, FileView, keep, large_file, runs_of
 from mocapfix.formats.textenc import UTF8_BOM, longest_field_bytes, refuse_long_fields
 
 #: bytes of the file decoded at a time (cut at a line end, so never inside a character)
 BLOCK = 1 << 22
+#: bytes of a large file held while it is read (its first lines: :meth:`TextLines.open_large`)
+HEAD = 1 << 20
+
+
+def _block_to_line_end(raw, a: int, size: int) -> bytes:
+    """The bytes of ``raw`` from ``a`` to the end of the line that ends last within
+    :data:`BLOCK` bytes (the rest of the file when it ends sooner; a line longer than a
+    block whole)."""
+    if a + BLOCK >= size:
+        return raw[a:size]
+    data = raw[a:a + BLOCK]
+    cut = data.rfind(b"\n") + 1
+    if cut:
+        return data[:cut]
+    parts = [data]                                  # one line longer than a block
+    for c in range(a + BLOCK, size, BLOCK):
+        more = raw[c:min(c + BLOCK, size)]
+        cut = more.find(b"\n") + 1
+        parts.append(more[:cut] if cut else more)
+        if cut:
+            break
+    return b"".join(parts)
 
 
 class TextLines:
     """The lines of ``raw`` (bytes): ``line(i)`` decodes one, ``pieces`` writes them back
     with edits. ``content`` marks the lines that are neither blank nor ``#`` comments."""
 
-    def __init__(self, raw: bytes, starts: np.ndarray, stops: np.ndarray, content: np.ndarray):
+    def __init__(self, raw, starts: np.ndarray, stops: np.ndarray, content: np.ndarray):
         self.raw = raw
-        self.bom = "\ufeff" if raw.startswith(UTF8_BOM) else ""
+        self.bom = "\ufeff" if raw[:len(UTF8_BOM)] == UTF8_BOM else ""
         self.starts, self.stops = starts, stops      # text of line i: raw[starts[i]:stops[i]]
         self.content = content
 
     @classmethod
-    def scan(cls, path, raw: bytes) -> TextLines:
-        """Index ``raw``: an UnreadableFileError at its first byte that is not UTF-8, or
-        (after the whole file decoded) for a field longer than MAX_FIELD characters."""
-        begin = len(UTF8_BOM) if raw.startswith(UTF8_BOM) else 0
-        view = np.frombuffer(raw, np.uint8)
-        newlines, content, long_line = [], [], None
+    def scan(cls, path, raw) -> TextLines:
+        """Index ``raw`` (bytes, or a large file's
+        :class:`~mocapfix.formats.filebytes.FileView`: read a block at a time, never
+        whole): an UnreadableFileError at its first byte that is not UTF-8, or (after the
+        whole file decoded) for a field longer than MAX_FIELD characters."""
+        size = len(raw)
+        begin = len(UTF8_BOM) if raw[:len(UTF8_BOM)] == UTF8_BOM else 0
+        newlines, carriage, content, long_line = [], [], [], None
         a, n_lines = begin, 0
-        while a < len(raw):
-            b = raw.rfind(b"\n", a, a + BLOCK) + 1 if a + BLOCK < len(raw) else len(raw)
-            if b <= a:                              # one line longer than a block
-                b = raw.find(b"\n", a + BLOCK)
-                b = len(raw) if b < 0 else b + 1
+        while a < size:
+            data = _block_to_line_end(raw, a, size)
+            b = a + len(data)
             try:
-                text = raw[a:b].decode("utf-8")
+                text = data.decode("utf-8")
             except UnicodeDecodeError as exc:
                 raise UnreadableFileError(path, f"not a text file (undecodable byte at offset "
                                                 f"{a + exc.start})") from None
             pieces = text.split("\n")
-            if b < len(raw) or pieces[-1] == "":
+            if b < size or pieces[-1] == "":
                 pieces.pop()                        # what follows the block's last newline
             content.append(np.fromiter((bool(p.strip()) and not p.lstrip().startswith("#")
                                         for p in pieces), bool, len(pieces)))
+            view = np.frombuffer(data, np.uint8)
             if (long_line is None and len(text) > MAX_FIELD
-                    and longest_field_bytes(view[a:b]) > MAX_FIELD):
+                    and longest_field_bytes(view) > MAX_FIELD):
                 long_line = cls._long_field(path, pieces, n_lines,
-                                             b == len(raw) and raw[-1:] != b"\n")
-            newlines.append(a + np.flatnonzero(view[a:b] == 10))
+                                             b == size and data[-1:] != b"\n")
+            nl = np.flatnonzero(view == 10)
+            # a CR before a newline ends the line with it (not in a line of its own: a
+            # block starts a line, after a newline or the mark)
+            line_start = np.concatenate([[0], nl[:-1] + 1])
+            carriage.append((nl > line_start) & (view[np.maximum(nl - 1, 0)] == 13))
+            newlines.append(a + nl)
             n_lines += len(pieces)
             a = b
         nl = np.concatenate(newlines) if newlines else np.zeros(0, np.int64)
+        cr = np.concatenate(carriage) if carriage else np.zeros(0, bool)
         starts = np.concatenate([[begin], nl + 1])[:n_lines].astype(np.int64)
         stops = np.empty(n_lines, np.int64)
         ended = min(len(nl), n_lines)               # lines with a newline after them
         stops[:ended] = nl[:ended]
         if ended < n_lines:
-            stops[ended:] = len(raw)
-        cr = np.flatnonzero((view[np.maximum(stops[:ended] - 1, 0)] == 13)
-                            & (stops[:ended] > starts[:ended]))
-        stops[cr] -= 1
+            stops[ended:] = size
+        stops[np.flatnonzero(cr[:ended])] -= 1
         lines = cls(raw, starts, stops, np.concatenate(content) if content else
                     np.zeros(0, bool))
         lines.long_field = long_line
         return lines
+
+    @staticmethod
+    def open_large(path) -> FileView | None:
+        """A file over :data:`~mocapfix.formats.filebytes.HELD_MAX` bytes as a
+        :class:`~mocapfix.formats.filebytes.FileView` holding its first :data:`HEAD`
+        bytes, for :meth:`scan` and the reader to read a block at a time (never whole);
+        None for a smaller file."""
+        file = large_file(path)
+        return None if file is None else FileView(file, min(HEAD, len(file)))
 
     @staticmethod
     def _long_field(path, pieces, first, last_open):
@@ -102,7 +141,7 @@ class TextLines:
 
     def lines_at(self, indices) -> list[str]:
         raw, starts, stops = self.raw, self.starts[indices], self.stops[indices]
-        if isinstance(raw, FileBytes) and len(starts):
+        if isinstance(raw, (FileBytes, FileView)) and len(starts):
             # one read of the stretch that holds them, when they lie close together
             a, b = int(starts.min()), int(stops.max())
             if b - a <= max(BLOCK, 4 * int((stops - starts).sum())):
@@ -113,7 +152,9 @@ class TextLines:
         """After the reader is done with the text: the bytes kept as
         :func:`mocapfix.formats.filebytes.keep` keeps them (a large file is read again
         when written, not held)."""
-        self.raw = keep(path, self.raw)
+        raw, self.raw = self.raw, keep(path, self.raw)
+        if isinstance(raw, FileView):
+            raw.file.close()        # opened again by the writer, which then sees a change
 
     def end(self, i: int) -> int:
         """Offset just past line ``i``'s ending."""

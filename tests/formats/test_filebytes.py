@@ -20,7 +20,7 @@ import mocapfix
 from mocapfix import formats
 from mocapfix.core.errors import MocapfixError, UnreadableFileError
 from mocapfix.core.fileio import read_input_bytes
-from mocapfix.formats import c3d, filebytes
+from mocapfix.formats import asfamc, bvh, c3d, filebytes, kinect, textlines
 from mocapfix.formats.c3d import C3DSource, _StoredRecords
 from mocapfix.formats.filebytes import FileBytes
 from mocapfix.quality.info import summarise
@@ -54,6 +54,13 @@ def test_a_file_read_again_is_written_as_the_file_held(path, tmp_path, monkeypat
     held_clean, _ = mocapfix.clean(held)
     monkeypatch.setattr(filebytes, "HELD_MAX", 0)
     monkeypatch.setattr(c3d, "CHUNK", 7)    # a large C3D's records decoded in many chunks
+    # a large BVH's frame lines scanned in blocks of 97 bytes (a CRLF cut between blocks:
+    # the mocapbank file) and converted 7 lines at a time
+    monkeypatch.setattr(bvh, "BLOCK", 97)
+    monkeypatch.setattr(bvh, "CHUNK", 7)
+    monkeypatch.setattr(asfamc, "_BLOCK", 97)      # an AMC's likewise
+    monkeypatch.setattr(asfamc, "_CHUNK", 7)
+    monkeypatch.setattr(textlines, "BLOCK", 97)    # a Kinect file's lines decoded likewise
     again = formats.read(path)
     assert isinstance(_held(again), (FileBytes, _StoredRecords))
     assert isinstance(_held(held), (bytes, np.ndarray))
@@ -205,6 +212,61 @@ def test_a_large_c3d_is_never_read_whole(tmp_path, monkeypatch):
     assert not whole
     np.testing.assert_array_equal(again.positions, held.positions)
     assert again.names == held.names and again.notes == held.notes
+
+
+@pytest.mark.parametrize("head", ["the default", "ends in its MOTION line", "ends before it"])
+def test_a_large_bvh_is_read_whole_only_when_its_hierarchy_is_not_held(head, monkeypatch):
+    # its hierarchy and MOTION line are read and held, its frame lines scanned and
+    # converted from the file a block at a time; a MOTION line that does not end within
+    # the bytes held (a hierarchy over a megabyte, or no MOTION at all) and the file is
+    # read whole, as a small one (the reader then parses it or says what is wrong)
+    path = need(shared("bvh/bvhpython_test_mocapbank.bvh"))
+    held = formats.read(path)
+    motion_end = path.read_bytes().index(b"MOTION") + len(b"MOTION")
+    if head != "the default":
+        monkeypatch.setattr(bvh, "HEAD", motion_end if head == "ends in its MOTION line" else 500)
+    whole = []
+    real = bvh.read_input_bytes
+    monkeypatch.setattr(bvh, "read_input_bytes", lambda p: whole.append(p) or real(p))
+    monkeypatch.setattr(filebytes, "HELD_MAX", 0)
+    again = formats.read(path)
+    assert bool(whole) == (head != "the default")
+    np.testing.assert_array_equal(again.channels, held.channels)
+    assert again.names == held.names and again.notes == held.notes
+    assert again.source.newline == held.source.newline == b"\r\n"
+    assert isinstance(again.source.data, FileBytes)
+
+
+def test_a_large_amc_is_never_read_whole(monkeypatch):
+    # its lines are scanned, checked and converted from the file a block at a time; its
+    # ASF (small) is read whole; the same motion as the file read whole
+    path = need(shared("asfamc/05_02.amc"))
+    held = formats.read(path)
+    whole = []
+    real = asfamc.read_input_bytes
+    monkeypatch.setattr(asfamc, "read_input_bytes", lambda p: whole.append(p) or real(p))
+    monkeypatch.setattr(filebytes, "HELD_MAX", 0)
+    again = formats.read(path)
+    assert [p.suffix for p in whole] == [".asf"]
+    np.testing.assert_array_equal(again.channels, held.channels)
+    assert again.names == held.names and again.notes == held.notes
+    assert isinstance(again.source.body.data, FileBytes)
+
+
+def test_a_large_kinect_file_is_never_read_whole(monkeypatch):
+    # its lines are scanned, decoded and parsed from the file a block at a time; the same
+    # motion as the file read whole
+    path = need(shared("kinect/kv2_laban_Ges01_wavehand.csv"))
+    held = formats.read(path)
+    whole = []
+    monkeypatch.setattr(kinect, "read_input_bytes", lambda p: whole.append(p) or b"")
+    monkeypatch.setattr(filebytes, "HELD_MAX", 0)
+    monkeypatch.setattr(textlines, "BLOCK", 1000)
+    again = formats.read(path)
+    assert not whole
+    np.testing.assert_array_equal(again.positions, held.positions)
+    assert again.names == held.names and again.notes == held.notes
+    assert isinstance(again.source.text.raw, FileBytes)
 
 
 def test_only_a_large_file_read_unchanged_is_kept_on_disk(tmp_path, monkeypatch):
