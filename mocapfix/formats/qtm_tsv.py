@@ -42,6 +42,7 @@ import numpy as np
 
 from mocapfix.core.errors import UnreadableFileError
 from mocapfix.core.fileio import read_input_bytes
+from mocapfix.formats.textlines import TextLines
 from mocapfix.core.motion import Motion
 from mocapfix.formats import texttable as tt
 
@@ -75,7 +76,7 @@ def read(path, fps: float | None = None, units: str | None = None,
          zero_missing: bool | None = None, default_fps: float | None = None,
          **options) -> Motion:
     path = Path(path)
-    text = tt.text_lines(path, read_input_bytes(path), "QTM TSV")
+    text = tt.text_lines(path, TextLines.open_large(path) or read_input_bytes(path), "QTM TSV")
     header, i = _header(text)
     for key in _REQUIRED:
         if key not in header:
@@ -245,7 +246,7 @@ def _missing_token(text, first: int, stop: int, zeros: bool, decimals: int) -> s
     ``first`` .. ``stop - 1``, holds one: looked for in the bytes)."""
     if zeros:
         return f"{0:.{decimals}f}"
-    if text.raw.find(b"NaN", int(text.starts[first]), int(text.stops[stop - 1])) >= 0:
+    if tt.find_all(text.raw, b"NaN", int(text.starts[first]), int(text.stops[stop - 1]), first=True):
         return "NaN"
     return ""
 

@@ -2,7 +2,8 @@
 QTM TSV, OptiTrack Motive CSV): one row of text per frame, one separator character, the X, Y,
 Z of each marker in three fixed columns.
 
-What is shared: the file held once, as its bytes with the offsets of its lines
+What is shared: the file held once, as its bytes with the offsets of its lines (a file
+over 64 MB not held: read a block at a time, :meth:`TextLines.open_large`)
 (:func:`text_lines`, a :class:`~mocapfix.formats.textlines.TextLines`: UTF-8 with an
 optional byte-order mark; UTF-16/32, undecodable bytes and fields over MAX_FIELD named and
 refused), the vectorised parse of the data rows (:func:`parse_rows`: CHUNK rows at a time,
@@ -35,6 +36,7 @@ from mocapfix.core.fileio import write_output_pieces
 from mocapfix.core.motion import Motion
 from mocapfix.core.quantity import MAX_FRAME_RATE_HZ, MIN_FRAME_RATE_HZ
 from mocapfix.formats.textenc import refuse_wide_text, wide_encoding
+from mocapfix.formats import textlines
 from mocapfix.formats.textlines import TextLines
 
 #: data rows decoded and converted at a time: their fields are Python strings only while
@@ -53,11 +55,12 @@ def quote(token: str) -> str:
     return repr(token if len(token) <= _QUOTE else token[:_QUOTE] + "...")
 
 
-def text_lines(path, raw: bytes, what: str) -> TextLines:
-    """The lines of a file's bytes, held as those bytes; UTF-16/32, undecodable bytes and
-    a field over MAX_FIELD characters refused (in that order, as each was found first when
-    the file was decoded whole)."""
-    refuse_wide_text(path, raw, what)
+def text_lines(path, raw, what: str) -> TextLines:
+    """The lines of a file's bytes (bytes, or a large file's FileView: read a block at a
+    time, never whole), held as those bytes; UTF-16/32, undecodable bytes and a field
+    over MAX_FIELD characters refused (in that order, as each was found first when the
+    file was decoded whole)."""
+    refuse_wide_text(path, raw[:4096], what)
     text = TextLines.scan(path, raw)
     if text.long_field is not None:
         raise text.long_field
@@ -77,13 +80,25 @@ def first_line(text: TextLines, start: int, test) -> int:
 def lines_holding(text: TextLines, word: str) -> list[int]:
     """Indices of the lines in which ``word`` (ASCII, no line break) occurs: a search of
     the bytes, so that looking for a rare word (a section name) decodes no line."""
-    needle, raw, found = word.encode("ascii"), text.raw, []
-    at = raw.find(needle)
-    while at >= 0:
-        found.append(at)
-        at = raw.find(needle, at + 1)
+    found = find_all(text.raw, word.encode("ascii"), 0, len(text.raw))
     lines = np.searchsorted(text.starts, np.asarray(found, np.int64), side="right") - 1
     return sorted(set(lines[lines >= 0].tolist()))
+
+
+def find_all(raw, needle: bytes, start: int, stop: int, first: bool = False) -> list[int]:
+    """Offsets of every occurrence of ``needle`` in ``raw[start:stop]`` (bytes or a
+    FileView; ``first``: the first one only), read a block at a time (each with the
+    ``len(needle) - 1`` bytes after it, so that no occurrence across two is missed)."""
+    found, size = [], textlines.BLOCK
+    for a in range(start, stop, size):
+        block = raw[a:min(a + size + len(needle) - 1, stop)]
+        at = block.find(needle)
+        while 0 <= at < size:
+            found.append(a + at)
+            if first:
+                return found
+            at = block.find(needle, at + 1)
+    return found
 
 
 def head_lines(head: bytes, n: int = 12) -> list[str]:
@@ -176,14 +191,20 @@ def _trailing_separators(path, text: TextLines, first: int, stop: int, sep: str,
     many, the last empty (a trailing separator, dropped); an UnreadableFileError for the
     first row holding another count. Counted in the bytes: no line is decoded."""
     n, mark = stop - first, sep.encode("ascii")
-    bounds = zip(text.starts[first:stop].tolist(), text.stops[first:stop].tolist())
-    counts = np.fromiter((text.raw.count(mark, s, e) for s, e in bounds), np.int64, n) + 1
+    counts, last = np.empty(n, np.int64), np.zeros(n, np.uint8)
+    for a in range(first, stop, CHUNK):         # a stretch of lines read at a time
+        b = min(stop, a + CHUNK)
+        base = int(text.starts[a])
+        chunk = text.raw[base:int(text.stops[b - 1])]
+        starts = (text.starts[a:b] - base).tolist()
+        stops = (text.stops[a:b] - base).tolist()
+        counts[a - first:b - first] = np.fromiter(
+            (chunk.count(mark, s, e) for s, e in zip(starts, stops)), np.int64, b - a) + 1
+        last[a - first:b - first] = [chunk[e - 1] if e > s else 0 for s, e in zip(starts, stops)]
     trim = np.zeros(n, bool)
     if (counts != n_fields).any():
         extra = np.flatnonzero(counts == n_fields + 1)
-        ends = text.stops[first + extra]
-        view = np.frombuffer(text.raw, np.uint8)
-        trim[extra] = (ends > text.starts[first + extra]) & (view[np.maximum(ends - 1, 0)] == mark[0])
+        trim[extra] = last[extra] == mark[0]
         counts[trim] -= 1
         bad = np.flatnonzero(counts != n_fields)
         if len(bad):

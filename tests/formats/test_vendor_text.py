@@ -108,6 +108,36 @@ def test_read_write_is_byte_identical(name, fmt, expected, tmp_path):
     assert out.read_bytes() == (VENDOR / name).read_bytes()
 
 
+@pytest.mark.parametrize("name,fmt,expected", FIXTURES, ids=IDS)
+def test_a_large_file_is_read_a_block_at_a_time(name, fmt, expected, tmp_path, monkeypatch):
+    # over HELD_MAX (0 here) the file is never read whole: scanned, checked and parsed from
+    # the file 97 bytes and 7 rows at a time, and written back from it; the same motion,
+    # and the same bytes written unchanged and with a sample moved, as read whole
+    import importlib
+
+    from mocapfix.formats import filebytes, textlines, texttable
+
+    held = formats.read(VENDOR / name)
+    moved = held.copy()
+    t, j = np.argwhere(~held.missing)[len(held.positions) // 2]
+    moved.positions[t, j] += 1.5
+    monkeypatch.setattr(importlib.import_module(f"mocapfix.formats.{fmt}"), "read_input_bytes",
+                        lambda path: pytest.fail(f"{path} read whole"))
+    monkeypatch.setattr(filebytes, "HELD_MAX", 0)
+    monkeypatch.setattr(textlines, "BLOCK", 97)
+    monkeypatch.setattr(texttable, "CHUNK", 7)
+    again = formats.read(VENDOR / name)
+    assert isinstance(again.source.text.raw, filebytes.FileBytes)
+    np.testing.assert_array_equal(again.positions, held.positions)
+    assert (again.names, again.notes, again.fps) == (held.names, held.notes, held.fps)
+    suffix = Path(name).suffix
+    for k, (a, b) in enumerate(((held, again), (moved, moved.replace(source=again.source)))):
+        out_a, out_b = tmp_path / f"a{k}{suffix}", tmp_path / f"b{k}{suffix}"
+        formats.write(a, out_a)
+        formats.write(b, out_b)
+        assert out_a.read_bytes() == out_b.read_bytes()
+
+
 def _field_diff(a: Path, b: Path, sep: str) -> list[tuple[int, int, str, str]]:
     la, lb = a.read_text().splitlines(), b.read_text().splitlines()
     assert len(la) == len(lb)
