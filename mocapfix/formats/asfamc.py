@@ -57,7 +57,7 @@ Why hand-written
     lines; its frames are tokenised and converted _CHUNK at a time, and written back as
     slices of the source between the rewritten bone lines, so that a long take costs its
     arrays, not a Python object per line or value, nor the file's bytes when it is large
-    (read a block at a time from the file: :func:`_large`).
+    (read a block at a time from the file: :func:`~mocapfix.formats.filebytes.large_view`).
 """
 from __future__ import annotations
 
@@ -72,7 +72,7 @@ import numpy as np
 from mocapfix.core.errors import MAX_FIELD, UnreadableFileError, UnsupportedFeatureError, WriteError
 from mocapfix.core.fileio import (atomic_write_bytes, atomic_write_pieces, read_input_bytes,
                                   refuse_stream, regular_file_problem)
-from mocapfix.formats.filebytes import FileView, keep, large_file, runs_of
+from mocapfix.formats.filebytes import keep, large_view, runs_of
 from mocapfix.formats.textenc import UTF8_BOM, refuse_long_fields, refuse_wide_text
 from mocapfix.core.kinematics import Rig, euler_to_matrix, positions_in_chunks
 from mocapfix.core.motion import Motion, Skeleton
@@ -93,7 +93,6 @@ _INT_RE = re.compile(r"^\d{1,18}$")
 #: bytes scanned at a time for line ends; frames converted at a time
 _BLOCK = 1 << 22
 _CHUNK = 4096
-_LONG_LINE = re.compile(rb"[^\n]{%d,}" % (MAX_FIELD + 1))
 #: a blank or comment line inside an AMC body (then the body is not one run of frame lines):
 #: after a line end, or (``_GAP_FIRST``) as the file's first line; blank as ``str.strip``
 #: has it (a line of a vertical tab or a no-break space alone is one)
@@ -102,7 +101,7 @@ _GAP = re.compile(rb"\n" + _BLANKS + rb"(#|\n)")
 _GAP_FIRST = re.compile(_BLANKS + rb"(#|\n)")
 #: bytes ``str.isspace`` takes for whitespace, one character per byte (latin-1)
 _SPACE = np.array([chr(i).isspace() for i in range(256)])
-#: bytes of a large AMC held while it is read (its header lines; :func:`_large`)
+#: bytes of a large AMC held while it is read (its header lines; :func:`read`)
 _HEAD = 1 << 20
 
 
@@ -235,24 +234,17 @@ def _decode(path: Path, data: bytes) -> str:
 def _check_text(path: Path, data, lines: _AmcLines | None = None) -> None:
     """Refuse an empty, UTF-16/32, binary file or one with a field over MAX_FIELD
     characters (latin-1: one per byte; only the lines longer than that are split).
-    ``lines``: the lines of ``data`` (bytes, or a large AMC's FileView), which then tell
-    the long ones; without them ``data`` is bytes, searched whole (an ASF)."""
+    ``data``: bytes, or a large AMC's FileView; ``lines``: its lines, when found."""
     if _blank(data):
         raise UnreadableFileError(path, "file is empty")
     head = data[:4096]
     refuse_wide_text(path, head, Path(path).suffix.lstrip(".").upper() or "ASF/AMC")
     if b"\x00" in head:
         raise UnreadableFileError(path, "binary data where ASF/AMC text was expected")
-    if lines is not None:
-        for k in lines.longer_than(MAX_FIELD).tolist():
-            a, b = lines.span(k)
-            refuse_long_fields(path, [data[a:b].decode("latin-1")], first_line=k)
-        return
-    line, counted = 0, 0
-    for match in _LONG_LINE.finditer(data):
-        line += data.count(b"\n", counted, match.start())
-        counted = match.start()
-        refuse_long_fields(path, [match.group().decode("latin-1")], first_line=line)
+    lines = _AmcLines.of(data) if lines is None else lines
+    for k in lines.longer_than(MAX_FIELD).tolist():
+        a, b = lines.span(k)
+        refuse_long_fields(path, [data[a:b].decode("latin-1")], first_line=k)
 
 
 def _blank(data) -> bool:
@@ -872,17 +864,14 @@ def read(path, fps: float | None = None, **options) -> Motion:
     path = Path(path)
     if path.suffix.lower() == ".asf":
         return _read_rest_pose(path, fps)
-    amc = _large(path) or read_input_bytes(path)
-    try:
-        lines = _AmcLines.of(amc)
-        _check_text(path, amc, lines)
-        asf_path = find_asf(path, options.get("asf"))
-        asf_bytes = read_input_bytes(asf_path)
-        asf = parse_asf(asf_path, asf_bytes)
-        source = parse_amc(path, amc, asf, lines)
-    finally:
-        if isinstance(amc, FileView):
-            amc.file.close()        # opened again by the writer, which then sees a change
+    # a large AMC is read a block at a time from the file, never held whole
+    amc = large_view(path, _HEAD) or read_input_bytes(path)
+    lines = _AmcLines.of(amc)
+    _check_text(path, amc, lines)
+    asf_path = find_asf(path, options.get("asf"))
+    asf_bytes = read_input_bytes(asf_path)
+    asf = parse_asf(asf_path, asf_bytes)
+    source = parse_amc(path, amc, asf, lines)
     source.asf_path, source.asf_bytes = str(asf_path), asf_bytes
     if source.body is not None:
         source.body.data = keep(path, source.body.data)
@@ -895,15 +884,6 @@ def read(path, fps: float | None = None, **options) -> Motion:
     if len(frames) > 1 and np.any(np.diff(frames) != 1):
         notes.append("AMC frame numbers are not consecutive; frames are taken as evenly spaced")
     return _motion(source, source.values.copy(), fps, notes)
-
-
-def _large(path) -> FileView | None:
-    """An AMC over :data:`~mocapfix.formats.filebytes.HELD_MAX` bytes as a
-    :class:`~mocapfix.formats.filebytes.FileView` holding its first :data:`_HEAD` bytes:
-    its lines are scanned and its frames converted from the file a block at a time,
-    never held whole (a 500,000-frame take's 440 MB); None for a smaller file."""
-    file = large_file(path)
-    return None if file is None else FileView(file, min(_HEAD, len(file)))
 
 
 def _read_rest_pose(path: Path, fps) -> Motion:

@@ -77,7 +77,7 @@ import numpy as np
 
 from mocapfix.core.errors import MAX_FIELD, UnreadableFileError, WriteError, excerpt
 from mocapfix.core.fileio import atomic_write_pieces, read_input_bytes
-from mocapfix.formats.filebytes import FileView, keep, large_file, runs_of
+from mocapfix.formats.filebytes import FileView, keep, large_view, runs_of
 from mocapfix.formats.textenc import refuse_wide_text
 from mocapfix.core.kinematics import Rig, positions_in_chunks
 from mocapfix.core.motion import Motion, Skeleton
@@ -717,13 +717,8 @@ def read(path, fps: float | None = None, allow_truncated: bool = False, **option
         raise UnreadableFileError(path, "no MOTION section after the hierarchy "
                                         "(file truncated?)", line=tokens.end_line)
     n_channels = sum(len(j.channels) for j in joints)
-    try:
-        values, frame_time, parts = _parse_motion(path, data, motion_match.start(), n_channels,
-                                                  allow_truncated, notes)
-    finally:
-        if isinstance(data, FileView):
-            # opened again by the writer, which then sees a file replaced since the read
-            data.file.close()
+    values, frame_time, parts = _parse_motion(path, data, motion_match.start(), n_channels,
+                                              allow_truncated, notes)
     names = _unique_names(joints, notes)
     rig, unknown = _build_rig(joints, names, n_channels)
     if unknown:
@@ -777,10 +772,9 @@ def _large(path) -> FileView | None:
     converted from the file a block at a time, never held whole (a 500,000-frame take's
     470 MB). None for a smaller file, or one whose hierarchy does not end there (read
     whole: the reader then says what is wrong)."""
-    file = large_file(path)
-    if file is None:
+    view = large_view(path, HEAD)
+    if view is None:
         return None
-    view = FileView(file, min(HEAD, len(file)))
     start = len(_BOM) if view.head.startswith(_BOM) else 0
     match = _MOTION_LINE.search(view.head, start)
     # a match at the held bytes' very end may be a longer word in the file

@@ -160,12 +160,22 @@ def large_file(path) -> FileBytes | None:
     return FileBytes(path, st)
 
 
+def large_view(path, head: int) -> FileView | None:
+    """The regular file at ``path`` as a :class:`FileView` holding its first ``head``
+    bytes when it is larger than :data:`HELD_MAX` (a reader then reads it a block at a
+    time, never whole), else None (:func:`large_file`)."""
+    file = large_file(path)
+    return None if file is None else FileView(file, min(head, len(file)))
+
+
 def keep(path, data):
     """What a reader keeps of ``data``, the bytes it read from ``path``: ``data`` itself
     when it is at most :data:`HELD_MAX` bytes, or when the file cannot be shown to be
     the one read (:func:`mocapfix.core.fileio.read_identity`); else a :class:`FileBytes`
-    (a :class:`FileView`'s own)."""
+    (a :class:`FileView`'s own, closed: the writer opens it again, and then sees a file
+    replaced since the read)."""
     if isinstance(data, FileView):
+        data.file.close()
         return data.file
     if not isinstance(data, bytes) or len(data) <= HELD_MAX:
         return data

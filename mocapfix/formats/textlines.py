@@ -22,7 +22,7 @@ from __future__ import annotations
 import numpy as np
 
 from mocapfix.core.errors import MAX_FIELD, UnreadableFileError
-from mocapfix.formats.filebytes import FileBytes, FileView, keep, large_file, runs_of
+from mocapfix.formats.filebytes import FileBytes, FileView, keep, large_view, runs_of
 from mocapfix.formats.textenc import UTF8_BOM, longest_field_bytes, refuse_long_fields
 
 #: bytes of the file decoded at a time (cut at a line end, so never inside a character)
@@ -117,8 +117,7 @@ class TextLines:
         :class:`~mocapfix.formats.filebytes.FileView` holding its first :data:`HEAD`
         bytes, for :meth:`scan` and the reader to read a block at a time (never whole);
         None for a smaller file."""
-        file = large_file(path)
-        return None if file is None else FileView(file, min(HEAD, len(file)))
+        return large_view(path, HEAD)
 
     @staticmethod
     def _long_field(path, pieces, first, last_open):
@@ -152,9 +151,7 @@ class TextLines:
         """After the reader is done with the text: the bytes kept as
         :func:`mocapfix.formats.filebytes.keep` keeps them (a large file is read again
         when written, not held)."""
-        raw, self.raw = self.raw, keep(path, self.raw)
-        if isinstance(raw, FileView):
-            raw.file.close()        # opened again by the writer, which then sees a change
+        self.raw = keep(path, self.raw)
 
     def end(self, i: int) -> int:
         """Offset just past line ``i``'s ending."""
