@@ -71,9 +71,11 @@ class TextLines:
         begin = len(UTF8_BOM) if raw[:len(UTF8_BOM)] == UTF8_BOM else 0
         newlines, carriage, content, long_line = [], [], [], None
         a, n_lines = begin, 0
+        solid = begin > 0               # a byte that is not ASCII whitespace (the mark is)
         while a < size:
             data = _block_to_line_end(raw, a, size)
             b = a + len(data)
+            solid = solid or bool(data.strip())
             try:
                 text = data.decode("utf-8")
             except UnicodeDecodeError as exc:
@@ -97,6 +99,8 @@ class TextLines:
             newlines.append(a + nl)
             n_lines += len(pieces)
             a = b
+        if not solid:       # as read_input_bytes says of a file it reads whole
+            raise UnreadableFileError(path, "file is empty")
         nl = np.concatenate(newlines) if newlines else np.zeros(0, np.int64)
         cr = np.concatenate(carriage) if carriage else np.zeros(0, bool)
         starts = np.concatenate([[begin], nl + 1])[:n_lines].astype(np.int64)

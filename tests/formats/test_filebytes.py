@@ -269,6 +269,24 @@ def test_a_large_kinect_file_is_never_read_whole(monkeypatch):
     assert isinstance(again.source.text.raw, FileBytes)
 
 
+@pytest.mark.parametrize("fmt,name", [("kinect", "take.csv"), ("nexus_csv", "take.csv"),
+                                      ("qtm_tsv", "take.tsv"), ("motive_csv", "take.csv"),
+                                      ("bvh", "take.bvh"), ("asfamc", "take.amc")])
+@pytest.mark.parametrize("large", [False, True])
+def test_a_file_of_whitespace_is_empty_read_whole_or_in_blocks(fmt, name, large, tmp_path,
+                                                                monkeypatch):
+    # read a block at a time (over HELD_MAX, 0 here) a file holding only blank lines is
+    # refused as empty, as when read whole, not by whatever the parser checks next
+    import importlib
+
+    path = tmp_path / name
+    path.write_bytes(b"  \n\n \t \r\n" * 50)
+    if large:
+        monkeypatch.setattr(filebytes, "HELD_MAX", 0)
+    with pytest.raises(UnreadableFileError, match="file is empty"):
+        importlib.import_module(f"mocapfix.formats.{fmt}").read(path)
+
+
 def test_only_a_large_file_read_unchanged_is_kept_on_disk(tmp_path, monkeypatch):
     path = tmp_path / "f.txt"
     path.write_bytes(b"x" * 1000)
