@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import signal
 import sys
 import threading
 import time
@@ -83,10 +84,37 @@ def pool_worker_init(threads: int = 1, creator: int | None = None) -> None:
 
     _kill_me_with_parent()
     drop_inherited_locks()
+    signal.signal(signal.SIGINT, _on_interrupt)
     if creator is not None:
         threading.Thread(target=_exit_when_gone, args=(creator,), daemon=True,
                          name="mocapfix-parent-watch").start()
     worker_init(threads)
+
+
+#: tasks running in this process (:class:`~mocapfix.batch.tasks.InWorker`)
+_TASKS = [0]
+
+
+@contextlib.contextmanager
+def running_task():
+    """Mark a task as running in this worker process (see :func:`_on_interrupt`)."""
+    _TASKS[0] += 1
+    try:
+        yield
+    finally:
+        _TASKS[0] -= 1
+
+
+def _on_interrupt(signum, frame) -> None:
+    """Ctrl-C (SIGINT to the whole process group) in a local pool worker: a running task is
+    interrupted (KeyboardInterrupt: its cleanup removes its temporary files, and the pool
+    hands the interrupt back as its result); an idle worker, waiting for its next task,
+    exits at once -- interrupted there it printed multiprocessing's "Process
+    ForkProcess-1: Traceback ... KeyboardInterrupt" under the run's "mocapfix:
+    interrupted"."""
+    if _TASKS[0]:
+        raise KeyboardInterrupt
+    os._exit(128 + signum)
 
 
 def _kill_me_with_parent() -> None:
@@ -95,7 +123,6 @@ def _kill_me_with_parent() -> None:
     if not sys.platform.startswith("linux"):
         return
     import ctypes
-    import signal
 
     with contextlib.suppress(OSError, AttributeError):
         ctypes.CDLL(None, use_errno=True).prctl(1, int(signal.SIGKILL), 0, 0, 0)  # PR_SET_PDEATHSIG

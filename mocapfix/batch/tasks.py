@@ -72,13 +72,15 @@ class InWorker:
     threads: int = 1
 
     def __call__(self, item):
+        from mocapfix.batch.executors import running_task
         from mocapfix.core.memory import release_freed_memory
         from mocapfix.core.threads import limit_blas, set_task_threads
 
         limit_blas(self.threads)
         set_task_threads(1)
         try:
-            return self.task(item)
+            with running_task():
+                return self.task(item)
         finally:
             release_freed_memory()
 

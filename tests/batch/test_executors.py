@@ -223,3 +223,39 @@ def test_an_unreachable_scheduler_leaves_the_output_folder_as_it_was(tmp_path, m
                                   "--overwrite", "--scheduler", "tcp://10.0.0.1:8786"])
     assert r.exit_code == 2, r.output
     assert md5_tree(used) == before                           # the manifest as it was
+
+
+def _sleep(seconds: float) -> float:
+    import time
+
+    time.sleep(seconds)
+    return seconds
+
+
+def test_ctrl_c_in_a_pool_worker_interrupts_its_task_or_ends_it_quietly(capfd):
+    # Ctrl-C reaches every process of the group. A worker running a task has the task
+    # interrupted (KeyboardInterrupt, handed back as its result; its cleanup ran) and goes
+    # on; an idle one exits at once. Idle, it printed multiprocessing's "Process
+    # ForkProcess-1: Traceback ... KeyboardInterrupt" under the run's "mocapfix:
+    # interrupted" (a flaky failure of test_resume's interrupted batch)
+    import os
+    import signal
+    import time
+
+    from mocapfix.batch.executors import _gone, pool_worker_init
+    from mocapfix.batch.tasks import InWorker
+
+    with ProcessPoolExecutor(1, initializer=pool_worker_init, initargs=(1, os.getpid())) as pool:
+        pid = pool.submit(os.getpid).result()
+        busy = pool.submit(InWorker(_sleep), 30.0)
+        time.sleep(1.0)
+        os.kill(pid, signal.SIGINT)
+        assert isinstance(busy.exception(timeout=20), KeyboardInterrupt)
+        assert pool.submit(os.getpid).result(timeout=20) == pid      # the worker goes on
+        os.kill(pid, signal.SIGINT)                                    # idle now
+        deadline = time.monotonic() + 20
+        while not _gone(pid) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert _gone(pid)
+    err = capfd.readouterr().err
+    assert "Traceback" not in err and "KeyboardInterrupt" not in err, err
