@@ -196,11 +196,14 @@ def _trailing_separators(path, text: TextLines, first: int, stop: int, sep: str,
         b = min(stop, a + CHUNK)
         base = int(text.starts[a])
         chunk = text.raw[base:int(text.stops[b - 1])]
-        starts = (text.starts[a:b] - base).tolist()
-        stops = (text.stops[a:b] - base).tolist()
+        starts, stops = text.starts[a:b] - base, text.stops[a:b] - base
         counts[a - first:b - first] = np.fromiter(
-            (chunk.count(mark, s, e) for s, e in zip(starts, stops)), np.int64, b - a) + 1
-        last[a - first:b - first] = [chunk[e - 1] if e > s else 0 for s, e in zip(starts, stops)]
+            (chunk.count(mark, s, e) for s, e in zip(starts.tolist(), stops.tolist())),
+            np.int64, b - a) + 1
+        # each line's last byte (0 for an empty line): a trailing separator?
+        view = np.frombuffer(chunk, np.uint8)
+        if view.size:                           # (a stretch of empty lines has no bytes)
+            last[a - first:b - first] = np.where(stops > starts, view[np.maximum(stops - 1, 0)], 0)
     trim = np.zeros(n, bool)
     if (counts != n_fields).any():
         extra = np.flatnonzero(counts == n_fields + 1)
