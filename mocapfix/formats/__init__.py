@@ -203,7 +203,8 @@ def share_values_read(motion: Motion) -> None:
     copy of ``motion.channels`` as read, so that an edit of the motion's own array in
     place is written) become ``motion.channels`` itself, made read-only: one whole-take
     array fewer (20 bytes a sample for a CMU BVH); a Kinect source's coordinates, the
-    same with ``motion.positions`` (:func:`_share_coordinates_read`). Any other motion,
+    same with ``motion.positions``, and a TRC source's values as read
+    (:func:`_share_coordinates_read`). Any other motion,
     or one whose arrays are no longer the values read, is left as it is."""
     _share_coordinates_read(motion)
     values = getattr(motion.source, "values", None)
@@ -217,14 +218,14 @@ def share_values_read(motion: Motion) -> None:
 
 
 def _share_coordinates_read(motion: Motion) -> None:
-    """A Kinect source's coordinates as written (``original``: the writer compares the
-    samples seen in the file with them, to rewrite only those that moved) become the
+    """A Kinect or TRC source's coordinates as written (``original``: the writer compares
+    the samples seen in the file with them, to rewrite only those that moved) become the
     motion's positions, made read-only, when the two agree on every sample seen (they
     differ only where the reader made a sample missing, where the writer does not look):
     one whole-take array fewer (24 bytes a sample). :func:`share_values_read`'s rule."""
     source, positions = motion.source, motion.positions
     original = getattr(source, "original", None)
-    if (motion.format != "kinect" or not isinstance(original, np.ndarray)
+    if (motion.format not in ("kinect", "trc") or not isinstance(original, np.ndarray)
             or original is positions or original.shape != positions.shape
             or original.dtype != positions.dtype
             or source.missing.shape != positions.shape[:2]):

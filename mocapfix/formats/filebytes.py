@@ -51,11 +51,12 @@ class FileBytes:
     """The bytes of the file at ``path`` as they were read (``identity``: its
     :func:`os.stat` then): ``len()`` and slices (``data[a:b]``, bytes) as of ``bytes``."""
 
-    def __init__(self, path, st: os.stat_result):
+    def __init__(self, path, st: os.stat_result, reading: bool = False):
         self.path = str(path)
         self._where = os.path.abspath(path)     # the same file after a change of directory
         self.identity = stat_identity(st)
         self._fd: int | None = None
+        self.reading = reading      # read by its reader (:func:`large_file`), not a writer yet
 
     def __len__(self) -> int:
         return self.identity[2]
@@ -96,6 +97,10 @@ class FileBytes:
         return self._fd
 
     def _changed(self, why: str) -> UnreadableFileError:
+        if self.reading:
+            return UnreadableFileError(self.path, f"changed or moved while it was read ({why}); "
+                                       "a file this large is read a block at a time: leave it "
+                                       "as it is until its output is written, and run again")
         return UnreadableFileError(self.path, f"changed or moved since it was read ({why}); "
                                    "what the cleaning left unchanged is copied from a file "
                                    "this large when the output is written: leave it as it "
@@ -118,6 +123,7 @@ class FileBytes:
     def __setstate__(self, state):
         self.path, self._where, self.identity = state["path"], state["where"], state["identity"]
         self._fd = None
+        self.reading = False
 
 
 class FileView:
@@ -157,7 +163,7 @@ def large_file(path) -> FileBytes | None:
         return None
     if not stat.S_ISREG(st.st_mode) or st.st_size <= HELD_MAX:
         return None
-    return FileBytes(path, st)
+    return FileBytes(path, st, reading=True)
 
 
 def large_view(path, head: int) -> FileView | None:
@@ -176,6 +182,7 @@ def keep(path, data):
     replaced since the read)."""
     if isinstance(data, FileView):
         data.file.close()
+        data.file.reading = False
         return data.file
     if not isinstance(data, bytes) or len(data) <= HELD_MAX:
         return data

@@ -10,14 +10,19 @@ unchanged lines as byte slices between the lines it rewrites, straight to the ou
 Once the reader is done (:meth:`TextLines.keep`), a large file's bytes are let go and read
 again from the file when written (:mod:`mocapfix.formats.filebytes`). A reader may not
 hold a large file at all: given a :class:`~mocapfix.formats.filebytes.FileView`
-(:meth:`TextLines.open_large`; the Kinect reader), the file is scanned and its lines
-parsed a block at a time, read from the file.
+(:meth:`TextLines.open_large`; the Kinect, TRC and vendor-table readers), the file is
+scanned and its lines parsed a block at a time, read from the file.
 
 Lines are what ``text.split("\\n")`` gives after the UTF-8 byte-order mark: a ``\\r``
 before the ``\\n`` is the line's ending, not its text, and an empty piece after a final
-``\\n`` is no line.
+``\\n`` is no line. A reader may ask for a lone ``\\r`` to end a line too (``lone_cr``:
+TRC files from old Mac OS software; then lines are what ``re.split(r"\\r\\n|\\n|\\r")``
+gives), and for a file that is not UTF-8 to be decoded with another encoding
+(``fallback``: latin-1 for TRC), its edits then encoded with it too.
 """
 from __future__ import annotations
+
+import re
 
 import numpy as np
 
@@ -31,87 +36,132 @@ BLOCK = 1 << 22
 HEAD = 1 << 20
 
 
-def _block_to_line_end(raw, a: int, size: int) -> bytes:
+def _block_to_line_end(raw, a: int, size: int, lone_cr: bool = False) -> bytes:
     """The bytes of ``raw`` from ``a`` to the end of the line that ends last within
     :data:`BLOCK` bytes (the rest of the file when it ends sooner; a line longer than a
-    block whole)."""
+    block whole). ``lone_cr``: a ``\\r`` not followed by ``\\n`` ends a line too (never
+    cut between the two bytes of a ``\\r\\n``)."""
     if a + BLOCK >= size:
         return raw[a:size]
-    data = raw[a:a + BLOCK]
-    cut = data.rfind(b"\n") + 1
+    data = raw[a:a + BLOCK + lone_cr]           # one byte more: is a last CR a CRLF's?
+    cut = _after_last_end(data, BLOCK, lone_cr)
     if cut:
         return data[:cut]
-    parts = [data]                                  # one line longer than a block
+    parts = [data[:BLOCK]]                          # one line longer than a block
     for c in range(a + BLOCK, size, BLOCK):
-        more = raw[c:min(c + BLOCK, size)]
-        cut = more.find(b"\n") + 1
-        parts.append(more[:cut] if cut else more)
+        more = raw[c:min(c + BLOCK + lone_cr, size)]
+        cut = _after_first_end(more, BLOCK, lone_cr)
+        parts.append(more[:cut] if cut else more[:BLOCK])
         if cut:
             break
     return b"".join(parts)
 
 
+def _after_last_end(data: bytes, within: int, lone_cr: bool) -> int:
+    """Offset just past the last line ending that starts in ``data[:within]`` (0: none)."""
+    at = data.rfind(b"\n", 0, within)
+    if lone_cr:
+        cr = data.rfind(b"\r", 0, within)
+        if cr > at:
+            return cr + 1 + (data[cr + 1:cr + 2] == b"\n")
+    return at + 1
+
+
+def _after_first_end(data: bytes, within: int, lone_cr: bool) -> int:
+    """Offset just past the first line ending that starts in ``data[:within]`` (0: none)."""
+    at = data.find(b"\n", 0, within)
+    if lone_cr:
+        cr = data.find(b"\r", 0, within)
+        if cr >= 0 and (at < 0 or cr < at):
+            return cr + 1 + (data[cr + 1:cr + 2] == b"\n")
+    return at + 1
+
+
+#: a line ending where a lone CR ends a line too (old Mac OS files)
+_ANY_EOL = re.compile(r"\r\n|\n|\r")
+
+
 class TextLines:
     """The lines of ``raw`` (bytes): ``line(i)`` decodes one, ``pieces`` writes them back
-    with edits. ``content`` marks the lines that are neither blank nor ``#`` comments."""
+    with edits. ``content`` marks the lines that are neither blank nor (when the reader
+    has them) ``#`` comments. ``encoding``: what the lines are decoded and edits encoded
+    with (UTF-8, or a reader's fallback for a file that is not)."""
 
-    def __init__(self, raw, starts: np.ndarray, stops: np.ndarray, content: np.ndarray):
+    def __init__(self, raw, starts: np.ndarray, stops: np.ndarray, content: np.ndarray,
+                 encoding: str = "utf-8"):
         self.raw = raw
-        self.bom = "\ufeff" if raw[:len(UTF8_BOM)] == UTF8_BOM else ""
+        self.encoding = encoding
+        self.bom = "\ufeff" if encoding == "utf-8" and raw[:len(UTF8_BOM)] == UTF8_BOM else ""
         self.starts, self.stops = starts, stops      # text of line i: raw[starts[i]:stops[i]]
         self.content = content
 
     @classmethod
-    def scan(cls, path, raw) -> TextLines:
+    def scan(cls, path, raw, *, lone_cr: bool = False, comments: bool = True,
+             fallback: str | None = None, encoding: str = "utf-8") -> TextLines:
         """Index ``raw`` (bytes, or a large file's
         :class:`~mocapfix.formats.filebytes.FileView`: read a block at a time, never
-        whole): an UnreadableFileError at its first byte that is not UTF-8, or (after the
-        whole file decoded) for a field longer than MAX_FIELD characters."""
+        whole): an UnreadableFileError at its first byte that is not UTF-8 (or, given a
+        ``fallback`` encoding, the whole file decoded with that one), or (after the whole
+        file decoded) for a field longer than MAX_FIELD characters. ``lone_cr``: a CR not
+        followed by LF ends a line too; ``comments``: ``#`` lines are not ``content``."""
         size = len(raw)
-        begin = len(UTF8_BOM) if raw[:len(UTF8_BOM)] == UTF8_BOM else 0
-        newlines, carriage, content, long_line = [], [], [], None
+        begin = len(UTF8_BOM) if encoding == "utf-8" and raw[:len(UTF8_BOM)] == UTF8_BOM else 0
+        line_ends, carriage, content, long_line = [], [], [], None
         a, n_lines = begin, 0
         solid = begin > 0               # a byte that is not ASCII whitespace (the mark is)
         while a < size:
-            data = _block_to_line_end(raw, a, size)
+            data = _block_to_line_end(raw, a, size, lone_cr)
             b = a + len(data)
             solid = solid or bool(data.strip())
             try:
-                text = data.decode("utf-8")
+                text = data.decode(encoding)
             except UnicodeDecodeError as exc:
+                if fallback:
+                    return cls.scan(path, raw, lone_cr=lone_cr, comments=comments,
+                                    encoding=fallback)
                 raise UnreadableFileError(path, f"not a text file (undecodable byte at offset "
                                                 f"{a + exc.start})") from None
-            pieces = text.split("\n")
+            pieces = _ANY_EOL.split(text) if lone_cr else text.split("\n")
             if b < size or pieces[-1] == "":
-                pieces.pop()                        # what follows the block's last newline
-            content.append(np.fromiter((bool(p.strip()) and not p.lstrip().startswith("#")
+                pieces.pop()                        # what follows the block's last line end
+            content.append(np.fromiter((bool(p.strip()) and not (comments and
+                                                                  p.lstrip().startswith("#"))
                                         for p in pieces), bool, len(pieces)))
             view = np.frombuffer(data, np.uint8)
             if (long_line is None and len(text) > MAX_FIELD
                     and longest_field_bytes(view) > MAX_FIELD):
                 long_line = cls._long_field(path, pieces, n_lines,
                                              b == size and data[-1:] != b"\n")
-            nl = np.flatnonzero(view == 10)
-            # a CR before a newline ends the line with it (not in a line of its own: a
-            # block starts a line, after a newline or the mark)
-            line_start = np.concatenate([[0], nl[:-1] + 1])
-            carriage.append((nl > line_start) & (view[np.maximum(nl - 1, 0)] == 13))
-            newlines.append(a + nl)
+            ends = np.flatnonzero(view == 10)
+            if lone_cr:
+                cr = np.flatnonzero(view == 13)
+                paired = view[np.minimum(cr + 1, len(view) - 1)] == 10
+                paired &= cr + 1 < len(view)
+                ends = np.union1d(ends, cr[~paired])
+                # a LF after a CR ends the line with it (a block is never cut between them)
+                carriage.append((ends > 0) & (view[np.maximum(ends - 1, 0)] == 13)
+                                & (view[ends] == 10))
+            else:
+                # a CR before a newline ends the line with it (not in a line of its own: a
+                # block starts a line, after a newline or the mark)
+                line_start = np.concatenate([[0], ends[:-1] + 1])
+                carriage.append((ends > line_start) & (view[np.maximum(ends - 1, 0)] == 13))
+            line_ends.append(a + ends)
             n_lines += len(pieces)
             a = b
         if not solid:       # as read_input_bytes says of a file it reads whole
             raise UnreadableFileError(path, "file is empty")
-        nl = np.concatenate(newlines) if newlines else np.zeros(0, np.int64)
+        nl = np.concatenate(line_ends) if line_ends else np.zeros(0, np.int64)
         cr = np.concatenate(carriage) if carriage else np.zeros(0, bool)
         starts = np.concatenate([[begin], nl + 1])[:n_lines].astype(np.int64)
         stops = np.empty(n_lines, np.int64)
-        ended = min(len(nl), n_lines)               # lines with a newline after them
+        ended = min(len(nl), n_lines)               # lines with a line end after them
         stops[:ended] = nl[:ended]
         if ended < n_lines:
             stops[ended:] = size
         stops[np.flatnonzero(cr[:ended])] -= 1
         lines = cls(raw, starts, stops, np.concatenate(content) if content else
-                    np.zeros(0, bool))
+                    np.zeros(0, bool), encoding)
         lines.long_field = long_line
         return lines
 
@@ -140,7 +190,7 @@ class TextLines:
         return len(self.starts)
 
     def line(self, i: int) -> str:
-        return self.raw[self.starts[i]:self.stops[i]].decode("utf-8")
+        return self.raw[self.starts[i]:self.stops[i]].decode(self.encoding)
 
     def lines_at(self, indices) -> list[str]:
         raw, starts, stops = self.raw, self.starts[indices], self.stops[indices]
@@ -149,7 +199,7 @@ class TextLines:
             a, b = int(starts.min()), int(stops.max())
             if b - a <= max(BLOCK, 4 * int((stops - starts).sum())):
                 raw, starts, stops = raw[a:b], starts - a, stops - a
-        return [raw[s:e].decode("utf-8") for s, e in zip(starts.tolist(), stops.tolist())]
+        return [raw[s:e].decode(self.encoding) for s, e in zip(starts.tolist(), stops.tolist())]
 
     def keep(self, path) -> None:
         """After the reader is done with the text: the bytes kept as
@@ -208,7 +258,7 @@ class TextLines:
             for text in inserted.get(i, ()):
                 if not at[1]:
                     yield eol
-                yield text.encode("utf-8") + eol
+                yield text.encode(self.encoding) + eol
                 at[1] = True
 
         k = 0
@@ -219,7 +269,7 @@ class TextLines:
             if i in dropped:
                 continue
             yield from upto(int(starts[i]))
-            piece = text.encode("utf-8")
+            piece = text.encode(self.encoding)
             if piece:
                 at[1] = piece[-1] in (10, 13)
             yield piece

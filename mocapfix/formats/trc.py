@@ -33,11 +33,17 @@ Reading (decisions):
 * ``times`` is the Time column; ``NumFrames`` differing from the rows is noted (the rows
   win). A last line without a line break that is shorter than the row before it is a
   truncation: dropped with a note (and not written back), as the Kinect reader does.
+* The text is UTF-8 (with or without a byte-order mark) or, when it is not, latin-1 (a
+  lab's accented marker names); lines end in LF, CRLF or a lone CR (old Mac OS software),
+  mixed too.
 * Any other malformation (a header line missing, a non-numeric value, no data rows) is
   one :class:`UnreadableFileError` naming the line and what was expected.
 
-Parsing is vectorised: each line is split once, and all the value fields of the file go
-through one ``numpy`` float conversion.
+The file is held as its bytes and the offsets of its lines
+(:class:`~mocapfix.formats.textlines.TextLines`); one over 64 MB is never held whole: it
+is scanned and its rows decoded a block at a time, and read again when written
+(:mod:`mocapfix.formats.filebytes`). Parsing is vectorised: CHUNK rows at a time are
+split once and their value fields go through one ``numpy`` float conversion.
 
 Writing:
 
@@ -45,7 +51,8 @@ Writing:
     as the original text with only the changed samples re-formatted: a moved or filled
     sample gets the decimals of the token it replaces (a filled sample, whose fields were
     empty, the decimals most common in the file); a sample made missing gets empty fields.
-    An unchanged motion writes back byte-identical (line endings, trailing tabs, spaces).
+    An unchanged motion writes back byte-identical (line endings, trailing tabs, spaces,
+    a latin-1 file's bytes: edited rows are encoded as the file was).
 (b) Any other motion (markers of a C3D, joint positions of a BVH/AMC/Kinect file) is
     written as a fresh OpenSim 4 TRC: the header above with ``DataRate = CameraRate =
     OrigDataRate = fps``, ``OrigDataStartFrame 1``, the motion's units, ``Frame#`` from 1,
@@ -61,9 +68,8 @@ Writing:
 Why hand-written: TRC is a small tab-separated text layout, and no package that reads it
 keeps the text for a change-only write-back (docs/formats.md, "Why the readers are
 hand-written"). OpenSim's reader is the tests' independent check of the files we write
-(dev extra). Data rows are converted CHUNK at a time and files written in pieces of CHUNK
-rows, so that no whole-file join or token list is built (the lines themselves are still
-one str each).
+(dev extra). Data rows are converted CHUNK at a time and files written in pieces, so
+that no whole-file join, token list or str per line is built.
 """
 from __future__ import annotations
 
@@ -76,7 +82,6 @@ from pathlib import Path
 import numpy as np
 
 from mocapfix.core.errors import (
-    MAX_FIELD,
     UnreadableFileError,
     UnsupportedFeatureError,
     WriteError,
@@ -85,7 +90,8 @@ from mocapfix.core.fileio import read_input_bytes, write_output_pieces
 from mocapfix.core.motion import Motion, missing_samples
 from mocapfix.core.quantity import MAX_FRAME_RATE_HZ, MIN_FRAME_RATE_HZ
 from mocapfix.core.units import METRES_PER_UNIT, normalise_unit_name
-from mocapfix.formats.textenc import longest_field_bytes, refuse_long_fields, refuse_wide_text
+from mocapfix.formats.textenc import refuse_wide_text
+from mocapfix.formats.textlines import TextLines
 
 NAME = "trc"
 SUFFIXES = (".trc",)
@@ -106,10 +112,8 @@ _BLANK_FIELD = re.compile(r"\t +(?=\t|\Z)")
 class TRCSource:
     """What the writer needs to reproduce the file."""
 
-    bom: str
-    lines: list[str]             # every line, without its line ending
-    endings: list[str]           # the ending of each line ("\n", "\r\n", "\r" or "")
-    data_lines: np.ndarray       # (T,) index in ``lines`` of each frame's row
+    text: TextLines              # the file's bytes (a large file: read again) and its lines
+    data_lines: np.ndarray       # (T,) index in ``text`` of each frame's row
     names: list[str]
     header: dict                 # key -> value text of lines 2-3
     original: np.ndarray         # (T, J, 3) values as read (NaN where missing)
@@ -118,27 +122,16 @@ class TRCSource:
     skip_lines: list[int] = field(default_factory=list)   # a truncated last fragment
     unlabelled_values: int = 0   # values beyond the labelled columns (kept, not read)
 
+    @property
+    def bom(self) -> str:
+        return self.text.bom
+
 
 # ---------------------------------------------------------------------------------------
 # reading
 # ---------------------------------------------------------------------------------------
 def sniff(head: bytes) -> bool:
     return head.lstrip(b"\xef\xbb\xbf").startswith(b"PathFileType")
-
-
-def _split_lines(text: str) -> tuple[list[str], list[str]]:
-    """Lines and their endings, so that joining them gives ``text`` back."""
-    if "\r" not in text or text.count("\r") == text.count("\r\n") == text.count("\n"):
-        eol = "\r\n" if "\r" in text else "\n"
-        lines = text.split(eol)
-        endings = [eol] * (len(lines) - 1) + [""]
-    else:                                       # mixed or old-Mac line endings
-        parts = re.split(r"(\r\n|\n|\r)", text)
-        lines, endings = parts[0::2], parts[1::2] + [""]
-    if lines and lines[-1] == "" and len(lines) > 1:
-        lines.pop()
-        endings.pop()
-    return lines, endings
 
 
 def _fields(line: str) -> list[str]:
@@ -261,29 +254,34 @@ def _bad_token(rows, line_numbers, path) -> UnreadableFileError:
 CHUNK = 4096
 
 
-def _table(data: list[str], J: int, line_numbers: list[int], path) -> tuple[np.ndarray, int]:
-    """(T, 2 + 3J) floats of the data rows (NaN where empty), and how many values lie beyond
-    the labelled columns, CHUNK rows at a time. Rows of one length (most files) are
-    converted as they are; ragged rows are first cut or padded to the labelled columns."""
-    T, width = len(data), 2 + 3 * J
+def _table(text: TextLines, data_lines: np.ndarray, J: int, path) -> tuple[np.ndarray, int]:
+    """(T, 2 + 3J) floats of the data rows (lines ``data_lines`` of ``text``; NaN where
+    empty), and how many values lie beyond the labelled columns, decoded and converted
+    CHUNK rows at a time. When every row has one number of fields, at least the labelled
+    ones (most files), rows are converted as they are; else (found in any chunk) the rows
+    are converted again from the first, each cut or padded to the labelled columns."""
+    T, width = len(data_lines), 2 + 3 * J
     out = np.empty((T, width))
-    tabs = {row.count("\t") for row in data}
-    if len(tabs) == 1 and (columns := tabs.pop() + 1) >= width:
-        extra = 0
-        for a in range(0, T, CHUNK):
-            rows = data[a:a + CHUNK]
-            values = _floats("\t".join(rows), len(rows) * columns)
-            if values is None:
-                break
-            values = values.reshape(len(rows), columns)
-            out[a:a + len(rows)] = values[:, :width]
-            extra += int(np.count_nonzero(~np.isnan(values[:, width:])))
-        else:
-            return out, extra
+    extra, columns = 0, None
+    for a in range(0, T, CHUNK):
+        rows = text.lines_at(data_lines[a:a + CHUNK])
+        tabs = {row.count("\t") for row in rows}
+        n = tabs.pop() + 1 if len(tabs) == 1 else 0         # the rows' one field count
+        if n < width or columns not in (None, n):
+            break
+        columns = n
+        values = _floats("\t".join(rows), len(rows) * columns)
+        if values is None:
+            break
+        values = values.reshape(len(rows), columns)
+        out[a:a + len(rows)] = values[:, :width]
+        extra += int(np.count_nonzero(~np.isnan(values[:, width:])))
+    else:
+        return out, extra
     extra = 0
     for a in range(0, T, CHUNK):
         rows = []
-        for row in data[a:a + CHUNK]:
+        for row in text.lines_at(data_lines[a:a + CHUNK]):
             f = row.split("\t")
             if len(f) < width:
                 f += [""] * (width - len(f))
@@ -292,9 +290,10 @@ def _table(data: list[str], J: int, line_numbers: list[int], path) -> tuple[np.n
             rows.append("\t".join(f[:width]))
         values = _floats("\t".join(rows), len(rows) * width)
         if values is None:
-            rest = (r for row in data[a + len(rows):]
+            rest = (r for b in range(a + CHUNK, T, CHUNK)
+                    for row in text.lines_at(data_lines[b:b + CHUNK])
                     for r in ["\t".join((row.split("\t") + [""] * width)[:width])])
-            raise _bad_token(chain(rows, rest), line_numbers[a:], path)
+            raise _bad_token(chain(rows, rest), (data_lines[a:] + 1).tolist(), path)
         out[a:a + len(rows)] = values.reshape(len(rows), width)
     return out, extra
 
@@ -302,48 +301,49 @@ def _table(data: list[str], J: int, line_numbers: list[int], path) -> tuple[np.n
 def read(path, fps: float | None = None, **options) -> Motion:
     """Read a TRC file (see the module docstring)."""
     path = Path(path)
-    raw = read_input_bytes(path)
-    refuse_wide_text(path, raw, "TRC")
-    try:
-        text = raw.decode("utf-8")
-    except UnicodeDecodeError:
-        text = raw.decode("latin-1")
-    bom = "\ufeff" if text.startswith("\ufeff") else ""
-    lines, endings = _split_lines(text[len(bom):])
-    if longest_field_bytes(raw) > MAX_FIELD:
-        refuse_long_fields(path, lines)
-    del raw, text                               # the lines are the one copy kept
+    raw = TextLines.open_large(path) or read_input_bytes(path)
+    refuse_wide_text(path, raw[:4096], "TRC")
+    text = TextLines.scan(path, raw, lone_cr=True, comments=False, fallback="latin-1")
+    if text.long_field is not None:
+        raise text.long_field
+    n_lines = len(text)
+    head = text.lines_at(np.arange(min(n_lines, 5)))
     notes: list[str] = []
-    header = _header(lines, path, notes)
+    header = _header(head, path, notes)
     rate = _rate(header, path)
     units = _units(header, path, notes)
     declared_markers = _count(header, "NumMarkers", path)
     declared_frames = _count(header, "NumFrames", path)
-    names = _labels(lines[3])
+    names = _labels(head[3])
     J = len(names)
     if declared_markers is not None and declared_markers != J:
         notes.append(f"NumMarkers says {declared_markers} but line 4 labels {J} markers; "
                      f"the labels were read")
-    first = 5 if len(lines) > 4 and not _is_data_row(lines[4]) else 4
-    data_lines = [i for i in range(first, len(lines)) if lines[i].strip()]
+    first = 5 if n_lines > 4 and not _is_data_row(head[4]) else 4
+    data_lines = first + np.flatnonzero(text.content[first:])     # the lines not blank
     skip: list[int] = []
-    if (len(data_lines) > 1 and endings[data_lines[-1]] == ""
-            and len(lines[data_lines[-1]].split("\t")) < len(lines[data_lines[-2]].split("\t"))):
-        skip = [data_lines.pop()]
-        notes.append(f"last line (line {skip[0] + 1}) is shorter than the one before and "
-                     f"has no line break: the file looks truncated; that line was dropped")
-    if not data_lines:
+    if len(data_lines) > 1 and data_lines[-1] == n_lines - 1 and text.end(n_lines - 1) == \
+            text.stops[-1]:                                         # no line break after it
+        last, before = text.lines_at(data_lines[-2:])[::-1]
+        if len(last.split("\t")) < len(before.split("\t")):
+            skip = [int(data_lines[-1])]
+            data_lines = data_lines[:-1]
+            notes.append(f"last line (line {skip[0] + 1}) is shorter than the one before and "
+                         f"has no line break: the file looks truncated; that line was dropped")
+    if not len(data_lines):
         raise UnreadableFileError(path, f"no data rows after the header (expected rows "
                                         f"'frame<TAB>time<TAB>x<TAB>y<TAB>z...' from line {first + 1})")
     T = len(data_lines)
-    rows = [lines[i] for i in data_lines]
-    values, extra = _table(rows, J, [i + 1 for i in data_lines], path)
+    values, extra = _table(text, data_lines, J, path)
+    decimals = _common_decimals(text, data_lines)
+    text.keep(path)                 # parsed: a large file's bytes are read again when written
     times = values[:, 1].copy()
     if not np.isfinite(times).all():
         k = int(np.flatnonzero(~np.isfinite(times))[0])
         raise UnreadableFileError(path, "empty or non-finite Time (expected seconds in "
-                                        "column 2)", line=data_lines[k] + 1)
+                                        "column 2)", line=int(data_lines[k]) + 1)
     positions = np.ascontiguousarray(values[:, 2:]).reshape(T, J, 3)
+    del values
     infinite = np.isinf(positions).any(axis=2)
     if infinite.any():
         t, j = np.argwhere(infinite)[0]
@@ -359,24 +359,24 @@ def read(path, fps: float | None = None, **options) -> Motion:
                      f"columns); they were not read and are written back unchanged")
     if T > 1 and not (np.diff(times) > 0).all():
         notes.append("the Time column does not increase on every row")
-    source = TRCSource(bom=bom, lines=lines, endings=endings,
-                       data_lines=np.asarray(data_lines, dtype=np.intp), names=list(names),
+    source = TRCSource(text=text, data_lines=data_lines.astype(np.intp), names=list(names),
                        header=header, original=positions.copy(), missing=missing,
-                       decimals=_common_decimals(rows), skip_lines=skip,
-                       unlabelled_values=extra)
+                       decimals=decimals, skip_lines=skip, unlabelled_values=extra)
     return Motion(positions, list(names), float(fps) if fps else rate, units=units,
                   metres_per_unit=METRES_PER_UNIT[units], format=NAME, times=times,
                   source=source, notes=notes)
 
 
-def _common_decimals(rows: list[str], enough: int = 300) -> int:
-    """The most common number of decimals among the first ``enough`` values of ``rows``."""
+def _common_decimals(text: TextLines, data_lines: np.ndarray, enough: int = 300) -> int:
+    """The most common number of decimals among the first ``enough`` values of the rows
+    (lines ``data_lines`` of ``text``)."""
     counts: Counter = Counter()
-    for row in rows:
-        counts.update(len(t) - t.index(".") - 1 for t in map(str.strip, row.split("\t")[2:])
-                      if "." in t and "e" not in t.lower())
-        if counts.total() >= enough:
-            break
+    for a in range(0, len(data_lines), 64):
+        for row in text.lines_at(data_lines[a:a + 64]):
+            counts.update(len(t) - t.index(".") - 1 for t in map(str.strip, row.split("\t")[2:])
+                          if "." in t and "e" not in t.lower())
+            if counts.total() >= enough:
+                return counts.most_common(1)[0][0]
     return counts.most_common(1)[0][0] if counts else DECIMALS
 
 
@@ -457,42 +457,24 @@ def _changed(source: TRCSource, motion: Motion) -> tuple[np.ndarray, np.ndarray]
 
 
 def _patched_pieces(source: TRCSource, motion: Motion):
-    """The source's lines (UTF-8) with the rows holding changed samples rewritten, CHUNK
-    rows at a time."""
+    """The file's bytes with the rows holding changed samples rewritten (CHUNK rows
+    at a time) and a truncated last fragment left out, in pieces to write."""
     changed, now_missing = _changed(source, motion)
     rows = np.flatnonzero(changed.any(axis=1))
-    yield source.bom.encode("utf-8")
-    done = 0                                    # lines written so far
-    for a in range(0, len(rows), CHUNK):
-        at = source.data_lines[rows[a:a + CHUNK]].tolist()
-        new = dict(zip(at, _patched_rows(source, motion, rows[a:a + CHUNK], at, changed,
-                                         now_missing)))
-        yield from _lines_text(source, done, at[-1] + 1, new)
-        done = at[-1] + 1
-    yield from _lines_text(source, done, len(source.lines), {})
 
-
-def _lines_text(source: TRCSource, start: int, stop: int, new: dict):
-    """Lines ``start``..``stop`` with their endings (``new``: line -> text in its place;
-    the skipped fragment left out), CHUNK lines a piece."""
-    skip = set(source.skip_lines)
-    for a in range(start, stop, CHUNK):
-        b = min(stop, a + CHUNK)
-        lines = source.lines[a:b]
-        if new:
-            lines = [new.get(i, line) for i, line in enumerate(lines, a)]
-        text = "".join(map(str.__add__, lines, source.endings[a:b]))
-        if skip & set(range(a, b)):
-            text = "".join(line + end for i, (line, end) in
-                           enumerate(zip(lines, source.endings[a:b]), a) if i not in skip)
-        yield text.encode("utf-8")
+    def edits():
+        for a in range(0, len(rows), CHUNK):
+            at = source.data_lines[rows[a:a + CHUNK]]
+            yield from zip(at.tolist(), _patched_rows(source, motion, rows[a:a + CHUNK], at,
+                                                      changed, now_missing))
+    return source.text.pieces(edits(), deleted=source.skip_lines)
 
 
 def _patched_rows(source: TRCSource, motion: Motion, rows, at, changed, now_missing):
     """The new text of lines ``at``, the data rows of frames ``rows``."""
     J = motion.n_joints
     R, width = len(rows), 2 + 3 * J
-    fields = [source.lines[i].split("\t") for i in at]
+    fields = [line.split("\t") for line in source.text.lines_at(at)]
     short = {}                              # trimmed rows: index -> their field count
     for k, f in enumerate(fields):
         if len(f) < width:

@@ -14,19 +14,24 @@ import shutil
 
 import numpy as np
 import pytest
-from conftest import need, shared, shared_files
+from conftest import FORMATS_DATA, need, shared, shared_files
 
 import mocapfix
 from mocapfix import formats
 from mocapfix.core.errors import MocapfixError, UnreadableFileError
 from mocapfix.core.fileio import read_input_bytes
-from mocapfix.formats import asfamc, bvh, c3d, filebytes, kinect, textlines
+from mocapfix.formats import asfamc, bvh, c3d, filebytes, kinect, textlines, trc
 from mocapfix.formats.c3d import C3DSource, _StoredRecords
 from mocapfix.formats.filebytes import FileBytes
 from mocapfix.quality.info import summarise
 
+#: the TRC files of ../shared/formats that read (tests/formats/test_trc.py's READABLE)
+TRC_FILES = [pytest.param(FORMATS_DATA / "trc" / name, id=name) for name in (
+    "btk_10002-20130626160334-Unnamed.trc", "btk_Anto.trc", "btk_Gait.trc", "btk_Knee.trc",
+    "btk_Res16bits.trc", "btk_UpperLimbStatic.trc", "btk_motek_T.trc",
+    "btk_motek_ballet_reduced.trc")]
 FILES = (shared_files("bvh") + shared_files("asfamc", "*.amc") + shared_files("kinect")
-         + shared_files("c3d"))
+         + shared_files("c3d") + TRC_FILES)
 
 
 def _held(motion):
@@ -60,7 +65,8 @@ def test_a_file_read_again_is_written_as_the_file_held(path, tmp_path, monkeypat
     monkeypatch.setattr(bvh, "CHUNK", 7)
     monkeypatch.setattr(asfamc, "_BLOCK", 97)      # an AMC's likewise
     monkeypatch.setattr(asfamc, "_CHUNK", 7)
-    monkeypatch.setattr(textlines, "BLOCK", 97)    # a Kinect file's lines decoded likewise
+    monkeypatch.setattr(textlines, "BLOCK", 97)    # a Kinect or TRC file's lines likewise
+    monkeypatch.setattr(trc, "CHUNK", 7)
     again = formats.read(path)
     assert isinstance(_held(again), (FileBytes, _StoredRecords))
     assert isinstance(_held(held), (bytes, np.ndarray))
@@ -78,7 +84,7 @@ def test_a_file_read_again_is_written_as_the_file_held(path, tmp_path, monkeypat
     for k, (a, b) in enumerate(((held, again), (held_clean, again_clean))):
         assert _write(a, tmp_path / f"held{k}", path.name) == \
             _write(b, tmp_path / f"again{k}", path.name)
-    if path.suffix in (".bvh", ".csv", ".txt"):    # an AMC's header line, a C3D's
+    if path.suffix in (".bvh", ".csv", ".txt", ".trc"):    # an AMC's header line, a C3D's
         # parameter section (Intel-encoded, its fills listed) are written by the writer
         assert (tmp_path / "again0" / path.name).read_bytes() == path.read_bytes()
 
@@ -127,6 +133,34 @@ def test_a_file_changed_after_the_read_is_an_error_at_the_write(change, tmp_path
         formats.write(motion, out)
     assert str(path) in str(caught.value) and "changed or moved since it was read" in str(caught.value)
     assert not out.parent.exists() or not any(out.parent.iterdir())
+
+
+@pytest.mark.parametrize("name", ["btk_Gait.trc", "kinect"])
+def test_a_file_changed_while_it_is_read_in_blocks_is_named_so(name, tmp_path, monkeypatch):
+    # a large file is read a block at a time: one that shrinks meanwhile is an error
+    # naming that moment, not the writer's ("since it was read ... when the output is
+    # written"), which nothing has started yet
+    monkeypatch.setattr(filebytes, "HELD_MAX", 0)
+    monkeypatch.setattr(textlines, "HEAD", 100)
+    monkeypatch.setattr(textlines, "BLOCK", 97)
+    src = (FORMATS_DATA / "trc" / name if name.endswith(".trc")
+           else shared("kinect/kv2_laban_Ges01_wavehand.csv"))
+    path = tmp_path / need(src).name
+    shutil.copyfile(src, path)
+    size = path.stat().st_size
+    real = textlines._block_to_line_end
+
+    def then_shrunk(raw, a, end, *args):
+        if a > 1000 and path.stat().st_size == size:
+            with open(path, "r+b") as f:
+                f.truncate(size // 2)
+        return real(raw, a, end, *args)
+
+    monkeypatch.setattr(textlines, "_block_to_line_end", then_shrunk)
+    with pytest.raises(UnreadableFileError) as caught:
+        formats.read(path)
+    message = str(caught.value)
+    assert str(path) in message and "changed or moved while it was read" in message
 
 
 def test_the_cli_names_the_changed_input_and_writes_nothing(tmp_path, monkeypatch):

@@ -24,7 +24,7 @@ from mocapfix import formats
 from mocapfix.cli import main
 from mocapfix.core.errors import UnreadableFileError, WriteError
 from mocapfix.core.motion import Motion
-from mocapfix.formats import trc
+from mocapfix.formats import filebytes, textlines, trc
 
 TRC_DIR = FORMATS_DATA / "trc"
 READABLE = ("btk_10002-20130626160334-Unnamed.trc", "btk_Anto.trc", "btk_Gait.trc",
@@ -255,9 +255,15 @@ def test_nan_tokens_short_rows_and_units(tmp_path):
         assert m.metres_per_unit == scale
 
 
+@pytest.mark.parametrize("large", [False, True])
 @pytest.mark.parametrize("variant", ["crlf", "cr", "mixed", "bom", "no-final-newline",
                                      "blank-fields"])
-def test_odd_texts_write_back_byte_identical_and_edit_cleanly(variant, tmp_path):
+def test_odd_texts_write_back_byte_identical_and_edit_cleanly(variant, large, tmp_path,
+                                                              monkeypatch):
+    if large:       # read as a file over the threshold: a block of 13 bytes at a time
+        monkeypatch.setattr(filebytes, "HELD_MAX", 0)
+        monkeypatch.setattr(textlines, "BLOCK", 13)
+        monkeypatch.setattr(trc, "CHUNK", 2)
     text = _small()
     text = {"crlf": text.replace("\n", "\r\n"), "cr": text.replace("\n", "\r"),
             "mixed": text.replace("\n", "\r\n", 4), "bom": "\ufeff" + text,
@@ -278,6 +284,47 @@ def test_odd_texts_write_back_byte_identical_and_edit_cleanly(variant, tmp_path)
     assert back.missing.tolist() == [[False, False], [True, True], [False, True]]
     kept = out.read_bytes().decode().replace("7.0\t8.0\t9.0", "4.0\t5.0\t6.0")
     assert kept.replace("3\t0.04\t1.0\t2.0\t3.0", "3\t0.04\tnan\tnan\tnan") == path.read_bytes().decode()
+
+
+@pytest.mark.parametrize("large", [False, True])
+def test_a_latin1_file_writes_back_in_latin1(large, tmp_path, monkeypatch):
+    # a file that is not UTF-8 is read as latin-1 (a lab's marker named "Épaule"); its
+    # unchanged lines are copied as they are, an edited row in latin-1 too, never re-encoded
+    if large:
+        monkeypatch.setattr(filebytes, "HELD_MAX", 0)
+        monkeypatch.setattr(textlines, "BLOCK", 13)
+    path = tmp_path / "x.trc"
+    path.write_bytes(_small().replace("\tA\t", "\t\u00c9paule\t").encode("latin-1"))
+    m = formats.read(path)
+    assert m.names == ["\u00c9paule", "B"]
+    formats.write(m, tmp_path / "same.trc")
+    assert (tmp_path / "same.trc").read_bytes() == path.read_bytes()
+    m.positions[2, 0] = [1.0, 2.0, 3.0]
+    formats.write(m, tmp_path / "edit.trc")
+    edited = (tmp_path / "edit.trc").read_bytes()
+    assert edited == path.read_bytes().replace(b"3\t0.04\tnan\tnan\tnan", b"3\t0.04\t1.0\t2.0\t3.0")
+    assert formats.read(tmp_path / "edit.trc").names == ["\u00c9paule", "B"]
+
+
+def test_values_read_shared_with_the_motion_write_the_same_bytes(tmp_path):
+    """``formats.share_values_read`` (what ``clean`` does after reading): the source's
+    values as read become the motion's positions, read-only, and the motion and its
+    cleaned take write the same bytes as without the sharing."""
+    import mocapfix
+
+    path = trc_file("btk_Gait.trc")
+    shared_motion, own = formats.read(path), formats.read(path)
+    formats.share_values_read(shared_motion)
+    assert shared_motion.source.original is shared_motion.positions
+    with pytest.raises(ValueError):
+        shared_motion.positions[0, 0, 0] = 1.0
+    assert own.source.original is not own.positions
+    for k, (a, b) in enumerate([(shared_motion, own),
+                                (mocapfix.clean(shared_motion)[0], mocapfix.clean(own)[0])]):
+        written = [formats.write(m, tmp_path / f"{k}{side}" / "g.trc")[0].read_bytes()
+                   for m, side in ((a, "shared"), (b, "own"))]
+        assert written[0] == written[1]
+        assert k == 1 or written[0] == path.read_bytes()
 
 
 def test_short_last_row_without_line_break_is_a_truncation(tmp_path):
