@@ -138,14 +138,10 @@ class TextLines:
                 paired = view[np.minimum(cr + 1, len(view) - 1)] == 10
                 paired &= cr + 1 < len(view)
                 ends = np.union1d(ends, cr[~paired])
-                # a LF after a CR ends the line with it (a block is never cut between them)
-                carriage.append((ends > 0) & (view[np.maximum(ends - 1, 0)] == 13)
-                                & (view[ends] == 10))
-            else:
-                # a CR before a newline ends the line with it (not in a line of its own: a
-                # block starts a line, after a newline or the mark)
-                line_start = np.concatenate([[0], ends[:-1] + 1])
-                carriage.append((ends > line_start) & (view[np.maximum(ends - 1, 0)] == 13))
+            # a CR before a newline ends the line with it (a block starts a line, and is
+            # never cut between the two)
+            carriage.append((ends > 0) & (view[np.maximum(ends - 1, 0)] == 13)
+                            & (view[ends] == 10))
             line_ends.append(a + ends)
             n_lines += len(pieces)
             a = b

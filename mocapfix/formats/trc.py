@@ -122,10 +122,6 @@ class TRCSource:
     skip_lines: list[int] = field(default_factory=list)   # a truncated last fragment
     unlabelled_values: int = 0   # values beyond the labelled columns (kept, not read)
 
-    @property
-    def bom(self) -> str:
-        return self.text.bom
-
 
 # ---------------------------------------------------------------------------------------
 # reading
