@@ -79,6 +79,7 @@ from mocapfix.core.errors import MAX_FIELD, UnreadableFileError, WriteError, exc
 from mocapfix.core.fileio import atomic_write_pieces, read_input_bytes
 from mocapfix.formats.filebytes import FileView, keep, large_view, runs_of
 from mocapfix.formats.textenc import refuse_wide_text
+from mocapfix.formats.textlines import line_end_bytes
 from mocapfix.core.kinematics import Rig, positions_in_chunks
 from mocapfix.core.motion import Motion, Skeleton
 from mocapfix.core.quantity import MAX_FRAME_RATE_HZ, MIN_FRAME_RATE_HZ
@@ -428,9 +429,7 @@ class _Lines:
             # one byte past the block: whether a CR at its end is followed by a LF
             more = np.frombuffer(data[a:min(b + 1, size)], np.uint8)
             blk = more[:b - a]
-            cr = np.flatnonzero(blk == 13)
-            lone = cr[(cr + 1 >= len(more)) | (more[np.minimum(cr + 1, len(more) - 1)] != 10)]
-            end = np.union1d(np.flatnonzero(blk == 10), lone) + 1
+            end = line_end_bytes(more, b - a) + 1
             after_cr = np.concatenate([[previous_cr], blk[:-1] == 13])
             ending = np.zeros(len(end), np.int8)
             is_lf = blk[end - 1] == 10

@@ -37,7 +37,6 @@ from pathlib import Path
 import numpy as np
 
 from mocapfix.core.errors import UnreadableFileError
-from mocapfix.core.fileio import read_input_bytes
 from mocapfix.formats.textlines import TextLines
 from mocapfix.core.motion import Motion
 from mocapfix.core.units import METRES_PER_UNIT, normalise_unit_name
@@ -73,7 +72,7 @@ def _settings(line: str) -> dict[str, str]:
 
 def read(path, fps: float | None = None, units: str | None = None, **options) -> Motion:
     path = Path(path)
-    text = tt.text_lines(path, TextLines.open_large(path) or read_input_bytes(path), "Motive CSV")
+    text = TextLines.read(path, "Motive CSV")
     settings = _settings(text.line(0))
     if "Format Version" not in settings:
         raise UnreadableFileError(path, "line 1 does not start with 'Format Version,'", line=1)

@@ -41,7 +41,6 @@ from pathlib import Path
 import numpy as np
 
 from mocapfix.core.errors import UnreadableFileError
-from mocapfix.core.fileio import read_input_bytes
 from mocapfix.formats.textlines import TextLines
 from mocapfix.core.motion import Motion
 from mocapfix.core.units import METRES_PER_UNIT, normalise_unit_name
@@ -75,7 +74,7 @@ def sniff(head: bytes) -> bool:
 
 def read(path, fps: float | None = None, units: str | None = None, **options) -> Motion:
     path = Path(path)
-    text = tt.text_lines(path, TextLines.open_large(path) or read_input_bytes(path), "Nexus CSV")
+    text = TextLines.read(path, "Nexus CSV")
     starts = _section_starts(text)
     sections = [text.line(i).strip(", \t") for i in starts]
     traj = next((i for i, name in zip(starts, sections) if name == "Trajectories"), None)

@@ -41,7 +41,6 @@ from pathlib import Path
 import numpy as np
 
 from mocapfix.core.errors import UnreadableFileError
-from mocapfix.core.fileio import read_input_bytes
 from mocapfix.formats.textlines import TextLines
 from mocapfix.core.motion import Motion
 from mocapfix.formats import texttable as tt
@@ -76,7 +75,7 @@ def read(path, fps: float | None = None, units: str | None = None,
          zero_missing: bool | None = None, default_fps: float | None = None,
          **options) -> Motion:
     path = Path(path)
-    text = tt.text_lines(path, TextLines.open_large(path) or read_input_bytes(path), "QTM TSV")
+    text = TextLines.read(path, "QTM TSV")
     header, i = _header(text)
     for key in _REQUIRED:
         if key not in header:

@@ -27,8 +27,10 @@ import re
 import numpy as np
 
 from mocapfix.core.errors import MAX_FIELD, UnreadableFileError
+from mocapfix.core.fileio import read_input_bytes
 from mocapfix.formats.filebytes import FileBytes, FileView, keep, large_view, runs_of
-from mocapfix.formats.textenc import UTF8_BOM, longest_field_bytes, refuse_long_fields
+from mocapfix.formats.textenc import (UTF8_BOM, longest_field_bytes, refuse_long_fields,
+                                      refuse_wide_text)
 
 #: bytes of the file decoded at a time (cut at a line end, so never inside a character)
 BLOCK = 1 << 22
@@ -79,6 +81,15 @@ def _after_first_end(data: bytes, within: int, lone_cr: bool) -> int:
 
 #: a line ending where a lone CR ends a line too (old Mac OS files)
 _ANY_EOL = re.compile(r"\r\n|\n|\r")
+
+
+def line_end_bytes(view: np.ndarray, n: int) -> np.ndarray:
+    """Offsets in ``view[:n]`` (uint8) of the bytes that end a line when LF, CRLF and a
+    lone CR all do: every LF, and every CR not followed by a LF (``view`` may hold one
+    byte past ``n`` to tell; a CR at its very end is lone)."""
+    cr = np.flatnonzero(view[:n] == 13)
+    lone = cr[(cr + 1 >= len(view)) | (view[np.minimum(cr + 1, len(view) - 1)] != 10)]
+    return np.union1d(np.flatnonzero(view[:n] == 10), lone)
 
 
 class TextLines:
@@ -135,12 +146,7 @@ class TextLines:
                     and longest_field_bytes(view) > MAX_FIELD):
                 long_line = cls._long_field(path, pieces, n_lines,
                                              b == size and data[-1:] != b"\n")
-            ends = np.flatnonzero(view == 10)
-            if lone_cr:
-                cr = np.flatnonzero(view == 13)
-                paired = view[np.minimum(cr + 1, len(view) - 1)] == 10
-                paired &= cr + 1 < len(view)
-                ends = np.union1d(ends, cr[~paired])
+            ends = line_end_bytes(view, len(view)) if lone_cr else np.flatnonzero(view == 10)
             # a CR before a newline ends the line with it (a block starts a line, and is
             # never cut between the two)
             carriage.append((ends > 0) & (view[np.maximum(ends - 1, 0)] == 13)
@@ -163,6 +169,20 @@ class TextLines:
                     np.zeros(0, bool), encoding)
         lines.long_field = long_line
         return lines
+
+    @classmethod
+    def read(cls, path, what: str, **scan) -> TextLines:
+        """The lines of the file at ``path`` (one over
+        :data:`~mocapfix.formats.filebytes.HELD_MAX` bytes read a block at a time:
+        :meth:`open_large`); UTF-16/32 text (named as ``what``), undecodable bytes and a
+        field over MAX_FIELD characters refused, in that order, as each was found first
+        when the file was decoded whole. ``scan``: :meth:`scan`'s options."""
+        raw = cls.open_large(path) or read_input_bytes(path)
+        refuse_wide_text(path, raw[:4096], what)
+        text = cls.scan(path, raw, **scan)
+        if text.long_field is not None:
+            raise text.long_field
+        return text
 
     @staticmethod
     def open_large(path) -> FileView | None:

@@ -3,10 +3,9 @@ QTM TSV, OptiTrack Motive CSV): one row of text per frame, one separator charact
 Z of each marker in three fixed columns.
 
 What is shared: the file held once, as its bytes with the offsets of its lines (a file
-over 64 MB not held: read a block at a time, :meth:`TextLines.open_large`)
-(:func:`text_lines`, a :class:`~mocapfix.formats.textlines.TextLines`: UTF-8 with an
-optional byte-order mark; UTF-16/32, undecodable bytes and fields over MAX_FIELD named and
-refused), the vectorised parse of the data rows (:func:`parse_rows`: CHUNK rows at a time,
+over 64 MB not held: read a block at a time) (:meth:`TextLines.read
+<mocapfix.formats.textlines.TextLines.read>`: UTF-8 with an optional byte-order mark;
+UTF-16/32, undecodable bytes and fields over MAX_FIELD named and refused), the vectorised parse of the data rows (:func:`parse_rows`: CHUNK rows at a time,
 one ``split`` of the joined chunk and one numpy conversion, straight into the marker array;
 a row with the wrong number of fields, a non-numeric value or a huge field is one
 :class:`UnreadableFileError` naming its line), the source kept for writing back
@@ -35,7 +34,7 @@ from mocapfix.core.errors import UnreadableFileError
 from mocapfix.core.fileio import write_output_pieces
 from mocapfix.core.motion import Motion
 from mocapfix.core.quantity import MAX_FRAME_RATE_HZ, MIN_FRAME_RATE_HZ
-from mocapfix.formats.textenc import refuse_wide_text, wide_encoding
+from mocapfix.formats.textenc import wide_encoding
 from mocapfix.formats import textlines
 from mocapfix.formats.textlines import TextLines
 
@@ -53,18 +52,6 @@ def quote(token: str) -> str:
     """``token`` for a one-line message: shortened, control characters shown as ``?``."""
     token = "".join(c if c.isprintable() else "?" for c in token[:_QUOTE + 1])
     return repr(token if len(token) <= _QUOTE else token[:_QUOTE] + "...")
-
-
-def text_lines(path, raw, what: str) -> TextLines:
-    """The lines of a file's bytes (bytes, or a large file's FileView: read a block at a
-    time, never whole), held as those bytes; UTF-16/32, undecodable bytes and a field
-    over MAX_FIELD characters refused (in that order, as each was found first when the
-    file was decoded whole)."""
-    refuse_wide_text(path, raw[:4096], what)
-    text = TextLines.scan(path, raw)
-    if text.long_field is not None:
-        raise text.long_field
-    return text
 
 
 def first_line(text: TextLines, start: int, test) -> int:

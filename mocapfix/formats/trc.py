@@ -86,11 +86,10 @@ from mocapfix.core.errors import (
     UnsupportedFeatureError,
     WriteError,
 )
-from mocapfix.core.fileio import read_input_bytes, write_output_pieces
+from mocapfix.core.fileio import write_output_pieces
 from mocapfix.core.motion import Motion, missing_samples
 from mocapfix.core.quantity import MAX_FRAME_RATE_HZ, MIN_FRAME_RATE_HZ
 from mocapfix.core.units import METRES_PER_UNIT, normalise_unit_name
-from mocapfix.formats.textenc import refuse_wide_text
 from mocapfix.formats.textlines import TextLines
 
 NAME = "trc"
@@ -297,11 +296,7 @@ def _table(text: TextLines, data_lines: np.ndarray, J: int, path) -> tuple[np.nd
 def read(path, fps: float | None = None, **options) -> Motion:
     """Read a TRC file (see the module docstring)."""
     path = Path(path)
-    raw = TextLines.open_large(path) or read_input_bytes(path)
-    refuse_wide_text(path, raw[:4096], "TRC")
-    text = TextLines.scan(path, raw, lone_cr=True, comments=False, fallback="latin-1")
-    if text.long_field is not None:
-        raise text.long_field
+    text = TextLines.read(path, "TRC", lone_cr=True, comments=False, fallback="latin-1")
     n_lines = len(text)
     head = text.lines_at(np.arange(min(n_lines, 5)))
     notes: list[str] = []

@@ -113,15 +113,13 @@ def test_a_large_file_is_read_a_block_at_a_time(name, fmt, expected, tmp_path, m
     # over HELD_MAX (0 here) the file is never read whole: scanned, checked and parsed from
     # the file 97 bytes and 7 rows at a time, and written back from it; the same motion,
     # and the same bytes written unchanged and with a sample moved, as read whole
-    import importlib
-
     from mocapfix.formats import filebytes, textlines, texttable
 
     held = formats.read(VENDOR / name)
     moved = held.copy()
     t, j = np.argwhere(~held.missing)[len(held.positions) // 2]
     moved.positions[t, j] += 1.5
-    monkeypatch.setattr(importlib.import_module(f"mocapfix.formats.{fmt}"), "read_input_bytes",
+    monkeypatch.setattr(textlines, "read_input_bytes",       # TextLines.read's whole read
                         lambda path: pytest.fail(f"{path} read whole"))
     monkeypatch.setattr(filebytes, "HELD_MAX", 0)
     monkeypatch.setattr(textlines, "BLOCK", 97)
