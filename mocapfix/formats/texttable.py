@@ -2,10 +2,11 @@
 QTM TSV, OptiTrack Motive CSV): one row of text per frame, one separator character, the X, Y,
 Z of each marker in three fixed columns.
 
-What is shared: the file held once, as its bytes with the offsets of its lines (a file
-over 64 MB not held: read a block at a time) (:meth:`TextLines.read
-<mocapfix.formats.textlines.TextLines.read>`: UTF-8 with an optional byte-order mark;
-UTF-16/32, undecodable bytes and fields over MAX_FIELD named and refused), the vectorised parse of the data rows (:func:`parse_rows`: CHUNK rows at a time,
+What is shared: the file held once, as its bytes with the offsets of its lines, a file
+over 64 MB read a block at a time, never whole (the readers open it with
+:meth:`TextLines.read <mocapfix.formats.textlines.TextLines.read>`: UTF-8 with an optional
+byte-order mark; UTF-16/32, undecodable bytes and fields over MAX_FIELD named and
+refused), the vectorised parse of the data rows (:func:`parse_rows`: CHUNK rows at a time,
 one ``split`` of the joined chunk and one numpy conversion, straight into the marker array;
 a row with the wrong number of fields, a non-numeric value or a huge field is one
 :class:`UnreadableFileError` naming its line), the source kept for writing back
