@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from mocapfix import formats
+from mocapfix.core.diskarray import FramesOnDisk
 from mocapfix.core.errors import UnreadableFileError
 from mocapfix.core.fileio import NAME_MAX, atomic_write_text, is_stream, refuse_stream
 from mocapfix.core.memory import release_freed_memory
@@ -30,7 +31,8 @@ REPORT_KINDS = ("json", "md", "html")
 
 
 def clean_motion(motion: Motion, pipeline: Pipeline, to: str | None = None,
-                 windows: Windows | None | str = "budget") -> CleanResult:
+                 windows: Windows | None | str = "budget",
+                 keep_input_on_disk: Path | None = None) -> CleanResult:
     """Run ``pipeline`` on ``motion``. For BVH/AMC the cleaned positions are turned back
     into the file's channels and the written positions are their forward kinematics; a
     value the output file cannot hold is dropped as its writer will drop it
@@ -43,7 +45,16 @@ def clean_motion(motion: Motion, pipeline: Pipeline, to: str | None = None,
     :class:`~mocapfix.pipeline.windows.Windows` to choose them, None to clean it whole.
     A take whose frames repeat the frame before them is cleaned on its distinct frames
     (:mod:`mocapfix.pipeline.held`), and a take that jumps as a whole somewhere (takes
-    joined) as the takes between its jumps (:mod:`mocapfix.pipeline.cuts`)."""
+    joined) as the takes between its jumps (:mod:`mocapfix.pipeline.cuts`).
+
+    ``keep_input_on_disk``: a folder, for a caller that has no other use for ``motion``
+    (``clean_file``): a take over the memory budget (cleaned in windows, or as the takes
+    between its cuts) is then cleaned in place, its arrays
+    becoming the cleaned motion's, while ``motion`` (the result's ``original``) and its
+    source read the values as read from an unlinked file in that folder
+    (:class:`~mocapfix.core.diskarray.FramesOnDisk`): the input is not held in memory
+    beside the output. Where the file cannot be written the input is copied, as
+    without."""
     started = time.perf_counter()
     why = pipeline.not_cleaned(motion)
     held = HeldFrames.find(motion)
@@ -55,8 +66,9 @@ def clean_motion(motion: Motion, pipeline: Pipeline, to: str | None = None,
     if plan is None:
         cleaned, records, residual = _clean_span(distinct, pipeline, why)
     else:
-        cleaned, records, residual = _clean_windowed(distinct, pipeline, why, plan,
-                                                     distances=windows is None)
+        cleaned, records, residual = _clean_windowed(
+            distinct, pipeline, why, plan, distances=windows is None,
+            disk=keep_input_on_disk if held is None and windows is not None else None)
     if len(at):     # in place: replace() would copy the take's arrays
         cleaned.notes = [*cleaned.notes, cuts_note(at if held is None else held.kept[at])]
     if held is not None:
@@ -87,19 +99,24 @@ def _clean_span(motion: Motion, pipeline: Pipeline, why: list, points: np.ndarra
 
 
 def _clean_windowed(motion: Motion, pipeline: Pipeline, why: list, plan: Pieces,
-                    distances: bool = False):
+                    distances: bool = False, disk: Path | None = None):
     """:func:`_clean_span` over the pieces of ``plan`` (overlapping windows, the takes
     between cuts), put together frame by frame (:mod:`mocapfix.pipeline.windows`). The
     points the pipeline cleans are decided once, on the whole take. ``distances``: the
     steps' records keep how far they moved each sample (a take the memory budget lets
-    be cleaned whole), not only the mean."""
+    be cleaned whole), not only the mean. ``disk``: :func:`clean_motion`'s
+    ``keep_input_on_disk``."""
     T, J = motion.n_frames, motion.n_joints
     cuts = list(plan.cuts)
     per_point = point_cuts(motion.missing, cuts, plan.overlaps)
     points = np.array([w is None for w in why], bool)
-    positions = motion.positions.copy()
-    confidence = None if motion.confidence is None else motion.confidence.copy()
-    channels = None if motion.channels is None else motion.channels.copy()
+    taken = None if disk is None else _input_to_disk(motion, disk)
+    if taken is None:
+        positions = motion.positions.copy()
+        confidence = None if motion.confidence is None else motion.confidence.copy()
+        channels = None if motion.channels is None else motion.channels.copy()
+    else:
+        positions, confidence, channels = taken
     residual = None
     notes = list(motion.notes)
     masks: list[dict] = []
@@ -181,6 +198,43 @@ def _clean_windowed(motion: Motion, pipeline: Pipeline, why: list, plan: Pieces,
     return cleaned, records, residual
 
 
+_INPUT_ARRAYS = ("positions", "confidence", "channels")
+
+
+def _input_to_disk(motion: Motion, folder: Path):
+    """The motion's positions, confidence and channels, to be cleaned in place, with
+    ``motion`` and its source (the values a writer compares with) now reading the values
+    as read from disk (:class:`FramesOnDisk`); None, and nothing changed, when they cannot
+    be written there (no room, no permission)."""
+    arrays = [getattr(motion, name) for name in _INPUT_ARRAYS]
+    try:
+        kept = [None if a is None else FramesOnDisk(a, folder) for a in arrays]
+    except OSError:
+        return None
+    source = motion.source
+    out = []
+    for name, array, disk in zip(_INPUT_ARRAYS, arrays, kept):
+        if array is None:
+            out.append(None)
+            continue
+        for shared in ("values", "original"):   # share_values_read made them one array
+            if getattr(source, shared, None) is array:
+                setattr(source, shared, disk)
+        try:
+            array.flags.writeable = True        # read-only as shared with the source
+        except ValueError:                      # a view of memory it cannot write
+            array = array.copy()
+        setattr(motion, name, disk)
+        out.append(array)
+    return tuple(out)
+
+
+def _disk_folder(output: Path) -> Path:
+    """Where a long take's input is kept while it is cleaned: the output's folder, or the
+    nearest folder above it that exists (the output's is made when it is written)."""
+    return next(f for f in Path(output).absolute().parents if f.is_dir())
+
+
 def report_paths(output: Path, kinds) -> dict[str, Path]:
     """``take.c3d`` → ``take.c3d.report.json`` (``.md``, ``.html``): named after the whole
     output name, so that ``take.c3d`` and ``take.bvh`` in one folder do not share reports
@@ -231,11 +285,13 @@ def clean_file(source: Path, output: Path, pipeline: Pipeline, reports=("json",)
     not asked for this time are removed beside the new output (no stale reports). An output
     or report path that is a device or a pipe, or a link to one, is a WriteError before
     anything is written (it would swallow the output)."""
-    motion = formats.read(source, **(read_options or {}))
-    formats.share_values_read(motion)       # cleaning never writes into the motion read
+    # cleaning never writes into the motion read: the source's values are its own arrays
+    motion = formats.read(source, share_values=True, **(read_options or {}))
+    # the reader's freed temporaries go back to the system before the take is cleaned
+    release_freed_memory()
     if motion.n_frames == 0:
         raise UnreadableFileError(source, "holds no frames; nothing to clean")
-    result = clean_motion(motion, pipeline, to)
+    result = clean_motion(motion, pipeline, to, keep_input_on_disk=_disk_folder(output))
     report = build_report(result, pipeline.report)
     paths = report_paths(output, reports)
     writers = {"json": lambda: to_json(report), "md": lambda: to_markdown(report),

@@ -179,7 +179,8 @@ class Motion:
     @property
     def missing(self) -> np.ndarray:
         """(T, J) boolean: True where a sample is missing (any coordinate NaN)."""
-        return missing_samples(self.positions)
+        kept = getattr(self.positions, "missing", None)      # positions kept on disk
+        return missing_samples(self.positions) if kept is None else kept
 
     # -- copies ---------------------------------------------------------------
     def replace(self, **changes) -> "Motion":

@@ -138,7 +138,7 @@ def detect(path) -> str:
 
 
 def read(path, format: str | None = None, *, default_fps: float | None = None,
-         **options) -> Motion:
+         share_values: bool = False, **options) -> Motion:
     """Read any supported file into a :class:`Motion`.
 
     ``fps`` (an option of every reader) overrides the file's rate; ``default_fps`` (the
@@ -148,6 +148,11 @@ def read(path, format: str | None = None, *, default_fps: float | None = None,
     used where it differs: a batch of AMC and C3D files given ``--fps 60`` for the AMC
     files rewrote the C3D files' rate).
 
+    ``share_values``: for a caller that never changes the motion it reads in place
+    (``clean``): what the source keeps for its writer is the motion's own arrays, made
+    read-only (:func:`share_values_read`); the BVH and AMC readers then never make their
+    copy of the channels (a whole-take array at the read's peak).
+
     Any failure is a :class:`UnreadableFileError` naming the file and the cause.
     """
     path = Path(path)
@@ -156,6 +161,16 @@ def read(path, format: str | None = None, *, default_fps: float | None = None,
     if path.is_dir():
         raise UnreadableFileError(path, "is a directory, not a file")
     name = format or detect(path)
+    if share_values and name in ("bvh", "asfamc"):
+        options = {**options, "share_values": True}
+    motion = _read_at_rate(path, name, default_fps, options)
+    if share_values:
+        share_values_read(motion)
+    return motion
+
+
+def _read_at_rate(path: Path, name: str, default_fps: float | None, options: dict) -> Motion:
+    """:func:`read` of a file of format ``name``, ``default_fps`` applied as it says."""
     if default_fps is None or options.get("fps") is not None:
         return _read_as(path, name, options)
     if name == "asfamc":                           # AMC files never store a rate

@@ -72,7 +72,7 @@ import numpy as np
 from mocapfix.core.errors import MAX_FIELD, UnreadableFileError, UnsupportedFeatureError, WriteError
 from mocapfix.core.fileio import (atomic_write_bytes, atomic_write_pieces, read_input_bytes,
                                   refuse_stream, regular_file_problem)
-from mocapfix.formats.filebytes import keep, large_view, runs_of
+from mocapfix.formats.filebytes import keep, kept_values, large_view, runs_of
 from mocapfix.formats.textenc import UTF8_BOM, refuse_long_fields, refuse_wide_text
 from mocapfix.core.kinematics import Rig, euler_to_matrix, positions_in_chunks
 from mocapfix.core.motion import Motion, Skeleton
@@ -155,7 +155,9 @@ class AsfAmcSource:
     eol: str
     header_lines: list[str]                # raw AMC lines before the first frame ('\r' kept)
     body: _AmcLines | None = None        # the AMC lines from the first frame on
-    content_index: np.ndarray | None = None  # body line of each frame/bone line (T*lpf,)
+    # body line of each frame/bone line (T*lpf,): a range when they are simply the body's
+    # lines (the usual case; an array of them was 8 bytes a line, 16 a joint-frame)
+    content_index: np.ndarray | range | None = None
     frame_numbers: np.ndarray | None = None
     values: np.ndarray | None = None         # (T, C) the values as read
     flags: dict = field(default_factory=dict)  # AMC header: degrees, fully_specified, unknown
@@ -715,7 +717,7 @@ def parse_amc(path, data, asf: AsfSkeleton, lines: _AmcLines | None = None) -> A
         asf_path="", asf_bytes=b"", asf=asf, layout=layout,
         degrees=(asf.angle_unit == "deg") if degrees is None else degrees,
         eol="\r\n" if lines[0].endswith("\r") else "\n", header_lines=header, body=body,
-        content_index=np.asarray(content, dtype=np.intp),
+        content_index=content if contiguous else np.asarray(content, dtype=np.intp),
         frame_numbers=frame_numbers, values=values,
         flags=flags)
     if body[-1].strip():
@@ -883,7 +885,8 @@ def read(path, fps: float | None = None, **options) -> Motion:
     frames = source.frame_numbers
     if len(frames) > 1 and np.any(np.diff(frames) != 1):
         notes.append("AMC frame numbers are not consecutive; frames are taken as evenly spaced")
-    return _motion(source, source.values.copy(), fps, notes)
+    return _motion(source, kept_values(source.values, options.get("share_values", False)),
+                   fps, notes)
 
 
 def _read_rest_pose(path: Path, fps) -> Motion:
@@ -1122,6 +1125,14 @@ def _patched_pieces(source: AsfAmcSource, channels: np.ndarray):
     yield from runs_of(body.data, done, len(body.data))
 
 
+def _body_lines(index: np.ndarray | range, rows: np.ndarray) -> list[int]:
+    """The body lines of the content lines ``rows`` (``index``: the source's
+    ``content_index``)."""
+    if isinstance(index, range):
+        return (index.start + rows * index.step).tolist()
+    return index[rows].tolist()
+
+
 def _patched_lines(source: AsfAmcSource, channels: np.ndarray, first: int):
     """(body line, new text) of the bone lines of frames ``first`` on (``channels``) whose
     values changed, in line order."""
@@ -1139,7 +1150,7 @@ def _patched_lines(source: AsfAmcSource, channels: np.ndarray, first: int):
         frames = np.flatnonzero(line_changed.any(axis=1))
         rows = line_changed[frames].tolist()
         new_text = text[frames, starts[k]:starts[k + 1]].tolist()
-        lines = source.content_index[(first + frames) * per_frame + 1 + k].tolist()
+        lines = _body_lines(source.content_index, (first + frames) * per_frame + 1 + k)
         for i, row, new in zip(lines, rows, new_text):
             line = source.body[i]
             tokens = [n if c else o for o, n, c in zip(line.split()[1:], new, row)]

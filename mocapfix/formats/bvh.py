@@ -77,7 +77,7 @@ import numpy as np
 
 from mocapfix.core.errors import MAX_FIELD, UnreadableFileError, WriteError, excerpt
 from mocapfix.core.fileio import atomic_write_pieces, read_input_bytes
-from mocapfix.formats.filebytes import FileView, keep, large_view, runs_of
+from mocapfix.formats.filebytes import FileView, keep, kept_values, large_view, runs_of
 from mocapfix.formats.textenc import refuse_wide_text
 from mocapfix.formats.textlines import line_end_bytes
 from mocapfix.core.kinematics import Rig, positions_in_chunks
@@ -701,7 +701,9 @@ def _rest_positions(rig: Rig) -> np.ndarray:
 # ---------------------------------------------------------------------------------------
 def read(path, fps: float | None = None, allow_truncated: bool = False, **options) -> Motion:
     """Read a BVH file; see the module docstring. ``allow_truncated`` reads the complete
-    frames of a truncated file (with a note) instead of refusing it."""
+    frames of a truncated file (with a note) instead of refusing it. ``share_values``
+    (:func:`mocapfix.formats.read`'s): the source's values are the motion's channels,
+    read-only, not a copy."""
     path = Path(path)
     data = _large(path) or read_input_bytes(path)
     head = data.head if isinstance(data, FileView) else data
@@ -740,7 +742,7 @@ def read(path, fps: float | None = None, allow_truncated: bool = False, **option
         data=keep(path, parts["data"]),
         frames_start=parts["frames_start"],
         frame_ends=parts["frame_ends"],
-        values=values.copy(),
+        values=kept_values(values, options.get("share_values", False)),
         tail=parts["tail"],
         newline=parts["newline"],
         frame_time=frame_time,
@@ -873,7 +875,19 @@ def _frame_pieces(source: BvhSource, channels: np.ndarray):
     the source's), every line but the last with a line ending."""
     n_old, T = len(source.values), len(channels)
     common = min(T, n_old)
-    changed = np.flatnonzero((channels[:common] != source.values[:common]).any(axis=1))
+    # a chunk of the values read at a time: on a long take they may be kept on disk
+    # (mocapfix.core.diskarray), and a whole-take comparison was one more (T, C) array
+    changed = np.concatenate([np.flatnonzero((channels[a:b] != source.values[a:b]).any(axis=1)) + a
+                              for a, b in ((a, min(a + CHUNK, common))
+                                           for a in range(0, common, CHUNK))]
+                             or [np.zeros(0, np.intp)])
+    held = [-1, None]                             # the chunk of values read the rows are in
+
+    def old(i: int) -> np.ndarray:
+        a = i - i % CHUNK
+        if held[0] != a:
+            held[:] = [a, np.asarray(source.values[a:a + CHUNK])]
+        return held[1][i - a]
     special = np.union1d(changed, np.array([k for k in (n_old - 1, T - 1) if 0 <= k < common],
                                            dtype=np.intp))
     ends_with_newline = n_old and source.frame_line(n_old - 1).endswith((b"\n", b"\r"))
@@ -895,8 +909,8 @@ def _frame_pieces(source: BvhSource, channels: np.ndarray):
             yield from runs_of(source.data, source.frame_start(done),
                                int(source.frame_ends[i - 1]))
         line = source.frame_line(i)
-        if not np.array_equal(channels[i], source.values[i]):
-            line = _rewrite_line(line, channels[i], source.values[i])
+        if not np.array_equal(channels[i], old(i)):
+            line = _rewrite_line(line, channels[i], old(i))
         yield finished(i, line)
         done = i + 1
     if done < common:

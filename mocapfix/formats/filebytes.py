@@ -198,3 +198,14 @@ def runs_of(data, a: int, b: int):
     if isinstance(data, FileBytes):
         return data.pieces(a, b)
     return (memoryview(data)[a:b],)
+
+
+def kept_values(values, shared: bool):
+    """The values a BVH or AMC source keeps for its writer to tell which lines changed: a
+    copy (the motion's own array may be changed in place, and the writer must see that),
+    or, ``shared`` (:func:`mocapfix.formats.read`'s ``share_values``), the array itself
+    made read-only."""
+    if not shared:
+        return values.copy()
+    values.flags.writeable = False
+    return values

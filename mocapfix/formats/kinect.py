@@ -108,6 +108,7 @@ from mocapfix.core.motion import Motion, Skeleton
 from mocapfix.core.quantity import MAX_FRAME_RATE_HZ, MIN_FRAME_RATE_HZ
 from mocapfix.core.units import METRES_PER_UNIT, normalise_unit_name
 from mocapfix.formats.textlines import TextLines
+from mocapfix.formats.texttable import samples_to_rewrite
 
 NAME = "kinect"
 SUFFIXES = (".csv", ".txt", ".tsv")
@@ -1287,9 +1288,7 @@ def _format_like(value: float, token: str) -> str:
 def _changed(source: KinectSource, motion: Motion) -> tuple[np.ndarray, np.ndarray]:
     """(T, J) masks: the samples whose stored tokens must change (moved, filled or
     removed), and the samples missing in ``motion``."""
-    new_missing = np.isnan(motion.positions).any(axis=2)
-    same = np.all(motion.positions == source.original, axis=2)
-    return ~np.where(source.missing, new_missing, same & ~new_missing), new_missing
+    return samples_to_rewrite(source.original, motion.positions, source.missing)
 
 
 #: what keeps a line of a headerless Kinect CSV out of :func:`_fast_csv_text`'s bulk

@@ -33,7 +33,7 @@ import numpy as np
 
 from mocapfix.core.errors import UnreadableFileError
 from mocapfix.core.fileio import write_output_pieces
-from mocapfix.core.motion import Motion
+from mocapfix.core.motion import Motion, missing_samples
 from mocapfix.core.quantity import MAX_FRAME_RATE_HZ, MIN_FRAME_RATE_HZ
 from mocapfix.formats.textenc import wide_encoding
 from mocapfix.formats import textlines
@@ -316,10 +316,33 @@ def format_like(value: float, token: str, decimals: int) -> str:
 
 def changed_samples(source: TableSource, positions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(T, J) masks: the samples whose tokens must change, and the samples now missing."""
-    was_missing = np.isnan(source.original).any(axis=2)
-    now_missing = np.isnan(positions).any(axis=2)
-    same = np.all(positions == source.original, axis=2)
-    return np.where(was_missing, ~now_missing, ~same | now_missing), now_missing
+    return samples_to_rewrite(source.original, positions)
+
+
+def samples_to_rewrite(original, positions: np.ndarray, was_missing: np.ndarray | None = None,
+                       infinite_missing: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """(T, J) masks of a text file's samples when ``positions`` are written over the
+    coordinates it held (``original``): those whose tokens must change (filled, moved or
+    removed), and those missing now (a NaN coordinate; with ``infinite_missing``, any
+    coordinate not finite). ``was_missing``: the file's missing samples (default: a NaN
+    in ``original``). A chunk of frames at a time: ``original`` may be kept on disk
+    (:mod:`mocapfix.core.diskarray`), and the whole-take comparison made (T, J, 3)
+    temporaries."""
+    T, J = positions.shape[:2]
+    changed, now_missing = np.empty((T, J), bool), np.empty((T, J), bool)
+    for a in range(0, T, REWRITE_CHUNK):
+        rows = slice(a, a + REWRITE_CHUNK)
+        new, old = positions[rows], np.asarray(original[rows])
+        now = ~np.isfinite(new).all(axis=2) if infinite_missing else missing_samples(new)
+        was = missing_samples(old) if was_missing is None else was_missing[rows]
+        same = np.all(new == old, axis=2)
+        changed[rows] = np.where(was, ~now, ~same | now)
+        now_missing[rows] = now
+    return changed, now_missing
+
+
+#: frames compared at a time by :func:`samples_to_rewrite`
+REWRITE_CHUNK = 16384
 
 
 def patched_pieces(source: TableSource, motion: Motion):

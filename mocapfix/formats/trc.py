@@ -91,6 +91,7 @@ from mocapfix.core.motion import Motion, missing_samples
 from mocapfix.core.quantity import MAX_FRAME_RATE_HZ, MIN_FRAME_RATE_HZ
 from mocapfix.core.units import METRES_PER_UNIT, normalise_unit_name
 from mocapfix.formats.textlines import TextLines
+from mocapfix.formats.texttable import samples_to_rewrite
 
 NAME = "trc"
 SUFFIXES = (".trc",)
@@ -442,9 +443,8 @@ def _fits(source: TRCSource, motion: Motion) -> bool:
 
 def _changed(source: TRCSource, motion: Motion) -> tuple[np.ndarray, np.ndarray]:
     """(T, J) masks: samples whose fields must change, and samples missing now."""
-    now_missing = ~np.isfinite(motion.positions).all(axis=2)
-    same = np.all(motion.positions == source.original, axis=2)
-    return np.where(source.missing, ~now_missing, ~same | now_missing), now_missing
+    return samples_to_rewrite(source.original, motion.positions, source.missing,
+                              infinite_missing=True)
 
 
 def _patched_pieces(source: TRCSource, motion: Motion):

@@ -41,7 +41,9 @@ DEFAULT_MEMORY_BUDGET = "1 GB"
 #: of a whole 5,000-frame clean over its samples, ``benchmarks/long_takes.py``: 300–600)
 WORKING_BYTES_PER_SAMPLE = 800
 #: what the whole take costs per sample besides (bytes): the input and output positions,
-#: confidences and the steps' per-sample records
+#: confidences and the steps' per-sample records (``clean`` keeps the input's on disk
+#: while a take over the budget is cleaned: :mod:`mocapfix.core.diskarray`; counted
+#: here all the same, as the Python API holds them)
 TAKE_BYTES_PER_SAMPLE = 150
 #: context each side of a window (s), and the shortest window a budget may ask for (s)
 OVERLAP_S = 6.0

@@ -273,10 +273,10 @@ def test_a_skeleton_edited_while_its_take_is_cleaned_is_not_recorded_as_finished
     src, cfg = _subject(tmp_path), _cfg(tmp_path)
     real = clean_module.clean_motion
 
-    def edit_the_skeleton_meanwhile(motion, pipeline, *rest):
+    def edit_the_skeleton_meanwhile(motion, pipeline, *rest, **options):
         with open(src / "13.asf", "a") as fh:
             fh.write("# edited\n")
-        return real(motion, pipeline, *rest)
+        return real(motion, pipeline, *rest, **options)
 
     monkeypatch.setattr(clean_module, "clean_motion", edit_the_skeleton_meanwhile)
     out = tmp_path / "out"
@@ -365,10 +365,10 @@ def test_an_input_that_changes_while_it_is_cleaned_is_not_recorded_as_finished(t
     take.write_bytes(KIN.read_bytes())
     real = clean_module.clean_motion
 
-    def clean_while_the_file_grows(motion, pipeline, *rest):
+    def clean_while_the_file_grows(motion, pipeline, *rest, **options):
         with open(take, "ab") as fh:            # the recorder appends a frame meanwhile
             fh.write(KIN.read_bytes().splitlines(keepends=True)[-1])
-        return real(motion, pipeline, *rest)
+        return real(motion, pipeline, *rest, **options)
 
     monkeypatch.setattr(clean_module, "clean_motion", clean_while_the_file_grows)
     out = tmp_path / "out"

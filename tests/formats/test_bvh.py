@@ -515,6 +515,27 @@ def test_positions_in_chunks_are_bit_identical_to_one_forward_pass():
     assert motion.positions.tobytes() == whole.tobytes()
 
 
+@pytest.mark.parametrize("name", ["bvh/cmu_cgspeed_131_01.bvh", "asfamc/05_01.amc"])
+def test_a_read_that_shares_its_values_makes_no_copy(tmp_path, name):
+    """``formats.read(..., share_values=True)`` (what ``clean`` reads with): the BVH and
+    AMC readers keep the channels they read as the source's values themselves, read-only
+    (a copy was one more whole-take array at the read's peak), the same values as a plain
+    read, and the motion writes back byte for byte."""
+    from mocapfix import formats
+
+    path = shared(name)
+    module = formats.module(formats.detect(path))
+    plain, motion = module.read(path), module.read(path, share_values=True)
+    assert plain.channels is not plain.source.values and plain.channels.flags.writeable
+    assert motion.channels is motion.source.values and not motion.channels.flags.writeable
+    np.testing.assert_array_equal(motion.channels, plain.channels)
+    again = formats.read(path, share_values=True)
+    assert again.channels is again.source.values
+    out = tmp_path / path.name
+    formats.write(again, out)
+    assert out.read_bytes() == path.read_bytes()
+
+
 def test_values_shared_with_the_motion_read_are_read_only_and_write_the_same_bytes(tmp_path):
     """``formats.share_values_read`` (what ``clean`` does after reading): the source's
     copy of the values read becomes the motion's channels, read-only, and the motion
