@@ -110,7 +110,8 @@ def _clean_windowed(motion: Motion, pipeline: Pipeline, why: list, plan: Pieces,
     cuts = list(plan.cuts)
     per_point = point_cuts(motion.missing, cuts, plan.overlaps)
     points = np.array([w is None for w in why], bool)
-    taken = None if disk is None else _input_to_disk(motion, disk)
+    taken, why_held = (None, None) if disk is None else _input_to_disk(motion, disk)
+    notes = list(motion.notes) + ([why_held] if why_held else [])
     if taken is None:
         positions = motion.positions.copy()
         confidence = None if motion.confidence is None else motion.confidence.copy()
@@ -118,7 +119,6 @@ def _clean_windowed(motion: Motion, pipeline: Pipeline, why: list, plan: Pieces,
     else:
         positions, confidence, channels = taken
     residual = None
-    notes = list(motion.notes)
     masks: list[dict] = []
     infos: list[list] = []
     heads: list = []
@@ -202,15 +202,17 @@ _INPUT_ARRAYS = ("positions", "confidence", "channels")
 
 
 def _input_to_disk(motion: Motion, folder: Path):
-    """The motion's positions, confidence and channels, to be cleaned in place, with
-    ``motion`` and its source (the values a writer compares with) now reading the values
-    as read from disk (:class:`FramesOnDisk`); None, and nothing changed, when they cannot
-    be written there (no room, no permission)."""
+    """``(arrays, None)``: the motion's positions, confidence and channels, to be cleaned
+    in place, with ``motion`` and its source (the values a writer compares with) now
+    reading the values as read from disk (:class:`FramesOnDisk`); ``(None, note)``,
+    nothing changed, when they cannot be written there (no room, no permission)."""
     arrays = [getattr(motion, name) for name in _INPUT_ARRAYS]
     try:
         kept = [None if a is None else FramesOnDisk(a, folder) for a in arrays]
-    except OSError:
-        return None
+    except OSError as exc:
+        return None, (f"the input could not be kept on disk in {folder} while it was "
+                      f"cleaned ({exc.strerror or exc}): it was held in memory beside the "
+                      "output")
     source = motion.source
     out = []
     for name, array, disk in zip(_INPUT_ARRAYS, arrays, kept):
@@ -226,7 +228,7 @@ def _input_to_disk(motion: Motion, folder: Path):
             array = array.copy()
         setattr(motion, name, disk)
         out.append(array)
-    return tuple(out)
+    return tuple(out), None
 
 
 def _disk_folder(output: Path) -> Path:

@@ -7,7 +7,8 @@ of a few MB in every iteration then pay a page fault per 4 KB on every step.
 :func:`retain_freed_memory` sets ``M_MMAP_THRESHOLD`` (256 MB) and ``M_TRIM_THRESHOLD``
 (1 GB; 32 MB where an older glibc refuses more) with glibc's ``mallopt``;
 :func:`release_freed_memory` (``malloc_trim``) returns what is free after each file of a
-batch, and after the last window of a take cleaned in windows (before its report). Both
+batch, after a file is read (the reader's temporaries, before the take is cleaned), and
+after the last window of a take cleaned in windows (before its report). Both
 do nothing on other C libraries (macOS, Windows, musl) and in processes that did not ask:
 the CLI and the process-pool workers mocapfix starts call
 :func:`retain_freed_memory`; importing mocapfix changes nothing in the calling process,

@@ -104,6 +104,12 @@ def test_a_folder_that_cannot_take_the_input_keeps_it_in_memory(tmp_path):
     held, files_held, _ = _clean(path, tmp_path / "held", None)
     kept, files_kept, _ = _clean(path, tmp_path / "kept", tmp_path / "not-there")
     assert isinstance(kept.original.positions, np.ndarray)
+    report = files_kept.pop(f"{path.name}.report.json")
+    note = (f"the input could not be kept on disk in {tmp_path / 'not-there'} while it was "
+            "cleaned (No such file or directory): it was held in memory beside the output")
+    assert note in report["file"]["notes"]
+    report["file"]["notes"].remove(note)
+    assert report == files_held.pop(f"{path.name}.report.json")
     assert files_kept == files_held
 
 
