@@ -189,7 +189,11 @@ def _clean_windowed(motion: Motion, pipeline: Pipeline, why: list, plan: Pieces,
                      f"with {plan.windows.overlap} frames of overlap (memory_budget)"
                      + (f"; cut with no overlap where the take jumps as a whole ({apart} "
                         f"frame{'s' if apart > 1 else ''})" if apart else ""))
-        heavy = over_budget(pipeline.memory_budget, T, J)
+        held = [positions, confidence, channels, residual]
+        if taken is None:
+            held += [motion.positions, motion.confidence, motion.channels]
+        heavy = over_budget(pipeline.memory_budget, sum(a.nbytes for a in held if a is not None),
+                            input_on_disk=taken is not None)
         if heavy:
             notes.append(heavy)
     cleaned = motion.replace(positions=positions, confidence=confidence, channels=channels,

@@ -40,10 +40,11 @@ DEFAULT_MEMORY_BUDGET = "1 GB"
 #: the cleaners' working memory per sample of a window, default pipeline (bytes; the peak
 #: of a whole 5,000-frame clean over its samples, ``benchmarks/long_takes.py``: 300–600)
 WORKING_BYTES_PER_SAMPLE = 800
-#: what the whole take costs per sample besides (bytes): the input and output positions,
-#: confidences and the steps' per-sample records (``clean`` keeps the input's on disk
-#: while a take over the budget is cleaned: :mod:`mocapfix.core.diskarray`; counted
-#: here all the same, as the Python API holds them)
+#: what the whole take costs per sample besides (bytes), in deciding whether a take is
+#: cleaned whole: the input and output positions, confidences and the steps' per-sample
+#: records (an upper bound: measured at 500,000 frames, 64–90 bytes with the input held,
+#: about half that with it kept on disk as ``clean`` keeps it; the report's note counts
+#: the arrays themselves: :func:`over_budget`)
 TAKE_BYTES_PER_SAMPLE = 150
 #: context each side of a window (s), and the shortest window a budget may ask for (s)
 OVERLAP_S = 6.0
@@ -108,15 +109,16 @@ def window_for(budget: int | None, n_frames: int, n_joints: int, fps: float) -> 
     return None if frames >= n_frames else Windows(frames, overlap)
 
 
-def over_budget(budget: int | None, n_frames: int, n_joints: int) -> str | None:
-    """A note when the whole take's arrays alone (:data:`TAKE_BYTES_PER_SAMPLE`) need more
-    than half of ``budget``: windows bound the cleaners, not those."""
-    need = n_frames * n_joints * TAKE_BYTES_PER_SAMPLE
-    if budget is None or need <= budget / 2:
+def over_budget(budget: int | None, held: int, input_on_disk: bool = False) -> str | None:
+    """A note when the whole take's arrays held beside the windows (``held`` bytes: the
+    output's, and the input's unless it was kept on disk) are more than half of
+    ``budget``: windows bound the cleaners, not those."""
+    if budget is None or held <= budget / 2:
         return None
-    return (f"the take's own arrays need about {need / 1e9:.1f} GB, more than half the "
-            f"memory_budget ({budget / 1e9:g} GB): the windows bound the cleaners' memory, "
-            "not the take's")
+    whose = "the cleaned take's arrays (its input kept on disk)" if input_on_disk \
+        else "the take's own arrays (input and output)"
+    return (f"{whose} need about {held / 1e9:.2g} GB, more than half the memory_budget "
+            f"({budget / 1e9:g} GB): the windows bound the cleaners' memory, not the take's")
 
 
 @dataclass(frozen=True)

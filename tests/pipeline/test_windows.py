@@ -51,8 +51,25 @@ def test_window_for_budget():
     smaller = window_for(15 * 10 ** 8, 100_000, 41, 120.0)
     assert bigger.frames > smaller.frames                          # more budget, longer windows
     assert window_for(10 ** 9, 50_000, 41, 120.0) == window_for(10 ** 9, 500_000, 41, 120.0)
-    assert over_budget(10 ** 9, 4500, 41) is None
-    assert "need about 3.1 GB" in over_budget(10 ** 9, 500_000, 41)
+    assert over_budget(10 ** 9, 5 * 10 ** 8) is None
+    assert "need about 1.3 GB" in over_budget(10 ** 9, 1_312_000_000)
+
+
+def test_the_over_budget_note_counts_the_arrays_held(tmp_path):
+    """The note of a take whose own arrays are more than half the budget gives their
+    size: the input's and the output's positions when the input is held, the output's
+    alone when it was kept on disk (the 500,000-frame C3D's note said 3.1 GB, from a
+    per-sample estimate, where the whole clean peaked at 2.06 GB)."""
+    motion = _smooth_take(T=150_000, J=10)
+    pipeline = loads_config("version: 1\nmemory_budget: 64 MB\npipeline:\n  - cleaner: fill\n")
+    size = motion.positions.nbytes                           # 36 MB
+    held = clean_motion(motion, pipeline)
+    assert (f"the take's own arrays (input and output) need about {2 * size / 1e9:.2g} GB, "
+            "more than half the memory_budget (0.064 GB)") in held.cleaned.notes[-1]
+    kept = clean_motion(motion.copy(), pipeline, keep_input_on_disk=tmp_path)
+    assert (f"the cleaned take's arrays (its input kept on disk) need about {size / 1e9:.2g} "
+            "GB") in kept.cleaned.notes[-1]
+    np.testing.assert_array_equal(kept.cleaned.positions, held.cleaned.positions)
 
 
 def test_cuts_join_a_short_last_window():
