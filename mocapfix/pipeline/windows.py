@@ -42,9 +42,9 @@ DEFAULT_MEMORY_BUDGET = "1 GB"
 WORKING_BYTES_PER_SAMPLE = 800
 #: what the whole take costs per sample besides (bytes), in deciding whether a take is
 #: cleaned whole: the input and output positions, confidences and the steps' per-sample
-#: records (an upper bound: measured at 500,000 frames, 64–90 bytes with the input held,
-#: about half that with it kept on disk as ``clean`` keeps it; the report's note counts
-#: the arrays themselves: :func:`over_budget`)
+#: records (an upper bound: the arrays themselves are 64 bytes a sample for a C3D, 96 for
+#: a CMU BVH with its channels and write-back residual, with the input held; 32 and 52 with
+#: it kept on disk as ``clean`` keeps it; the report's note counts them: :func:`over_budget`)
 TAKE_BYTES_PER_SAMPLE = 150
 #: context each side of a window (s), and the shortest window a budget may ask for (s)
 OVERLAP_S = 6.0
