@@ -223,9 +223,7 @@ def _input_to_disk(motion: Motion, folder: Path):
         if array is None:
             out.append(None)
             continue
-        for shared in ("values", "original"):   # share_values_read made them one array
-            if getattr(source, shared, None) is array:
-                setattr(source, shared, disk)
+        formats.replace_shared_values(source, array, disk)
         try:
             array.flags.writeable = True        # read-only as shared with the source
         except ValueError:                      # a view of memory it cannot write

@@ -26,6 +26,8 @@ from pathlib import Path
 
 import numpy as np
 
+from mocapfix.core.motion import missing_samples
+
 
 class FramesOnDisk(np.lib.mixins.NDArrayOperatorsMixin):
     """A read-only (T, C, ...) array on disk, indexed as the array was: ``a[lo:hi]`` (a
@@ -45,10 +47,8 @@ class FramesOnDisk(np.lib.mixins.NDArrayOperatorsMixin):
         self.shape, self.dtype = array.shape, array.dtype
         self.missing = None
         if array.ndim == 3 and array.shape[2] == 3 and array.dtype.kind == "f":
-            nan = np.isnan(array)
-            self.missing = nan[..., 0] | nan[..., 1] | nan[..., 2]
+            self.missing = missing_samples(array)
             self.missing.flags.writeable = False
-            del nan
         self._row = int(np.prod(array.shape[2:], dtype=np.int64)) * array.dtype.itemsize
         self._column = self._row * array.shape[0]
         self._file = tempfile.TemporaryFile(dir=folder, prefix=".mocapfix-input-")

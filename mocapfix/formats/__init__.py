@@ -232,6 +232,20 @@ def share_values_read(motion: Motion) -> None:
     motion.channels = values
 
 
+#: where a source keeps the values a writer compares the motion with (a BVH's or AMC's
+#: channels, a Kinect or TRC file's coordinates), shared by :func:`share_values_read`
+SHARED_VALUES = ("values", "original")
+
+
+def replace_shared_values(source, array, replacement) -> None:
+    """Where ``source`` keeps ``array`` itself as the values its writer compares with
+    (:func:`share_values_read`), keep ``replacement`` instead (the same values, kept
+    elsewhere: :class:`mocapfix.core.diskarray.FramesOnDisk`)."""
+    for name in SHARED_VALUES:
+        if getattr(source, name, None) is array:
+            setattr(source, name, replacement)
+
+
 def _share_coordinates_read(motion: Motion) -> None:
     """A Kinect or TRC source's coordinates as written (``original``: the writer compares
     the samples seen in the file with them, to rewrite only those that moved) become the
