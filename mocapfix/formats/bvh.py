@@ -877,10 +877,11 @@ def _frame_pieces(source: BvhSource, channels: np.ndarray):
     common = min(T, n_old)
     # a chunk of the values read at a time: on a long take they may be kept on disk
     # (mocapfix.core.diskarray), and a whole-take comparison was one more (T, C) array
-    changed = np.concatenate([np.flatnonzero((channels[a:b] != source.values[a:b]).any(axis=1)) + a
-                              for a, b in ((a, min(a + CHUNK, common))
-                                           for a in range(0, common, CHUNK))]
-                             or [np.zeros(0, np.intp)])
+    changed = [np.zeros(0, np.intp)]
+    for a in range(0, common, CHUNK):
+        b = min(a + CHUNK, common)
+        changed.append(np.flatnonzero((channels[a:b] != source.values[a:b]).any(axis=1)) + a)
+    changed = np.concatenate(changed)
     held = [-1, None]                             # the chunk of values read the rows are in
 
     def old(i: int) -> np.ndarray:
