@@ -13,11 +13,13 @@
 The limits are set with ``threadpoolctl`` (a runtime dependency) for the whole process,
 once per process; kernels may lower them further for their own span, never raise them.
 
-**Task threads.** A few steps have independent pieces of work inside one file — the gap
-models of ``fill_ensemble`` (one per marker and neighbour set), ``trust``'s blocks of
-markers, ``swaps``' chunks of frames, ``tsmc``'s two GCV smooths — that
-:func:`parallel_map` runs on threads (numpy
-releases the GIL in its array loops, FFTs and BLAS calls). The budget is
+**Task threads.** A few steps have independent pieces of work inside one file —
+``trust``'s blocks of markers, ``swaps``' chunks of frames, ``tsmc``'s two GCV smooths —
+that :func:`parallel_map` runs on threads (numpy releases the GIL in its array loops, FFTs
+and BLAS calls). Work made of many small array operations gains nothing from them: it
+holds the GIL between the operations, and two threads spend their time handing it over
+(``fill_ensemble``'s gap models, which ran on these threads until issue 39 measured them
+slower there: :func:`mocapfix.solvers.pma.member_fills`). The budget is
 :func:`task_threads`: the cores available when one file is cleaned in this process
 (``-j 1`` or a single file; divided by the BLAS threads when ``MOCAPFIX_BLAS_THREADS``
 raises those; ``MOCAPFIX_THREADS`` lowers it, ``1`` turns it off), one in

@@ -37,7 +37,7 @@ and ``e`` when they exist):
    of the violated neighbours averaged, a few rounds; :func:`soft_distance_constraint`).
 
 Kernels are vectorised over the frames of a gap; the loop is over gaps (over the fits
-that serve them, on the task's threads).
+that serve them, in the calling thread: :func:`member_fills` says why).
 """
 from __future__ import annotations
 
@@ -45,7 +45,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from mocapfix.core.threads import parallel_map
 from mocapfix.solvers.rigid import kabsch_to_shape
 from mocapfix.solvers.segments import steepest_step
 
@@ -425,7 +424,13 @@ def member_fills(pos, observed, gaps, external, *, local=LOCAL_FILLERS, neighbou
     A member learns the same model for every gap of a marker with the same neighbours (the
     training frames are those where the marker is seen): it is fitted once per marker and
     neighbour set and predicts all those gaps (:func:`window_fills`). The fits are
-    independent: they run on the task's threads (:func:`mocapfix.core.threads.parallel_map`)."""
+    independent but run one after another in the calling thread: each is ~100 array
+    operations on a few hundred frames, between which it holds the GIL, so on two task
+    threads (:func:`mocapfix.core.threads.parallel_map`) the threads mostly hand the
+    GIL to each other — measured against them, paired runs on the 2-core machine: c3d.org
+    s02 (89 frames, 279 fits) 1.5× faster, s20 and s28 1.1–1.5×, the 4,500-frame case
+    of ``benchmarks/clean_speed.py`` through the CLI 0.90× the wall time
+    (benchmarks/RESULTS.md, "The fill ensemble's fits on one thread")."""
     if mu is None:
         mu, sd = distance_stats(pos, observed)
     T = pos.shape[0]
@@ -445,16 +450,12 @@ def member_fills(pos, observed, gaps, external, *, local=LOCAL_FILLERS, neighbou
                 jobs.setdefault((j, ("linear",), K, (), tuple(cand)), []).append(g)
     train = {j: _training_frames(observed[:, j], max_train) for j, *_ in jobs}
 
-    def fit_and_fill(job):
-        (j, members, K, markers, body), group = job
-        return window_fills(pos, observed, j, [gaps[g][1:] for g in group],
-                            np.array(markers, dtype=np.intp), train[j],
-                            np.array(body, dtype=np.intp), fillers=members,
-                            mu=mu, weight_scale=weight_scale, references=references)
-
     fills = [{} for _ in gaps]
-    for ((j, members, K, markers, body), group), parts in zip(
-            jobs.items(), parallel_map(fit_and_fill, jobs.items())):
+    for (j, members, K, markers, body), group in jobs.items():
+        parts = window_fills(pos, observed, j, [gaps[g][1:] for g in group],
+                             np.array(markers, dtype=np.intp), train[j],
+                             np.array(body, dtype=np.intp), fillers=members,
+                             mu=mu, weight_scale=weight_scale, references=references)
         for g, (_, part) in zip(group, parts):
             fills[g].update({_member_name(f, K, sizes): v for f, v in part.items()})
     order = member_names(local, sizes)

@@ -1,7 +1,7 @@
 """Task threads (mocapfix.core.threads.parallel_map): the independent pieces of work inside one
-file (fill_ensemble's gap models, trust's marker blocks, swaps' frame chunks) run on the
-cores available to a single-file clean, one thread in a batch worker, and the results do
-not depend on the number of threads."""
+file (trust's marker blocks, swaps' frame chunks, tsmc's two GCV smooths) run on the cores
+available to a single-file clean, one thread in a batch worker, and the results do not
+depend on the number of threads."""
 from __future__ import annotations
 
 import threading
@@ -117,59 +117,3 @@ def test_default_clean_is_identical_with_one_and_two_threads(budget):
     # and the clean did something: the corrupted capture had gaps, now filled where the
     # fill could be trusted (the default's fill gate leaves the others missing)
     assert (np.isnan(corrupted.positions) & ~np.isnan(a.positions)).any()
-
-
-@pytest.mark.slow
-def test_gap_fills_do_not_depend_on_which_job_runs_first(budget, monkeypatch):
-    """Two gaps of one marker whose rigid neighbours are never seen in its training frames
-    (each job then takes its frame's reference shape from its own gap): the fills are the
-    same with one thread, two threads, and two threads where the first job is slowed."""
-    import time
-
-    from mocapfix.solvers import pma
-
-    rng = np.random.default_rng(3)
-    T = 3000
-    t = np.arange(T)[:, None]
-    centre = np.concatenate([200 * np.sin(t / 300), 150 * np.cos(t / 250), 900 + 0 * t], axis=1)
-    offsets = np.array([[0, 0, 0], [80, 0, 0], [0, 90, 0], [0, 0, 70], [120, 60, 0], [-100, 50, 30.]])
-    angle = t[:, 0] / 400
-    c, s = np.cos(angle)[:, None], np.sin(angle)[:, None]
-    pos = centre[:, None] + np.stack([c * offsets[:, 0] - s * offsets[:, 1],
-                                      s * offsets[:, 0] + c * offsets[:, 1],
-                                      np.broadcast_to(offsets[:, 2], (T, 6))], axis=2)
-    pos[:, 1:] += rng.normal(0, 6, (T, 5, 3))
-    observed = np.zeros((T, 6), bool)
-    observed[:, 0] = True
-    gaps = [(0, 1000, 1020), (0, 2002, 2022)]
-    for _, a, b in gaps:
-        observed[a:b, 0] = False
-    train = set(pma._training_frames(observed[:, 0], 600).tolist())
-    for extra, (_, a, b) in zip((4, 5), gaps):            # neighbours only around the gaps,
-        near = [f for f in range(a - 12, b + 12) if f not in train]     # never in training
-        observed[near, 1:4] = True
-        observed[near, extra] = True
-    pos = np.where(observed[..., None], pos, np.nan)
-    mu, sd = pma.distance_stats(pos, observed)
-    reference = pma._reference
-
-    def fills(n, slow_first=False):
-        budget(n)
-        calls = []
-
-        def slowed(points):
-            calls.append(1)
-            if slow_first and len(calls) == 1:
-                time.sleep(0.3)
-            return reference(points)
-        monkeypatch.setattr(pma, "_reference", slowed)
-        out = pma.member_fills(pos, observed, gaps, {}, local=("interp", "poly", "grnn", "pose"),
-                               mu=mu, sd=sd, references={})
-        return [f for _, f in out]
-
-    one = fills(1)
-    assert all(f for f in one)                      # every gap has fills to compare
-    for other in (fills(2), fills(2, slow_first=True)):
-        for a, b in zip(one, other):
-            assert a.keys() == b.keys()
-            assert all(np.array_equal(a[k], b[k]) for k in a)
