@@ -45,7 +45,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from mocapfix.solvers.rigid import kabsch_to_shape
+from mocapfix.solvers.rigid import kabsch_to_shapes
 from mocapfix.solvers.segments import steepest_step
 
 #: the fillers computed here (the caller may add its own, e.g. weighted PCA)
@@ -92,19 +92,19 @@ def distance_stats(pos: np.ndarray, observed: np.ndarray, min_frames: int = 3):
 def _frames(points: np.ndarray, ref: np.ndarray | None):
     """Rigid transform of each frame of ``points`` (n, K, 3) onto ``ref`` (K, 3); with
     fewer than 3 points a translation only. Returns ``(to_local, to_global)`` functions of
-    (n, M, 3) arrays."""
+    (n, M, 3) arrays. A generator: it yields its Kabsch fit as ``(points, shape)`` and is
+    sent ``(R, cs, ct)`` (:func:`_fit_together`)."""
     n, K, _ = points.shape
     centre = points.mean(axis=1)
     if K < 3:
         return (lambda x: x - centre[:, None]), (lambda x: x + centre[:, None])
-    return _transforms(*kabsch_to_shape(points, ref))
+    return _transforms(*(yield points, ref))
 
 
 def _frames_two(first: np.ndarray, second: np.ndarray, ref: np.ndarray):
     """:func:`_frames` of two point sets (n1, K, 3) and (n2, K, 3), K ≥ 3, with one
-    batched Kabsch fit (the same values as two calls)."""
-    both = np.concatenate([first, second])
-    R, cs, ct = kabsch_to_shape(both, ref)
+    batched Kabsch fit (the same values as two calls); a generator as :func:`_frames`."""
+    R, cs, ct = yield np.concatenate([first, second]), ref
     n1 = len(first)
     return (_transforms(R[:n1], cs[:n1], ct[:n1]), _transforms(R[n1:], cs[n1:], ct[n1:]))
 
@@ -124,27 +124,86 @@ def _block(a: np.ndarray, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
     return a.take(rows, axis=0).take(cols, axis=1)
 
 
-def _reference(points: np.ndarray) -> np.ndarray:
+def _reference(points: np.ndarray):
     """Mean shape of (n, K, 3) point sets, after one rigid alignment to the first frame's
-    centred shape (enough for a consistent local frame)."""
+    centred shape (enough for a consistent local frame); a generator as :func:`_frames`."""
     if len(points) > 100:                       # a mean shape needs no more frames
         points = points[np.linspace(0, len(points) - 1, 100).astype(int)]
     centred = points - points.mean(axis=1, keepdims=True)
     if points.shape[1] < 3:
         return centred.mean(axis=0)
-    ref = centred[0]
-    R, cs, ct = kabsch_to_shape(points, ref)
+    R, cs, ct = yield points, centred[0]
     return ((points - cs[:, None]) @ np.swapaxes(R, 1, 2) + ct[:, None]).mean(axis=0)
 
 
-def _cached_reference(cache: dict | None, key, points: np.ndarray) -> np.ndarray:
+#: a reference shape another job of the same round is making (:func:`_cached_reference`)
+_MAKING = object()
+
+
+def _cached_reference(cache: dict | None, key, points: np.ndarray):
     """:func:`_reference` of ``points``, from ``cache[key]`` when there, stored there when
-    not (``cache`` None: no cache)."""
+    not (``cache`` None: no cache); a generator as :func:`_frames`. A job that finds the
+    key being made by an earlier job of its round waits a round for it (yields None), so
+    that the first job to ask makes it, as when the jobs ran one after another."""
     if cache is None:
-        return _reference(points)
+        return (yield from _reference(points))
+    while cache.get(key) is _MAKING:
+        yield None
     if key not in cache:
-        cache[key] = _reference(points)
+        cache[key] = _MAKING
+        try:
+            cache[key] = yield from _reference(points)
+        finally:
+            if cache.get(key) is _MAKING:       # abandoned: let no other job wait on it
+                del cache[key]
     return cache[key]
+
+
+#: points (frames × markers) the jobs of one :func:`_fit_together` call may hold at once:
+#: a job holds its training frames' points while it waits for its fit (about 48 bytes a
+#: point with their copy for the fit), so a long window's hundreds of gaps, or a capture
+#: of hundreds of markers, are fitted a batch of jobs at a time (~10 MB; the 4,500-frame
+#: case of benchmarks/clean_speed.py peaked 16 MB higher with all its jobs at once)
+TOGETHER_POINTS = 200_000
+
+
+def _batches(items, points):
+    """``items`` in order, in lists whose ``points(item)`` sum to at most
+    :data:`TOGETHER_POINTS` (an item larger than that alone)."""
+    batch, held = [], 0
+    for item in items:
+        n = points(item)
+        if batch and held + n > TOGETHER_POINTS:
+            yield batch
+            batch, held = [], 0
+        batch.append(item)
+        held += n
+    if batch:
+        yield batch
+
+
+def _fit_together(jobs) -> list:
+    """Run the generators ``jobs`` (:func:`window_fills`) side by side and return what
+    each returns. Each round, every job is advanced to the next Kabsch fit it needs
+    (``(points, shape)``, or None to wait a round) and the fits of all of them are made in
+    one :func:`mocapfix.solvers.rigid.kabsch_to_shapes` call: a few hundred fits of a few
+    dozen frames (a short take's gaps and their validation windows) cost about as much as
+    one of the size of them all."""
+    results = [None] * len(jobs)
+    sent = [None] * len(jobs)
+    active = list(range(len(jobs)))
+    while active:
+        asked = []
+        for i in active:
+            try:
+                asked.append((i, jobs[i].send(sent[i])))
+            except StopIteration as done:
+                results[i] = done.value
+        fits = iter(kabsch_to_shapes([fit for _, fit in asked if fit is not None]))
+        for i, fit in asked:
+            sent[i] = None if fit is None else next(fits)
+        active = [i for i, _ in asked]
+    return results
 
 
 def _ridge(X: np.ndarray, Y: np.ndarray, lam: float = 1e-3):
@@ -227,7 +286,12 @@ def window_fills(pos, observed, j, windows, neighbours, train, body, *,
     frames where ``j`` is observed. ``weight_scale`` in the data's units.
     ``references``: reference shapes of the rigid frames by ``(j, markers)``, used when
     present and added when not (so that the validation copies of a gap fit their frames
-    onto the real gap's reference shape instead of computing it again)."""
+    onto the real gap's reference shape instead of computing it again).
+
+    A generator: it yields each rigid (Kabsch) fit it needs as ``(points, shape)`` and is
+    sent the fit, so that :func:`member_fills` makes the fits of all its jobs together
+    (:func:`_fit_together`, which also runs one job alone); the windows' fills are its
+    return value."""
     T = pos.shape[0]
     spans = [np.arange(max(s - 1, 0), min(e + 1, T)) for s, e in windows]
     frames = np.concatenate(spans)
@@ -241,12 +305,12 @@ def window_fills(pos, observed, j, windows, neighbours, train, body, *,
         # only a reference from the training frames is shared (the first call's for the
         # key: the refill rounds train on more frames and reuse it; it only fixes the
         # frame's orientation); one from this job's own frames stays this job's
-        ref = (_cached_reference(references, (j, tuple(neighbours.tolist())), nb_train)
-               if len(tr_local) else _reference(nb))
+        ref = yield from (_cached_reference(references, (j, tuple(neighbours.tolist())),
+                                            nb_train) if len(tr_local) else _reference(nb))
         if K >= 3 and len(tr_local) >= max(10, 2 * K):
-            (loc, glob), (tl, _) = _frames_two(nb, nb_train, ref)
+            (loc, glob), (tl, _) = yield from _frames_two(nb, nb_train, ref)
         else:
-            (loc, glob), tl = _frames(nb, ref), None
+            (loc, glob), tl = (yield from _frames(nb, ref)), None
         if "interp" in fillers:
             lj = loc(np.nan_to_num(pos[frames, j])[:, None])[:, 0]
             ramps = []
@@ -260,7 +324,7 @@ def window_fills(pos, observed, j, windows, neighbours, train, body, *,
             out["interp"] = glob(np.concatenate(ramps)[:, None])[:, 0]
         if len(tr_local) >= max(10, 2 * K):
             if tl is None:
-                tl, _ = _frames(nb_train, ref)
+                tl, _ = yield from _frames(nb_train, ref)
             Xt = tl(nb_train).reshape(len(tr_local), -1)
             Yt = tl(pos[tr_local, j][:, None])[:, 0]
             Xg = loc(nb).reshape(len(frames), -1)
@@ -275,8 +339,8 @@ def window_fills(pos, observed, j, windows, neighbours, train, body, *,
         tr = train[_block(observed, train, body).all(axis=1)]
         if len(tr) >= max(10, len(body)):
             body_train, body_gap = _block(pos, tr, body), _block(pos, frames, body)
-            ref = _cached_reference(references, (j, tuple(body.tolist())), body_train)
-            (tl, _), (loc, glob) = _frames_two(body_train, body_gap, ref)
+            ref = yield from _cached_reference(references, (j, tuple(body.tolist())), body_train)
+            (tl, _), (loc, glob) = yield from _frames_two(body_train, body_gap, ref)
             d = mu[j, body] if mu is not None else np.zeros(len(body))
             w = np.repeat(np.exp(-0.5 * (np.nan_to_num(d, nan=1e9) / weight_scale) ** 2), 3)
             Xt = tl(body_train).reshape(len(tr), -1) * w
@@ -423,7 +487,8 @@ def member_fills(pos, observed, gaps, external, *, local=LOCAL_FILLERS, neighbou
 
     A member learns the same model for every gap of a marker with the same neighbours (the
     training frames are those where the marker is seen): it is fitted once per marker and
-    neighbour set and predicts all those gaps (:func:`window_fills`). The fits are
+    neighbour set and predicts all those gaps (:func:`window_fills`); their rigid frames
+    are fitted together (:func:`_fit_together`). The fits are
     independent but run one after another in the calling thread: each is ~100 array
     operations on a few hundred frames, between which it holds the GIL, so on two task
     threads (:func:`mocapfix.core.threads.parallel_map`) the threads mostly hand the
@@ -450,14 +515,21 @@ def member_fills(pos, observed, gaps, external, *, local=LOCAL_FILLERS, neighbou
                 jobs.setdefault((j, ("linear",), K, (), tuple(cand)), []).append(g)
     train = {j: _training_frames(observed[:, j], max_train) for j, *_ in jobs}
 
+    def held_points(job):
+        (j, _, _, markers, body), _ = job
+        return len(train[j]) * max(len(markers), len(body))
+
     fills = [{} for _ in gaps]
-    for (j, members, K, markers, body), group in jobs.items():
-        parts = window_fills(pos, observed, j, [gaps[g][1:] for g in group],
-                             np.array(markers, dtype=np.intp), train[j],
-                             np.array(body, dtype=np.intp), fillers=members,
-                             mu=mu, weight_scale=weight_scale, references=references)
-        for g, (_, part) in zip(group, parts):
-            fills[g].update({_member_name(f, K, sizes): v for f, v in part.items()})
+    for batch in _batches(jobs.items(), held_points):
+        fitted = _fit_together([
+            window_fills(pos, observed, j, [gaps[g][1:] for g in group],
+                         np.array(markers, dtype=np.intp), train[j],
+                         np.array(body, dtype=np.intp), fillers=members, mu=mu,
+                         weight_scale=weight_scale, references=references)
+            for (j, members, K, markers, body), group in batch])
+        for ((j, members, K, markers, body), group), parts in zip(batch, fitted):
+            for g, (_, part) in zip(group, parts):
+                fills[g].update({_member_name(f, K, sizes): v for f, v in part.items()})
     order = member_names(local, sizes)
     out = []
     for (j, s, e), cand, f in zip(gaps, cands, fills):

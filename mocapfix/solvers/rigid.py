@@ -33,12 +33,47 @@ def kabsch_to_shape(points, shape):
     with unit weights: ``H_t = Σ_k (p_tk − c_t)(s_k − c)ᵀ`` for all frames as one (3T, K) ×
     (K, 3) matrix product (the general kernel forms T small products: 2x faster for 35
     points). Returns R (T, 3, 3), cs (T, 3), ct (T, 3) as :func:`kabsch`."""
+    H, cs, c = _to_shape_covariance(points, shape)
+    return _best_rotation(H), cs, np.broadcast_to(c, (len(H), 3))
+
+
+#: most 3 × 3 matrices per call of :func:`_best_rotation` in :func:`kabsch_to_shapes`
+#: (its temporaries stay in the cache: 363,000 matrices in one call took 2–3× as long as
+#: in chunks of this many)
+CHUNK = 8192
+
+
+def kabsch_to_shapes(requests) -> list:
+    """:func:`kabsch_to_shape` of each ``(points, shape)`` of ``requests``, their
+    rotations found together: one :func:`_best_rotation` call per :data:`CHUNK` matrices
+    (chunks of equal size) instead of one per request. A call costs ~150 array operations
+    whatever its size, so a few hundred fits of a few dozen frames each (the fill
+    ensemble's, :func:`mocapfix.solvers.pma.member_fills`) cost as much as one large one.
+    The same values as one :func:`kabsch_to_shape` per request to rounding (~1e-13: a
+    request under 100 frames alone goes through the SVD, here through the closed form).
+    Returns one ``(R, cs, ct)`` per request."""
+    parts = [_to_shape_covariance(points, shape) for points, shape in requests]
+    if not parts:
+        return []
+    H = np.concatenate([h for h, _, _ in parts])
+    chunks = max(1, -(-len(H) // CHUNK))
+    R = np.concatenate([_best_rotation(h) for h in np.array_split(H, chunks)])
+    out, start = [], 0
+    for h, cs, c in parts:
+        out.append((R[start:start + len(h)], cs, np.broadcast_to(c, (len(h), 3))))
+        start += len(h)
+    return out
+
+
+def _to_shape_covariance(points, shape):
+    """``(H, cs, c)`` of :func:`kabsch_to_shape`: the (T, 3, 3) cross-covariances of the
+    centred frames of ``points`` with the centred ``shape``, the frames' centroids and
+    the shape's."""
     T, K, _ = points.shape
     cs = points.mean(axis=1)
     c = shape.mean(axis=0)
     centred = np.swapaxes(points - cs[:, None], 1, 2).reshape(T * 3, K)
-    H = (centred @ (shape - c)).reshape(T, 3, 3)
-    return _best_rotation(H), cs, np.broadcast_to(c, (T, 3))
+    return (centred @ (shape - c)).reshape(T, 3, 3), cs, c
 
 
 def _best_rotation_svd(H):

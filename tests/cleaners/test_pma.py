@@ -304,3 +304,60 @@ def test_gaps_no_other_marker_is_seen_through_get_no_members_and_a_reason(monkey
         else:
             assert fills_q.keys() == fills_f.keys() and err_q == err_f
             assert all(np.array_equal(fills_q[k], fills_f[k]) for k in fills_q)
+
+
+def test_fits_made_together_give_the_fills_of_the_jobs_one_after_another(monkeypatch):
+    """member_fills makes the rigid fits of all its jobs together (_fit_together). On a
+    real capture with many gaps (c3d.org s28: 296 frames), the real gaps and then a
+    validation copy sharing their reference shapes, as the cleaner makes them: the same
+    members and fills (to rounding) and the same reference shapes as when each job runs
+    alone, in order; where two jobs of one round ask for one reference (the same marker
+    and neighbours), the second waits for the first's instead of making it again."""
+    from mocapfix.solvers import fill_error
+
+    m = read(shared("c3d/c3dorg_s28_dynamic.C3D"))
+    pos, observed = m.positions, ~m.missing
+    mu, sd = kernels.distance_stats(pos, observed)
+    gaps = kernels.gap_list(observed)
+    cut, windows = fill_error.window_plan(observed, gaps, 1).windows[0]
+    synth = [(gaps[g][0], u, v) for g, u, v in windows]
+    together_fit = kernels._fit_together
+    making = kernels._cached_reference
+    waits = []
+
+    def watched(cache, key, points):
+        gen, sent = making(cache, key, points), None
+        while True:
+            try:
+                asked = gen.send(sent)
+            except StopIteration as done:
+                return done.value
+            if asked is None:
+                waits.append(key)
+            sent = yield asked
+
+    monkeypatch.setattr(kernels, "_cached_reference", watched)
+
+    def run(refs):
+        real = kernels.member_fills(pos, observed, gaps, {}, neighbours=(3, 5), mu=mu, sd=sd,
+                                    references=refs)
+        copy = kernels.member_fills(np.where(cut[..., None], pos, np.nan), cut, synth, {},
+                                    neighbours=(3, 5), mu=mu, sd=sd, references=refs)
+        return real + copy
+
+    refs_together = {}
+    together = run(refs_together)
+    assert waits                                  # some reference was asked for twice in a round
+    monkeypatch.setattr(kernels, "_fit_together",
+                        lambda jobs: [together_fit([job])[0] for job in jobs])
+    refs_alone = {}
+    alone = run(refs_alone)
+    assert len(together) == len(alone) == len(gaps) + len(synth) and len(synth) > 10
+    assert sum(len(f) for _, f in together) > 5 * len(gaps)      # the members filled them
+    for (cand_t, fills_t), (cand_a, fills_a) in zip(together, alone):
+        assert np.array_equal(cand_t, cand_a) and fills_t.keys() == fills_a.keys()
+        for k in fills_t:
+            np.testing.assert_allclose(fills_t[k], fills_a[k], rtol=0, atol=1e-6)
+    assert refs_together.keys() == refs_alone.keys()
+    for key in refs_together:
+        np.testing.assert_allclose(refs_together[key], refs_alone[key], rtol=0, atol=1e-9)
