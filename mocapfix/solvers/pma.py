@@ -493,7 +493,7 @@ def member_fills(pos, observed, gaps, external, *, local=LOCAL_FILLERS, neighbou
     operations on a few hundred frames, between which it holds the GIL, so on two task
     threads (:func:`mocapfix.core.threads.parallel_map`) the threads mostly hand the
     GIL to each other — measured against them, paired runs on the 2-core machine: c3d.org
-    s02 (89 frames, 279 fits) 1.5× faster, s20 and s28 1.1–1.5×, the 4,500-frame case
+    s02 (89 frames, 279 fits) 1.4× faster, s20, s28 and s09 1.1–1.4×, the 4,500-frame case
     of ``benchmarks/clean_speed.py`` through the CLI 0.90× the wall time
     (benchmarks/RESULTS.md, "The fill ensemble's fits on one thread")."""
     if mu is None:
