@@ -28,15 +28,6 @@ def kabsch(source, target, weights):
     return _best_rotation(H), cs, ct
 
 
-def kabsch_to_shape(points, shape):
-    """:func:`kabsch` of every frame of ``points`` (T, K, 3) onto one fixed ``shape`` (K, 3)
-    with unit weights: ``H_t = Σ_k (p_tk − c_t)(s_k − c)ᵀ`` for all frames as one (3T, K) ×
-    (K, 3) matrix product (the general kernel forms T small products: 2x faster for 35
-    points). Returns R (T, 3, 3), cs (T, 3), ct (T, 3) as :func:`kabsch`."""
-    H, cs, c = _to_shape_covariance(points, shape)
-    return _best_rotation(H), cs, np.broadcast_to(c, (len(H), 3))
-
-
 #: most 3 × 3 matrices per call of :func:`_best_rotation` in :func:`kabsch_to_shapes`
 #: (its temporaries stay in the cache: 363,000 matrices in one call took 2–3× as long as
 #: in chunks of this many)
@@ -44,15 +35,24 @@ CHUNK = 8192
 
 
 def kabsch_to_shapes(requests) -> list:
-    """:func:`kabsch_to_shape` of each ``(points, shape)`` of ``requests``, their
-    rotations found together: one :func:`_best_rotation` call per :data:`CHUNK` matrices
-    (chunks of equal size) instead of one per request. A call costs ~150 array operations
+    """:func:`kabsch` of every frame of ``points`` (T, K, 3) onto one fixed ``shape`` (K,
+    3) with unit weights, for each ``(points, shape)`` of ``requests``. Per request, ``H_t
+    = Σ_k (p_tk − c_t)(s_k − c)ᵀ`` for all its frames as one (3T, K) × (K, 3) matrix
+    product (the general kernel forms T small products: 2x faster for 35 points); the
+    rotations of all requests are found together, one :func:`_best_rotation` call per
+    :data:`CHUNK` matrices (chunks of equal size): a call costs ~150 array operations
     whatever its size, so a few hundred fits of a few dozen frames each (the fill
     ensemble's, :func:`mocapfix.solvers.pma.member_fills`) cost as much as one large one.
-    The same values as one :func:`kabsch_to_shape` per request to rounding (~1e-13: a
-    request under 100 frames alone goes through the SVD, here through the closed form).
-    Returns one ``(R, cs, ct)`` per request."""
-    parts = [_to_shape_covariance(points, shape) for points, shape in requests]
+    A request's values do not depend on the others' but for rounding (~1e-13: under 100
+    matrices in all, the SVD finds the rotations, else the closed form). Returns one ``(R
+    (T, 3, 3), cs (T, 3), ct (T, 3))`` per request, as :func:`kabsch`."""
+    parts = []
+    for points, shape in requests:
+        T, K, _ = points.shape
+        cs = points.mean(axis=1)
+        c = shape.mean(axis=0)
+        centred = np.swapaxes(points - cs[:, None], 1, 2).reshape(T * 3, K)
+        parts.append(((centred @ (shape - c)).reshape(T, 3, 3), cs, c))
     if not parts:
         return []
     H = np.concatenate([h for h, _, _ in parts])
@@ -63,17 +63,6 @@ def kabsch_to_shapes(requests) -> list:
         out.append((R[start:start + len(h)], cs, np.broadcast_to(c, (len(h), 3))))
         start += len(h)
     return out
-
-
-def _to_shape_covariance(points, shape):
-    """``(H, cs, c)`` of :func:`kabsch_to_shape`: the (T, 3, 3) cross-covariances of the
-    centred frames of ``points`` with the centred ``shape``, the frames' centroids and
-    the shape's."""
-    T, K, _ = points.shape
-    cs = points.mean(axis=1)
-    c = shape.mean(axis=0)
-    centred = np.swapaxes(points - cs[:, None], 1, 2).reshape(T * 3, K)
-    return (centred @ (shape - c)).reshape(T, 3, 3), cs, c
 
 
 def _best_rotation_svd(H):

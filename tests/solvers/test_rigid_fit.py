@@ -6,8 +6,7 @@ import pytest
 
 from mocapfix.solvers import pma
 from mocapfix.solvers import rigid
-from mocapfix.solvers.rigid import (_best_rotation, _best_rotation_svd, kabsch, kabsch_to_shape,
-                                    kabsch_to_shapes)
+from mocapfix.solvers.rigid import _best_rotation, _best_rotation_svd, kabsch, kabsch_to_shapes
 
 
 def _random_rotations(rng, n):
@@ -66,7 +65,7 @@ def test_kabsch_to_one_shape_recovers_the_motion_and_matches_kabsch(K):
     shape = rng.normal(size=(K, 3)) * [120.0, 60.0, 25.0] + 400.0
     R_true = _random_rotations(rng, n)
     pts = (shape - shape.mean(axis=0)) @ np.swapaxes(R_true, 1, 2) + rng.normal(size=(n, 1, 3)) * 900
-    R, cs, ct = kabsch_to_shape(pts, shape)
+    (R, cs, ct), = kabsch_to_shapes([(pts, shape)])
     back = (pts - cs[:, None]) @ np.swapaxes(R, 1, 2) + ct[:, None]
     assert np.max(np.abs(back - shape)) < 1e-9
     R2, cs2, ct2 = kabsch(pts, np.broadcast_to(shape, pts.shape), np.ones((n, K)))
@@ -74,20 +73,19 @@ def test_kabsch_to_one_shape_recovers_the_motion_and_matches_kabsch(K):
     assert np.max(np.abs(cs - cs2)) < 1e-9 and np.max(np.abs(ct - ct2)) < 1e-9
 
 
-def test_fits_made_together_undo_each_motion_and_match_one_call_each(monkeypatch):
+def test_fits_made_together_undo_each_motion_and_match_each_made_alone(monkeypatch):
     """Many requests of different sizes and point counts (a few frames to several hundred,
     3 to 40 points), some mirrored: made together, each fit still undoes its own rigid
-    motions, and agrees with one kabsch_to_shape call per request to rounding; the
+    motions, and agrees with each request made alone to rounding; the
     matrices are split into chunks of at most CHUNK (here 500, so several calls)."""
     monkeypatch.setattr(rigid, "CHUNK", 500)
     rng = np.random.default_rng(7)
-    requests, truths = [], []
+    requests = []
     for n, K in [(4, 3), (60, 5), (250, 3), (1, 40), (130, 12), (17, 4), (900, 6)]:
         shape = rng.normal(size=(K, 3)) * [120.0, 60.0, 25.0] + 400.0
         R_true = _random_rotations(rng, n)
         pts = (shape - shape.mean(axis=0)) @ np.swapaxes(R_true, 1, 2) + rng.normal(size=(n, 1, 3)) * 900
         requests.append((pts, shape))
-        truths.append(shape)
     noisy = rng.normal(size=(90, 5, 3)) * 100
     requests.append((noisy * [-1.0, 1.0, 1.0], noisy[0]))          # a mirrored, noisy set
     calls = []
@@ -98,7 +96,7 @@ def test_fits_made_together_undo_each_motion_and_match_one_call_each(monkeypatch
         back = (pts - cs[:, None]) @ np.swapaxes(R, 1, 2) + ct[:, None]
         assert np.max(np.abs(back - shape)) < 1e-8
     for (pts, shape), (R, cs, ct) in zip(requests, together):
-        R1, cs1, ct1 = kabsch_to_shape(pts, shape)
+        (R1, cs1, ct1), = kabsch_to_shapes([(pts, shape)])
         assert np.max(np.abs(R - R1)) < 1e-10
         assert np.array_equal(cs, cs1) and np.array_equal(ct, ct1)
         assert np.allclose(np.linalg.det(R), 1.0, atol=1e-12)
