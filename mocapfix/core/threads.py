@@ -19,7 +19,9 @@ that :func:`parallel_map` runs on threads (numpy releases the GIL in its array l
 and BLAS calls). Work made of many small array operations gains nothing from them: it
 holds the GIL between the operations, and two threads spend their time handing it over
 (``fill_ensemble``'s gap models, which ran on these threads until issue 39 measured them
-slower there: :func:`mocapfix.solvers.pma.member_fills`). The budget is
+slower there: :func:`mocapfix.solvers.pma.member_fills`); with the same budget that work
+goes to a forked child process instead (:mod:`mocapfix.core.forked`: the gap models of
+half the markers, :func:`mocapfix.solvers.pma.validated_member_fills`). The budget is
 :func:`task_threads`: the cores available when one file is cleaned in this process
 (``-j 1`` or a single file; divided by the BLAS threads when ``MOCAPFIX_BLAS_THREADS``
 raises those; ``MOCAPFIX_THREADS`` lowers it, ``1`` turns it off), one in

@@ -37,7 +37,9 @@ and ``e`` when they exist):
    of the violated neighbours averaged, a few rounds; :func:`soft_distance_constraint`).
 
 Kernels are vectorised over the frames of a gap; the loop is over gaps (over the fits
-that serve them, in the calling thread: :func:`member_fills` says why).
+that serve them, in the calling thread: :func:`member_fills` says why), in two groups of
+markers, the second in a forked child process where that can pay
+(:func:`validated_member_fills`).
 """
 from __future__ import annotations
 
@@ -495,7 +497,9 @@ def member_fills(pos, observed, gaps, external, *, local=LOCAL_FILLERS, neighbou
     GIL to each other — measured against them, paired runs on the 2-core machine: c3d.org
     s02 (89 frames, 279 fits) 1.4× faster, s20, s28 and s09 1.1–1.4×, the 4,500-frame case
     of ``benchmarks/clean_speed.py`` through the CLI 0.90× the wall time
-    (benchmarks/RESULTS.md, "The fill ensemble's fits on one thread")."""
+    (benchmarks/RESULTS.md, "The fill ensemble's fits on one thread"). A process of its
+    own runs them side by side: :func:`validated_member_fills` fits half the markers in a
+    forked child."""
     if mu is None:
         mu, sd = distance_stats(pos, observed)
     T = pos.shape[0]
@@ -573,7 +577,82 @@ def validated_member_fills(pos, observed, gaps, copies, external, *, local=LOCAL
     windows)`` per gap, ``errors`` name → mean squared error over the copies and
     ``windows`` one ``(copy, u, v, cand, fills, errors)`` per window of the gap: the
     members' fills of that window and their squared errors on it (so that a caller can
-    measure its own combination of the members on the windows)."""
+    measure its own combination of the members on the windows).
+
+    The gaps are fitted in two groups of markers (:func:`marker_groups`), each group's
+    fits together, the second group in a child process beside this one where that can
+    pay (:func:`mocapfix.core.forked.both`; the same values either way): the fits hold
+    the GIL, so threads could not run them side by side. A reference shape belongs to
+    one marker's gaps, so each group makes the ones it uses as it would alone."""
+    from mocapfix.core.forked import both
+
+    references = {} if references is None else references
+    if mu is None:
+        mu, sd = distance_stats(pos, observed)
+    settings = dict(local=local, neighbours=neighbours, weight_scale=weight_scale, mu=mu,
+                    sd=sd, max_train=max_train, copy_external=copy_external)
+    groups = marker_groups(gaps, copies) if not external else [list(range(len(gaps)))]
+    if len(groups) < 2:
+        return _validated_member_fills(pos, observed, gaps, copies, external,
+                                       references=references, **settings)
+
+    def group(which, refs):
+        place = {g: k for k, g in enumerate(which)}
+        return _validated_member_fills(
+            pos, observed, [gaps[g] for g in which],
+            [(cut, [(place[g], u, v) for g, u, v in windows if g in place])
+             for cut, windows in copies], external, references=refs, **settings)
+
+    known = set(references)
+
+    def aside():
+        refs = dict(references)
+        rows = group(groups[1], refs)
+        return rows, {k: v for k, v in refs.items() if k not in known}
+
+    work = [len(which) + sum(g in set(which) for _, windows in copies for g, _, _ in windows)
+            for which in groups]
+    (second, made), first = both(aside, lambda: group(groups[0], references),
+                                 fork=min(work) >= FORK_WORK)
+    references.update(made)
+    out = [None] * len(gaps)
+    for which, rows in zip(groups, (first, second)):
+        for g, row in zip(which, rows):
+            out[g] = row
+    return out
+
+
+#: the least work (gaps and validation windows) the smaller group of
+#: :func:`validated_member_fills` must have for a child process to fit it: ~2 ms of
+#: fits each on the 4,500-frame case of benchmarks/clean_speed.py, the fork ~3 ms
+FORK_WORK = 8
+
+
+def marker_groups(gaps, copies) -> list[list[int]]:
+    """The gaps' indices in two groups of whole markers with about the same work (a
+    marker's gaps and their validation windows, largest first into the lighter group),
+    or one group when one marker has all the gaps. Depends on the gaps and windows
+    only (not on the cores)."""
+    load: dict = {}
+    for j, _, _ in gaps:
+        load[j] = load.get(j, 0) + 1
+    for _, windows in copies:
+        for g, _, _ in windows:
+            load[gaps[g][0]] = load.get(gaps[g][0], 0) + 1
+    if len(load) < 2:
+        return [list(range(len(gaps)))]
+    side, totals = {}, [0, 0]
+    for j in sorted(load, key=lambda m: (-load[m], m)):
+        k = int(totals[1] < totals[0])
+        side[j] = k
+        totals[k] += load[j]
+    return [[g for g, (j, _, _) in enumerate(gaps) if side[j] == k] for k in (0, 1)]
+
+
+def _validated_member_fills(pos, observed, gaps, copies, external, *, local, neighbours,
+                            weight_scale, mu, sd, max_train, copy_external, references):
+    """:func:`validated_member_fills` of one group of gaps (copies with no window of
+    theirs are skipped)."""
     references = {} if references is None else references
     real = member_fills(pos, observed, gaps, external, local=local, neighbours=neighbours,
                         weight_scale=weight_scale, mu=mu, sd=sd, max_train=max_train,
@@ -581,6 +660,8 @@ def validated_member_fills(pos, observed, gaps, copies, external, *, local=LOCAL
     errors = [{} for _ in gaps]
     windows_of = [[] for _ in gaps]
     for c, (cut, windows) in enumerate(copies):
+        if not windows:
+            continue
         synth = [(gaps[g][0], u, v) for g, u, v in windows]
         fills = member_fills(np.where(cut[..., None], pos, np.nan), cut, synth,
                              copy_external(cut) if copy_external else {}, local=local,

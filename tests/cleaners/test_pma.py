@@ -1,6 +1,8 @@
 """The model-averaging gap filler ``pma`` (Tits et al. 2018 as a baseline): exact on a
 rigid body, observed samples untouched, and on a real capture with occlusion gaps better
 than its own members alone and than a cubic spline."""
+import sys
+
 import numpy as np
 import pytest
 
@@ -361,3 +363,72 @@ def test_fits_made_together_give_the_fills_of_the_jobs_one_after_another(monkeyp
     assert refs_together.keys() == refs_alone.keys()
     for key in refs_together:
         np.testing.assert_allclose(refs_together[key], refs_alone[key], rtol=0, atol=1e-9)
+
+
+def test_marker_groups_split_whole_markers_with_about_the_same_work():
+    """Every gap in one group, a marker's gaps all in one, the groups' work (gaps and
+    windows) within the largest marker's of each other; one group when one marker has
+    every gap."""
+    gaps = [(0, 5, 9), (1, 3, 4), (0, 20, 22), (2, 7, 8), (3, 1, 2), (1, 30, 33), (4, 9, 12)]
+    copies = [(None, [(0, 40, 44), (2, 50, 52), (6, 60, 63)]), (None, [(0, 70, 74), (1, 8, 9)])]
+    first, second = kernels.marker_groups(gaps, copies)
+    assert sorted(first + second) == list(range(len(gaps)))
+    markers = [{gaps[g][0] for g in grp} for grp in (first, second)]
+    assert not markers[0] & markers[1]
+    work = [len(grp) + sum(g in grp for _, w in copies for g, _, _ in w) for grp in (first, second)]
+    assert abs(work[0] - work[1]) <= 6            # marker 0: 2 gaps + 3 windows, the largest
+    assert kernels.marker_groups([(3, 1, 2), (3, 8, 9)], [(None, [(1, 20, 21)])]) == [[0, 1]]
+
+
+def test_validated_fills_in_two_groups_are_those_of_all_the_gaps_at_once(monkeypatch):
+    """validated_member_fills fits two groups of markers apart (the second in a child
+    process where it can fork). On c3d.org s28's gaps with two validation copies: the
+    same members, fills, window errors and reference shapes (to rounding) as all the gaps
+    fitted as one group, whether the second group ran in a child or here."""
+    from mocapfix.core import forked, threads
+    from mocapfix.solvers import fill_error
+
+    m = read(shared("c3d/c3dorg_s28_dynamic.C3D"))
+    pos, observed = m.positions, ~m.missing
+    mu, sd = kernels.distance_stats(pos, observed)
+    gaps = kernels.gap_list(observed)
+    copies = fill_error.window_plan(observed, gaps, 2).windows
+    assert len(kernels.marker_groups(gaps, copies)) == 2
+
+    def run(**kw):
+        refs = {}
+        return kernels.validated_member_fills(pos, observed, gaps, copies, {}, neighbours=(3, 5),
+                                              mu=mu, sd=sd, references=refs, **kw), refs
+
+    monkeypatch.setattr(threads, "_TASK_THREADS", [2])
+    children = []
+    both = forked.both
+
+    def watched(aside, here, fork=True):
+        children.append(fork and forked.can_fork())
+        return both(aside, here, fork)
+
+    monkeypatch.setattr(forked, "both", watched)
+    split, refs_split = run()
+    monkeypatch.setattr(threads, "_TASK_THREADS", [1])
+    here, refs_here = run()
+    monkeypatch.setattr(kernels, "marker_groups", lambda g, c: [list(range(len(g)))])
+    whole, refs_whole = run()
+    # on Linux the first run's second group went to a child, the second run's did not
+    assert children[0] == sys.platform.startswith("linux") and not children[1]
+    assert sum(len(w) for *_, w in whole) > len(gaps)                   # windows were fitted
+    for rows in (split, here):
+        assert len(rows) == len(whole)
+        for (cand_s, fills_s, err_s, win_s), (cand_w, fills_w, err_w, win_w) in zip(rows, whole):
+            assert np.array_equal(cand_s, cand_w) and fills_s.keys() == fills_w.keys()
+            for k in fills_s:
+                np.testing.assert_allclose(fills_s[k], fills_w[k], rtol=0, atol=1e-6)
+            assert err_s.keys() == err_w.keys()
+            np.testing.assert_allclose([err_s[k] for k in err_s], [err_w[k] for k in err_s],
+                                       rtol=1e-9, atol=1e-9)
+            assert [w[:3] for w in win_s] == [w[:3] for w in win_w]
+    assert all(np.array_equal(a[1][k], b[1][k]) for a, b in zip(split, here) for k in a[1])
+    for refs in (refs_split, refs_here):
+        assert refs.keys() == refs_whole.keys()
+        for key in refs:
+            np.testing.assert_allclose(refs[key], refs_whole[key], rtol=0, atol=1e-9)
