@@ -37,6 +37,7 @@ import numpy as np
 from mocapfix.cleaners import build, register
 from mocapfix.cleaners.base import FILL_ERRORS, REJECTED_FILLS, Cleaner, FillGate, Param
 from mocapfix.core.errors import ConfigError
+from mocapfix.core import forked
 from mocapfix.core.motion import Motion, missing_samples
 from mocapfix.solvers import fill_error, pma
 from mocapfix.solvers.pca_gapfill import fill_gaps_pca
@@ -52,6 +53,12 @@ REFILL_MIN_S = 0.2
 #: markers and the first pass's reference shapes, numediart_03_rolling's fill 19.6 →
 #: 16.3 s, against 7.4 s without the refill)
 REFILL_COPIES = 1
+#: frames × markers² from which the distance statistics are made in a child process beside
+#: the short gaps' fills (:func:`mocapfix.core.forked.both`): ~7 ms of them, the fork ~3
+DISTANCES_APART = 2_000_000
+#: validation windows from which half the gaps' combinations and window errors are made in
+#: a child process (:meth:`PMA._combined`): ~0.2 ms of combining a window, the fork ~3 ms
+WINDOWS_APART = 32
 
 
 @register
@@ -129,7 +136,6 @@ class PMA(Cleaner):
         info = {"gaps": 0, "gaps_filled": 0, "filled": 0, "weights_mean": {}}
         if T < 3 or observed.all() or observed.sum(axis=0).max(initial=0) < 2:
             return motion.copy(), info
-        mu, sd = pma.distance_stats(pos, observed)
         local = tuple(m for m in self["members"] if m in pma.LOCAL_FILLERS)
         max_gap = None if self["max_gap"] is None else self.frames("max_gap", motion)
         out = pos.copy()
@@ -143,14 +149,22 @@ class PMA(Cleaner):
         horizon = self.frames("confidence_horizon", motion)
         trust = fill_error.FillTrust(motion, gate)
         if self["short_gap"] is not None and self.frames("short_gap", motion) >= 1:
-            gaps = self._fill_short(out, conf, gaps, self.frames("short_gap", motion), horizon,
-                                    trust)
+            # the distance statistics (large array operations, ~27 ms on 4,500 × 41) in a
+            # child beside the short gaps' fills and validation here (small operations
+            # holding the GIL, ~75 ms): mocapfix.core.forked
+            (mu, sd), gaps = forked.both(
+                lambda: pma.distance_stats(pos, observed),
+                lambda: self._fill_short(out, conf, gaps, self.frames("short_gap", motion),
+                                         horizon, trust),
+                fork=T * J * J >= DISTANCES_APART)
             info["gaps_filled"] = info["gaps"] - len(gaps)
             seen = ~missing_samples(out)
             info["filled"] = int((seen & ~observed).sum())
             # a short gap left as too uncertain is no gap for the members to fill
             gaps = [g for g in gaps if not trust.refused(g)]
             pos, observed = out.copy(), seen
+        else:
+            mu, sd = pma.distance_stats(pos, observed)
         work = motion if pos is motion.positions else motion.replace(positions=pos)
         external = self._external(work)
         # windows are needed to weight the members (weights: validation/best) or, under the
@@ -181,10 +195,10 @@ class PMA(Cleaner):
         ctx = pma.Combination(mu, sd, floor, box, largest_steps(pos, observed),
                               self["weights"], self["constraint_neighbours"], self["width"],
                               self["max_step"])
-        combined = [pma.combine(pos, gap, cand, fills, verr, ctx)
-                    for gap, (cand, fills), verr in zip(gaps, members, validated)]
+        combined, errors = self._combined(pos, gaps, members, validated, windows,
+                                          len(plan.windows) if validate else None, ctx)
         if validate:
-            cross, fitted = self._window_errors(pos, gaps, windows, len(plan.windows), ctx)
+            cross, fitted = errors
             trust.estimate(gaps, plan, cross, "the members", fitted=fitted)
         if self["refill"] > 0 and self["weights"] != "plausibility":
             combined = self._refill(work, observed, gaps, local, ctx, members, validated,
@@ -235,7 +249,30 @@ class PMA(Cleaner):
             info["gaps_too_uncertain"] = trust.count
         return motion.replace(positions=out, confidence=conf), info
 
-    def _window_errors(self, pos, gaps, windows, copies, ctx):
+    def _combined(self, pos, gaps, members, validated, windows, copies, ctx):
+        """Each gap's combined fill (:func:`mocapfix.solvers.pma.combine`) and, with
+        ``copies`` (None: not validated), the combination's errors on its windows
+        (:meth:`_window_errors`). Every gap's are its own: the gaps go in two runs of
+        about as much work, the second in a child process beside this one where there
+        are at least :data:`WINDOWS_APART` windows (:func:`mocapfix.core.forked.both`;
+        the same values either way)."""
+        load = np.cumsum([1 + len(w) for w in windows]) if len(gaps) else np.zeros(0)
+        half = int(np.searchsorted(load, load[-1] / 2)) + 1 if len(gaps) else 0
+
+        def part(which):
+            combined = [pma.combine(pos, gaps[g], *members[g], validated[g], ctx) for g in which]
+            if copies is None:
+                return combined, None
+            return combined, self._window_errors(pos, gaps, windows, copies, ctx, which)
+
+        (second, errors2), (first, errors1) = forked.both(
+            lambda: part(range(half, len(gaps))), lambda: part(range(half)),
+            fork=len(gaps) > 1 and load[-1] - len(gaps) >= WINDOWS_APART)
+        if copies is None:
+            return first + second, None
+        return first + second, tuple(np.concatenate([a, b]) for a, b in zip(errors1, errors2))
+
+    def _window_errors(self, pos, gaps, windows, copies, ctx, which=None):
         """Two (G, copies) errors of the combined fill (:func:`mocapfix.solvers.pma.combine`: the weighted
         average, the soft constraint, the jump screen) on each gap's validation windows:
         its members weighted by their errors on the gap's *other* windows (cross-fitted:
@@ -244,8 +281,9 @@ class PMA(Cleaner):
         a gap with one window uses that window's), and weighted by their errors on all
         its windows, as the real gap's fill is (the errors its estimate is made of).
         NaN where the window's fill leaves the capture volume or a copy has no window for
-        the gap."""
-        cross = np.full((len(gaps), max(copies, 1)), np.nan)
+        the gap. ``which``: the rows of those gaps only (default all)."""
+        which = range(len(gaps)) if which is None else which
+        cross = np.full((len(which), max(copies, 1)), np.nan)
         fitted = cross.copy()
         cut_positions: dict = {}
         plausibility = self["weights"] == "plausibility"
@@ -255,7 +293,8 @@ class PMA(Cleaner):
                 k: float(np.mean([o[k] for o in chosen if k in o]))
                 for k in fills if any(k in o for o in chosen)}
 
-        for g, ((j, _, _), ws) in enumerate(zip(gaps, windows)):
+        for row, g in enumerate(which):
+            (j, _, _), ws = gaps[g], windows[g]
             for c, u, v, cand, fills, _ in ws:
                 if not fills:
                     continue
@@ -266,7 +305,7 @@ class PMA(Cleaner):
                     result = pma.combine(cut_positions[c], (j, u, v), cand, fills,
                                          mean_errors(fills, chosen), ctx)
                     if result is not None and result[0] is not None:
-                        out[g, c] = fill_error.rms_error(result[0], pos[u:v, j])
+                        out[row, c] = fill_error.rms_error(result[0], pos[u:v, j])
         return cross, fitted
 
     @staticmethod

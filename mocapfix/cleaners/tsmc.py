@@ -235,12 +235,16 @@ class TSMC(Cleaner):
         if mode in ("smooth", "auto"):
             # the noise is judged on the trusted samples with linear bridges, not on the
             # model's fills (a poor fill distorts the smooth around it); the two smooths
-            # are independent: on the task's threads
+            # are independent: on the task's threads. Under the gate the channels are
+            # those bridges already: one smooth gives both
             from mocapfix.core.threads import parallel_map
 
-            bridged = est if gate is not None else linear_bridge(np.where(omega, x, np.nan))
-            (smoothed, _), (_, noise) = parallel_map(lambda args: tsmc_kernels.gcv_denoise(*args), [
-                (est, p), (bridged, p, omega)])
+            if gate is not None:
+                smoothed, noise = tsmc_kernels.gcv_denoise(est, p, omega)
+            else:
+                bridged = linear_bridge(np.where(omega, x, np.nan))
+                (smoothed, _), (_, noise) = parallel_map(
+                    lambda args: tsmc_kernels.gcv_denoise(*args), [(est, p), (bridged, p, omega)])
             noisy = noise > self.length("noise_floor", motion) if mode == "auto" \
                 else np.ones(noise.shape, bool)
             est = np.where(noisy[None, :], smoothed, est)

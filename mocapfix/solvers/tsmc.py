@@ -112,13 +112,15 @@ def trust_mask(pos: np.ndarray, weights: np.ndarray, k: float, lo: float, hi: fl
                iterations: int, pad: int, welsch: float | None = None):
     """:func:`trust_mask_block` of blocks of markers of equal size (at most
     :data:`TRUST_BLOCK` markers, at least :data:`TRUST_BLOCK_SAMPLES` samples but for
-    one block; every marker's detection is its own, and the blocks depend on the take's
-    size only, not on the thread count) on the task's threads
+    one block, an even number of them but for one; every marker's detection is its own,
+    and the blocks depend on the take's size only, not on the thread count) on the
+    task's threads
     (:func:`mocapfix.core.threads.parallel_map`), put back together."""
     from mocapfix.core.threads import parallel_map
 
     T, J = pos.shape[:2]
     count = max(1, min(-(-J // TRUST_BLOCK), T * J // TRUST_BLOCK_SAMPLES))
+    count += count % 2 if count > 1 else 0      # two threads end together (41 markers: 6 blocks)
     if count == 1:
         return trust_mask_block(pos, weights, k, lo, hi, iterations, pad, welsch)
     blocks = [slice(b[0], b[-1] + 1) for b in np.array_split(np.arange(J), count)]
