@@ -56,9 +56,6 @@ REFILL_COPIES = 1
 #: frames × markers² from which the distance statistics are made in a child process beside
 #: the short gaps' fills (:func:`mocapfix.core.forked.both`): ~7 ms of them, the fork ~3
 DISTANCES_APART = 2_000_000
-#: validation windows from which half the gaps' combinations and window errors are made in
-#: a child process (:meth:`PMA._combined`): ~0.2 ms of combining a window, the fork ~3 ms
-WINDOWS_APART = 32
 
 
 @register
@@ -167,6 +164,13 @@ class PMA(Cleaner):
             mu, sd = pma.distance_stats(pos, observed)
         work = motion if pos is motion.positions else motion.replace(positions=pos)
         external = self._external(work)
+        seen_points = motion.positions[~motion.missing]
+        lo, hi = seen_points.min(axis=0), seen_points.max(axis=0)
+        box = (lo - 0.1 * (hi - lo), hi + 0.1 * (hi - lo))
+        floor = self.length("sd_floor", motion)
+        ctx = pma.Combination(mu, sd, floor, box, largest_steps(pos, observed),
+                              self["weights"], self["constraint_neighbours"], self["width"],
+                              self["max_step"])
         # windows are needed to weight the members (weights: validation/best) or, under the
         # gate, to estimate the fills' error (weights: plausibility weights them as before)
         validate = self["weights"] != "plausibility" or gate is not None
@@ -181,25 +185,31 @@ class PMA(Cleaner):
             # makes them, the refill rounds reuse them (a reference only fixes a frame's
             # orientation)
             references: dict = {}
-            members, validated, windows, plan = self._validated_fills(
+            # each gap's combined fill and the combination's errors on its windows are
+            # made where its members were fitted (a forked child's with its fits)
+            members, validated, windows, plan, finished = self._validated_fills(
                 work, observed, gaps, external, local, mu, sd, references=references,
                 skip_unsupported=not external, skip_unvalidated=gate is not None,
-                with_windows=True)
+                with_windows=True,
+                finish=lambda which, rows, cut_of: self._finish(pos, gaps, which, rows,
+                                                                cut_of, ctx))
         if self["weights"] == "plausibility":
             validated = [{}] * len(gaps)
         expected = len(pma.member_names(local, self["neighbours"])) + len(external)
-        seen_points = motion.positions[~motion.missing]
-        lo, hi = seen_points.min(axis=0), seen_points.max(axis=0)
-        box = (lo - 0.1 * (hi - lo), hi + 0.1 * (hi - lo))
-        floor = self.length("sd_floor", motion)
-        ctx = pma.Combination(mu, sd, floor, box, largest_steps(pos, observed),
-                              self["weights"], self["constraint_neighbours"], self["width"],
-                              self["max_step"])
-        combined, errors = self._combined(pos, gaps, members, validated, windows,
-                                          len(plan.windows) if validate else None, ctx)
         if validate:
-            cross, fitted = errors
+            combined = [result for result, _, _ in finished]
+            # (gaps, copies) errors of the combination on the windows; NaN where a copy has
+            # no window for the gap or the window's fill left the capture volume
+            cross = np.full((len(gaps), max(len(plan.windows), 1)), np.nan)
+            fitted = cross.copy()
+            for g, (_, on_windows, on_all) in enumerate(finished):
+                for errors, into in ((on_windows, cross), (on_all, fitted)):
+                    for c, e in errors.items():
+                        into[g, c] = e
             trust.estimate(gaps, plan, cross, "the members", fitted=fitted)
+        else:
+            combined = [pma.combine(pos, gap, cand, fills, verr, ctx)
+                        for gap, (cand, fills), verr in zip(gaps, members, validated)]
         if self["refill"] > 0 and self["weights"] != "plausibility":
             combined = self._refill(work, observed, gaps, local, ctx, members, validated,
                                     combined, info, references, trust)
@@ -249,43 +259,20 @@ class PMA(Cleaner):
             info["gaps_too_uncertain"] = trust.count
         return motion.replace(positions=out, confidence=conf), info
 
-    def _combined(self, pos, gaps, members, validated, windows, copies, ctx):
-        """Each gap's combined fill (:func:`mocapfix.solvers.pma.combine`) and, with
-        ``copies`` (None: not validated), the combination's errors on its windows
-        (:meth:`_window_errors`). Every gap's are its own: the gaps go in two runs of
-        about as much work, the second in a child process beside this one where there
-        are at least :data:`WINDOWS_APART` windows (:func:`mocapfix.core.forked.both`;
-        the same values either way)."""
-        load = np.cumsum([1 + len(w) for w in windows]) if len(gaps) else np.zeros(0)
-        half = int(np.searchsorted(load, load[-1] / 2)) + 1 if len(gaps) else 0
-
-        def part(which):
-            combined = [pma.combine(pos, gaps[g], *members[g], validated[g], ctx) for g in which]
-            if copies is None:
-                return combined, None
-            return combined, self._window_errors(pos, gaps, windows, copies, ctx, which)
-
-        (second, errors2), (first, errors1) = forked.both(
-            lambda: part(range(half, len(gaps))), lambda: part(range(half)),
-            fork=len(gaps) > 1 and load[-1] - len(gaps) >= WINDOWS_APART)
-        if copies is None:
-            return first + second, None
-        return first + second, tuple(np.concatenate([a, b]) for a, b in zip(errors1, errors2))
-
-    def _window_errors(self, pos, gaps, windows, copies, ctx, which=None):
-        """Two (G, copies) errors of the combined fill (:func:`mocapfix.solvers.pma.combine`: the weighted
-        average, the soft constraint, the jump screen) on each gap's validation windows:
-        its members weighted by their errors on the gap's *other* windows (cross-fitted:
-        the weights are not chosen on the window they are judged on — a window's test
-        error, as the real gap's fill is judged on a gap its weights were not chosen on;
-        a gap with one window uses that window's), and weighted by their errors on all
-        its windows, as the real gap's fill is (the errors its estimate is made of).
-        NaN where the window's fill leaves the capture volume or a copy has no window for
-        the gap. ``which``: the rows of those gaps only (default all)."""
-        which = range(len(gaps)) if which is None else which
-        cross = np.full((len(which), max(copies, 1)), np.nan)
-        fitted = cross.copy()
-        cut_positions: dict = {}
+    def _finish(self, pos, gaps, which, rows, cut_of, ctx):
+        """Per gap of ``which`` (its row of :func:`mocapfix.solvers.pma.validated_member_fills`):
+        ``(result, cross, fitted)``, its combined fill (:func:`mocapfix.solvers.pma.combine`:
+        the weighted average, the soft constraint, the jump screen) and two errors of the
+        combination on each of its validation windows, copy → RMS error: ``cross``, its
+        members weighted by their errors on the gap's *other* windows (cross-fitted: the
+        weights are not chosen on the window they are judged on — a window's test error,
+        as the real gap's fill is judged on a gap its weights were not chosen on; a gap
+        with one window uses that window's), and ``fitted``, weighted by their errors on
+        all its windows, as the real gap's fill is (the errors its estimate is made of).
+        No entry where the window's fill leaves the capture volume. ``cut_of(copy)``: the
+        positions of a validation copy (its windows missing). Every gap's are its own:
+        they are made where its members were fitted; the members' fills of its windows
+        are then dropped from its row (kept: where they were and their errors)."""
         plausibility = self["weights"] == "plausibility"
 
         def mean_errors(fills, chosen):
@@ -293,29 +280,24 @@ class PMA(Cleaner):
                 k: float(np.mean([o[k] for o in chosen if k in o]))
                 for k in fills if any(k in o for o in chosen)}
 
-        for row, g in enumerate(which):
-            (j, _, _), ws = gaps[g], windows[g]
-            for c, u, v, cand, fills, _ in ws:
-                if not fills:
+        out = []
+        for g, (cand, fills, verr, ws) in zip(which, rows):
+            j = gaps[g][0]
+            result = pma.combine(pos, gaps[g], cand, fills, {} if plausibility else verr, ctx)
+            cross: dict = {}
+            fitted: dict = {}
+            for c, u, v, wcand, wfills, _ in ws:
+                if not wfills:
                     continue
-                if c not in cut_positions:
-                    cut_positions[c] = self._cut_positions(pos, gaps, windows, c)
                 others = [w[5] for w in ws if w[0] != c] or [w[5] for w in ws if w[0] == c]
-                for out, chosen in ((cross, others), (fitted, [w[5] for w in ws])):
-                    result = pma.combine(cut_positions[c], (j, u, v), cand, fills,
-                                         mean_errors(fills, chosen), ctx)
-                    if result is not None and result[0] is not None:
-                        out[row, c] = fill_error.rms_error(result[0], pos[u:v, j])
-        return cross, fitted
-
-    @staticmethod
-    def _cut_positions(pos, gaps, windows, copy):
-        """The positions of validation copy ``copy``: its windows made missing."""
-        out = pos.copy()
-        for (j, _, _), ws in zip(gaps, windows):
-            for c, u, v, *_ in ws:
-                if c == copy:
-                    out[u:v, j] = np.nan
+                for errors, chosen in ((cross, others), (fitted, [w[5] for w in ws])):
+                    window = pma.combine(cut_of(c), (j, u, v), wcand, wfills,
+                                         mean_errors(wfills, chosen), ctx)
+                    if window is not None and window[0] is not None:
+                        errors[c] = fill_error.rms_error(window[0], pos[u:v, j])
+            out.append((result, cross, fitted))
+            # the windows' fills have served: not sent back from a child
+            ws[:] = [(c, u, v, wcand, {}, werr) for c, u, v, wcand, _, werr in ws]
         return out
 
     def _refill(self, motion, observed, gaps, local, ctx, members, validated, combined, info,
@@ -438,7 +420,7 @@ class PMA(Cleaner):
 
     def _validated_fills(self, motion, observed, gaps, external, local, mu, sd, copies=None,
                          references=None, skip_unsupported=False, skip_unvalidated=False,
-                         with_windows=False):
+                         with_windows=False, finish=None):
         """Every member's fill of every gap and, per gap, member name → mean squared error
         on the gap's validation windows (:meth:`_validation_windows`;
         :func:`mocapfix.solvers.pma.validated_member_fills`); the external members are
@@ -455,7 +437,9 @@ class PMA(Cleaner):
         :class:`FillGate` its fill has no estimate and would not be written.
         ``with_windows``: also return, per gap, its windows with the members' fills there
         (:func:`mocapfix.solvers.pma.validated_member_fills`), and the windows' plan (with
-        the probes of the extrapolated estimates)."""
+        the probes of the extrapolated estimates). ``finish(indices, rows, cut_of)``: run
+        on each group of gaps where it was fitted (its ``finish``), ``cut_of(copy)`` the
+        positions of a validation copy; also returns its results, one per gap."""
         pos = motion.positions
         plan = self._validation_windows(observed, gaps, copies, probes=with_windows)
         windows = plan.windows
@@ -476,14 +460,35 @@ class PMA(Cleaner):
             return self._external(motion.replace(positions=np.where(cut[..., None], pos, np.nan),
                                                  confidence=None))
 
-        rows = iter(pma.validated_member_fills(
-            pos, observed, [g for g, k in zip(gaps, keep) if k], windows, external, local=local,
+        kept = np.flatnonzero(keep)
+        cuts: dict = {}             # per process: a child makes its own
+
+        def cut_of(c):
+            if c not in cuts:
+                cuts[c] = cut = pos.copy()
+                for g, u, v in windows[c][1]:
+                    cut[u:v, gaps[kept[g]][0]] = np.nan
+            return cuts[c]
+
+        found = pma.validated_member_fills(
+            pos, observed, [gaps[g] for g in kept], windows, external, local=local,
             neighbours=self["neighbours"], mu=mu, sd=sd,
             weight_scale=self.length("weight_scale", motion),
-            copy_external=copy_external if external else None, references=references))
-        rows = [next(rows) if k else (np.array([], dtype=np.intp), {}, {}, []) for k in keep]
+            copy_external=copy_external if external else None, references=references,
+            finish=None if finish is None else
+            (lambda which, rows: finish([int(kept[w]) for w in which], rows, cut_of)))
+        found, finished = found if finish else (found, None)
+        empty = (np.array([], dtype=np.intp), {}, {}, [])
+        rows, done = [empty] * len(gaps), [None] * len(gaps)
+        for k, g in enumerate(kept):
+            rows[g] = found[k]
+            done[g] = finished[k] if finish else None
+        if finish:
+            for g in np.flatnonzero(~keep):
+                done[g] = finish([int(g)], [empty], cut_of)[0]
         out = [(cand, fills) for cand, fills, _, _ in rows], [errs for _, _, errs, _ in rows]
-        return (*out, [w for *_, w in rows], plan) if with_windows else out
+        out = (*out, [w for *_, w in rows], plan) if with_windows else out
+        return (*out, done) if finish else out
 
 
 def _defaults(params, **new):

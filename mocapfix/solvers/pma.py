@@ -561,7 +561,7 @@ def _member_name(filler: str, K: int, sizes: tuple) -> str:
 def validated_member_fills(pos, observed, gaps, copies, external, *, local=LOCAL_FILLERS,
                            neighbours=3, weight_scale: float = 300.0, mu=None, sd=None,
                            max_train: int = 600, copy_external=None,
-                           references: dict | None = None):
+                           references: dict | None = None, finish=None):
     """:func:`member_fills` of every gap with each member's mean squared error on the
     gap's validation windows. ``copies``: per copy, ``(cut, windows)`` with ``cut`` the
     observed mask with the copy's windows removed and ``windows`` a list of ``(gap index,
@@ -583,7 +583,12 @@ def validated_member_fills(pos, observed, gaps, copies, external, *, local=LOCAL
     fits together, the second group in a child process beside this one where that can
     pay (:func:`mocapfix.core.forked.both`; the same values either way): the fits hold
     the GIL, so threads could not run them side by side. A reference shape belongs to
-    one marker's gaps, so each group makes the ones it uses as it would alone."""
+    one marker's gaps, so each group makes the ones it uses as it would alone.
+
+    ``finish(indices, rows)``: what a caller makes of a group's rows (one result per gap
+    of ``indices``), run in the process that fitted the group, so that the child sends
+    back that with the rows (which ``finish`` may trim of what it alone needed); the call
+    then returns ``(rows, finished)``, ``finished`` one result per gap."""
     from mocapfix.core.forked import both
 
     references = {} if references is None else references
@@ -592,34 +597,36 @@ def validated_member_fills(pos, observed, gaps, copies, external, *, local=LOCAL
     settings = dict(local=local, neighbours=neighbours, weight_scale=weight_scale, mu=mu,
                     sd=sd, max_train=max_train, copy_external=copy_external)
     groups = marker_groups(gaps, copies) if not external else [list(range(len(gaps)))]
-    if len(groups) < 2:
-        return _validated_member_fills(pos, observed, gaps, copies, external,
-                                       references=references, **settings)
 
     def group(which, refs):
         place = {g: k for k, g in enumerate(which)}
-        return _validated_member_fills(
+        rows = _validated_member_fills(
             pos, observed, [gaps[g] for g in which],
             [(cut, [(place[g], u, v) for g, u, v in windows if g in place])
              for cut, windows in copies], external, references=refs, **settings)
+        return rows, (finish(which, rows) if finish else None)
 
+    if len(groups) < 2:
+        rows, finished = group(list(range(len(gaps))), references)
+        return (rows, finished) if finish else rows
     known = set(references)
 
     def aside():
         refs = dict(references)
-        rows = group(groups[1], refs)
-        return rows, {k: v for k, v in refs.items() if k not in known}
+        done = group(groups[1], refs)
+        return done, {k: v for k, v in refs.items() if k not in known}
 
     work = [len(which) + sum(g in set(which) for _, windows in copies for g, _, _ in windows)
             for which in groups]
     (second, made), first = both(aside, lambda: group(groups[0], references),
                                  fork=min(work) >= FORK_WORK)
     references.update(made)
-    out = [None] * len(gaps)
-    for which, rows in zip(groups, (first, second)):
-        for g, row in zip(which, rows):
-            out[g] = row
-    return out
+    out, finished = [None] * len(gaps), [None] * len(gaps)
+    for which, (rows, extra) in zip(groups, (first, second)):
+        for k, g in enumerate(which):
+            out[g] = rows[k]
+            finished[g] = extra[k] if finish else None
+    return (out, finished) if finish else out
 
 
 #: the least work (gaps and validation windows) the smaller group of

@@ -19,7 +19,7 @@ import numpy as np
 
 from mocapfix.solvers import dct, segments
 from mocapfix.solvers.localfit import moving_median
-from mocapfix.solvers.nanstats import nanmedian_columns
+from mocapfix.solvers.nanstats import nanmedian_columns, nanquantile_columns
 from mocapfix.solvers.lowrank import svt
 from mocapfix.solvers.rigid import body_frame, norms, to_global, to_local
 from mocapfix.core.motion import missing_samples
@@ -53,7 +53,7 @@ def gross_errors(pos: np.ndarray, fps: float, metres_per_unit: float) -> np.ndar
             if todo.any():
                 sub = pos[part][:, todo]
                 centre[todo] = nanmedian_columns(sub.reshape(len(sub), -1)).reshape(-1, 3)
-                own[todo] = np.nanquantile(norms(sub - centre[todo]), 0.9, axis=0)
+                own[todo] = nanquantile_columns(norms(sub - centre[todo]), 0.9)
         dist = norms(pos - centre)
         every = dist[rows][seen[rows]]
         extent = np.maximum(own, float(np.quantile(every if len(every) else dist[seen], 0.9)))
