@@ -361,7 +361,7 @@ class PMA(Cleaner):
                 for jj, s, e in gaps:
                     if jj == j:
                         second[s:e, j] = np.nan
-                seen = ~np.isnan(second).any(axis=2)
+                seen = ~missing_samples(second)
                 redone = [gaps[g] for g in group]
                 if round_ == 0:
                     again, errors = self._validated_fills(motion.replace(positions=second), seen,

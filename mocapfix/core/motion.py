@@ -26,11 +26,20 @@ import numpy as np
 
 
 def missing_samples(positions: np.ndarray) -> np.ndarray:
-    """(T, J) True where any coordinate of a (T, J, 3) sample is NaN: the three coordinate
-    planes or-ed (``np.isnan(positions).any(axis=2)``, which reduces over an axis of 3, is
-    6x slower)."""
-    nan = np.isnan(positions)
-    return nan[..., 0] | nan[..., 1] | nan[..., 2]
+    """(T, J) True where any coordinate of a (T, J, 3) sample is NaN (:func:`any_xyz`)."""
+    return any_xyz(np.isnan(positions))
+
+
+def any_xyz(mask: np.ndarray) -> np.ndarray:
+    """``mask.any(axis=-1)`` of a (..., 3) boolean array: the three coordinate planes
+    or-ed (numpy's reduction over an axis of 3 is ~6x slower: 2.3 against 0.32 ms for
+    4,500 × 41 samples)."""
+    return mask[..., 0] | mask[..., 1] | mask[..., 2]
+
+
+def all_xyz(mask: np.ndarray) -> np.ndarray:
+    """``mask.all(axis=-1)`` of a (..., 3) boolean array, the planes and-ed (:func:`any_xyz`)."""
+    return mask[..., 0] & mask[..., 1] & mask[..., 2]
 
 
 @dataclass

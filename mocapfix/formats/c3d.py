@@ -69,7 +69,7 @@ from mocapfix.formats.filebytes import FileBytes, FileView, keep, large_file
 from mocapfix.formats.c3d_params import (MAX_DIM, group_record as _group_record, param_data_offset,
                                          param_record as _param_record, string_param as _string_param,
                                          string_value, with_group)
-from mocapfix.core.motion import Motion
+from mocapfix.core.motion import Motion, all_xyz, any_xyz
 from mocapfix.core.quantity import MAX_FRAME_RATE_HZ, MIN_FRAME_RATE_HZ
 from mocapfix.core.units import METRES_PER_UNIT, normalise_unit_name
 
@@ -773,12 +773,12 @@ def _decoded(points, storage, scale, model):
     non-finite and (0, 0, 0) samples that the notes report."""
     xyz = _coordinates(points, storage, scale)
     flagged = _residual_words(points, storage) < 0
-    non_finite = ~np.isfinite(xyz).all(axis=2)
-    zeros = (xyz == 0).all(axis=2) & ~flagged & ~non_finite
+    non_finite = ~all_xyz(np.isfinite(xyz))
+    zeros = all_xyz(xyz == 0) & ~flagged & ~non_finite
     missing = flagged | non_finite | zeros
     positions = _positions_from(xyz, missing)
     if model is not None:
-        zero = model[None, :] & (points[..., :3] == 0).all(axis=2) & ~flagged
+        zero = model[None, :] & all_xyz(points[..., :3] == 0) & ~flagged
         positions[zero] = 0.0
         missing &= ~zero
     return positions, missing, (int(non_finite.sum()), int(zeros.sum()))
@@ -832,7 +832,7 @@ def _positions(points, storage, scale, missing) -> tuple[np.ndarray, np.ndarray]
     (the reader's final mask: a model output's (0, 0, 0) is a value, +0.0), and that mask."""
     xyz = _coordinates(points, storage, scale)
     # a sample seen at exactly (0, 0, 0) is a model output's zero (any other is missing)
-    zero = (xyz == 0).all(axis=2) & ~missing
+    zero = all_xyz(xyz == 0) & ~missing
     xyz[zero] = 0.0
     return _positions_from(xyz, missing), missing
 
@@ -1009,7 +1009,7 @@ def _beyond_int16(new: np.ndarray, source: C3DSource, frames: slice = slice(None
     with np.errstate(invalid="ignore", over="ignore"):
         out = np.abs(np.rint(new / source.scale)) > 32767
     which = ~source.missing[frames] if moved else source.missing[frames]
-    return which & np.isfinite(new).all(axis=2) & out.any(axis=2)
+    return which & all_xyz(np.isfinite(new)) & any_xyz(out)
 
 
 def _chunks(n_frames: int):
@@ -1130,8 +1130,8 @@ class _SampleEdits:
         old = source.positions_of(frames)
         was_missing = source.missing[frames]
         self.new = new
-        self.new_missing = ~np.isfinite(new).all(axis=2)
-        changed = ~((new == old) | (np.isnan(new) & np.isnan(old))).all(axis=2)
+        self.new_missing = ~all_xyz(np.isfinite(new))
+        changed = ~all_xyz((new == old) | (np.isnan(new) & np.isnan(old)))
         self.filled = changed & ~self.new_missing & was_missing
         self.modified = changed & ~self.new_missing & ~was_missing
         self.deleted = self.new_missing & ~was_missing
@@ -1419,7 +1419,7 @@ def _fresh_records(positions: np.ndarray, scale: float | None):
     of a fresh file, CHUNK frames a piece (never a whole-take copy of the take)."""
     for frames in _chunks(len(positions)):
         part = positions[frames] if scale is None else positions[frames] * scale
-        missing = ~np.isfinite(part).all(axis=2)
+        missing = ~all_xyz(np.isfinite(part))
         points = np.zeros((*part.shape[:2], 4), dtype="<f4")
         points[..., :3] = np.where(missing[..., None], 0.0, part)
         points[..., 3] = np.where(missing, -1.0, 0.0)

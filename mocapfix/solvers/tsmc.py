@@ -41,7 +41,7 @@ def gross_errors(pos: np.ndarray, fps: float, metres_per_unit: float) -> np.ndar
     :data:`LOCAL_GROSS_M`). The medians and extents come from at most 2,000 evenly spaced
     frames of a marker (all its frames when it is seen on none of those): they only place
     limits 20 times the extent away."""
-    seen = ~np.isnan(pos).any(axis=2)
+    seen = ~missing_samples(pos)
     if not seen.any():
         return seen
     T, J, _ = pos.shape
