@@ -169,3 +169,21 @@ def cut_amc(src: Path, dst: Path, frames: int) -> Path:
     parts = re.split(r"(?m)^(?=\d+\s*$)", src.read_text())
     dst.write_text("".join(parts[:1 + frames]))
     return dst
+
+
+class _OneThread:
+    """``threading`` as :mod:`mocapfix.core.forked` sees it in a process of one thread."""
+
+    @staticmethod
+    def active_count():
+        return 1
+
+
+@pytest.fixture
+def fork_allowed(monkeypatch):
+    """Let :mod:`mocapfix.core.forked` fork in a test: an earlier test of the session may
+    leave a thread alive (Dask's offload thread), which rightly stops every fork
+    (that policy is tested alone, tests/core/test_forked.py)."""
+    from mocapfix.core import forked
+
+    monkeypatch.setattr(forked, "threading", _OneThread)

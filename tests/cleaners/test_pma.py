@@ -380,7 +380,7 @@ def test_marker_groups_split_whole_markers_with_about_the_same_work():
     assert kernels.marker_groups([(3, 1, 2), (3, 8, 9)], [(None, [(1, 20, 21)])]) == [[0, 1]]
 
 
-def test_validated_fills_in_two_groups_are_those_of_all_the_gaps_at_once(monkeypatch):
+def test_validated_fills_in_two_groups_are_those_of_all_the_gaps_at_once(monkeypatch, fork_allowed):
     """validated_member_fills fits two groups of markers apart (the second in a child
     process where it can fork). On c3d.org s28's gaps with two validation copies: the
     same members, fills, window errors and reference shapes (to rounding) as all the gaps

@@ -98,7 +98,7 @@ def test_budget_single_file_worker_and_environment(budget, monkeypatch):
 
 
 @pytest.mark.slow
-def test_default_clean_is_identical_with_one_and_two_threads(budget, monkeypatch):
+def test_default_clean_is_identical_with_one_and_two_threads(budget, monkeypatch, fork_allowed):
     """The default pipeline on a real capture with gaps, jitter and spikes (every threaded
     step has work, and with two threads the fill ensemble's two pieces that go to a
     forked child on Linux do): the same output, bit for bit, with one and with two task
