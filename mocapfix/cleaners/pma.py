@@ -277,7 +277,7 @@ class PMA(Cleaner):
 
         def mean_errors(fills, chosen):
             return {} if plausibility else {
-                k: float(np.mean([o[k] for o in chosen if k in o]))
+                k: fill_error.mean_of([o[k] for o in chosen if k in o])
                 for k in fills if any(k in o for o in chosen)}
 
         out = []

@@ -66,6 +66,7 @@ from bisect import bisect_left
 import numpy as np
 
 from mocapfix.core.gaps import runs
+from mocapfix.solvers.nanstats import mean_of
 
 #: the coverage of the bound
 LEVEL = 0.9
@@ -291,7 +292,7 @@ def extrapolation_scores(window_errors: np.ndarray, probe_estimates: np.ndarray,
 
 def rms_error(fill: np.ndarray, truth: np.ndarray) -> float:
     """The error of a fill (n, 3) against the truth (n, 3): RMS of the 3-D distances."""
-    return float(np.sqrt(np.mean(np.sum((fill - truth) ** 2, axis=-1))))
+    return math.sqrt(mean_of(np.sum((fill - truth) ** 2, axis=-1)))
 
 
 def estimates(window_errors: np.ndarray, floor: float = 0.0) -> np.ndarray:

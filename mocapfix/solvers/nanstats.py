@@ -1,5 +1,7 @@
-"""Column statistics of arrays with NaN for missing values, without numpy's per-column
-Python loops."""
+"""Statistics numpy makes slowly, with its values: column statistics of arrays with NaN
+for missing values without numpy's per-column Python loops, and the mean and median of
+a short 1-D array without the wrappers of ``np.mean`` and ``np.median`` (a few µs a
+call, which the fill ensemble pays thousands of times a file)."""
 from __future__ import annotations
 
 import numpy as np
@@ -38,3 +40,22 @@ def nanquantile_columns(x: np.ndarray, q: float) -> np.ndarray:
         diff = b - a
         out = np.where(gamma >= 0.5, b - diff * (1 - gamma), a + diff * gamma)
         return np.where(n > 0, out, np.nan)
+
+
+def mean_of(values) -> float:
+    """``float(np.mean(values))`` of a non-empty 1-D sequence of numbers: numpy's sum of
+    them over their count."""
+    values = np.asarray(values, dtype=np.float64)
+    return float(np.add.reduce(values) / len(values))
+
+
+def median_of(values: np.ndarray) -> float:
+    """``float(np.median(values))`` of a non-empty 1-D float array: its middle value, or
+    the mean of its two middle values (numpy's sum of them over 2), NaN when it holds a
+    NaN."""
+    n = len(values)
+    half = n // 2
+    part = np.partition(values, [half - 1, half, -1] if n % 2 == 0 else [half, -1])
+    if np.isnan(part[-1]):
+        return float("nan")
+    return float(part[half]) if n % 2 else float((part[half - 1] + part[half]) / 2)

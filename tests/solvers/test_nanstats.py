@@ -1,12 +1,13 @@
-"""Column statistics with NaN for missing values (mocapfix.solvers.nanstats): the values
-numpy's nanmedian and nanquantile give, column by column, on random columns with ties,
-NaN runs, columns with one number and columns with none."""
+"""Statistics without numpy's wrappers (mocapfix.solvers.nanstats): the values numpy's
+nanmedian and nanquantile give, column by column, on random columns with ties, NaN runs,
+columns with one number and columns with none; and np.mean's and np.median's of short
+arrays and lists."""
 import warnings
 
 import numpy as np
 import pytest
 
-from mocapfix.solvers.nanstats import nanmedian_columns, nanquantile_columns
+from mocapfix.solvers.nanstats import mean_of, median_of, nanmedian_columns, nanquantile_columns
 
 
 def _columns(seed: int):
@@ -42,3 +43,18 @@ def test_known_answers():
     # column 0: 1, 2, 3, 10 → the 0.9 quantile at (4 − 1) 0.9 = 2.7: 3 + 0.7 × 7 = 7.9
     np.testing.assert_allclose(nanquantile_columns(x, 0.9), [7.9, 5.0])
     np.testing.assert_array_equal(nanmedian_columns(x), [2.5, 5.0])
+
+
+def test_mean_and_median_of_short_arrays_are_numpys_bit_for_bit():
+    rng = np.random.default_rng(3)
+    for trial in range(3000):
+        n = int(rng.integers(1, 300))
+        v = rng.normal(size=n) * 10.0 ** rng.uniform(-5, 5) + rng.normal() * 1e3
+        if trial % 4 == 0:
+            v = np.round(v, 1)                      # ties
+        assert mean_of(v) == float(np.mean(v))
+        assert mean_of(list(v)) == float(np.mean(list(v)))
+        assert median_of(v) == float(np.median(v))
+    v = np.array([3.0, np.nan, 1.0])
+    assert np.isnan(median_of(v)) and np.isnan(np.median(v))
+    assert median_of(np.array([4.0, 1.0, 3.0, 2.0])) == 2.5 and mean_of([1, 2, 4]) == 7 / 3
