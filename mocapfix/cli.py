@@ -3,8 +3,10 @@ code; see docs/commands.md "Exit codes". Each command is one function registered
 options every command shares (``-q``, ``-v``, ``--debug``) come from :func:`common`."""
 from __future__ import annotations
 
+import atexit
 import contextlib
 import functools
+import gc
 import json
 import os
 import sys
@@ -118,6 +120,12 @@ def main(ctx, debug):
 
     retain_freed_memory()
     _printable_file_names()
+    # the last thing before the interpreter's own shutdown (atexit runs its functions last
+    # registered first): every object still alive leaves the collector's generations, so
+    # the shutdown's collection does not walk them (the 4,500-frame clean of
+    # benchmarks/clean_speed.py: ~55 → ~30 ms from the command's end to the process's)
+    atexit.unregister(gc.freeze)         # once, however often main runs in one process
+    atexit.register(gc.freeze)
     ctx.obj = {"debug": debug}
 
 
