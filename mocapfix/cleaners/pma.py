@@ -478,14 +478,14 @@ class PMA(Cleaner):
             finish=None if finish is None else
             (lambda which, rows: finish([int(kept[w]) for w in which], rows, cut_of)))
         found, finished = found if finish else (found, None)
-        empty = (np.array([], dtype=np.intp), {}, {}, [])
-        rows, done = [empty] * len(gaps), [None] * len(gaps)
+        rows, done = [None] * len(gaps), [None] * len(gaps)
         for k, g in enumerate(kept):
             rows[g] = found[k]
             done[g] = finished[k] if finish else None
-        if finish:
-            for g in np.flatnonzero(~keep):
-                done[g] = finish([int(g)], [empty], cut_of)[0]
+        for g in np.flatnonzero(~keep):
+            rows[g] = (np.array([], dtype=np.intp), {}, {}, [])
+            if finish:
+                done[g] = finish([int(g)], [rows[g]], cut_of)[0]
         out = [(cand, fills) for cand, fills, _, _ in rows], [errs for _, _, errs, _ in rows]
         out = (*out, [w for *_, w in rows], plan) if with_windows else out
         return (*out, done) if finish else out

@@ -619,8 +619,9 @@ def validated_member_fills(pos, observed, gaps, copies, external, *, local=LOCAL
         done = group(groups[1], refs)
         return done, {k: v for k, v in refs.items() if k not in known}
 
-    work = [len(which) + sum(g in set(which) for _, windows in copies for g, _, _ in windows)
-            for which in groups]
+    tested = np.bincount([g for _, windows in copies for g, _, _ in windows],
+                         minlength=len(gaps))
+    work = [len(which) + int(tested[which].sum()) for which in groups]
     (second, made), first = both(aside, lambda: group(groups[0], references),
                                  fork=min(work) >= FORK_WORK)
     references.update(made)
