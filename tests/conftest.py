@@ -187,3 +187,19 @@ def fork_allowed(monkeypatch):
     from mocapfix.core import forked
 
     monkeypatch.setattr(forked, "threading", _OneThread)
+
+
+@pytest.fixture
+def fork_calls(monkeypatch, fork_allowed):
+    """The calls of :func:`mocapfix.core.forked.both` during the test, each True when it
+    forked a child (with :func:`fork_allowed`)."""
+    from mocapfix.core import forked
+
+    calls, both = [], forked.both
+
+    def watched(aside, here, fork=True):
+        calls.append(fork and forked.can_fork())
+        return both(aside, here, fork)
+
+    monkeypatch.setattr(forked, "both", watched)
+    return calls

@@ -380,12 +380,12 @@ def test_marker_groups_split_whole_markers_with_about_the_same_work():
     assert kernels.marker_groups([(3, 1, 2), (3, 8, 9)], [(None, [(1, 20, 21)])]) == [[0, 1]]
 
 
-def test_validated_fills_in_two_groups_are_those_of_all_the_gaps_at_once(monkeypatch, fork_allowed):
+def test_validated_fills_in_two_groups_are_those_of_all_the_gaps_at_once(monkeypatch, fork_calls):
     """validated_member_fills fits two groups of markers apart (the second in a child
     process where it can fork). On c3d.org s28's gaps with two validation copies: the
     same members, fills, window errors and reference shapes (to rounding) as all the gaps
     fitted as one group, whether the second group ran in a child or here."""
-    from mocapfix.core import forked, threads
+    from mocapfix.core import threads
     from mocapfix.solvers import fill_error
 
     m = read(shared("c3d/c3dorg_s28_dynamic.C3D"))
@@ -401,21 +401,13 @@ def test_validated_fills_in_two_groups_are_those_of_all_the_gaps_at_once(monkeyp
                                               mu=mu, sd=sd, references=refs, **kw), refs
 
     monkeypatch.setattr(threads, "_TASK_THREADS", [2])
-    children = []
-    both = forked.both
-
-    def watched(aside, here, fork=True):
-        children.append(fork and forked.can_fork())
-        return both(aside, here, fork)
-
-    monkeypatch.setattr(forked, "both", watched)
     split, refs_split = run()
     monkeypatch.setattr(threads, "_TASK_THREADS", [1])
     here, refs_here = run()
     monkeypatch.setattr(kernels, "marker_groups", lambda g, c: [list(range(len(g)))])
     whole, refs_whole = run()
     # on Linux the first run's second group went to a child, the second run's did not
-    assert children[0] == sys.platform.startswith("linux") and not children[1]
+    assert fork_calls[0] == sys.platform.startswith("linux") and not fork_calls[1]
     assert sum(len(w) for *_, w in whole) > len(gaps)                   # windows were fitted
     for rows in (split, here):
         assert len(rows) == len(whole)

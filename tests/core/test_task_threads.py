@@ -98,35 +98,25 @@ def test_budget_single_file_worker_and_environment(budget, monkeypatch):
 
 
 @pytest.mark.slow
-def test_default_clean_is_identical_with_one_and_two_threads(budget, monkeypatch, fork_allowed):
+def test_default_clean_is_identical_with_one_and_two_threads(budget, fork_calls):
     """The default pipeline on a real capture with gaps, jitter and spikes (every threaded
     step has work, and with two threads the fill ensemble's two pieces that go to a
     forked child on Linux do): the same output, bit for bit, with one and with two task
     threads."""
-    from mocapfix.core import forked
-
     base = read(shared("c3d/cmu_85_02.c3d"))
     clean = base.replace(positions=np.concatenate([base.positions, base.positions[::-1]]),
                          source=None, confidence=None)
     corrupted, _ = occlusion(clean, "mixed", 3)
     pipeline = load_config(resolve_config("default"))
-    forks = []
-    both = forked.both
-
-    def watched(aside, here, fork=True):
-        forks.append(fork and forked.can_fork())
-        return both(aside, here, fork)
-
-    monkeypatch.setattr(forked, "both", watched)
     outs = []
     for n in (1, 2):
         budget(n)
-        forks.clear()
+        fork_calls.clear()
         out, records = pipeline.run(corrupted)
         assert {r.cleaner for r in records if r.seconds > 0} >= {"swaps", "trust", "fill_ensemble"}
         outs.append(out)
     # the distance statistics; the validated fits with their combinations on the windows
-    assert sum(forks) == (2 if sys.platform.startswith("linux") else 0)
+    assert sum(fork_calls) == (2 if sys.platform.startswith("linux") else 0)
     a, b = outs
     assert np.array_equal(a.positions, b.positions, equal_nan=True)
     assert np.array_equal(a.confidence, b.confidence, equal_nan=True)
