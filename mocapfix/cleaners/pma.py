@@ -40,6 +40,7 @@ from mocapfix.core.errors import ConfigError
 from mocapfix.core import forked
 from mocapfix.core.motion import Motion, missing_samples
 from mocapfix.solvers import fill_error, pma
+from mocapfix.solvers.nanstats import mean_of
 from mocapfix.solvers.pca_gapfill import fill_gaps_pca
 from mocapfix.solvers.segments import largest_steps
 
@@ -277,7 +278,7 @@ class PMA(Cleaner):
 
         def mean_errors(fills, chosen):
             return {} if plausibility else {
-                k: fill_error.mean_of([o[k] for o in chosen if k in o])
+                k: mean_of([o[k] for o in chosen if k in o])
                 for k in fills if any(k in o for o in chosen)}
 
         out = []

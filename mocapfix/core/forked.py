@@ -3,10 +3,11 @@
 Work made of many small array operations holds the GIL between them, so two threads of
 one process run it one after the other (:mod:`mocapfix.core.threads`). A child forked
 from this process has an interpreter of its own and a copy-on-write view of this one's
-memory: every module and array is already there, it starts in ~15 ms (a 130 MB process,
-the 2-core machine), and it sends its result back pickled through a pipe. The standard
-library's pools keep workers that outlive a call and move work and results through
-queues and feeder threads; one fork per call and one pipe, no thread, is what this needs.
+memory: every module and array is already there, its work starts ~2–3 ms after the call
+(a 170 MB process, the 2-core machine), and it sends its result back pickled through a
+pipe. The standard library's pools keep workers that outlive a call and move work and
+results through queues and feeder threads; one fork per call and one pipe, no thread, is
+what this needs.
 
 The child is used only where it is safe and can pay: on Linux (a fork after numpy's BLAS
 has started is what macOS warns against), with a task-thread budget of at least two

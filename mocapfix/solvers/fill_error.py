@@ -115,7 +115,7 @@ def validation_windows(observed: np.ndarray, gaps, copies: int, seed: int = 0,
     (thousands of spike holes cost one pass over their marker, not one each; the list's
     slices are deleted in place, where a mask of the places was searched whole for every
     window: 53 → 38 ms for the 3,593 short gaps of the 4,500-frame case of
-    benchmarks/clean_speed.py, the same windows)."""
+    benchmarks/clean_speed.py, the same windows; 36 ms on a quieter run)."""
     T = observed.shape[0]
     rng = np.random.default_rng(seed)
     seen_rows = np.ascontiguousarray(observed.T)
